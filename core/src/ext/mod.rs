@@ -1,0 +1,10 @@
+//! Extension points: each is a trait, plus a factory trait that the name-keyed [`Registry`]
+//! stores. Built-in implementations live in the `granite-plugins` crate; nothing here names them.
+//!
+//! [`Registry`]: crate::registry::Registry
+
+pub mod constitutive;
+pub mod velocity_update;
+
+pub use constitutive::{ConstitutiveLaw, ConstitutiveLawFactory, LawBatch};
+pub use velocity_update::{G2pBatch, VelocityUpdate, VelocityUpdateFactory};

@@ -1,0 +1,20 @@
+//! Output files of the output contract: `series.csv`, `summary.json`, `vtk/`.
+
+pub mod series;
+pub mod vtk;
+
+pub use series::SeriesWriter;
+pub use vtk::VtkWriter;
+
+use crate::error::{GraniteError, Result};
+use std::path::Path;
+
+/// Writes `summary.json` (a flat object of named results, in insertion order).
+pub fn write_summary(
+    path: &Path,
+    values: &indexmap::IndexMap<String, serde_json::Value>,
+) -> Result<()> {
+    let text =
+        serde_json::to_string_pretty(values).map_err(|e| GraniteError::Other(e.to_string()))?;
+    std::fs::write(path, text + "\n").map_err(|e| GraniteError::io(path, e))
+}

@@ -1,0 +1,17 @@
+//! granite-core: the engine and its extension points.
+//!
+//! Sign convention everywhere: continuum mechanics, tension positive (as in CB-Geo MPM).
+//! Tensors travel as Voigt 6-vectors in the order `xx, yy, zz, xy, yz, xz`; strains carry the
+//! engineering shear (`gamma_xy = 2 eps_xy`), stresses the plain shear stress.
+
+pub mod error;
+pub mod ext;
+pub mod io;
+pub mod math;
+pub mod mpm;
+pub mod params;
+pub mod registry;
+pub mod script;
+
+pub use error::{GraniteError, Result};
+pub use registry::{Plugin, Registry};

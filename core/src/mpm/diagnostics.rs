@@ -1,0 +1,76 @@
+//! Global measures of an MPM state: energies (thesis 3.45-3.48), heights and runout (5.6-5.9).
+
+use crate::math::{deviatoric_strain_norm, stress_strain_work, Vec3};
+use crate::mpm::sim::MpmSim;
+
+#[derive(Debug, Clone, Default)]
+pub struct Diagnostics {
+    pub points: usize,
+    pub mass: f64,
+    pub momentum: Vec3,
+    /// Eq. 3.47.
+    pub kinetic_energy: f64,
+    /// Eqs. 3.45-3.46: `sum v/2 sigma : eps`.
+    pub elastic_energy: f64,
+    /// Eq. 3.48 generalised to any gravity direction: `-sum m g . x`.
+    pub gravitational_energy: f64,
+    /// Highest point along the last axis (eq. 3.44: z in 3D, y in 2D).
+    pub max_height: f64,
+    /// Rightmost point along x.
+    pub max_x: f64,
+    /// Largest deviatoric strain norm (eq. 5.12).
+    pub max_deviatoric_strain: f64,
+}
+
+impl Diagnostics {
+    /// Mechanical energy (eq. 5.10).
+    pub fn total_energy(&self) -> f64 {
+        self.kinetic_energy + self.elastic_energy + self.gravitational_energy
+    }
+}
+
+impl MpmSim {
+    /// Sums are taken in point order, so they do not depend on the thread count.
+    pub fn diagnostics(&self) -> Diagnostics {
+        let p = &self.points;
+        let up = self.mesh.dim - 1;
+        let mut d = Diagnostics {
+            points: p.len(),
+            max_height: f64::NEG_INFINITY,
+            max_x: f64::NEG_INFINITY,
+            ..Default::default()
+        };
+        let g = self.gravity;
+        for i in 0..p.len() {
+            let (m, v, x) = (p.mass[i], p.v[i], p.x[i]);
+            d.mass += m;
+            for a in 0..3 {
+                d.momentum[a] += m * v[a];
+            }
+            d.kinetic_energy += 0.5 * m * (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+            d.elastic_energy += 0.5 * p.volume[i] * stress_strain_work(&p.stress[i], &p.strain[i]);
+            d.gravitational_energy -= m * (g[0] * x[0] + g[1] * x[1] + g[2] * x[2]);
+            d.max_height = d.max_height.max(x[up]);
+            d.max_x = d.max_x.max(x[0]);
+            d.max_deviatoric_strain = d
+                .max_deviatoric_strain
+                .max(deviatoric_strain_norm(&p.strain[i]));
+        }
+        d
+    }
+
+    /// Width of the material measured from the mesh origin, voxelised by cells (eq. 5.6).
+    pub fn voxel_width(&self) -> f64 {
+        let h = self.mesh.cell[0];
+        let max_x = self
+            .points
+            .x
+            .iter()
+            .map(|x| x[0])
+            .fold(f64::NEG_INFINITY, f64::max);
+        if !max_x.is_finite() {
+            return 0.0;
+        }
+        (((max_x - self.mesh.origin[0]) / h) + 1.0).floor() * h
+    }
+}

@@ -1,0 +1,328 @@
+//! The state of an MPM simulation and its set-up operations. The time step itself is in `step.rs`.
+
+use crate::error::{GraniteError, Result};
+use crate::ext::{ConstitutiveLaw, VelocityUpdate};
+use crate::math::{Vec3, Voigt};
+use crate::mpm::boundary::Boundary;
+use crate::mpm::grid::{Grid, SlabIndex};
+use crate::mpm::mesh::{Location, Mesh};
+use crate::mpm::points::{retain_strided, NewPoint, Points};
+use std::ops::Range;
+
+/// When the stress is updated relative to the internal force (eq. 3.23).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum StressScheme {
+    /// Update Stress First: strain from the mapped velocity, then forces from the new stress.
+    Usf,
+    /// Update Stress Last: forces from the old stress, strain from the updated grid velocity.
+    Usl,
+    /// Modified USL: like USL, but strain from the velocity remapped from the updated points.
+    Musl,
+}
+
+impl StressScheme {
+    pub fn parse(name: &str) -> Result<StressScheme> {
+        match name.to_ascii_uppercase().as_str() {
+            "USF" => Ok(StressScheme::Usf),
+            "USL" => Ok(StressScheme::Usl),
+            "MUSL" => Ok(StressScheme::Musl),
+            _ => Err(GraniteError::param(
+                "scheme",
+                name,
+                "must be one of USF, USL, MUSL",
+            )),
+        }
+    }
+    pub fn name(&self) -> &'static str {
+        match self {
+            StressScheme::Usf => "USF",
+            StressScheme::Usl => "USL",
+            StressScheme::Musl => "MUSL",
+        }
+    }
+}
+
+/// What happens to a point that leaves the mesh (thesis 3.4.6).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum OutOfMeshPolicy {
+    Delete,
+    Stop,
+}
+
+pub struct Material {
+    pub name: String,
+    pub density: f64,
+    pub law: Box<dyn ConstitutiveLaw>,
+    /// Per-point state variables of this material's points, point-major.
+    pub state: Vec<f64>,
+    /// Number of points of this material (they are stored contiguously).
+    pub count: usize,
+}
+
+impl Material {
+    pub fn state_stride(&self) -> usize {
+        self.law.state_names().len()
+    }
+}
+
+/// A copy of everything a step changes, to fall back on when a step goes wrong.
+#[derive(Debug, Clone)]
+pub struct Snapshot {
+    pub step: u64,
+    pub time: f64,
+    pub points: Points,
+    pub states: Vec<Vec<f64>>,
+    pub counts: Vec<usize>,
+}
+
+pub struct MpmSim {
+    pub mesh: Mesh,
+    pub points: Points,
+    pub materials: Vec<Material>,
+    pub boundary: Boundary,
+    pub gravity: Vec3,
+    /// Cundall damping coefficient D (eq. 3.26).
+    pub damping: f64,
+    pub scheme: StressScheme,
+    pub velocity_update: Box<dyn VelocityUpdate>,
+    pub dt: f64,
+    pub time: f64,
+    pub step: u64,
+    pub out_of_mesh: OutOfMeshPolicy,
+    /// Points deleted since the start because they left the mesh.
+    pub deleted_points: u64,
+    /// Things a user should be told about (deletions, mesh changes), drained by the driver.
+    pub events: Vec<String>,
+    next_id: u64,
+    pub(crate) grid: Grid,
+    pub(crate) slabs: SlabIndex,
+    pub(crate) loc: Vec<Location>,
+}
+
+impl MpmSim {
+    pub fn new(mesh: Mesh, velocity_update: Box<dyn VelocityUpdate>) -> MpmSim {
+        MpmSim {
+            mesh,
+            points: Points::default(),
+            materials: Vec::new(),
+            boundary: Boundary::default(),
+            gravity: [0.0; 3],
+            damping: 0.0,
+            scheme: StressScheme::Usf,
+            velocity_update,
+            dt: 0.0,
+            time: 0.0,
+            step: 0,
+            out_of_mesh: OutOfMeshPolicy::Delete,
+            deleted_points: 0,
+            events: Vec::new(),
+            next_id: 0,
+            grid: Grid::default(),
+            slabs: SlabIndex::default(),
+            loc: Vec::new(),
+        }
+    }
+
+    pub fn dim(&self) -> usize {
+        self.mesh.dim
+    }
+
+    pub fn add_material(
+        &mut self,
+        name: &str,
+        density: f64,
+        law: Box<dyn ConstitutiveLaw>,
+    ) -> Result<usize> {
+        if !(density > 0.0 && density.is_finite()) {
+            return Err(GraniteError::param_in(
+                format!("`density` of material \"{name}\""),
+                density,
+                "must be > 0",
+            ));
+        }
+        self.materials.push(Material {
+            name: name.into(),
+            density,
+            law,
+            state: Vec::new(),
+            count: 0,
+        });
+        Ok(self.materials.len() - 1)
+    }
+
+    pub fn material_index(&self, name: &str) -> Result<usize> {
+        self.materials
+            .iter()
+            .position(|m| m.name == name)
+            .ok_or_else(|| GraniteError::Unknown {
+                kind: "material".into(),
+                name: name.into(),
+                known: self
+                    .materials
+                    .iter()
+                    .map(|m| m.name.clone())
+                    .collect::<Vec<_>>()
+                    .join(", "),
+            })
+    }
+
+    /// Points `[start, end)` of material `m`.
+    pub fn material_range(&self, m: usize) -> Range<usize> {
+        let start: usize = self.materials[..m].iter().map(|m| m.count).sum();
+        start..start + self.materials[m].count
+    }
+
+    /// Adds points of material `m` at the given positions, each with volume `volume[k]`
+    /// (mass = density x volume), velocity `v` and initial stress `stress`.
+    pub fn add_points(
+        &mut self,
+        m: usize,
+        positions: &[Vec3],
+        volumes: &[f64],
+        v: Vec3,
+        stress: Voigt,
+    ) -> Result<()> {
+        if m >= self.materials.len() {
+            return Err(GraniteError::Setup(format!("no material with index {m}")));
+        }
+        for (k, x) in positions.iter().enumerate() {
+            if !self.mesh.contains(*x) {
+                return Err(GraniteError::Setup(format!(
+                    "material point {k} at {x:?} is outside the mesh [{:?}, {:?}]",
+                    self.mesh.origin,
+                    self.mesh.upper()
+                )));
+            }
+            if !(volumes[k] > 0.0) {
+                return Err(GraniteError::param("volume", volumes[k], "must be > 0"));
+            }
+        }
+        let density = self.materials[m].density;
+        let new: Vec<NewPoint> = positions
+            .iter()
+            .zip(volumes)
+            .map(|(&x, &vol)| NewPoint {
+                x,
+                volume: vol,
+                mass: density * vol,
+                v,
+                stress,
+            })
+            .collect();
+        let at = self.material_range(m).end;
+        self.points.insert(at, m as u32, self.next_id, &new);
+        self.next_id += new.len() as u64;
+        let material = &mut self.materials[m];
+        let stride = material.state_stride();
+        let mut fresh = vec![0.0; stride];
+        material.law.init_state(&mut fresh);
+        for _ in 0..new.len() {
+            material.state.extend_from_slice(&fresh);
+        }
+        material.count += new.len();
+        Ok(())
+    }
+
+    /// Replaces the background mesh; points stay where they are (thesis 5.2.1). Boundary conditions
+    /// refer to nodes of the old mesh and are cleared.
+    pub fn replace_mesh(&mut self, mesh: Mesh) -> Result<()> {
+        if mesh.dim != self.mesh.dim {
+            return Err(GraniteError::param(
+                "dim",
+                mesh.dim,
+                &format!("a new mesh must keep dim = {}", self.mesh.dim),
+            ));
+        }
+        if let Some(p) = self.points.x.iter().position(|x| !mesh.contains(*x)) {
+            return Err(GraniteError::Setup(format!(
+                "the new mesh does not contain material point {} at {:?}",
+                self.points.id[p], self.points.x[p]
+            )));
+        }
+        self.mesh = mesh;
+        self.boundary.clear();
+        self.events
+            .push("mesh replaced: boundary conditions cleared".into());
+        Ok(())
+    }
+
+    /// Stable time step of explicit MPM: the cell crossing time of the fastest P wave.
+    pub fn critical_dt(&self) -> Option<f64> {
+        let h = self.mesh.cell[..self.mesh.dim]
+            .iter()
+            .cloned()
+            .fold(f64::INFINITY, f64::min);
+        self.materials
+            .iter()
+            .filter(|m| m.count > 0)
+            .filter_map(|m| m.law.wave_speed(m.density))
+            .map(|c| h / c)
+            .reduce(f64::min)
+    }
+
+    pub fn set_dt(&mut self, dt: f64) -> Result<()> {
+        if !(dt > 0.0 && dt.is_finite()) {
+            return Err(GraniteError::param("dt", dt, "must be > 0"));
+        }
+        self.dt = dt;
+        Ok(())
+    }
+
+    /// Checks everything a run needs; called before stepping.
+    pub fn validate(&self) -> Result<()> {
+        if self.dt <= 0.0 {
+            return Err(GraniteError::Setup(
+                "no time step: call dt(...) before running".into(),
+            ));
+        }
+        if let Some(crit) = self.critical_dt() {
+            if self.dt > crit {
+                return Err(GraniteError::param(
+                    "dt",
+                    format!("{:e}", self.dt),
+                    &format!("must not exceed the stability limit cell/c_p = {crit:.4e} s of this mesh and material"),
+                ));
+            }
+        }
+        if !(self.damping >= 0.0 && self.damping < 1.0) {
+            return Err(GraniteError::param(
+                "damping",
+                self.damping,
+                "must be in [0, 1)",
+            ));
+        }
+        Ok(())
+    }
+
+    pub fn snapshot(&self) -> Snapshot {
+        Snapshot {
+            step: self.step,
+            time: self.time,
+            points: self.points.clone(),
+            states: self.materials.iter().map(|m| m.state.clone()).collect(),
+            counts: self.materials.iter().map(|m| m.count).collect(),
+        }
+    }
+
+    pub fn restore(&mut self, snap: Snapshot) {
+        self.step = snap.step;
+        self.time = snap.time;
+        self.points = snap.points;
+        for ((m, state), count) in self.materials.iter_mut().zip(snap.states).zip(snap.counts) {
+            m.state = state;
+            m.count = count;
+        }
+    }
+
+    /// Removes points by mask, keeping material blocks and their state aligned.
+    pub(crate) fn remove_points(&mut self, keep: &[bool]) {
+        let mut start = 0;
+        for m in &mut self.materials {
+            let mask = &keep[start..start + m.count];
+            retain_strided(&mut m.state, m.law.state_names().len(), mask);
+            start += m.count;
+            m.count = mask.iter().filter(|&&k| k).count();
+        }
+        self.points.retain(keep);
+    }
+}

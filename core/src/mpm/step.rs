@@ -1,0 +1,591 @@
+//! One MPM time step, thesis eqs. 3.10-3.42, as stages called in a fixed order. Each stage is a
+//! free function whose signature shows what it reads and what it writes.
+
+use crate::error::{GraniteError, Result};
+use crate::ext::{G2pBatch, LawBatch, VelocityUpdate};
+use crate::math::{strain_rate_from_gradient, Mat3, Vec3, Voigt};
+use crate::mpm::boundary::Boundary;
+use crate::mpm::grid::{scatter, Grid, NodeSums, SlabIndex};
+use crate::mpm::mesh::{Location, Mesh};
+use crate::mpm::points::Points;
+use crate::mpm::shape::{Linear2, Linear3, ShapeFunction, MAX_NODES};
+use crate::mpm::sim::{Material, MpmSim, OutOfMeshPolicy, StressScheme};
+use rayon::prelude::*;
+
+/// Points handled per task (and per velocity-update call).
+const CHUNK: usize = 256;
+/// Nodes lighter than this fraction of the lightest point are treated as empty.
+const MASS_EPS: f64 = 1e-12;
+
+impl MpmSim {
+    /// Advances the simulation by one time step.
+    pub fn step(&mut self) -> Result<()> {
+        match self.mesh.dim {
+            3 => self.step_with::<Linear3>(),
+            _ => self.step_with::<Linear2>(),
+        }
+    }
+
+    fn step_with<S: ShapeFunction>(&mut self) -> Result<()> {
+        let dt = self.dt;
+        let t_next = self.time + dt;
+        locate(&self.mesh, &self.points, &mut self.loc)?;
+        self.grid.resize(self.mesh.node_count());
+        self.slabs.build(&self.mesh, &self.loc);
+        let affine = self.velocity_update.affine();
+        let mesh = &self.mesh;
+        let grid = &mut self.grid;
+        let pts = &mut self.points;
+        let (loc, slabs, bc, g) = (&self.loc, &self.slabs, &self.boundary, self.gravity);
+        let strategy = self.velocity_update.as_ref();
+        match self.scheme {
+            StressScheme::Usl => {
+                p2g::<S>(
+                    grid,
+                    mesh,
+                    slabs,
+                    pts,
+                    loc,
+                    g,
+                    affine,
+                    Maps::MassMomentumForce,
+                );
+                grid_velocity(grid, bc, self.time);
+                grid_update(grid, bc, self.damping, dt, self.time);
+                g2p::<S>(pts, grid, mesh, loc, strategy, dt, true);
+                stress_update(pts, &mut self.materials)?;
+            }
+            StressScheme::Usf => {
+                p2g::<S>(grid, mesh, slabs, pts, loc, g, affine, Maps::MassMomentum);
+                grid_velocity(grid, bc, self.time);
+                strain_update::<S>(pts, &grid.velocity, mesh, loc, dt);
+                stress_update(pts, &mut self.materials)?;
+                p2g::<S>(grid, mesh, slabs, pts, loc, g, affine, Maps::Force);
+                grid_update(grid, bc, self.damping, dt, self.time);
+                g2p::<S>(pts, grid, mesh, loc, strategy, dt, false);
+            }
+            StressScheme::Musl => {
+                p2g::<S>(
+                    grid,
+                    mesh,
+                    slabs,
+                    pts,
+                    loc,
+                    g,
+                    affine,
+                    Maps::MassMomentumForce,
+                );
+                grid_velocity(grid, bc, self.time);
+                grid_update(grid, bc, self.damping, dt, self.time);
+                g2p::<S>(pts, grid, mesh, loc, strategy, dt, false);
+                // Remap the updated point momentum (positions as at the start of the step).
+                p2g::<S>(grid, mesh, slabs, pts, loc, g, affine, Maps::Momentum);
+                grid_velocity(grid, bc, t_next);
+                strain_update::<S>(pts, &grid.velocity, mesh, loc, dt);
+                stress_update(pts, &mut self.materials)?;
+            }
+        }
+        self.time = t_next;
+        self.step += 1;
+        self.check_finite()?;
+        self.handle_out_of_mesh()
+    }
+
+    fn check_finite(&self) -> Result<()> {
+        let p = &self.points;
+        let bad = (0..p.len()).into_par_iter().find_first(|&i| {
+            !(p.x[i].iter().all(|c| c.is_finite())
+                && p.v[i].iter().all(|c| c.is_finite())
+                && p.stress[i].iter().all(|c| c.is_finite()))
+        });
+        match bad {
+            None => Ok(()),
+            Some(i) => Err(GraniteError::Unstable {
+                step: self.step,
+                time: self.time,
+                reason: format!(
+                    "non-finite value at material point {} (position {:?}, velocity {:?}, stress {:?}); \
+                     try a smaller time step or a more dissipative velocity update",
+                    p.id[i], p.x[i], p.v[i], p.stress[i]
+                ),
+            }),
+        }
+    }
+
+    fn handle_out_of_mesh(&mut self) -> Result<()> {
+        let mesh = &self.mesh;
+        let keep: Vec<bool> = self
+            .points
+            .x
+            .par_iter()
+            .map(|x| mesh.contains(*x))
+            .collect();
+        let lost = keep.iter().filter(|k| !**k).count();
+        if lost == 0 {
+            return Ok(());
+        }
+        let first = keep.iter().position(|k| !*k).unwrap_or(0);
+        let what = format!(
+            "{lost} material point(s) left the mesh (first: point {} at {:?})",
+            self.points.id[first], self.points.x[first]
+        );
+        match self.out_of_mesh {
+            OutOfMeshPolicy::Stop => Err(GraniteError::Unstable {
+                step: self.step,
+                time: self.time,
+                reason: what,
+            }),
+            OutOfMeshPolicy::Delete => {
+                self.remove_points(&keep);
+                self.deleted_points += lost as u64;
+                self.events.push(format!(
+                    "step {} (t = {:.6e} s): {what}; deleted",
+                    self.step, self.time
+                ));
+                Ok(())
+            }
+        }
+    }
+}
+
+/// Cell and local coordinates of every point (eq. 3.10).
+fn locate(mesh: &Mesh, points: &Points, loc: &mut Vec<Location>) -> Result<()> {
+    loc.resize(
+        points.len(),
+        Location {
+            cell: 0,
+            xi: [0.0; 3],
+        },
+    );
+    let outside = loc
+        .par_iter_mut()
+        .zip(points.x.par_iter())
+        .map(|(l, x)| match mesh.locate(*x) {
+            Some(found) => {
+                *l = found;
+                0usize
+            }
+            None => 1,
+        })
+        .sum::<usize>();
+    if outside > 0 {
+        return Err(GraniteError::Setup(format!(
+            "{outside} material point(s) are outside the mesh"
+        )));
+    }
+    Ok(())
+}
+
+/// Node index offsets, relative to a cell's first node, of the nodes a point talks to.
+fn node_offsets<S: ShapeFunction>(mesh: &Mesh) -> [usize; MAX_NODES] {
+    let n = mesh.nodes_per_axis();
+    let mut off = [0; MAX_NODES];
+    for (k, o) in S::offsets().iter().enumerate() {
+        off[k] = o[0] + n[0] * (o[1] + n[1] * o[2]);
+    }
+    off
+}
+
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Maps {
+    MassMomentumForce,
+    MassMomentum,
+    Momentum,
+    Force,
+}
+
+/// Particle-to-grid transfer: mass (3.17), momentum (3.18, with the APIC affine term when asked),
+/// gravity (3.21) and internal force (3.23) from the points' current stress.
+#[allow(clippy::too_many_arguments)]
+fn p2g<S: ShapeFunction>(
+    grid: &mut Grid,
+    mesh: &Mesh,
+    slabs: &SlabIndex,
+    pts: &Points,
+    loc: &[Location],
+    gravity: Vec3,
+    affine: bool,
+    maps: Maps,
+) {
+    let (do_mass, do_momentum, do_force) = match maps {
+        Maps::MassMomentumForce => (true, true, true),
+        Maps::MassMomentum => (true, true, false),
+        Maps::Momentum => (false, true, false),
+        Maps::Force => (false, false, true),
+    };
+    grid.sums.par_iter_mut().for_each(|s| {
+        if do_mass {
+            s.mass = 0.0;
+        }
+        if do_momentum {
+            s.momentum = [0.0; 3];
+        }
+        if do_force {
+            s.force = [0.0; 3];
+        }
+    });
+    let off = node_offsets::<S>(mesh);
+    let h = mesh.cell;
+    scatter(
+        &mut grid.sums,
+        mesh,
+        slabs,
+        |p, window: &mut [NodeSums], first| {
+            let l = loc[p];
+            let mut n = [0.0; MAX_NODES];
+            let mut dn = [[0.0; 3]; MAX_NODES];
+            S::eval(l.xi, h, &mut n, &mut dn);
+            let base = mesh.cell_base_node(l.cell) - first;
+            let m = pts.mass[p];
+            let v = pts.v[p];
+            let c = &pts.affine[p];
+            let s = &pts.stress[p];
+            let vol = pts.volume[p];
+            for k in 0..S::NODES {
+                let node = &mut window[base + off[k]];
+                let w = n[k];
+                if do_mass {
+                    node.mass += m * w;
+                }
+                if do_momentum {
+                    let mut vk = v;
+                    if affine {
+                        // x_i - x_p in global coordinates, from the local position in the cell.
+                        let o = S::offsets()[k];
+                        let d = [
+                            (o[0] as f64 - 0.5 * (l.xi[0] + 1.0)) * h[0],
+                            (o[1] as f64 - 0.5 * (l.xi[1] + 1.0)) * h[1],
+                            (o[2] as f64 - 0.5 * (l.xi[2] + 1.0)) * h[2],
+                        ];
+                        let d = if mesh.dim == 2 { [d[0], d[1], 0.0] } else { d };
+                        for a in 0..3 {
+                            vk[a] += c[3 * a] * d[0] + c[3 * a + 1] * d[1] + c[3 * a + 2] * d[2];
+                        }
+                    }
+                    for a in 0..3 {
+                        node.momentum[a] += m * w * vk[a];
+                    }
+                }
+                if do_force {
+                    let g = dn[k];
+                    node.force[0] +=
+                        m * w * gravity[0] - vol * (s[0] * g[0] + s[3] * g[1] + s[5] * g[2]);
+                    node.force[1] +=
+                        m * w * gravity[1] - vol * (s[3] * g[0] + s[1] * g[1] + s[4] * g[2]);
+                    node.force[2] +=
+                        m * w * gravity[2] - vol * (s[5] * g[0] + s[4] * g[1] + s[2] * g[2]);
+                }
+            }
+        },
+    );
+}
+
+/// Nodal velocity from momentum (eq. 3.18), then velocity constraints (eq. 3.19) at time `t`.
+fn grid_velocity(grid: &mut Grid, bc: &Boundary, t: f64) {
+    grid.velocity
+        .par_iter_mut()
+        .zip(grid.sums.par_iter())
+        .for_each(|(v, s)| {
+            *v = if s.mass > MASS_EPS {
+                [
+                    s.momentum[0] / s.mass,
+                    s.momentum[1] / s.mass,
+                    s.momentum[2] / s.mass,
+                ]
+            } else {
+                [0.0; 3]
+            };
+        });
+    for c in &bc.velocity {
+        let value = c.value.at(t);
+        for &n in &c.nodes {
+            grid.velocity[n as usize][c.axis] = value;
+        }
+    }
+}
+
+#[inline]
+fn sign_or_zero(x: f64) -> f64 {
+    if x > 0.0 {
+        1.0
+    } else if x < 0.0 {
+        -1.0
+    } else {
+        0.0
+    }
+}
+
+/// Equation of motion on the nodes: total force (3.25), Cundall damping (3.24, 3.26), explicit
+/// update (3.27), friction and velocity constraints; then the effective acceleration.
+fn grid_update(grid: &mut Grid, bc: &Boundary, damping: f64, dt: f64, t: f64) {
+    for f in &bc.forces {
+        let factor = f.factor.at(t);
+        for (&n, force) in f.nodes.iter().zip(&f.force) {
+            let s = &mut grid.sums[n as usize];
+            for a in 0..3 {
+                s.force[a] += factor * force[a];
+            }
+        }
+    }
+    grid.velocity_new
+        .par_iter_mut()
+        .zip(grid.sums.par_iter().zip(grid.velocity.par_iter()))
+        .for_each(|(vn, (s, v))| {
+            if s.mass > MASS_EPS {
+                let f = s.force;
+                let fnorm = (f[0] * f[0] + f[1] * f[1] + f[2] * f[2]).sqrt();
+                for a in 0..3 {
+                    let acc = (f[a] - damping * fnorm * sign_or_zero(v[a])) / s.mass;
+                    vn[a] = v[a] + acc * dt;
+                }
+            } else {
+                *vn = [0.0; 3];
+            }
+        });
+    for fc in &bc.friction {
+        for &n in &fc.nodes {
+            let n = n as usize;
+            if grid.sums[n].mass <= MASS_EPS {
+                continue;
+            }
+            let vn = &mut grid.velocity_new[n];
+            let into_wall = fc.sign * vn[fc.axis];
+            if into_wall <= 0.0 {
+                continue;
+            }
+            vn[fc.axis] = 0.0;
+            let speed_t = (vn[0] * vn[0] + vn[1] * vn[1] + vn[2] * vn[2]).sqrt();
+            if speed_t > 0.0 {
+                let scale = (speed_t - fc.mu * into_wall).max(0.0) / speed_t;
+                for a in 0..3 {
+                    vn[a] *= scale;
+                }
+            }
+        }
+    }
+    for c in &bc.velocity {
+        let value = c.value.at(t);
+        for &n in &c.nodes {
+            grid.velocity_new[n as usize][c.axis] = value;
+        }
+    }
+    let inv_dt = 1.0 / dt;
+    grid.accel
+        .par_iter_mut()
+        .zip(grid.velocity_new.par_iter().zip(grid.velocity.par_iter()))
+        .for_each(|(a, (vn, v))| {
+            *a = [
+                (vn[0] - v[0]) * inv_dt,
+                (vn[1] - v[1]) * inv_dt,
+                (vn[2] - v[2]) * inv_dt,
+            ];
+        });
+}
+
+/// Velocity gradient `L_ab = sum_i v_i,a dN_i/dx_b` at a point.
+#[inline(always)]
+fn velocity_gradient<S: ShapeFunction>(
+    vel: &[Vec3],
+    base: usize,
+    off: &[usize; MAX_NODES],
+    dn: &[Vec3; MAX_NODES],
+) -> Mat3 {
+    let mut l = [0.0; 9];
+    for k in 0..S::NODES {
+        let v = vel[base + off[k]];
+        let g = dn[k];
+        for a in 0..3 {
+            l[3 * a] += v[a] * g[0];
+            l[3 * a + 1] += v[a] * g[1];
+            l[3 * a + 2] += v[a] * g[2];
+        }
+    }
+    l
+}
+
+/// Strain increment (3.36-3.38) and volume update (3.39-3.40) of one point from a nodal velocity.
+#[inline(always)]
+fn apply_strain<S: ShapeFunction>(
+    l: &Mat3,
+    vel: &[Vec3],
+    base: usize,
+    off: &[usize; MAX_NODES],
+    dn_centre: &[Vec3; MAX_NODES],
+    dt: f64,
+    dstrain: &mut Voigt,
+    strain: &mut Voigt,
+    volume: &mut f64,
+) {
+    let rate = strain_rate_from_gradient(l);
+    for c in 0..6 {
+        dstrain[c] = rate[c] * dt;
+        strain[c] += dstrain[c];
+    }
+    let lc = velocity_gradient::<S>(vel, base, off, dn_centre);
+    *volume *= 1.0 + dt * (lc[0] + lc[4] + lc[8]);
+}
+
+fn centre_gradients<S: ShapeFunction>(mesh: &Mesh) -> [Vec3; MAX_NODES] {
+    let mut n = [0.0; MAX_NODES];
+    let mut dn = [[0.0; 3]; MAX_NODES];
+    S::eval([0.0; 3], mesh.cell, &mut n, &mut dn);
+    dn
+}
+
+/// Strain and volume update from a nodal velocity field (USF: V^i, MUSL: remapped velocity).
+fn strain_update<S: ShapeFunction>(
+    pts: &mut Points,
+    vel: &[Vec3],
+    mesh: &Mesh,
+    loc: &[Location],
+    dt: f64,
+) {
+    let off = node_offsets::<S>(mesh);
+    let dn0 = centre_gradients::<S>(mesh);
+    (
+        pts.dstrain.par_iter_mut(),
+        pts.strain.par_iter_mut(),
+        pts.volume.par_iter_mut(),
+        loc.par_iter(),
+    )
+        .into_par_iter()
+        .for_each(|(de, e, vol, l)| {
+            let mut n = [0.0; MAX_NODES];
+            let mut dn = [[0.0; 3]; MAX_NODES];
+            S::eval(l.xi, mesh.cell, &mut n, &mut dn);
+            let base = mesh.cell_base_node(l.cell);
+            let lg = velocity_gradient::<S>(vel, base, &off, &dn);
+            apply_strain::<S>(&lg, vel, base, &off, &dn0, dt, de, e, vol);
+        });
+}
+
+/// Grid-to-particle transfer (3.28-3.34 through the velocity-update strategy) and, for USL, the
+/// strain from the updated grid velocity.
+fn g2p<S: ShapeFunction>(
+    pts: &mut Points,
+    grid: &Grid,
+    mesh: &Mesh,
+    loc: &[Location],
+    strategy: &dyn VelocityUpdate,
+    dt: f64,
+    with_strain: bool,
+) {
+    let off = node_offsets::<S>(mesh);
+    let dn0 = centre_gradients::<S>(mesh);
+    let affine = strategy.affine();
+    let need_gradient = affine || with_strain;
+    let (vel, acc) = (&grid.velocity_new, &grid.accel);
+    (
+        pts.x.par_chunks_mut(CHUNK),
+        pts.v.par_chunks_mut(CHUNK),
+        pts.affine.par_chunks_mut(CHUNK),
+        pts.dstrain.par_chunks_mut(CHUNK),
+        pts.strain.par_chunks_mut(CHUNK),
+        pts.volume.par_chunks_mut(CHUNK),
+        loc.par_chunks(CHUNK),
+    )
+        .into_par_iter()
+        .for_each(|(x, v, c, de, e, vol, l)| {
+            let len = x.len();
+            let mut v_pic = [[0.0; 3]; CHUNK];
+            let mut dv = [[0.0; 3]; CHUNK];
+            let mut v_new = [[0.0; 3]; CHUNK];
+            let mut v_move = [[0.0; 3]; CHUNK];
+            for p in 0..len {
+                let mut n = [0.0; MAX_NODES];
+                let mut dn = [[0.0; 3]; MAX_NODES];
+                S::eval(l[p].xi, mesh.cell, &mut n, &mut dn);
+                let base = mesh.cell_base_node(l[p].cell);
+                let (mut vp, mut dvp) = ([0.0; 3], [0.0; 3]);
+                for k in 0..S::NODES {
+                    let i = base + off[k];
+                    for a in 0..3 {
+                        vp[a] += vel[i][a] * n[k];
+                        dvp[a] += acc[i][a] * n[k];
+                    }
+                }
+                v_pic[p] = vp;
+                dv[p] = [dvp[0] * dt, dvp[1] * dt, dvp[2] * dt];
+                if need_gradient {
+                    let lg = velocity_gradient::<S>(vel, base, &off, &dn);
+                    if affine {
+                        c[p] = lg;
+                    }
+                    if with_strain {
+                        apply_strain::<S>(
+                            &lg,
+                            vel,
+                            base,
+                            &off,
+                            &dn0,
+                            dt,
+                            &mut de[p],
+                            &mut e[p],
+                            &mut vol[p],
+                        );
+                    }
+                }
+            }
+            strategy.update(G2pBatch {
+                v_old: v,
+                v_pic: &v_pic[..len],
+                dv_grid: &dv[..len],
+                v_new: &mut v_new[..len],
+                v_move: &mut v_move[..len],
+            });
+            for p in 0..len {
+                for a in 0..3 {
+                    x[p][a] += v_move[p][a] * dt;
+                }
+                v[p] = v_new[p];
+            }
+        });
+}
+
+/// Constitutive update (3.41-3.42): each material's law over its contiguous block of points.
+fn stress_update(pts: &mut Points, materials: &mut [Material]) -> Result<()> {
+    let mut start = 0;
+    for m in materials.iter_mut() {
+        let range = start..start + m.count;
+        start += m.count;
+        if range.is_empty() {
+            continue;
+        }
+        let stride = m.law.state_names().len();
+        let law = m.law.as_ref();
+        let stress = pts.stress[range.clone()].par_chunks_mut(CHUNK);
+        let dstrain = pts.dstrain[range].par_chunks(CHUNK);
+        let results: Vec<Result<()>> = if stride == 0 {
+            stress
+                .zip(dstrain)
+                .map(|(s, de)| {
+                    law.update(LawBatch {
+                        stress: s,
+                        dstrain: de,
+                        state: &mut [],
+                    })
+                })
+                .collect()
+        } else {
+            stress
+                .zip(dstrain)
+                .zip(m.state.par_chunks_mut(CHUNK * stride))
+                .map(|((s, de), state)| {
+                    law.update(LawBatch {
+                        stress: s,
+                        dstrain: de,
+                        state,
+                    })
+                })
+                .collect()
+        };
+        if let Some(Err(e)) = results.into_iter().find(|r| r.is_err()) {
+            return Err(GraniteError::Other(format!(
+                "material \"{}\" ({}): {e}",
+                m.name,
+                law.name()
+            )));
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,96 @@
+//! Name-keyed registries of the extension points. A [`Plugin`] adds its factories to a registry;
+//! insertion order is kept so listings are stable.
+
+use crate::error::{GraniteError, Result};
+use crate::ext::{ConstitutiveLaw, ConstitutiveLawFactory, VelocityUpdate, VelocityUpdateFactory};
+use crate::params::Params;
+use indexmap::IndexMap;
+use std::sync::Arc;
+
+/// User-given parameter values by name, in the order given.
+pub type ParamMap = IndexMap<String, f64>;
+
+pub trait Plugin {
+    fn register(&self, registry: &mut Registry);
+}
+
+#[derive(Clone, Default)]
+pub struct Registry {
+    laws: IndexMap<String, Arc<dyn ConstitutiveLawFactory>>,
+    velocity_updates: IndexMap<String, Arc<dyn VelocityUpdateFactory>>,
+}
+
+/// Exact match first, then case-insensitive: `flip` finds `FLIP`.
+fn lookup<'a, T: ?Sized>(
+    map: &'a IndexMap<String, Arc<T>>,
+    name: &str,
+    kind: &str,
+) -> Result<&'a Arc<T>> {
+    if let Some(f) = map.get(name) {
+        return Ok(f);
+    }
+    map.iter()
+        .find(|(k, _)| k.eq_ignore_ascii_case(name))
+        .map(|(_, f)| f)
+        .ok_or_else(|| GraniteError::Unknown {
+            kind: kind.into(),
+            name: name.into(),
+            known: map.keys().cloned().collect::<Vec<_>>().join(", "),
+        })
+}
+
+impl Registry {
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    pub fn with(mut self, plugin: &dyn Plugin) -> Self {
+        plugin.register(&mut self);
+        self
+    }
+
+    pub fn add_law(&mut self, factory: Arc<dyn ConstitutiveLawFactory>) {
+        self.laws.insert(factory.name().to_string(), factory);
+    }
+
+    pub fn add_velocity_update(&mut self, factory: Arc<dyn VelocityUpdateFactory>) {
+        self.velocity_updates
+            .insert(factory.name().to_string(), factory);
+    }
+
+    pub fn law_names(&self) -> Vec<String> {
+        self.laws.keys().cloned().collect()
+    }
+
+    pub fn velocity_update_names(&self) -> Vec<String> {
+        self.velocity_updates.keys().cloned().collect()
+    }
+
+    pub fn law_factory(&self, name: &str) -> Result<&Arc<dyn ConstitutiveLawFactory>> {
+        lookup(&self.laws, name, "constitutive law")
+    }
+
+    pub fn build_law(&self, name: &str, given: &ParamMap) -> Result<Box<dyn ConstitutiveLaw>> {
+        let factory = self.law_factory(name)?;
+        let params = Params::resolve(
+            &format!("law \"{}\"", factory.name()),
+            factory.param_specs(),
+            given,
+        )?;
+        factory.build(params)
+    }
+
+    pub fn build_velocity_update(
+        &self,
+        name: &str,
+        given: &ParamMap,
+    ) -> Result<Box<dyn VelocityUpdate>> {
+        let factory = lookup(&self.velocity_updates, name, "velocity update")?;
+        let params = Params::resolve(
+            &format!("velocity update \"{}\"", factory.name()),
+            factory.param_specs(),
+            given,
+        )?;
+        factory.build(params)
+    }
+}

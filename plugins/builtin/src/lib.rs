@@ -1,0 +1,22 @@
+//! Built-in granite plugins: the constitutive laws and velocity-update strategies of the thesis,
+//! each registered by name in a [`Registry`].
+
+pub mod constitutive;
+pub mod velocity_update;
+
+use granite_core::{Plugin, Registry};
+
+/// Every built-in plugin.
+pub struct DefaultPlugins;
+
+impl Plugin for DefaultPlugins {
+    fn register(&self, registry: &mut Registry) {
+        constitutive::register(registry);
+        velocity_update::register(registry);
+    }
+}
+
+/// A registry holding every built-in plugin.
+pub fn default_registry() -> Registry {
+    Registry::new().with(&DefaultPlugins)
+}

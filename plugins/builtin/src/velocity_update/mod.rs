@@ -1,0 +1,159 @@
+//! Velocity-update strategies of thesis table 3.1. Each is a blend of the PIC velocity and the FLIP
+//! velocity, with the point moved either by the PIC velocity or by its own new velocity:
+//!
+//! | name   | new point velocity                    | displacement velocity |
+//! |--------|---------------------------------------|-----------------------|
+//! | PIC    | V_PIC (3.28)                          | V_PIC (3.29)          |
+//! | FLIP   | V_FLIP = V + sum a N dt (3.30)        | V_PIC (3.31)          |
+//! | NFLIP  | V_FLIP                                | V_FLIP (3.32)         |
+//! | FLIPX  | (1-P) V_PIC + P V_FLIP (3.33)         | V_PIC                 |
+//! | NFLIPX | (1-P) V_PIC + P V_FLIP                | that velocity (3.34)  |
+//! | APIC   | V_PIC, with affine momentum transfer  | V_PIC                 |
+
+use granite_core::ext::{G2pBatch, VelocityUpdate, VelocityUpdateFactory};
+use granite_core::params::{ParamSpec, Params};
+use granite_core::registry::ParamMap;
+use granite_core::Registry;
+use std::sync::Arc;
+
+#[derive(Debug, Clone, Copy)]
+pub struct Blend {
+    name: &'static str,
+    /// Weight P of the FLIP velocity in the new point velocity.
+    flip_weight: f64,
+    /// Move with the new point velocity (N-variants) instead of V_PIC.
+    move_with_new: bool,
+    affine: bool,
+}
+
+impl VelocityUpdate for Blend {
+    fn name(&self) -> &str {
+        self.name
+    }
+    fn affine(&self) -> bool {
+        self.affine
+    }
+    fn update(&self, b: G2pBatch<'_>) {
+        let p = self.flip_weight;
+        for i in 0..b.v_old.len() {
+            let (v0, vp, dv) = (b.v_old[i], b.v_pic[i], b.dv_grid[i]);
+            let v_new = [
+                (1.0 - p) * vp[0] + p * (v0[0] + dv[0]),
+                (1.0 - p) * vp[1] + p * (v0[1] + dv[1]),
+                (1.0 - p) * vp[2] + p * (v0[2] + dv[2]),
+            ];
+            b.v_new[i] = v_new;
+            b.v_move[i] = if self.move_with_new { v_new } else { vp };
+        }
+    }
+}
+
+struct BlendFactory {
+    name: &'static str,
+    description: &'static str,
+    /// Fixed FLIP weight, or None to read `flip_ratio`.
+    flip_weight: Option<f64>,
+    move_with_new: bool,
+    affine: bool,
+}
+
+const FLIP_RATIO: &[ParamSpec] = &[ParamSpec::optional(
+    "flip_ratio",
+    0.9,
+    "P_FLIP in [0, 1]: weight of the FLIP velocity (eq. 3.33)",
+)];
+
+impl VelocityUpdateFactory for BlendFactory {
+    fn name(&self) -> &str {
+        self.name
+    }
+    fn description(&self) -> &str {
+        self.description
+    }
+    fn param_specs(&self) -> &[ParamSpec] {
+        if self.flip_weight.is_none() {
+            FLIP_RATIO
+        } else {
+            &[]
+        }
+    }
+    fn build(&self, params: Params) -> granite_core::Result<Box<dyn VelocityUpdate>> {
+        let flip_weight = match self.flip_weight {
+            Some(w) => w,
+            None => params.in_range("flip_ratio", 0.0, 1.0, true)?,
+        };
+        Ok(Box::new(Blend {
+            name: self.name,
+            flip_weight,
+            move_with_new: self.move_with_new,
+            affine: self.affine,
+        }))
+    }
+}
+
+pub fn register(registry: &mut Registry) {
+    let table = [
+        (
+            "PIC",
+            "particle in cell: dissipative, robust",
+            Some(0.0),
+            false,
+            false,
+        ),
+        (
+            "FLIP",
+            "fluid implicit particle: velocity from accelerations, moved with V_PIC",
+            Some(1.0),
+            false,
+            false,
+        ),
+        (
+            "NFLIP",
+            "naturally modified FLIP: moved with its own velocity",
+            Some(1.0),
+            true,
+            false,
+        ),
+        (
+            "FLIPX",
+            "blend of PIC and FLIP with weight flip_ratio",
+            None,
+            false,
+            false,
+        ),
+        (
+            "NFLIPX",
+            "blend of PIC and FLIP, moved with the blended velocity",
+            None,
+            true,
+            false,
+        ),
+        (
+            "APIC",
+            "affine particle in cell (Jiang et al. 2015)",
+            Some(0.0),
+            false,
+            true,
+        ),
+    ];
+    for (name, description, flip_weight, move_with_new, affine) in table {
+        registry.add_velocity_update(Arc::new(BlendFactory {
+            name,
+            description,
+            flip_weight,
+            move_with_new,
+            affine,
+        }));
+    }
+}
+
+/// A strategy by name, for tests and tools that do not go through a registry.
+pub fn by_name(name: &str, flip_ratio: f64) -> granite_core::Result<Box<dyn VelocityUpdate>> {
+    let mut reg = Registry::new();
+    register(&mut reg);
+    let mut given = ParamMap::new();
+    if matches!(name.to_ascii_uppercase().as_str(), "FLIPX" | "NFLIPX") {
+        given.insert("flip_ratio".into(), flip_ratio);
+    }
+    reg.build_velocity_update(name, &given)
+}
