@@ -1,1 +1,112 @@
-fn main() {}
+use clap::{Parser, Subcommand};
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+/// granite: multi-scale simulation of granular materials (MPM, DEM, MPMxDEM) driven by Rhai scripts.
+#[derive(Parser)]
+#[command(name = "granite", version, about, long_about = None)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Run a simulation script.
+    Run {
+        /// The Rhai script.
+        script: PathBuf,
+        /// Override a script parameter declared with param("NAME", default).
+        #[arg(long = "set", value_name = "NAME=VALUE", value_parser = granite::parse_override)]
+        set: Vec<(String, String)>,
+        /// Output folder (default: out/<script stem>/).
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Worker threads (default: all cores).
+        #[arg(long)]
+        threads: Option<usize>,
+        /// No progress lines.
+        #[arg(long)]
+        quiet: bool,
+    },
+    /// Print performance figures.
+    Bench {
+        /// Which benchmark: mpm.
+        which: String,
+        /// Material points in the 3D block (about).
+        #[arg(long, default_value_t = 100_000)]
+        points: usize,
+        /// Steps to time.
+        #[arg(long, default_value_t = 50)]
+        steps: usize,
+        /// Thread counts to measure, comma separated.
+        #[arg(long, default_value = "1,2", value_delimiter = ',')]
+        threads: Vec<usize>,
+    },
+    /// List the registered plugins (constitutive laws, velocity updates) and their parameters.
+    Plugins,
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    match cli.command {
+        Command::Run {
+            script,
+            set,
+            out,
+            threads,
+            quiet,
+        } => {
+            if let Some(n) = threads {
+                if n == 0 {
+                    eprintln!("granite: --threads must be >= 1");
+                    return ExitCode::from(2);
+                }
+                if let Err(e) = rayon::ThreadPoolBuilder::new()
+                    .num_threads(n)
+                    .build_global()
+                {
+                    eprintln!("granite: cannot set up {n} threads: {e}");
+                    return ExitCode::from(2);
+                }
+            }
+            match granite::run(&script, set, out, quiet) {
+                Ok(report) => {
+                    if !quiet {
+                        println!("granite: done; outputs in {}", report.out_dir.display());
+                        for (k, v) in &report.summary {
+                            println!("  {k} = {v}");
+                        }
+                    }
+                    ExitCode::SUCCESS
+                }
+                Err(e) => {
+                    eprintln!("granite: error: {e}");
+                    ExitCode::FAILURE
+                }
+            }
+        }
+        Command::Bench {
+            which,
+            points,
+            steps,
+            threads,
+        } => match which.as_str() {
+            "mpm" => match granite::bench::mpm(points, steps, &threads) {
+                Ok(()) => ExitCode::SUCCESS,
+                Err(e) => {
+                    eprintln!("granite: bench failed: {e}");
+                    ExitCode::FAILURE
+                }
+            },
+            other => {
+                eprintln!("granite: unknown benchmark `{other}`; available: mpm");
+                ExitCode::from(2)
+            }
+        },
+        Command::Plugins => {
+            print!("{}", granite::plugin_listing());
+            ExitCode::SUCCESS
+        }
+    }
+}

@@ -70,6 +70,10 @@ impl Registry {
         lookup(&self.laws, name, "constitutive law")
     }
 
+    pub fn velocity_update_factory(&self, name: &str) -> Result<&Arc<dyn VelocityUpdateFactory>> {
+        lookup(&self.velocity_updates, name, "velocity update")
+    }
+
     pub fn build_law(&self, name: &str, given: &ParamMap) -> Result<Box<dyn ConstitutiveLaw>> {
         let factory = self.law_factory(name)?;
         let params = Params::resolve(

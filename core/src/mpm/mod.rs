@@ -2,6 +2,7 @@
 
 pub mod boundary;
 pub mod diagnostics;
+pub mod fill;
 pub mod grid;
 pub mod mesh;
 pub mod points;

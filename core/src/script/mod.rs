@@ -1,1 +1,271 @@
+//! Rhai scripting: a script builds a simulation, runs it and writes the output contract
+//! (`series.csv`, `summary.json`, `vtk/`) into the run's output folder.
+//!
+//! Rhai is called at set-up and from callbacks every N steps, never per material point.
 
+pub mod convert;
+mod mpm_api;
+mod output;
+
+pub use mpm_api::SimHandle;
+
+use crate::error::{GraniteError, Result};
+use crate::registry::Registry;
+use convert::{err, RhaiResult};
+use indexmap::IndexMap;
+use rhai::{Dynamic, Engine, EvalAltResult};
+use serde_json::Value;
+use std::path::{Path, PathBuf};
+use std::sync::{Arc, Mutex};
+
+/// How a script is run.
+#[derive(Debug, Clone, Default)]
+pub struct RunOptions {
+    /// Output folder (created if missing).
+    pub out_dir: PathBuf,
+    /// `--set NAME=VALUE` overrides of the script's `param(...)` declarations.
+    pub overrides: Vec<(String, String)>,
+    /// No progress lines.
+    pub quiet: bool,
+}
+
+/// What a finished script leaves behind.
+#[derive(Debug, Clone)]
+pub struct RunReport {
+    pub out_dir: PathBuf,
+    pub summary: IndexMap<String, Value>,
+}
+
+/// State shared by every function a script calls.
+pub struct ScriptContext {
+    pub registry: Registry,
+    pub options: RunOptions,
+    declared: Mutex<IndexMap<String, Dynamic>>,
+    summary: Mutex<IndexMap<String, Value>>,
+    sims: Mutex<usize>,
+}
+
+impl ScriptContext {
+    fn new(registry: Registry, options: RunOptions) -> ScriptContext {
+        ScriptContext {
+            registry,
+            options,
+            declared: Mutex::new(IndexMap::new()),
+            summary: Mutex::new(IndexMap::new()),
+            sims: Mutex::new(0),
+        }
+    }
+
+    /// `param(name, default)`: the override if one was given, parsed like the default.
+    fn param(&self, name: &str, default: Dynamic) -> RhaiResult<Dynamic> {
+        let given = self
+            .options
+            .overrides
+            .iter()
+            .rev()
+            .find(|(k, _)| k == name)
+            .map(|(_, v)| v.clone());
+        let value = match given {
+            None => default.clone(),
+            Some(text) => parse_like(&text, &default, name)?,
+        };
+        self.declared
+            .lock()
+            .unwrap()
+            .insert(name.to_string(), value.clone());
+        Ok(value)
+    }
+
+    /// Every `--set` name must be declared by the script.
+    pub fn check_overrides(&self) -> RhaiResult<()> {
+        let declared = self.declared.lock().unwrap();
+        for (k, _) in &self.options.overrides {
+            if !declared.contains_key(k) {
+                let list = if declared.is_empty() {
+                    "none".to_string()
+                } else {
+                    declared.keys().cloned().collect::<Vec<_>>().join(", ")
+                };
+                return err(format!(
+                    "--set {k}: the script declares no parameter `{k}`; declared: {list}"
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    pub fn set_summary(&self, name: &str, value: Value) {
+        self.summary.lock().unwrap().insert(name.to_string(), value);
+    }
+
+    fn next_sim_index(&self) -> usize {
+        let mut n = self.sims.lock().unwrap();
+        *n += 1;
+        *n
+    }
+}
+
+fn parse_like(text: &str, default: &Dynamic, name: &str) -> RhaiResult<Dynamic> {
+    let bad = |what: &str| {
+        err(format!(
+            "--set {name}={text}: expected {what} (the default is {default})"
+        ))
+    };
+    if default.is_int() {
+        text.trim()
+            .parse::<i64>()
+            .map(Dynamic::from)
+            .or_else(|_| bad("an integer"))
+    } else if default.is_float() {
+        text.trim()
+            .parse::<f64>()
+            .map(Dynamic::from)
+            .or_else(|_| bad("a number"))
+    } else if default.is_bool() {
+        text.trim()
+            .parse::<bool>()
+            .map(Dynamic::from)
+            .or_else(|_| bad("true or false"))
+    } else {
+        Ok(Dynamic::from(text.to_string()))
+    }
+}
+
+fn to_json(d: &Dynamic) -> Value {
+    if let Ok(f) = d.as_float() {
+        serde_json::Number::from_f64(f)
+            .map(Value::Number)
+            .unwrap_or(Value::Null)
+    } else if let Ok(i) = d.as_int() {
+        Value::from(i)
+    } else if let Ok(b) = d.as_bool() {
+        Value::from(b)
+    } else if d.is_array() {
+        Value::Array(
+            d.clone()
+                .into_array()
+                .unwrap_or_default()
+                .iter()
+                .map(to_json)
+                .collect(),
+        )
+    } else {
+        Value::from(d.to_string())
+    }
+}
+
+fn build_engine(ctx: &Arc<ScriptContext>) -> Engine {
+    let mut engine = Engine::new();
+    engine.set_max_expr_depths(128, 64);
+    for kind in 0..4 {
+        let c = ctx.clone();
+        match kind {
+            0 => engine.register_fn("param", move |name: &str, d: f64| {
+                c.param(name, Dynamic::from(d))
+            }),
+            1 => engine.register_fn("param", move |name: &str, d: i64| {
+                c.param(name, Dynamic::from(d))
+            }),
+            2 => engine.register_fn("param", move |name: &str, d: &str| {
+                c.param(name, Dynamic::from(d.to_string()))
+            }),
+            _ => engine.register_fn("param", move |name: &str, d: bool| {
+                c.param(name, Dynamic::from(d))
+            }),
+        };
+    }
+    let c = ctx.clone();
+    engine.register_fn("summary", move |name: &str, value: Dynamic| {
+        c.set_summary(name, to_json(&value))
+    });
+    let c = ctx.clone();
+    engine.register_fn("out_dir", move || c.options.out_dir.display().to_string());
+    engine.register_fn("print_line", |s: &str| println!("{s}"));
+    mpm_api::register(&mut engine, ctx);
+    engine
+}
+
+/// Runs a script file. The output folder gets `summary.json` whatever happens; a failed run
+/// records `status: "failed"` and the error there too.
+pub fn run_script(path: &Path, registry: Registry, options: RunOptions) -> Result<RunReport> {
+    let source = std::fs::read_to_string(path).map_err(|e| GraniteError::io(path, e))?;
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().to_string())
+        .unwrap_or_default();
+    run_source(&name, &source, registry, options)
+}
+
+/// Runs script text; `name` is used in error messages.
+pub fn run_source(
+    name: &str,
+    source: &str,
+    registry: Registry,
+    options: RunOptions,
+) -> Result<RunReport> {
+    let out_dir = options.out_dir.clone();
+    std::fs::create_dir_all(&out_dir).map_err(|e| GraniteError::io(&out_dir, e))?;
+    let ctx = Arc::new(ScriptContext::new(registry, options));
+    let engine = build_engine(&ctx);
+    let started = std::time::Instant::now();
+    let outcome = engine
+        .compile(source)
+        .map_err(|e| format!("{name}: syntax error: {e}"))
+        .and_then(|ast| {
+            engine
+                .run_ast(&ast)
+                .map_err(|e| format!("{name}: {}", describe(&e)))
+        })
+        .and_then(|_| {
+            ctx.check_overrides()
+                .map_err(|e| format!("{name}: {}", describe(&e)))
+        });
+    let mut summary = ctx.summary.lock().unwrap().clone();
+    summary.insert(
+        "status".into(),
+        Value::from(if outcome.is_ok() { "ok" } else { "failed" }),
+    );
+    if let Err(e) = &outcome {
+        summary.insert("error".into(), Value::from(e.clone()));
+    }
+    summary.insert(
+        "wall_time_s".into(),
+        Value::from(started.elapsed().as_secs_f64()),
+    );
+    crate::io::write_summary(&out_dir.join("summary.json"), &summary)?;
+    match outcome {
+        Ok(()) => Ok(RunReport { out_dir, summary }),
+        Err(e) => Err(GraniteError::Other(e)),
+    }
+}
+
+/// A script error in one line: the message first, then where it happened.
+fn describe(e: &EvalAltResult) -> String {
+    let mut inner = e;
+    let mut pos = e.position();
+    while let EvalAltResult::ErrorInFunctionCall(_, _, next, p) = inner {
+        if !p.is_none() {
+            pos = *p;
+        }
+        inner = next;
+    }
+    let msg = match inner {
+        EvalAltResult::ErrorRuntime(d, _) => d.to_string(),
+        other => {
+            let s = other.to_string();
+            match s.find(" (line ") {
+                Some(i) => s[..i].to_string(),
+                None => s,
+            }
+        }
+    };
+    let p = if inner.position().is_none() {
+        pos
+    } else {
+        inner.position()
+    };
+    match p.line() {
+        Some(line) => format!("line {line}: {msg}"),
+        None => msg,
+    }
+}

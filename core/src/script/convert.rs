@@ -1,0 +1,142 @@
+//! Conversions from Rhai values to engine values, with errors that name the parameter.
+
+use crate::error::{GraniteError, Result};
+use crate::math::Vec3;
+use crate::registry::ParamMap;
+use rhai::{Dynamic, EvalAltResult, Map, Position};
+
+pub type RhaiResult<T> = std::result::Result<T, Box<EvalAltResult>>;
+
+/// A granite error as a Rhai runtime error; Rhai adds the script position of the failing call.
+pub fn to_rhai(e: GraniteError) -> Box<EvalAltResult> {
+    Box::new(EvalAltResult::ErrorRuntime(
+        Dynamic::from(e.to_string()),
+        Position::NONE,
+    ))
+}
+
+pub fn err<T>(msg: impl Into<String>) -> RhaiResult<T> {
+    Err(to_rhai(GraniteError::Setup(msg.into())))
+}
+
+pub trait OrRhai<T> {
+    fn or_rhai(self) -> RhaiResult<T>;
+}
+
+impl<T> OrRhai<T> for Result<T> {
+    fn or_rhai(self) -> RhaiResult<T> {
+        self.map_err(to_rhai)
+    }
+}
+
+/// A number given as float or integer.
+pub fn number(d: &Dynamic, name: &str) -> RhaiResult<f64> {
+    if let Ok(f) = d.as_float() {
+        Ok(f)
+    } else if let Ok(i) = d.as_int() {
+        Ok(i as f64)
+    } else {
+        err(format!(
+            "`{name}` must be a number, got {} ({})",
+            d,
+            d.type_name()
+        ))
+    }
+}
+
+pub fn integer(d: &Dynamic, name: &str) -> RhaiResult<i64> {
+    d.as_int().or_else(|_| {
+        err(format!(
+            "`{name}` must be an integer, got {} ({})",
+            d,
+            d.type_name()
+        ))
+    })
+}
+
+/// An array of `dim` numbers (2D vectors get z = 0).
+pub fn vector(d: &Dynamic, dim: usize, name: &str) -> RhaiResult<Vec3> {
+    let arr = d.clone().into_array().or_else(|_| {
+        err(format!(
+            "`{name}` must be an array of {dim} numbers, got {}",
+            d.type_name()
+        ))
+    })?;
+    if arr.len() != dim {
+        return err(format!(
+            "`{name}` must have {dim} components (dim = {dim}), got {}",
+            arr.len()
+        ));
+    }
+    let mut v = [0.0; 3];
+    for (k, x) in arr.iter().enumerate() {
+        v[k] = number(x, name)?;
+    }
+    Ok(v)
+}
+
+/// An array of numbers of any length.
+pub fn numbers(d: &Dynamic, name: &str) -> RhaiResult<Vec<f64>> {
+    let arr = d
+        .clone()
+        .into_array()
+        .or_else(|_| err(format!("`{name}` must be an array of numbers")))?;
+    arr.iter().map(|x| number(x, name)).collect()
+}
+
+pub fn counts(d: &Dynamic, dim: usize, name: &str) -> RhaiResult<[usize; 3]> {
+    let arr = d
+        .clone()
+        .into_array()
+        .or_else(|_| err(format!("`{name}` must be an array of {dim} integers")))?;
+    if arr.len() != dim {
+        return err(format!(
+            "`{name}` must have {dim} entries (dim = {dim}), got {}",
+            arr.len()
+        ));
+    }
+    let mut c = [1usize; 3];
+    for (k, x) in arr.iter().enumerate() {
+        let n = integer(x, name)?;
+        if n <= 0 {
+            return err(format!("`{name}` entries must be >= 1, got {n}"));
+        }
+        c[k] = n as usize;
+    }
+    Ok(c)
+}
+
+/// The numeric entries of an options map, minus the keys the caller handles itself.
+pub fn param_map(map: &Map, skip: &[&str], owner: &str) -> RhaiResult<ParamMap> {
+    let mut out = ParamMap::new();
+    for (k, v) in map {
+        if skip.contains(&k.as_str()) {
+            continue;
+        }
+        out.insert(k.to_string(), number(v, &format!("{k}` of `{owner}"))?);
+    }
+    Ok(out)
+}
+
+pub fn get<'a>(map: &'a Map, key: &str) -> Option<&'a Dynamic> {
+    map.get(key)
+}
+
+/// Rejects keys of an options map that the function does not know.
+pub fn only_keys(map: &Map, allowed: &[&str], function: &str) -> RhaiResult<()> {
+    for k in map.keys() {
+        if !allowed.contains(&k.as_str()) {
+            return err(format!(
+                "unknown option `{k}` of {function}; allowed: {}",
+                allowed.join(", ")
+            ));
+        }
+    }
+    Ok(())
+}
+
+pub fn string(d: &Dynamic, name: &str) -> RhaiResult<String> {
+    d.clone()
+        .into_string()
+        .or_else(|_| err(format!("`{name}` must be a string, got {}", d.type_name())))
+}
