@@ -20,23 +20,35 @@ pub fn default_out_dir(script: &Path) -> PathBuf {
     PathBuf::from("out").join(stem)
 }
 
-/// Runs a script with `--set` overrides into `out_dir`.
+/// Runs a script with `--set` overrides into `out_dir`, on `threads` worker threads (None: all
+/// cores). The script itself runs on a worker of that pool, so the engine's parallel loops start
+/// without handing work across threads.
 pub fn run(
     script: &Path,
     overrides: Vec<(String, String)>,
     out_dir: Option<PathBuf>,
     quiet: bool,
+    threads: Option<usize>,
 ) -> Result<RunReport> {
     let out_dir = out_dir.unwrap_or_else(|| default_out_dir(script));
-    run_script(
-        script,
-        registry(),
-        RunOptions {
-            out_dir,
-            overrides,
-            quiet,
-        },
-    )
+    let mut pool = rayon::ThreadPoolBuilder::new();
+    if let Some(n) = threads {
+        pool = pool.num_threads(n);
+    }
+    let pool = pool
+        .build()
+        .map_err(|e| granite_core::GraniteError::Other(format!("thread pool: {e}")))?;
+    pool.install(|| {
+        run_script(
+            script,
+            registry(),
+            RunOptions {
+                out_dir,
+                overrides,
+                quiet,
+            },
+        )
+    })
 }
 
 /// Parses `NAME=VALUE`.

@@ -57,20 +57,11 @@ fn main() -> ExitCode {
             threads,
             quiet,
         } => {
-            if let Some(n) = threads {
-                if n == 0 {
-                    eprintln!("granite: --threads must be >= 1");
-                    return ExitCode::from(2);
-                }
-                if let Err(e) = rayon::ThreadPoolBuilder::new()
-                    .num_threads(n)
-                    .build_global()
-                {
-                    eprintln!("granite: cannot set up {n} threads: {e}");
-                    return ExitCode::from(2);
-                }
+            if threads == Some(0) {
+                eprintln!("granite: --threads must be >= 1");
+                return ExitCode::from(2);
             }
-            match granite::run(&script, set, out, quiet) {
+            match granite::run(&script, set, out, quiet, threads) {
                 Ok(report) => {
                     if !quiet {
                         println!("granite: done; outputs in {}", report.out_dir.display());

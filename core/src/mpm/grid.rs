@@ -82,11 +82,14 @@ where
 {
     let plane = mesh.nodes_per_plane();
     let nslabs = mesh.slab_count();
+    // Enough slabs per task that a task has a few thousand points to scatter.
+    let per_slab = slabs.order.len() / nslabs.max(1);
+    let min_windows = (4096 / per_slab.max(1)).max(1);
     for parity in 0..2 {
-        let (head, body) = sums.split_at_mut(parity * plane);
-        let _ = head;
+        let body = &mut sums[parity * plane..];
         body.par_chunks_mut(2 * plane)
             .enumerate()
+            .with_min_len(min_windows)
             .for_each(|(j, window)| {
                 let s = 2 * j + parity;
                 if s < nslabs {

@@ -14,6 +14,10 @@ use rayon::prelude::*;
 
 /// Points handled per task (and per velocity-update call).
 const CHUNK: usize = 256;
+/// Fewest points or nodes worth handing to another thread: below this, waking a worker costs more
+/// than the work (small scenes then run on one thread with no synchronisation at all).
+const MIN_PER_TASK: usize = 4096;
+const MIN_CHUNKS_PER_TASK: usize = MIN_PER_TASK / CHUNK;
 /// Nodes lighter than this fraction of the lightest point are treated as empty.
 const MASS_EPS: f64 = 1e-12;
 
@@ -93,11 +97,14 @@ impl MpmSim {
 
     fn check_finite(&self) -> Result<()> {
         let p = &self.points;
-        let bad = (0..p.len()).into_par_iter().find_first(|&i| {
-            !(p.x[i].iter().all(|c| c.is_finite())
-                && p.v[i].iter().all(|c| c.is_finite())
-                && p.stress[i].iter().all(|c| c.is_finite()))
-        });
+        let bad = (0..p.len())
+            .into_par_iter()
+            .with_min_len(MIN_PER_TASK)
+            .find_first(|&i| {
+                !(p.x[i].iter().all(|c| c.is_finite())
+                    && p.v[i].iter().all(|c| c.is_finite())
+                    && p.stress[i].iter().all(|c| c.is_finite()))
+            });
         match bad {
             None => Ok(()),
             Some(i) => Err(GraniteError::Unstable {
@@ -160,6 +167,7 @@ fn locate(mesh: &Mesh, points: &Points, loc: &mut Vec<Location>) -> Result<()> {
     let outside = loc
         .par_iter_mut()
         .zip(points.x.par_iter())
+        .with_min_len(MIN_PER_TASK)
         .map(|(l, x)| match mesh.locate(*x) {
             Some(found) => {
                 *l = found;
@@ -213,17 +221,20 @@ fn p2g<S: ShapeFunction>(
         Maps::Momentum => (false, true, false),
         Maps::Force => (false, false, true),
     };
-    grid.sums.par_iter_mut().for_each(|s| {
-        if do_mass {
-            s.mass = 0.0;
-        }
-        if do_momentum {
-            s.momentum = [0.0; 3];
-        }
-        if do_force {
-            s.force = [0.0; 3];
-        }
-    });
+    grid.sums
+        .par_iter_mut()
+        .with_min_len(MIN_PER_TASK)
+        .for_each(|s| {
+            if do_mass {
+                s.mass = 0.0;
+            }
+            if do_momentum {
+                s.momentum = [0.0; 3];
+            }
+            if do_force {
+                s.force = [0.0; 3];
+            }
+        });
     let off = node_offsets::<S>(mesh);
     let h = mesh.cell;
     scatter(
@@ -285,6 +296,7 @@ fn grid_velocity(grid: &mut Grid, bc: &Boundary, t: f64) {
     grid.velocity
         .par_iter_mut()
         .zip(grid.sums.par_iter())
+        .with_min_len(MIN_PER_TASK)
         .for_each(|(v, s)| {
             *v = if s.mass > MASS_EPS {
                 [
@@ -330,6 +342,7 @@ fn grid_update(grid: &mut Grid, bc: &Boundary, damping: f64, dt: f64, t: f64) {
     grid.velocity_new
         .par_iter_mut()
         .zip(grid.sums.par_iter().zip(grid.velocity.par_iter()))
+        .with_min_len(MIN_PER_TASK)
         .for_each(|(vn, (s, v))| {
             if s.mass > MASS_EPS {
                 let f = s.force;
@@ -373,6 +386,7 @@ fn grid_update(grid: &mut Grid, bc: &Boundary, damping: f64, dt: f64, t: f64) {
     grid.accel
         .par_iter_mut()
         .zip(grid.velocity_new.par_iter().zip(grid.velocity.par_iter()))
+        .with_min_len(MIN_PER_TASK)
         .for_each(|(a, (vn, v))| {
             *a = [
                 (vn[0] - v[0]) * inv_dt,
@@ -449,6 +463,7 @@ fn strain_update<S: ShapeFunction>(
         loc.par_iter(),
     )
         .into_par_iter()
+        .with_min_len(MIN_PER_TASK)
         .for_each(|(de, e, vol, l)| {
             let mut n = [0.0; MAX_NODES];
             let mut dn = [[0.0; 3]; MAX_NODES];
@@ -485,6 +500,7 @@ fn g2p<S: ShapeFunction>(
         loc.par_chunks(CHUNK),
     )
         .into_par_iter()
+        .with_min_len(MIN_CHUNKS_PER_TASK)
         .for_each(|(x, v, c, de, e, vol, l)| {
             let len = x.len();
             let mut v_pic = [[0.0; 3]; CHUNK];
@@ -570,6 +586,7 @@ fn stress_update(pts: &mut Points, materials: &mut [Material]) -> Result<()> {
             stress
                 .zip(dstrain)
                 .zip(m.state.par_chunks_mut(CHUNK * stride))
+                .with_min_len(MIN_CHUNKS_PER_TASK)
                 .map(|((s, de), state)| {
                     law.update(LawBatch {
                         stress: s,
