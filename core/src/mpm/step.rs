@@ -95,6 +95,39 @@ impl MpmSim {
         self.handle_out_of_mesh()
     }
 
+    /// Maps the points' mass, momentum and forces to the grid (eqs. 3.17, 3.18, 3.21, 3.23) without
+    /// advancing time, and returns the nodal sums: for inspection and conservation checks.
+    pub fn map_to_grid(&mut self) -> Result<&[NodeSums]> {
+        locate(&self.mesh, &self.points, &mut self.loc)?;
+        self.grid.resize(self.mesh.node_count());
+        self.slabs.build(&self.mesh, &self.loc);
+        let affine = self.velocity_update.affine();
+        let (mesh, pts, loc, slabs) = (&self.mesh, &self.points, &self.loc, &self.slabs);
+        match mesh.dim {
+            3 => p2g::<Linear3>(
+                &mut self.grid,
+                mesh,
+                slabs,
+                pts,
+                loc,
+                self.gravity,
+                affine,
+                Maps::MassMomentumForce,
+            ),
+            _ => p2g::<Linear2>(
+                &mut self.grid,
+                mesh,
+                slabs,
+                pts,
+                loc,
+                self.gravity,
+                affine,
+                Maps::MassMomentumForce,
+            ),
+        }
+        Ok(&self.grid.sums)
+    }
+
     fn check_finite(&self) -> Result<()> {
         let p = &self.points;
         let bad = (0..p.len())

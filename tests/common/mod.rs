@@ -1,0 +1,78 @@
+//! Helpers shared by the integration tests.
+#![allow(dead_code)]
+
+use std::path::{Path, PathBuf};
+
+/// The repository root (tests run with the package root as working directory).
+pub fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+pub fn script(rel: &str) -> PathBuf {
+    root().join("scripts").join(rel)
+}
+
+/// A fresh output folder under target/, unique per test name.
+pub fn out_dir(name: &str) -> PathBuf {
+    let dir = root().join("target").join("test-out").join(name);
+    let _ = std::fs::remove_dir_all(&dir);
+    dir
+}
+
+pub fn sets(pairs: &[(&str, &str)]) -> Vec<(String, String)> {
+    pairs
+        .iter()
+        .map(|(k, v)| (k.to_string(), v.to_string()))
+        .collect()
+}
+
+/// Runs a script through the library, quietly, on `threads` threads.
+pub fn run(
+    script_rel: &str,
+    name: &str,
+    pairs: &[(&str, &str)],
+    threads: usize,
+) -> granite_core::Result<granite_core::script::RunReport> {
+    granite::run(
+        &script(script_rel),
+        sets(pairs),
+        Some(out_dir(name)),
+        true,
+        Some(threads),
+    )
+}
+
+pub fn summary_f64(report: &granite_core::script::RunReport, key: &str) -> f64 {
+    report
+        .summary
+        .get(key)
+        .and_then(|v| v.as_f64())
+        .unwrap_or_else(|| panic!("summary has no number `{key}`"))
+}
+
+/// Reads a CSV file with a header into (header, rows of numbers).
+pub fn read_csv(path: &Path) -> (Vec<String>, Vec<Vec<f64>>) {
+    let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    let mut lines = text.lines();
+    let header: Vec<String> = lines
+        .next()
+        .unwrap_or_default()
+        .split(',')
+        .map(|s| s.to_string())
+        .collect();
+    let rows = lines
+        .map(|l| {
+            l.split(',')
+                .map(|v| v.parse::<f64>().unwrap_or(f64::NAN))
+                .collect()
+        })
+        .collect();
+    (header, rows)
+}
+
+pub fn column(header: &[String], name: &str) -> usize {
+    header
+        .iter()
+        .position(|h| h == name)
+        .unwrap_or_else(|| panic!("no column `{name}` in {header:?}"))
+}

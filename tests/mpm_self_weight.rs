@@ -1,0 +1,46 @@
+//! A linear-elastic column at rest under gravity carries sigma_yy = -rho g depth.
+
+mod common;
+use common::*;
+
+#[test]
+fn settled_column_stress_matches_overburden() {
+    let report = run("mpm/self_weight_column.rhai", "self_weight", &[], 2).unwrap();
+    assert!(
+        summary_f64(&report, "final_kinetic_energy") < 1e-6,
+        "the column has not settled"
+    );
+    let (rho, height, cell) = (
+        summary_f64(&report, "density"),
+        summary_f64(&report, "height"),
+        summary_f64(&report, "cell_size"),
+    );
+    let g = 9.81;
+    let (h, rows) = read_csv(&report.out_dir.join("points.csv"));
+    let (y, syy) = (column(&h, "y"), column(&h, "syy"));
+    // Linear shape functions make the stress uniform in a cell, equal to the overburden at the
+    // cell's centroid (thesis 5.3.2): compare cell averages, away from the top cell.
+    let mut cells: std::collections::BTreeMap<i64, (f64, f64, usize)> = Default::default();
+    for r in &rows {
+        let e = cells.entry((r[y] / cell).floor() as i64).or_default();
+        e.0 += r[y];
+        e.1 += r[syy];
+        e.2 += 1;
+    }
+    let top_cell = ((height / cell).round() as i64) - 1;
+    let mut checked = 0;
+    for (&c, &(ys, ss, n)) in &cells {
+        if c >= top_cell {
+            continue;
+        }
+        let (y_mean, s_mean) = (ys / n as f64, ss / n as f64);
+        let expected = -rho * g * (height - y_mean);
+        let err = (s_mean - expected).abs() / expected.abs();
+        assert!(
+            err < 0.03,
+            "cell {c} (y = {y_mean:.3}): sigma_yy = {s_mean:.1} Pa, expected {expected:.1} Pa"
+        );
+        checked += 1;
+    }
+    assert!(checked >= 10, "too few cells checked: {checked}");
+}
