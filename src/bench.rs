@@ -20,19 +20,11 @@ pub fn elastic_block(points: usize) -> Result<MpmSim> {
     let h = 0.1;
     let n = cells_per_side + 2;
     let mesh = Mesh::new(3, [0.0; 3], [h; 3], [n, n, n])?;
-    let mut sim = MpmSim::new(
-        mesh.clone(),
-        reg.build_velocity_update("FLIP", &ParamMap::new())?,
-    );
-    let law = reg.build_law(
-        "linear_elastic",
-        &params(&[("young", 1e7), ("poisson", 0.3)]),
-    )?;
+    let mut sim = MpmSim::new(mesh.clone(), reg.build_velocity_update("FLIP", &ParamMap::new())?);
+    let law = reg.build_law("linear_elastic", &params(&[("young", 1e7), ("poisson", 0.3)]))?;
     let m = sim.add_material("block", 2000.0, law)?;
     let top = h * (cells_per_side as f64 + 1.0);
-    let (xs, vols) = cell_points(&mesh, Layout::Gauss, 2, |x| {
-        Ok(x.iter().all(|&c| c > h && c < top))
-    })?;
+    let (xs, vols) = cell_points(&mesh, Layout::Gauss, 2, |x| Ok(x.iter().all(|&c| c > h && c < top)))?;
     sim.add_points(m, &xs, &vols, [0.0; 3], [0.0; 6])?;
     sim.gravity = [0.0, 0.0, -9.81];
     sim.scheme = StressScheme::Usf;
@@ -53,34 +45,16 @@ pub fn elastic_block(points: usize) -> Result<MpmSim> {
 pub fn mohr_coulomb_column(cell: f64) -> Result<MpmSim> {
     let reg = crate::registry();
     let (width, height) = (1.0, 2.0);
-    let cells = [
-        (width / cell).round() as usize,
-        (height / cell).round() as usize,
-        1,
-    ];
+    let cells = [(width / cell).round() as usize, (height / cell).round() as usize, 1];
     let mesh = Mesh::new(2, [0.0; 3], [cell, cell, 1.0], cells)?;
-    let mut sim = MpmSim::new(
-        mesh.clone(),
-        reg.build_velocity_update("FLIP", &ParamMap::new())?,
-    );
+    let mut sim = MpmSim::new(mesh.clone(), reg.build_velocity_update("FLIP", &ParamMap::new())?);
     let law = reg.build_law(
         "mohr_coulomb",
-        &params(&[
-            ("young", 1.28e7),
-            ("poisson", 0.16),
-            ("friction", 33.75),
-            ("cohesion", 1.0),
-        ]),
+        &params(&[("young", 1.28e7), ("poisson", 0.16), ("friction", 33.75), ("cohesion", 1.0)]),
     )?;
     let m = sim.add_material("sand", 1748.0, law)?;
     let (xs, vols) = cell_points(&mesh, Layout::Gauss, 2, |_| Ok(true))?;
-    sim.add_points(
-        m,
-        &xs,
-        &vols,
-        [0.0; 3],
-        [-250.0, -250.0, -250.0, 0.0, 0.0, 0.0],
-    )?;
+    sim.add_points(m, &xs, &vols, [0.0; 3], [-250.0, -250.0, -250.0, 0.0, 0.0, 0.0])?;
     sim.gravity = [0.0, -9.81, 0.0];
     sim.damping = 0.1;
     for (face, _) in [("x-", 0), ("x+", 0), ("y-", 1)] {
@@ -106,12 +80,7 @@ fn time_steps(sim: &mut MpmSim, steps: usize) -> Result<f64> {
     Ok(t.elapsed().as_secs_f64())
 }
 
-fn measure(
-    label: &str,
-    threads: &[usize],
-    steps: usize,
-    build: &(dyn Fn() -> Result<MpmSim> + Sync),
-) -> Result<()> {
+fn measure(label: &str, threads: &[usize], steps: usize, build: &(dyn Fn() -> Result<MpmSim> + Sync)) -> Result<()> {
     let mut base = None;
     for &n in threads {
         let pool = rayon::ThreadPoolBuilder::new()
@@ -138,15 +107,8 @@ fn measure(
 
 pub fn mpm(points: usize, steps: usize, threads: &[usize]) -> Result<()> {
     println!("granite bench mpm (USF + FLIP, linear shape functions)");
-    measure("3D linear-elastic block", threads, steps, &|| {
-        elastic_block(points)
-    })?;
+    measure("3D linear-elastic block", threads, steps, &|| elastic_block(points))?;
     let cell = (2.0 / (points as f64 / 4.0)).sqrt();
-    measure(
-        "2D Mohr-Coulomb column (table 5.1)",
-        threads,
-        steps,
-        &|| mohr_coulomb_column(cell),
-    )?;
+    measure("2D Mohr-Coulomb column (table 5.1)", threads, steps, &|| mohr_coulomb_column(cell))?;
     Ok(())
 }

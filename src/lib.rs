@@ -13,10 +13,7 @@ pub fn registry() -> Registry {
 
 /// Default output folder of a script: `out/<script stem>/`.
 pub fn default_out_dir(script: &Path) -> PathBuf {
-    let stem = script
-        .file_stem()
-        .map(|s| s.to_string_lossy().to_string())
-        .unwrap_or_else(|| "run".into());
+    let stem = script.file_stem().map(|s| s.to_string_lossy().to_string()).unwrap_or_else(|| "run".into());
     PathBuf::from("out").join(stem)
 }
 
@@ -35,20 +32,8 @@ pub fn run(
     if let Some(n) = threads {
         pool = pool.num_threads(n);
     }
-    let pool = pool
-        .build()
-        .map_err(|e| granite_core::GraniteError::Other(format!("thread pool: {e}")))?;
-    pool.install(|| {
-        run_script(
-            script,
-            registry(),
-            RunOptions {
-                out_dir,
-                overrides,
-                quiet,
-            },
-        )
-    })
+    let pool = pool.build().map_err(|e| granite_core::GraniteError::Other(format!("thread pool: {e}")))?;
+    pool.install(|| run_script(script, registry(), RunOptions { out_dir, overrides, quiet }))
 }
 
 /// Parses `NAME=VALUE`.
@@ -63,8 +48,7 @@ pub fn parse_override(s: &str) -> std::result::Result<(String, String), String> 
 pub fn plugin_listing() -> String {
     use std::fmt::Write;
     let reg = registry();
-    let mut out =
-        String::from("constitutive laws (sim.material(NAME, #{ density: ..., PARAMS })):\n");
+    let mut out = String::from("constitutive laws (sim.material(NAME, #{ density: ..., PARAMS })):\n");
     for name in reg.law_names() {
         if let Ok(f) = reg.law_factory(&name) {
             let _ = writeln!(out, "  {name}: {}", f.description());
@@ -81,20 +65,13 @@ pub fn plugin_listing() -> String {
     out.push_str("velocity updates (sim.velocity_update(NAME, #{ PARAMS })):\n");
     for name in reg.velocity_update_names() {
         if let Ok(f) = reg.velocity_update_factory(&name) {
-            let params: Vec<String> = f
-                .param_specs()
-                .iter()
-                .map(|s| format!("{} = {}", s.name, s.default.unwrap_or(f64::NAN)))
-                .collect();
+            let params: Vec<String> =
+                f.param_specs().iter().map(|s| format!("{} = {}", s.name, s.default.unwrap_or(f64::NAN))).collect();
             let _ = writeln!(
                 out,
                 "  {name:<7} {}{}",
                 f.description(),
-                if params.is_empty() {
-                    String::new()
-                } else {
-                    format!(" [{}]", params.join(", "))
-                }
+                if params.is_empty() { String::new() } else { format!(" [{}]", params.join(", ")) }
             );
         }
     }

@@ -50,13 +50,7 @@ enum Command {
 fn main() -> ExitCode {
     let cli = Cli::parse();
     match cli.command {
-        Command::Run {
-            script,
-            set,
-            out,
-            threads,
-            quiet,
-        } => {
+        Command::Run { script, set, out, threads, quiet } => {
             if threads == Some(0) {
                 eprintln!("granite: --threads must be >= 1");
                 return ExitCode::from(2);
@@ -77,12 +71,7 @@ fn main() -> ExitCode {
                 }
             }
         }
-        Command::Bench {
-            which,
-            points,
-            steps,
-            threads,
-        } => match which.as_str() {
+        Command::Bench { which, points, steps, threads } => match which.as_str() {
             "mpm" => match granite::bench::mpm(points, steps, &threads) {
                 Ok(()) => ExitCode::SUCCESS,
                 Err(e) => {

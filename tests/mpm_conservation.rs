@@ -7,24 +7,11 @@ use granite_core::registry::ParamMap;
 fn elastic_block(dim: usize, update: &str) -> MpmSim {
     let reg = granite::registry();
     let mesh = Mesh::new(dim, [0.0; 3], [0.1, 0.125, 0.2], [8, 6, 5]).unwrap();
-    let mut sim = MpmSim::new(
-        mesh.clone(),
-        reg.build_velocity_update(update, &ParamMap::new()).unwrap(),
-    );
-    let params: ParamMap = [("young".to_string(), 1e6), ("poisson".to_string(), 0.25)]
-        .into_iter()
-        .collect();
-    let m = sim
-        .add_material(
-            "block",
-            1500.0,
-            reg.build_law("linear_elastic", &params).unwrap(),
-        )
-        .unwrap();
-    let (xs, vols) = cell_points(&mesh, Layout::Gauss, 2, |x| {
-        Ok(x[0] > 0.2 && x[0] < 0.6 && x[1] > 0.25 && x[1] < 0.5)
-    })
-    .unwrap();
+    let mut sim = MpmSim::new(mesh.clone(), reg.build_velocity_update(update, &ParamMap::new()).unwrap());
+    let params: ParamMap = [("young".to_string(), 1e6), ("poisson".to_string(), 0.25)].into_iter().collect();
+    let m = sim.add_material("block", 1500.0, reg.build_law("linear_elastic", &params).unwrap()).unwrap();
+    let (xs, vols) =
+        cell_points(&mesh, Layout::Gauss, 2, |x| Ok(x[0] > 0.2 && x[0] < 0.6 && x[1] > 0.25 && x[1] < 0.5)).unwrap();
     sim.add_points(m, &xs, &vols, [0.0; 3], [0.0; 6]).unwrap();
     sim.set_dt(0.1 * sim.critical_dt().unwrap()).unwrap();
     sim
@@ -33,11 +20,7 @@ fn elastic_block(dim: usize, update: &str) -> MpmSim {
 /// A smooth but non-uniform velocity field, so that transfers have something to get wrong.
 fn swirl(sim: &mut MpmSim) {
     for (v, x) in sim.points.v.iter_mut().zip(&sim.points.x) {
-        *v = [
-            0.3 + (7.0 * x[1]).sin(),
-            -0.2 + (5.0 * x[0]).cos(),
-            if sim.mesh.dim == 3 { 0.1 * x[0] } else { 0.0 },
-        ];
+        *v = [0.3 + (7.0 * x[1]).sin(), -0.2 + (5.0 * x[0]).cos(), if sim.mesh.dim == 3 { 0.1 * x[0] } else { 0.0 }];
     }
 }
 
@@ -60,17 +43,10 @@ fn p2g_conserves_mass_and_momentum() {
         let momentum = total_momentum(&sim);
         let sums = sim.map_to_grid().unwrap();
         let grid_mass: f64 = sums.iter().map(|s| s.mass).sum();
-        assert!(
-            (grid_mass - mass).abs() <= 1e-13 * mass,
-            "{dim}D mass {grid_mass} vs {mass}"
-        );
+        assert!((grid_mass - mass).abs() <= 1e-13 * mass, "{dim}D mass {grid_mass} vs {mass}");
         for a in 0..3 {
             let grid_p: f64 = sums.iter().map(|s| s.momentum[a]).sum();
-            assert!(
-                (grid_p - momentum[a]).abs() <= 1e-12 * mass,
-                "{dim}D momentum[{a}] {grid_p} vs {}",
-                momentum[a]
-            );
+            assert!((grid_p - momentum[a]).abs() <= 1e-12 * mass, "{dim}D momentum[{a}] {grid_p} vs {}", momentum[a]);
         }
     }
 }
@@ -114,20 +90,14 @@ fn rigid_translation_produces_no_strain() {
         let t = sim.time;
         for (i, (x, x_start)) in sim.points.x.iter().zip(&x0).enumerate() {
             for a in 0..3 {
-                assert!(
-                    (x[a] - (x_start[a] + v[a] * t)).abs() < 1e-10,
-                    "point {i} drifted"
-                );
+                assert!((x[a] - (x_start[a] + v[a] * t)).abs() < 1e-10, "point {i} drifted");
             }
             assert!(
                 sim.points.strain[i].iter().all(|e| e.abs() < 1e-12),
                 "point {i} strained: {:?}",
                 sim.points.strain[i]
             );
-            assert!(
-                sim.points.stress[i].iter().all(|s| s.abs() < 1e-5),
-                "point {i} stressed"
-            );
+            assert!(sim.points.stress[i].iter().all(|s| s.abs() < 1e-5), "point {i} stressed");
         }
     }
 }
@@ -135,46 +105,26 @@ fn rigid_translation_produces_no_strain() {
 #[test]
 fn results_do_not_depend_on_thread_count() {
     let run = |threads: usize| {
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .unwrap();
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
         pool.install(|| {
             let reg = granite::registry();
             let mesh = Mesh::new(2, [0.0; 3], [0.01, 0.01, 1.0], [100, 70, 1]).unwrap();
-            let mut sim = MpmSim::new(
-                mesh.clone(),
-                reg.build_velocity_update("APIC", &ParamMap::new()).unwrap(),
-            );
-            let params: ParamMap = [
-                ("young", 1e6),
-                ("poisson", 0.2),
-                ("friction", 30.0),
-                ("cohesion", 10.0),
-            ]
-            .iter()
-            .map(|(k, v)| (k.to_string(), *v))
-            .collect();
-            let m = sim
-                .add_material(
-                    "sand",
-                    1800.0,
-                    reg.build_law("mohr_coulomb", &params).unwrap(),
-                )
-                .unwrap();
-            let (xs, vols) =
-                cell_points(&mesh, Layout::Gauss, 3, |x| Ok(x[0] < 0.5 && x[1] < 0.6)).unwrap();
+            let mut sim = MpmSim::new(mesh.clone(), reg.build_velocity_update("APIC", &ParamMap::new()).unwrap());
+            let params: ParamMap = [("young", 1e6), ("poisson", 0.2), ("friction", 30.0), ("cohesion", 10.0)]
+                .iter()
+                .map(|(k, v)| (k.to_string(), *v))
+                .collect();
+            let m = sim.add_material("sand", 1800.0, reg.build_law("mohr_coulomb", &params).unwrap()).unwrap();
+            let (xs, vols) = cell_points(&mesh, Layout::Gauss, 3, |x| Ok(x[0] < 0.5 && x[1] < 0.6)).unwrap();
             sim.add_points(m, &xs, &vols, [0.0; 3], [0.0; 6]).unwrap();
             sim.gravity = [0.0, -9.81, 0.0];
             for (face, axis) in [("x-", 0), ("y-", 1)] {
                 let f = granite_core::mpm::Face::parse(face, 2).unwrap();
-                sim.boundary
-                    .velocity
-                    .push(granite_core::mpm::boundary::VelocityConstraint {
-                        nodes: f.nodes(&mesh),
-                        axis,
-                        value: granite_core::mpm::TimeFunction::Constant(0.0),
-                    });
+                sim.boundary.velocity.push(granite_core::mpm::boundary::VelocityConstraint {
+                    nodes: f.nodes(&mesh),
+                    axis,
+                    value: granite_core::mpm::TimeFunction::Constant(0.0),
+                });
             }
             sim.set_dt(0.2 * sim.critical_dt().unwrap()).unwrap();
             for _ in 0..150 {
@@ -185,9 +135,6 @@ fn results_do_not_depend_on_thread_count() {
     };
     let (x1, s1) = run(1);
     let (x2, s2) = run(2);
-    assert!(
-        x1.len() > 20_000,
-        "the scene must be large enough to be split across threads"
-    );
+    assert!(x1.len() > 20_000, "the scene must be large enough to be split across threads");
     assert!(x1 == x2 && s1 == s2, "1 and 2 threads differ");
 }

@@ -6,15 +6,9 @@ use common::*;
 #[test]
 fn settled_column_stress_matches_overburden() {
     let report = run("mpm/self_weight_column.rhai", "self_weight", &[], 2).unwrap();
-    assert!(
-        summary_f64(&report, "final_kinetic_energy") < 1e-6,
-        "the column has not settled"
-    );
-    let (rho, height, cell) = (
-        summary_f64(&report, "density"),
-        summary_f64(&report, "height"),
-        summary_f64(&report, "cell_size"),
-    );
+    assert!(summary_f64(&report, "final_kinetic_energy") < 1e-6, "the column has not settled");
+    let (rho, height, cell) =
+        (summary_f64(&report, "density"), summary_f64(&report, "height"), summary_f64(&report, "cell_size"));
     let g = 9.81;
     let (h, rows) = read_csv(&report.out_dir.join("points.csv"));
     let (y, syy) = (column(&h, "y"), column(&h, "syy"));
@@ -36,10 +30,7 @@ fn settled_column_stress_matches_overburden() {
         let (y_mean, s_mean) = (ys / n as f64, ss / n as f64);
         let expected = -rho * g * (height - y_mean);
         let err = (s_mean - expected).abs() / expected.abs();
-        assert!(
-            err < 0.03,
-            "cell {c} (y = {y_mean:.3}): sigma_yy = {s_mean:.1} Pa, expected {expected:.1} Pa"
-        );
+        assert!(err < 0.03, "cell {c} (y = {y_mean:.3}): sigma_yy = {s_mean:.1} Pa, expected {expected:.1} Pa");
         checked += 1;
     }
     assert!(checked >= 10, "too few cells checked: {checked}");

@@ -87,29 +87,12 @@ pub fn stress_matrix(s: &Voigt) -> nalgebra::Matrix3<f64> {
 
 /// Voigt stress of a symmetric 3x3 matrix.
 pub fn stress_from_matrix(m: &nalgebra::Matrix3<f64>) -> Voigt {
-    [
-        m[(0, 0)],
-        m[(1, 1)],
-        m[(2, 2)],
-        m[(0, 1)],
-        m[(1, 2)],
-        m[(0, 2)],
-    ]
+    [m[(0, 0)], m[(1, 1)], m[(2, 2)], m[(0, 1)], m[(1, 2)], m[(0, 2)]]
 }
 
 /// Symmetric 3x3 matrix of an engineering-shear Voigt strain (tensor components).
 pub fn strain_matrix(e: &Voigt) -> nalgebra::Matrix3<f64> {
-    nalgebra::Matrix3::new(
-        e[0],
-        0.5 * e[3],
-        0.5 * e[5],
-        0.5 * e[3],
-        e[1],
-        0.5 * e[4],
-        0.5 * e[5],
-        0.5 * e[4],
-        e[2],
-    )
+    nalgebra::Matrix3::new(e[0], 0.5 * e[3], 0.5 * e[5], 0.5 * e[3], e[1], 0.5 * e[4], 0.5 * e[5], 0.5 * e[4], e[2])
 }
 
 pub fn all_finite(v: &[f64]) -> bool {

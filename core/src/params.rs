@@ -13,26 +13,14 @@ pub struct ParamSpec {
 
 impl ParamSpec {
     pub const fn required(name: &'static str, doc: &'static str) -> Self {
-        ParamSpec {
-            name,
-            default: None,
-            doc,
-        }
+        ParamSpec { name, default: None, doc }
     }
     pub const fn optional(name: &'static str, default: f64, doc: &'static str) -> Self {
-        ParamSpec {
-            name,
-            default: Some(default),
-            doc,
-        }
+        ParamSpec { name, default: Some(default), doc }
     }
     /// Optional with no default: reads as NaN until given; test with [`Params::is_set`].
     pub const fn unset(name: &'static str, doc: &'static str) -> Self {
-        ParamSpec {
-            name,
-            default: Some(f64::NAN),
-            doc,
-        }
+        ParamSpec { name, default: Some(f64::NAN), doc }
     }
 }
 
@@ -46,11 +34,7 @@ pub struct Params {
 impl Params {
     /// Checks `given` against `specs`: unknown names and missing required values are errors that name
     /// the owner (e.g. `material "mohr_coulomb"`) and list what is allowed.
-    pub fn resolve(
-        owner: &str,
-        specs: &[ParamSpec],
-        given: &IndexMap<String, f64>,
-    ) -> Result<Params> {
+    pub fn resolve(owner: &str, specs: &[ParamSpec], given: &IndexMap<String, f64>) -> Result<Params> {
         let known = || specs.iter().map(|s| s.name).collect::<Vec<_>>().join(", ");
         for name in given.keys() {
             if !specs.iter().any(|s| s.name == name) {
@@ -84,10 +68,7 @@ impl Params {
             }
             values.insert(spec.name.to_string(), value);
         }
-        Ok(Params {
-            owner: owner.into(),
-            values,
-        })
+        Ok(Params { owner: owner.into(), values })
     }
 
     pub fn owner(&self) -> &str {
@@ -128,11 +109,7 @@ impl Params {
         if v > 0.0 {
             Ok(v)
         } else {
-            Err(GraniteError::param_in(
-                self.qualified(name),
-                v,
-                "must be > 0",
-            ))
+            Err(GraniteError::param_in(self.qualified(name), v, "must be > 0"))
         }
     }
 
@@ -142,11 +119,7 @@ impl Params {
         if v >= 0.0 {
             Ok(v)
         } else {
-            Err(GraniteError::param_in(
-                self.qualified(name),
-                v,
-                "must be >= 0",
-            ))
+            Err(GraniteError::param_in(self.qualified(name), v, "must be >= 0"))
         }
     }
 
@@ -158,11 +131,7 @@ impl Params {
             Ok(v)
         } else {
             let bracket = if hi_inclusive { "]" } else { ")" };
-            Err(GraniteError::param_in(
-                self.qualified(name),
-                v,
-                &format!("must be in [{lo}, {hi}{bracket}"),
-            ))
+            Err(GraniteError::param_in(self.qualified(name), v, &format!("must be in [{lo}, {hi}{bracket}")))
         }
     }
 

@@ -21,22 +21,15 @@ pub struct Registry {
 }
 
 /// Exact match first, then case-insensitive: `flip` finds `FLIP`.
-fn lookup<'a, T: ?Sized>(
-    map: &'a IndexMap<String, Arc<T>>,
-    name: &str,
-    kind: &str,
-) -> Result<&'a Arc<T>> {
+fn lookup<'a, T: ?Sized>(map: &'a IndexMap<String, Arc<T>>, name: &str, kind: &str) -> Result<&'a Arc<T>> {
     if let Some(f) = map.get(name) {
         return Ok(f);
     }
-    map.iter()
-        .find(|(k, _)| k.eq_ignore_ascii_case(name))
-        .map(|(_, f)| f)
-        .ok_or_else(|| GraniteError::Unknown {
-            kind: kind.into(),
-            name: name.into(),
-            known: map.keys().cloned().collect::<Vec<_>>().join(", "),
-        })
+    map.iter().find(|(k, _)| k.eq_ignore_ascii_case(name)).map(|(_, f)| f).ok_or_else(|| GraniteError::Unknown {
+        kind: kind.into(),
+        name: name.into(),
+        known: map.keys().cloned().collect::<Vec<_>>().join(", "),
+    })
 }
 
 impl Registry {
@@ -54,8 +47,7 @@ impl Registry {
     }
 
     pub fn add_velocity_update(&mut self, factory: Arc<dyn VelocityUpdateFactory>) {
-        self.velocity_updates
-            .insert(factory.name().to_string(), factory);
+        self.velocity_updates.insert(factory.name().to_string(), factory);
     }
 
     pub fn law_names(&self) -> Vec<String> {
@@ -76,25 +68,13 @@ impl Registry {
 
     pub fn build_law(&self, name: &str, given: &ParamMap) -> Result<Box<dyn ConstitutiveLaw>> {
         let factory = self.law_factory(name)?;
-        let params = Params::resolve(
-            &format!("law \"{}\"", factory.name()),
-            factory.param_specs(),
-            given,
-        )?;
+        let params = Params::resolve(&format!("law \"{}\"", factory.name()), factory.param_specs(), given)?;
         factory.build(params)
     }
 
-    pub fn build_velocity_update(
-        &self,
-        name: &str,
-        given: &ParamMap,
-    ) -> Result<Box<dyn VelocityUpdate>> {
+    pub fn build_velocity_update(&self, name: &str, given: &ParamMap) -> Result<Box<dyn VelocityUpdate>> {
         let factory = lookup(&self.velocity_updates, name, "velocity update")?;
-        let params = Params::resolve(
-            &format!("velocity update \"{}\"", factory.name()),
-            factory.param_specs(),
-            given,
-        )?;
+        let params = Params::resolve(&format!("velocity update \"{}\"", factory.name()), factory.param_specs(), given)?;
         factory.build(params)
     }
 }

@@ -20,10 +20,7 @@ pub fn out_dir(name: &str) -> PathBuf {
 }
 
 pub fn sets(pairs: &[(&str, &str)]) -> Vec<(String, String)> {
-    pairs
-        .iter()
-        .map(|(k, v)| (k.to_string(), v.to_string()))
-        .collect()
+    pairs.iter().map(|(k, v)| (k.to_string(), v.to_string())).collect()
 }
 
 /// Runs a script through the library, quietly, on `threads` threads.
@@ -33,46 +30,22 @@ pub fn run(
     pairs: &[(&str, &str)],
     threads: usize,
 ) -> granite_core::Result<granite_core::script::RunReport> {
-    granite::run(
-        &script(script_rel),
-        sets(pairs),
-        Some(out_dir(name)),
-        true,
-        Some(threads),
-    )
+    granite::run(&script(script_rel), sets(pairs), Some(out_dir(name)), true, Some(threads))
 }
 
 pub fn summary_f64(report: &granite_core::script::RunReport, key: &str) -> f64 {
-    report
-        .summary
-        .get(key)
-        .and_then(|v| v.as_f64())
-        .unwrap_or_else(|| panic!("summary has no number `{key}`"))
+    report.summary.get(key).and_then(|v| v.as_f64()).unwrap_or_else(|| panic!("summary has no number `{key}`"))
 }
 
 /// Reads a CSV file with a header into (header, rows of numbers).
 pub fn read_csv(path: &Path) -> (Vec<String>, Vec<Vec<f64>>) {
     let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
     let mut lines = text.lines();
-    let header: Vec<String> = lines
-        .next()
-        .unwrap_or_default()
-        .split(',')
-        .map(|s| s.to_string())
-        .collect();
-    let rows = lines
-        .map(|l| {
-            l.split(',')
-                .map(|v| v.parse::<f64>().unwrap_or(f64::NAN))
-                .collect()
-        })
-        .collect();
+    let header: Vec<String> = lines.next().unwrap_or_default().split(',').map(|s| s.to_string()).collect();
+    let rows = lines.map(|l| l.split(',').map(|v| v.parse::<f64>().unwrap_or(f64::NAN)).collect()).collect();
     (header, rows)
 }
 
 pub fn column(header: &[String], name: &str) -> usize {
-    header
-        .iter()
-        .position(|h| h == name)
-        .unwrap_or_else(|| panic!("no column `{name}` in {header:?}"))
+    header.iter().position(|h| h == name).unwrap_or_else(|| panic!("no column `{name}` in {header:?}"))
 }

@@ -10,11 +10,7 @@ use crate::error::{GraniteError, Result};
 use std::path::Path;
 
 /// Writes `summary.json` (a flat object of named results, in insertion order).
-pub fn write_summary(
-    path: &Path,
-    values: &indexmap::IndexMap<String, serde_json::Value>,
-) -> Result<()> {
-    let text =
-        serde_json::to_string_pretty(values).map_err(|e| GraniteError::Other(e.to_string()))?;
+pub fn write_summary(path: &Path, values: &indexmap::IndexMap<String, serde_json::Value>) -> Result<()> {
+    let text = serde_json::to_string_pretty(values).map_err(|e| GraniteError::Other(e.to_string()))?;
     std::fs::write(path, text + "\n").map_err(|e| GraniteError::io(path, e))
 }

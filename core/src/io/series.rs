@@ -14,14 +14,8 @@ impl SeriesWriter {
     pub fn create(path: &Path, columns: Vec<String>) -> Result<SeriesWriter> {
         let file = File::create(path).map_err(|e| GraniteError::io(path, e))?;
         let mut writer = csv::Writer::from_writer(file);
-        writer
-            .write_record(&columns)
-            .map_err(|e| GraniteError::Other(format!("{}: {e}", path.display())))?;
-        Ok(SeriesWriter {
-            path: path.to_path_buf(),
-            writer,
-            columns,
-        })
+        writer.write_record(&columns).map_err(|e| GraniteError::Other(format!("{}: {e}", path.display())))?;
+        Ok(SeriesWriter { path: path.to_path_buf(), writer, columns })
     }
 
     pub fn columns(&self) -> &[String] {
@@ -34,8 +28,6 @@ impl SeriesWriter {
         self.writer
             .write_record(values.iter().map(|v| format!("{v}")))
             .map_err(|e| GraniteError::Other(format!("{}: {e}", self.path.display())))?;
-        self.writer
-            .flush()
-            .map_err(|e| GraniteError::io(&self.path, e))
+        self.writer.flush().map_err(|e| GraniteError::io(&self.path, e))
     }
 }

@@ -21,11 +21,7 @@ pub struct VtkWriter {
 impl VtkWriter {
     pub fn new(dir: &Path, stem: &str) -> Result<VtkWriter> {
         std::fs::create_dir_all(dir).map_err(|e| GraniteError::io(dir, e))?;
-        Ok(VtkWriter {
-            dir: dir.to_path_buf(),
-            stem: stem.into(),
-            frames: Vec::new(),
-        })
+        Ok(VtkWriter { dir: dir.to_path_buf(), stem: stem.into(), frames: Vec::new() })
     }
 
     pub fn frames(&self) -> usize {
@@ -33,25 +29,16 @@ impl VtkWriter {
     }
 
     /// Writes one frame and rewrites the `.pvd` index.
-    pub fn write_frame(
-        &mut self,
-        time: f64,
-        positions: &[Vec3],
-        fields: &[Field<'_>],
-    ) -> Result<PathBuf> {
+    pub fn write_frame(&mut self, time: f64, positions: &[Vec3], fields: &[Field<'_>]) -> Result<PathBuf> {
         let name = format!("{}_{:06}.vtu", self.stem, self.frames.len());
         let path = self.dir.join(&name);
         let text = vtu_text(positions, fields);
         std::fs::write(&path, text).map_err(|e| GraniteError::io(&path, e))?;
         self.frames.push((time, name));
-        let mut pvd = String::from(
-            "<?xml version=\"1.0\"?>\n<VTKFile type=\"Collection\" version=\"0.1\">\n<Collection>\n",
-        );
+        let mut pvd =
+            String::from("<?xml version=\"1.0\"?>\n<VTKFile type=\"Collection\" version=\"0.1\">\n<Collection>\n");
         for (t, file) in &self.frames {
-            let _ = writeln!(
-                pvd,
-                "<DataSet timestep=\"{t}\" part=\"0\" file=\"{file}\"/>"
-            );
+            let _ = writeln!(pvd, "<DataSet timestep=\"{t}\" part=\"0\" file=\"{file}\"/>");
         }
         pvd.push_str("</Collection>\n</VTKFile>\n");
         let pvd_path = self.dir.join(format!("{}.pvd", self.stem));

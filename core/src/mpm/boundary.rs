@@ -18,18 +18,10 @@ pub enum TimeFunction {
 impl TimeFunction {
     pub fn table(points: Vec<(f64, f64)>) -> Result<TimeFunction> {
         if points.is_empty() {
-            return Err(GraniteError::param(
-                "table",
-                "[]",
-                "needs at least one (time, value) pair",
-            ));
+            return Err(GraniteError::param("table", "[]", "needs at least one (time, value) pair"));
         }
         if points.windows(2).any(|w| w[1].0 <= w[0].0) {
-            return Err(GraniteError::param(
-                "table",
-                "times",
-                "times must increase strictly",
-            ));
+            return Err(GraniteError::param("table", "times", "times must increase strictly"));
         }
         Ok(TimeFunction::Table(points))
     }
@@ -62,34 +54,18 @@ pub struct Face {
 
 impl Face {
     pub fn parse(name: &str, dim: usize) -> Result<Face> {
-        let allowed = if dim == 2 {
-            "x-, x+, y-, y+"
-        } else {
-            "x-, x+, y-, y+, z-, z+"
-        };
+        let allowed = if dim == 2 { "x-, x+, y-, y+" } else { "x-, x+, y-, y+, z-, z+" };
         let b = name.as_bytes();
         let axis = match b.first() {
             Some(b'x') => 0,
             Some(b'y') => 1,
             Some(b'z') if dim == 3 => 2,
-            _ => {
-                return Err(GraniteError::param(
-                    "face",
-                    name,
-                    &format!("must be one of {allowed}"),
-                ))
-            }
+            _ => return Err(GraniteError::param("face", name, &format!("must be one of {allowed}"))),
         };
         let upper = match &b[1..] {
             b"-" => false,
             b"+" => true,
-            _ => {
-                return Err(GraniteError::param(
-                    "face",
-                    name,
-                    &format!("must be one of {allowed}"),
-                ))
-            }
+            _ => return Err(GraniteError::param("face", name, &format!("must be one of {allowed}"))),
         };
         Ok(Face { axis, upper })
     }
@@ -98,10 +74,7 @@ impl Face {
     pub fn nodes(&self, mesh: &Mesh) -> Vec<u32> {
         let n = mesh.nodes_per_axis();
         let fixed = if self.upper { n[self.axis] - 1 } else { 0 };
-        (0..mesh.node_count())
-            .filter(|&i| mesh.node_ijk(i)[self.axis] == fixed)
-            .map(|i| i as u32)
-            .collect()
+        (0..mesh.node_count()).filter(|&i| mesh.node_ijk(i)[self.axis] == fixed).map(|i| i as u32).collect()
     }
 
     /// Unit outward normal component along `axis`: +1 on an upper face, -1 on a lower one.
@@ -170,11 +143,7 @@ impl Boundary {
                     if a == face.axis {
                         continue;
                     }
-                    let share = if ijk[a] == 0 || ijk[a] == n[a] - 1 {
-                        0.5
-                    } else {
-                        1.0
-                    };
+                    let share = if ijk[a] == 0 || ijk[a] == n[a] - 1 { 0.5 } else { 1.0 };
                     area *= share * mesh.cell[a];
                 }
                 [traction[0] * area, traction[1] * area, traction[2] * area]
@@ -200,8 +169,7 @@ mod tests {
     #[test]
     fn face_traction_sums_to_traction_times_area() {
         let mesh = Mesh::new(3, [0.0; 3], [0.5, 0.25, 1.0], [2, 4, 3]).unwrap();
-        let (nodes, forces) =
-            Boundary::traction_on_face(&mesh, Face::parse("x+", 3).unwrap(), [-100.0, 0.0, 0.0]);
+        let (nodes, forces) = Boundary::traction_on_face(&mesh, Face::parse("x+", 3).unwrap(), [-100.0, 0.0, 0.0]);
         assert_eq!(nodes.len(), 5 * 4);
         let total: f64 = forces.iter().map(|f| f[0]).sum();
         assert!((total - (-100.0 * 1.0 * 3.0)).abs() < 1e-9);

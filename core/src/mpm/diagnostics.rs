@@ -52,9 +52,7 @@ impl MpmSim {
             d.gravitational_energy -= m * (g[0] * x[0] + g[1] * x[1] + g[2] * x[2]);
             d.max_height = d.max_height.max(x[up]);
             d.max_x = d.max_x.max(x[0]);
-            d.max_deviatoric_strain = d
-                .max_deviatoric_strain
-                .max(deviatoric_strain_norm(&p.strain[i]));
+            d.max_deviatoric_strain = d.max_deviatoric_strain.max(deviatoric_strain_norm(&p.strain[i]));
         }
         d
     }
@@ -62,12 +60,7 @@ impl MpmSim {
     /// Width of the material measured from the mesh origin, voxelised by cells (eq. 5.6).
     pub fn voxel_width(&self) -> f64 {
         let h = self.mesh.cell[0];
-        let max_x = self
-            .points
-            .x
-            .iter()
-            .map(|x| x[0])
-            .fold(f64::NEG_INFINITY, f64::max);
+        let max_x = self.points.x.iter().map(|x| x[0]).fold(f64::NEG_INFINITY, f64::max);
         if !max_x.is_finite() {
             return 0.0;
         }

@@ -18,20 +18,14 @@ impl Layout {
         match name {
             "regular" => Ok(Layout::Regular),
             "gauss" => Ok(Layout::Gauss),
-            _ => Err(GraniteError::param(
-                "layout",
-                name,
-                "must be \"regular\" or \"gauss\"",
-            )),
+            _ => Err(GraniteError::param("layout", name, "must be \"regular\" or \"gauss\"")),
         }
     }
 
     /// Local coordinates in [-1, 1] of `n` points along one direction.
     pub fn local_positions(&self, n: usize) -> Vec<f64> {
         match self {
-            Layout::Regular => (0..n)
-                .map(|k| -1.0 + (2 * k + 1) as f64 / n as f64)
-                .collect(),
+            Layout::Regular => (0..n).map(|k| -1.0 + (2 * k + 1) as f64 / n as f64).collect(),
             Layout::Gauss => gauss_legendre_roots(n),
         }
     }
@@ -78,11 +72,7 @@ pub fn cell_points(
     mut inside: impl FnMut(Vec3) -> Result<bool>,
 ) -> Result<(Vec<Vec3>, Vec<f64>)> {
     if per_dir == 0 || per_dir > 20 {
-        return Err(GraniteError::param(
-            "per_cell",
-            per_dir,
-            "points per cell direction must be in [1, 20]",
-        ));
+        return Err(GraniteError::param("per_cell", per_dir, "points per cell direction must be in [1, 20]"));
     }
     let local = layout.local_positions(per_dir);
     let per_cell = per_dir.pow(mesh.dim as u32);
@@ -94,15 +84,10 @@ pub fn cell_points(
         for kz in 0..nz {
             for ky in 0..per_dir {
                 for kx in 0..per_dir {
-                    let lx = [
-                        local[kx],
-                        local[ky],
-                        if mesh.dim == 3 { local[kz] } else { 0.0 },
-                    ];
+                    let lx = [local[kx], local[ky], if mesh.dim == 3 { local[kz] } else { 0.0 }];
                     let mut x = [0.0; 3];
                     for a in 0..mesh.dim {
-                        x[a] =
-                            mesh.origin[a] + mesh.cell[a] * (ijk[a] as f64 + 0.5 * (lx[a] + 1.0));
+                        x[a] = mesh.origin[a] + mesh.cell[a] * (ijk[a] as f64 + 0.5 * (lx[a] + 1.0));
                     }
                     if inside(x)? {
                         xs.push(x);

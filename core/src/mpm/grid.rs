@@ -87,17 +87,14 @@ where
     let min_windows = (4096 / per_slab.max(1)).max(1);
     for parity in 0..2 {
         let body = &mut sums[parity * plane..];
-        body.par_chunks_mut(2 * plane)
-            .enumerate()
-            .with_min_len(min_windows)
-            .for_each(|(j, window)| {
-                let s = 2 * j + parity;
-                if s < nslabs {
-                    let first = s * plane;
-                    for &p in slabs.slab(s) {
-                        add(p as usize, window, first);
-                    }
+        body.par_chunks_mut(2 * plane).enumerate().with_min_len(min_windows).for_each(|(j, window)| {
+            let s = 2 * j + parity;
+            if s < nslabs {
+                let first = s * plane;
+                for &p in slabs.slab(s) {
+                    add(p as usize, window, first);
                 }
-            });
+            }
+        });
     }
 }

@@ -27,26 +27,14 @@ pub struct Location {
 impl Mesh {
     pub fn new(dim: usize, origin: Vec3, cell: Vec3, cells: [usize; 3]) -> Result<Mesh> {
         if dim != 2 && dim != 3 {
-            return Err(GraniteError::param(
-                "dim",
-                dim,
-                "must be 2 (plane strain) or 3",
-            ));
+            return Err(GraniteError::param("dim", dim, "must be 2 (plane strain) or 3"));
         }
         for a in 0..dim {
             if !(cell[a] > 0.0 && cell[a].is_finite()) {
-                return Err(GraniteError::param(
-                    "cell",
-                    cell[a],
-                    "cell sizes must be > 0",
-                ));
+                return Err(GraniteError::param("cell", cell[a], "cell sizes must be > 0"));
             }
             if cells[a] == 0 {
-                return Err(GraniteError::param(
-                    "cells",
-                    0,
-                    "every axis needs at least one cell",
-                ));
+                return Err(GraniteError::param("cells", 0, "every axis needs at least one cell"));
             }
         }
         let mut cells = cells;
@@ -57,27 +45,14 @@ impl Mesh {
         }
         let nodes = (cells[0] + 1) * (cells[1] + 1) * if dim == 3 { cells[2] + 1 } else { 1 };
         if nodes > u32::MAX as usize / 2 {
-            return Err(GraniteError::param(
-                "cells",
-                nodes,
-                "too many nodes for one mesh",
-            ));
+            return Err(GraniteError::param("cells", nodes, "too many nodes for one mesh"));
         }
-        Ok(Mesh {
-            dim,
-            origin,
-            cell,
-            cells,
-        })
+        Ok(Mesh { dim, origin, cell, cells })
     }
 
     /// Nodes along each axis (2D: z has a single node layer).
     pub fn nodes_per_axis(&self) -> [usize; 3] {
-        [
-            self.cells[0] + 1,
-            self.cells[1] + 1,
-            if self.dim == 3 { self.cells[2] + 1 } else { 1 },
-        ]
+        [self.cells[0] + 1, self.cells[1] + 1, if self.dim == 3 { self.cells[2] + 1 } else { 1 }]
     }
 
     pub fn node_count(&self) -> usize {
@@ -140,11 +115,7 @@ impl Mesh {
 
     pub fn cell_ijk(&self, cell: u32) -> [usize; 3] {
         let c = cell as usize;
-        [
-            c % self.cells[0],
-            (c / self.cells[0]) % self.cells[1],
-            c / (self.cells[0] * self.cells[1]),
-        ]
+        [c % self.cells[0], (c / self.cells[0]) % self.cells[1], c / (self.cells[0] * self.cells[1])]
     }
 
     /// Index of the node at the lower corner of a cell (its node 0).
@@ -172,10 +143,7 @@ impl Mesh {
             xi[a] = 2.0 * (t - c as f64) - 1.0;
         }
         let cell = ijk[0] + self.cells[0] * (ijk[1] + self.cells[1] * ijk[2]);
-        Some(Location {
-            cell: cell as u32,
-            xi,
-        })
+        Some(Location { cell: cell as u32, xi })
     }
 
     pub fn contains(&self, x: Vec3) -> bool {

@@ -21,16 +21,8 @@ pub struct Linear2;
 /// 8-node hexahedron, node numbering of thesis figure 3.1.
 pub struct Linear3;
 
-const OFFSETS_3D: [[usize; 3]; 8] = [
-    [0, 0, 0],
-    [1, 0, 0],
-    [1, 1, 0],
-    [0, 1, 0],
-    [0, 0, 1],
-    [1, 0, 1],
-    [1, 1, 1],
-    [0, 1, 1],
-];
+const OFFSETS_3D: [[usize; 3]; 8] =
+    [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0, 0, 1], [1, 0, 1], [1, 1, 1], [0, 1, 1]];
 
 impl ShapeFunction for Linear2 {
     const NODES: usize = 4;
@@ -68,11 +60,7 @@ impl ShapeFunction for Linear3 {
             let fy = 1.0 + sy * xi[1];
             let fz = 1.0 + sz * xi[2];
             n[k] = 0.125 * fx * fy * fz;
-            dn[k] = [
-                0.125 * sx * fy * fz * jx,
-                0.125 * fx * sy * fz * jy,
-                0.125 * fx * fy * sz * jz,
-            ];
+            dn[k] = [0.125 * sx * fy * fz * jx, 0.125 * fx * sy * fz * jy, 0.125 * fx * fy * sz * jz];
         }
     }
 }
@@ -91,20 +79,13 @@ mod tests {
             assert!((sum - 1.0).abs() < 1e-14);
             for a in 0..3 {
                 let g: f64 = dn[..S::NODES].iter().map(|d| d[a]).sum();
-                assert!(
-                    g.abs() < 1e-12,
-                    "gradients of a partition of unity sum to zero"
-                );
+                assert!(g.abs() < 1e-12, "gradients of a partition of unity sum to zero");
             }
             // Linear completeness: sum_i N_i x_i reproduces the local position, sum_i grad N_i x_i = I.
             for a in 0..2 {
-                let x: f64 = (0..S::NODES)
-                    .map(|k| n[k] * S::offsets()[k][a] as f64 * cell[a])
-                    .sum();
+                let x: f64 = (0..S::NODES).map(|k| n[k] * S::offsets()[k][a] as f64 * cell[a]).sum();
                 assert!((x - (xi[a] + 1.0) * 0.5 * cell[a]).abs() < 1e-12);
-                let dxdx: f64 = (0..S::NODES)
-                    .map(|k| dn[k][a] * S::offsets()[k][a] as f64 * cell[a])
-                    .sum();
+                let dxdx: f64 = (0..S::NODES).map(|k| dn[k][a] * S::offsets()[k][a] as f64 * cell[a]).sum();
                 assert!((dxdx - 1.0).abs() < 1e-12);
             }
         }

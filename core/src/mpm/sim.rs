@@ -26,11 +26,7 @@ impl StressScheme {
             "USF" => Ok(StressScheme::Usf),
             "USL" => Ok(StressScheme::Usl),
             "MUSL" => Ok(StressScheme::Musl),
-            _ => Err(GraniteError::param(
-                "scheme",
-                name,
-                "must be one of USF, USL, MUSL",
-            )),
+            _ => Err(GraniteError::param("scheme", name, "must be one of USF, USL, MUSL")),
         }
     }
     pub fn name(&self) -> &'static str {
@@ -127,43 +123,20 @@ impl MpmSim {
         self.mesh.dim
     }
 
-    pub fn add_material(
-        &mut self,
-        name: &str,
-        density: f64,
-        law: Box<dyn ConstitutiveLaw>,
-    ) -> Result<usize> {
+    pub fn add_material(&mut self, name: &str, density: f64, law: Box<dyn ConstitutiveLaw>) -> Result<usize> {
         if !(density > 0.0 && density.is_finite()) {
-            return Err(GraniteError::param_in(
-                format!("`density` of material \"{name}\""),
-                density,
-                "must be > 0",
-            ));
+            return Err(GraniteError::param_in(format!("`density` of material \"{name}\""), density, "must be > 0"));
         }
-        self.materials.push(Material {
-            name: name.into(),
-            density,
-            law,
-            state: Vec::new(),
-            count: 0,
-        });
+        self.materials.push(Material { name: name.into(), density, law, state: Vec::new(), count: 0 });
         Ok(self.materials.len() - 1)
     }
 
     pub fn material_index(&self, name: &str) -> Result<usize> {
-        self.materials
-            .iter()
-            .position(|m| m.name == name)
-            .ok_or_else(|| GraniteError::Unknown {
-                kind: "material".into(),
-                name: name.into(),
-                known: self
-                    .materials
-                    .iter()
-                    .map(|m| m.name.clone())
-                    .collect::<Vec<_>>()
-                    .join(", "),
-            })
+        self.materials.iter().position(|m| m.name == name).ok_or_else(|| GraniteError::Unknown {
+            kind: "material".into(),
+            name: name.into(),
+            known: self.materials.iter().map(|m| m.name.clone()).collect::<Vec<_>>().join(", "),
+        })
     }
 
     /// Points `[start, end)` of material `m`.
@@ -174,14 +147,7 @@ impl MpmSim {
 
     /// Adds points of material `m` at the given positions, each with volume `volume[k]`
     /// (mass = density x volume), velocity `v` and initial stress `stress`.
-    pub fn add_points(
-        &mut self,
-        m: usize,
-        positions: &[Vec3],
-        volumes: &[f64],
-        v: Vec3,
-        stress: Voigt,
-    ) -> Result<()> {
+    pub fn add_points(&mut self, m: usize, positions: &[Vec3], volumes: &[f64], v: Vec3, stress: Voigt) -> Result<()> {
         if m >= self.materials.len() {
             return Err(GraniteError::Setup(format!("no material with index {m}")));
         }
@@ -201,13 +167,7 @@ impl MpmSim {
         let new: Vec<NewPoint> = positions
             .iter()
             .zip(volumes)
-            .map(|(&x, &vol)| NewPoint {
-                x,
-                volume: vol,
-                mass: density * vol,
-                v,
-                stress,
-            })
+            .map(|(&x, &vol)| NewPoint { x, volume: vol, mass: density * vol, v, stress })
             .collect();
         let at = self.material_range(m).end;
         self.points.insert(at, m as u32, self.next_id, &new);
@@ -227,11 +187,7 @@ impl MpmSim {
     /// refer to nodes of the old mesh and are cleared.
     pub fn replace_mesh(&mut self, mesh: Mesh) -> Result<()> {
         if mesh.dim != self.mesh.dim {
-            return Err(GraniteError::param(
-                "dim",
-                mesh.dim,
-                &format!("a new mesh must keep dim = {}", self.mesh.dim),
-            ));
+            return Err(GraniteError::param("dim", mesh.dim, &format!("a new mesh must keep dim = {}", self.mesh.dim)));
         }
         if let Some(p) = self.points.x.iter().position(|x| !mesh.contains(*x)) {
             return Err(GraniteError::Setup(format!(
@@ -241,17 +197,13 @@ impl MpmSim {
         }
         self.mesh = mesh;
         self.boundary.clear();
-        self.events
-            .push("mesh replaced: boundary conditions cleared".into());
+        self.events.push("mesh replaced: boundary conditions cleared".into());
         Ok(())
     }
 
     /// Stable time step of explicit MPM: the cell crossing time of the fastest P wave.
     pub fn critical_dt(&self) -> Option<f64> {
-        let h = self.mesh.cell[..self.mesh.dim]
-            .iter()
-            .cloned()
-            .fold(f64::INFINITY, f64::min);
+        let h = self.mesh.cell[..self.mesh.dim].iter().cloned().fold(f64::INFINITY, f64::min);
         self.materials
             .iter()
             .filter(|m| m.count > 0)
@@ -271,9 +223,7 @@ impl MpmSim {
     /// Checks everything a run needs; called before stepping.
     pub fn validate(&self) -> Result<()> {
         if self.dt <= 0.0 {
-            return Err(GraniteError::Setup(
-                "no time step: call dt(...) before running".into(),
-            ));
+            return Err(GraniteError::Setup("no time step: call dt(...) before running".into()));
         }
         if let Some(crit) = self.critical_dt() {
             if self.dt > crit {
@@ -285,11 +235,7 @@ impl MpmSim {
             }
         }
         if !(self.damping >= 0.0 && self.damping < 1.0) {
-            return Err(GraniteError::param(
-                "damping",
-                self.damping,
-                "must be in [0, 1)",
-            ));
+            return Err(GraniteError::param("damping", self.damping, "must be in [0, 1)"));
         }
         Ok(())
     }

@@ -44,16 +44,7 @@ impl MpmSim {
         let strategy = self.velocity_update.as_ref();
         match self.scheme {
             StressScheme::Usl => {
-                p2g::<S>(
-                    grid,
-                    mesh,
-                    slabs,
-                    pts,
-                    loc,
-                    g,
-                    affine,
-                    Maps::MassMomentumForce,
-                );
+                p2g::<S>(grid, mesh, slabs, pts, loc, g, affine, Maps::MassMomentumForce);
                 grid_velocity(grid, bc, self.time);
                 grid_update(grid, bc, self.damping, dt, self.time);
                 g2p::<S>(pts, grid, mesh, loc, strategy, dt, true);
@@ -69,16 +60,7 @@ impl MpmSim {
                 g2p::<S>(pts, grid, mesh, loc, strategy, dt, false);
             }
             StressScheme::Musl => {
-                p2g::<S>(
-                    grid,
-                    mesh,
-                    slabs,
-                    pts,
-                    loc,
-                    g,
-                    affine,
-                    Maps::MassMomentumForce,
-                );
+                p2g::<S>(grid, mesh, slabs, pts, loc, g, affine, Maps::MassMomentumForce);
                 grid_velocity(grid, bc, self.time);
                 grid_update(grid, bc, self.damping, dt, self.time);
                 g2p::<S>(pts, grid, mesh, loc, strategy, dt, false);
@@ -104,40 +86,19 @@ impl MpmSim {
         let affine = self.velocity_update.affine();
         let (mesh, pts, loc, slabs) = (&self.mesh, &self.points, &self.loc, &self.slabs);
         match mesh.dim {
-            3 => p2g::<Linear3>(
-                &mut self.grid,
-                mesh,
-                slabs,
-                pts,
-                loc,
-                self.gravity,
-                affine,
-                Maps::MassMomentumForce,
-            ),
-            _ => p2g::<Linear2>(
-                &mut self.grid,
-                mesh,
-                slabs,
-                pts,
-                loc,
-                self.gravity,
-                affine,
-                Maps::MassMomentumForce,
-            ),
+            3 => p2g::<Linear3>(&mut self.grid, mesh, slabs, pts, loc, self.gravity, affine, Maps::MassMomentumForce),
+            _ => p2g::<Linear2>(&mut self.grid, mesh, slabs, pts, loc, self.gravity, affine, Maps::MassMomentumForce),
         }
         Ok(&self.grid.sums)
     }
 
     fn check_finite(&self) -> Result<()> {
         let p = &self.points;
-        let bad = (0..p.len())
-            .into_par_iter()
-            .with_min_len(MIN_PER_TASK)
-            .find_first(|&i| {
-                !(p.x[i].iter().all(|c| c.is_finite())
-                    && p.v[i].iter().all(|c| c.is_finite())
-                    && p.stress[i].iter().all(|c| c.is_finite()))
-            });
+        let bad = (0..p.len()).into_par_iter().with_min_len(MIN_PER_TASK).find_first(|&i| {
+            !(p.x[i].iter().all(|c| c.is_finite())
+                && p.v[i].iter().all(|c| c.is_finite())
+                && p.stress[i].iter().all(|c| c.is_finite()))
+        });
         match bad {
             None => Ok(()),
             Some(i) => Err(GraniteError::Unstable {
@@ -154,12 +115,7 @@ impl MpmSim {
 
     fn handle_out_of_mesh(&mut self) -> Result<()> {
         let mesh = &self.mesh;
-        let keep: Vec<bool> = self
-            .points
-            .x
-            .par_iter()
-            .map(|x| mesh.contains(*x))
-            .collect();
+        let keep: Vec<bool> = self.points.x.par_iter().map(|x| mesh.contains(*x)).collect();
         let lost = keep.iter().filter(|k| !**k).count();
         if lost == 0 {
             return Ok(());
@@ -170,18 +126,11 @@ impl MpmSim {
             self.points.id[first], self.points.x[first]
         );
         match self.out_of_mesh {
-            OutOfMeshPolicy::Stop => Err(GraniteError::Unstable {
-                step: self.step,
-                time: self.time,
-                reason: what,
-            }),
+            OutOfMeshPolicy::Stop => Err(GraniteError::Unstable { step: self.step, time: self.time, reason: what }),
             OutOfMeshPolicy::Delete => {
                 self.remove_points(&keep);
                 self.deleted_points += lost as u64;
-                self.events.push(format!(
-                    "step {} (t = {:.6e} s): {what}; deleted",
-                    self.step, self.time
-                ));
+                self.events.push(format!("step {} (t = {:.6e} s): {what}; deleted", self.step, self.time));
                 Ok(())
             }
         }
@@ -190,13 +139,7 @@ impl MpmSim {
 
 /// Cell and local coordinates of every point (eq. 3.10).
 fn locate(mesh: &Mesh, points: &Points, loc: &mut Vec<Location>) -> Result<()> {
-    loc.resize(
-        points.len(),
-        Location {
-            cell: 0,
-            xi: [0.0; 3],
-        },
-    );
+    loc.resize(points.len(), Location { cell: 0, xi: [0.0; 3] });
     let outside = loc
         .par_iter_mut()
         .zip(points.x.par_iter())
@@ -210,9 +153,7 @@ fn locate(mesh: &Mesh, points: &Points, loc: &mut Vec<Location>) -> Result<()> {
         })
         .sum::<usize>();
     if outside > 0 {
-        return Err(GraniteError::Setup(format!(
-            "{outside} material point(s) are outside the mesh"
-        )));
+        return Err(GraniteError::Setup(format!("{outside} material point(s) are outside the mesh")));
     }
     Ok(())
 }
@@ -254,93 +195,74 @@ fn p2g<S: ShapeFunction>(
         Maps::Momentum => (false, true, false),
         Maps::Force => (false, false, true),
     };
-    grid.sums
-        .par_iter_mut()
-        .with_min_len(MIN_PER_TASK)
-        .for_each(|s| {
-            if do_mass {
-                s.mass = 0.0;
-            }
-            if do_momentum {
-                s.momentum = [0.0; 3];
-            }
-            if do_force {
-                s.force = [0.0; 3];
-            }
-        });
+    grid.sums.par_iter_mut().with_min_len(MIN_PER_TASK).for_each(|s| {
+        if do_mass {
+            s.mass = 0.0;
+        }
+        if do_momentum {
+            s.momentum = [0.0; 3];
+        }
+        if do_force {
+            s.force = [0.0; 3];
+        }
+    });
     let off = node_offsets::<S>(mesh);
     let h = mesh.cell;
-    scatter(
-        &mut grid.sums,
-        mesh,
-        slabs,
-        |p, window: &mut [NodeSums], first| {
-            let l = loc[p];
-            let mut n = [0.0; MAX_NODES];
-            let mut dn = [[0.0; 3]; MAX_NODES];
-            S::eval(l.xi, h, &mut n, &mut dn);
-            let base = mesh.cell_base_node(l.cell) - first;
-            let m = pts.mass[p];
-            let v = pts.v[p];
-            let c = &pts.affine[p];
-            let s = &pts.stress[p];
-            let vol = pts.volume[p];
-            for k in 0..S::NODES {
-                let node = &mut window[base + off[k]];
-                let w = n[k];
-                if do_mass {
-                    node.mass += m * w;
-                }
-                if do_momentum {
-                    let mut vk = v;
-                    if affine {
-                        // x_i - x_p in global coordinates, from the local position in the cell.
-                        let o = S::offsets()[k];
-                        let d = [
-                            (o[0] as f64 - 0.5 * (l.xi[0] + 1.0)) * h[0],
-                            (o[1] as f64 - 0.5 * (l.xi[1] + 1.0)) * h[1],
-                            (o[2] as f64 - 0.5 * (l.xi[2] + 1.0)) * h[2],
-                        ];
-                        let d = if mesh.dim == 2 { [d[0], d[1], 0.0] } else { d };
-                        for a in 0..3 {
-                            vk[a] += c[3 * a] * d[0] + c[3 * a + 1] * d[1] + c[3 * a + 2] * d[2];
-                        }
-                    }
+    scatter(&mut grid.sums, mesh, slabs, |p, window: &mut [NodeSums], first| {
+        let l = loc[p];
+        let mut n = [0.0; MAX_NODES];
+        let mut dn = [[0.0; 3]; MAX_NODES];
+        S::eval(l.xi, h, &mut n, &mut dn);
+        let base = mesh.cell_base_node(l.cell) - first;
+        let m = pts.mass[p];
+        let v = pts.v[p];
+        let c = &pts.affine[p];
+        let s = &pts.stress[p];
+        let vol = pts.volume[p];
+        for k in 0..S::NODES {
+            let node = &mut window[base + off[k]];
+            let w = n[k];
+            if do_mass {
+                node.mass += m * w;
+            }
+            if do_momentum {
+                let mut vk = v;
+                if affine {
+                    // x_i - x_p in global coordinates, from the local position in the cell.
+                    let o = S::offsets()[k];
+                    let d = [
+                        (o[0] as f64 - 0.5 * (l.xi[0] + 1.0)) * h[0],
+                        (o[1] as f64 - 0.5 * (l.xi[1] + 1.0)) * h[1],
+                        (o[2] as f64 - 0.5 * (l.xi[2] + 1.0)) * h[2],
+                    ];
+                    let d = if mesh.dim == 2 { [d[0], d[1], 0.0] } else { d };
                     for a in 0..3 {
-                        node.momentum[a] += m * w * vk[a];
+                        vk[a] += c[3 * a] * d[0] + c[3 * a + 1] * d[1] + c[3 * a + 2] * d[2];
                     }
                 }
-                if do_force {
-                    let g = dn[k];
-                    node.force[0] +=
-                        m * w * gravity[0] - vol * (s[0] * g[0] + s[3] * g[1] + s[5] * g[2]);
-                    node.force[1] +=
-                        m * w * gravity[1] - vol * (s[3] * g[0] + s[1] * g[1] + s[4] * g[2]);
-                    node.force[2] +=
-                        m * w * gravity[2] - vol * (s[5] * g[0] + s[4] * g[1] + s[2] * g[2]);
+                for a in 0..3 {
+                    node.momentum[a] += m * w * vk[a];
                 }
             }
-        },
-    );
+            if do_force {
+                let g = dn[k];
+                node.force[0] += m * w * gravity[0] - vol * (s[0] * g[0] + s[3] * g[1] + s[5] * g[2]);
+                node.force[1] += m * w * gravity[1] - vol * (s[3] * g[0] + s[1] * g[1] + s[4] * g[2]);
+                node.force[2] += m * w * gravity[2] - vol * (s[5] * g[0] + s[4] * g[1] + s[2] * g[2]);
+            }
+        }
+    });
 }
 
 /// Nodal velocity from momentum (eq. 3.18), then velocity constraints (eq. 3.19) at time `t`.
 fn grid_velocity(grid: &mut Grid, bc: &Boundary, t: f64) {
-    grid.velocity
-        .par_iter_mut()
-        .zip(grid.sums.par_iter())
-        .with_min_len(MIN_PER_TASK)
-        .for_each(|(v, s)| {
-            *v = if s.mass > MASS_EPS {
-                [
-                    s.momentum[0] / s.mass,
-                    s.momentum[1] / s.mass,
-                    s.momentum[2] / s.mass,
-                ]
-            } else {
-                [0.0; 3]
-            };
-        });
+    grid.velocity.par_iter_mut().zip(grid.sums.par_iter()).with_min_len(MIN_PER_TASK).for_each(|(v, s)| {
+        *v = if s.mass > MASS_EPS {
+            [s.momentum[0] / s.mass, s.momentum[1] / s.mass, s.momentum[2] / s.mass]
+        } else {
+            [0.0; 3]
+        };
+    });
     for c in &bc.velocity {
         let value = c.value.at(t);
         for &n in &c.nodes {
@@ -421,11 +343,7 @@ fn grid_update(grid: &mut Grid, bc: &Boundary, damping: f64, dt: f64, t: f64) {
         .zip(grid.velocity_new.par_iter().zip(grid.velocity.par_iter()))
         .with_min_len(MIN_PER_TASK)
         .for_each(|(a, (vn, v))| {
-            *a = [
-                (vn[0] - v[0]) * inv_dt,
-                (vn[1] - v[1]) * inv_dt,
-                (vn[2] - v[2]) * inv_dt,
-            ];
+            *a = [(vn[0] - v[0]) * inv_dt, (vn[1] - v[1]) * inv_dt, (vn[2] - v[2]) * inv_dt];
         });
 }
 
@@ -480,21 +398,10 @@ fn centre_gradients<S: ShapeFunction>(mesh: &Mesh) -> [Vec3; MAX_NODES] {
 }
 
 /// Strain and volume update from a nodal velocity field (USF: V^i, MUSL: remapped velocity).
-fn strain_update<S: ShapeFunction>(
-    pts: &mut Points,
-    vel: &[Vec3],
-    mesh: &Mesh,
-    loc: &[Location],
-    dt: f64,
-) {
+fn strain_update<S: ShapeFunction>(pts: &mut Points, vel: &[Vec3], mesh: &Mesh, loc: &[Location], dt: f64) {
     let off = node_offsets::<S>(mesh);
     let dn0 = centre_gradients::<S>(mesh);
-    (
-        pts.dstrain.par_iter_mut(),
-        pts.strain.par_iter_mut(),
-        pts.volume.par_iter_mut(),
-        loc.par_iter(),
-    )
+    (pts.dstrain.par_iter_mut(), pts.strain.par_iter_mut(), pts.volume.par_iter_mut(), loc.par_iter())
         .into_par_iter()
         .with_min_len(MIN_PER_TASK)
         .for_each(|(de, e, vol, l)| {
@@ -561,17 +468,7 @@ fn g2p<S: ShapeFunction>(
                         c[p] = lg;
                     }
                     if with_strain {
-                        apply_strain::<S>(
-                            &lg,
-                            vel,
-                            base,
-                            &off,
-                            &dn0,
-                            dt,
-                            &mut de[p],
-                            &mut e[p],
-                            &mut vol[p],
-                        );
+                        apply_strain::<S>(&lg, vel, base, &off, &dn0, dt, &mut de[p], &mut e[p], &mut vol[p]);
                     }
                 }
             }
@@ -605,36 +502,17 @@ fn stress_update(pts: &mut Points, materials: &mut [Material]) -> Result<()> {
         let stress = pts.stress[range.clone()].par_chunks_mut(CHUNK);
         let dstrain = pts.dstrain[range].par_chunks(CHUNK);
         let results: Vec<Result<()>> = if stride == 0 {
-            stress
-                .zip(dstrain)
-                .map(|(s, de)| {
-                    law.update(LawBatch {
-                        stress: s,
-                        dstrain: de,
-                        state: &mut [],
-                    })
-                })
-                .collect()
+            stress.zip(dstrain).map(|(s, de)| law.update(LawBatch { stress: s, dstrain: de, state: &mut [] })).collect()
         } else {
             stress
                 .zip(dstrain)
                 .zip(m.state.par_chunks_mut(CHUNK * stride))
                 .with_min_len(MIN_CHUNKS_PER_TASK)
-                .map(|((s, de), state)| {
-                    law.update(LawBatch {
-                        stress: s,
-                        dstrain: de,
-                        state,
-                    })
-                })
+                .map(|((s, de), state)| law.update(LawBatch { stress: s, dstrain: de, state }))
                 .collect()
         };
         if let Some(Err(e)) = results.into_iter().find(|r| r.is_err()) {
-            return Err(GraniteError::Other(format!(
-                "material \"{}\" ({}): {e}",
-                m.name,
-                law.name()
-            )));
+            return Err(GraniteError::Other(format!("material \"{}\" ({}): {e}", m.name, law.name())));
         }
     }
     Ok(())

@@ -9,10 +9,7 @@ pub type RhaiResult<T> = std::result::Result<T, Box<EvalAltResult>>;
 
 /// A granite error as a Rhai runtime error; Rhai adds the script position of the failing call.
 pub fn to_rhai(e: GraniteError) -> Box<EvalAltResult> {
-    Box::new(EvalAltResult::ErrorRuntime(
-        Dynamic::from(e.to_string()),
-        Position::NONE,
-    ))
+    Box::new(EvalAltResult::ErrorRuntime(Dynamic::from(e.to_string()), Position::NONE))
 }
 
 pub fn err<T>(msg: impl Into<String>) -> RhaiResult<T> {
@@ -36,37 +33,22 @@ pub fn number(d: &Dynamic, name: &str) -> RhaiResult<f64> {
     } else if let Ok(i) = d.as_int() {
         Ok(i as f64)
     } else {
-        err(format!(
-            "`{name}` must be a number, got {} ({})",
-            d,
-            d.type_name()
-        ))
+        err(format!("`{name}` must be a number, got {} ({})", d, d.type_name()))
     }
 }
 
 pub fn integer(d: &Dynamic, name: &str) -> RhaiResult<i64> {
-    d.as_int().or_else(|_| {
-        err(format!(
-            "`{name}` must be an integer, got {} ({})",
-            d,
-            d.type_name()
-        ))
-    })
+    d.as_int().or_else(|_| err(format!("`{name}` must be an integer, got {} ({})", d, d.type_name())))
 }
 
 /// An array of `dim` numbers (2D vectors get z = 0).
 pub fn vector(d: &Dynamic, dim: usize, name: &str) -> RhaiResult<Vec3> {
-    let arr = d.clone().into_array().or_else(|_| {
-        err(format!(
-            "`{name}` must be an array of {dim} numbers, got {}",
-            d.type_name()
-        ))
-    })?;
+    let arr = d
+        .clone()
+        .into_array()
+        .or_else(|_| err(format!("`{name}` must be an array of {dim} numbers, got {}", d.type_name())))?;
     if arr.len() != dim {
-        return err(format!(
-            "`{name}` must have {dim} components (dim = {dim}), got {}",
-            arr.len()
-        ));
+        return err(format!("`{name}` must have {dim} components (dim = {dim}), got {}", arr.len()));
     }
     let mut v = [0.0; 3];
     for (k, x) in arr.iter().enumerate() {
@@ -77,23 +59,14 @@ pub fn vector(d: &Dynamic, dim: usize, name: &str) -> RhaiResult<Vec3> {
 
 /// An array of numbers of any length.
 pub fn numbers(d: &Dynamic, name: &str) -> RhaiResult<Vec<f64>> {
-    let arr = d
-        .clone()
-        .into_array()
-        .or_else(|_| err(format!("`{name}` must be an array of numbers")))?;
+    let arr = d.clone().into_array().or_else(|_| err(format!("`{name}` must be an array of numbers")))?;
     arr.iter().map(|x| number(x, name)).collect()
 }
 
 pub fn counts(d: &Dynamic, dim: usize, name: &str) -> RhaiResult<[usize; 3]> {
-    let arr = d
-        .clone()
-        .into_array()
-        .or_else(|_| err(format!("`{name}` must be an array of {dim} integers")))?;
+    let arr = d.clone().into_array().or_else(|_| err(format!("`{name}` must be an array of {dim} integers")))?;
     if arr.len() != dim {
-        return err(format!(
-            "`{name}` must have {dim} entries (dim = {dim}), got {}",
-            arr.len()
-        ));
+        return err(format!("`{name}` must have {dim} entries (dim = {dim}), got {}", arr.len()));
     }
     let mut c = [1usize; 3];
     for (k, x) in arr.iter().enumerate() {
@@ -126,17 +99,12 @@ pub fn get<'a>(map: &'a Map, key: &str) -> Option<&'a Dynamic> {
 pub fn only_keys(map: &Map, allowed: &[&str], function: &str) -> RhaiResult<()> {
     for k in map.keys() {
         if !allowed.contains(&k.as_str()) {
-            return err(format!(
-                "unknown option `{k}` of {function}; allowed: {}",
-                allowed.join(", ")
-            ));
+            return err(format!("unknown option `{k}` of {function}; allowed: {}", allowed.join(", ")));
         }
     }
     Ok(())
 }
 
 pub fn string(d: &Dynamic, name: &str) -> RhaiResult<String> {
-    d.clone()
-        .into_string()
-        .or_else(|_| err(format!("`{name}` must be a string, got {}", d.type_name())))
+    d.clone().into_string().or_else(|_| err(format!("`{name}` must be a string, got {}", d.type_name())))
 }

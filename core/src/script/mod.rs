@@ -58,21 +58,12 @@ impl ScriptContext {
 
     /// `param(name, default)`: the override if one was given, parsed like the default.
     fn param(&self, name: &str, default: Dynamic) -> RhaiResult<Dynamic> {
-        let given = self
-            .options
-            .overrides
-            .iter()
-            .rev()
-            .find(|(k, _)| k == name)
-            .map(|(_, v)| v.clone());
+        let given = self.options.overrides.iter().rev().find(|(k, _)| k == name).map(|(_, v)| v.clone());
         let value = match given {
             None => default.clone(),
             Some(text) => parse_like(&text, &default, name)?,
         };
-        self.declared
-            .lock()
-            .unwrap()
-            .insert(name.to_string(), value.clone());
+        self.declared.lock().unwrap().insert(name.to_string(), value.clone());
         Ok(value)
     }
 
@@ -86,9 +77,7 @@ impl ScriptContext {
                 } else {
                     declared.keys().cloned().collect::<Vec<_>>().join(", ")
                 };
-                return err(format!(
-                    "--set {k}: the script declares no parameter `{k}`; declared: {list}"
-                ));
+                return err(format!("--set {k}: the script declares no parameter `{k}`; declared: {list}"));
             }
         }
         Ok(())
@@ -106,26 +95,13 @@ impl ScriptContext {
 }
 
 fn parse_like(text: &str, default: &Dynamic, name: &str) -> RhaiResult<Dynamic> {
-    let bad = |what: &str| {
-        err(format!(
-            "--set {name}={text}: expected {what} (the default is {default})"
-        ))
-    };
+    let bad = |what: &str| err(format!("--set {name}={text}: expected {what} (the default is {default})"));
     if default.is_int() {
-        text.trim()
-            .parse::<i64>()
-            .map(Dynamic::from)
-            .or_else(|_| bad("an integer"))
+        text.trim().parse::<i64>().map(Dynamic::from).or_else(|_| bad("an integer"))
     } else if default.is_float() {
-        text.trim()
-            .parse::<f64>()
-            .map(Dynamic::from)
-            .or_else(|_| bad("a number"))
+        text.trim().parse::<f64>().map(Dynamic::from).or_else(|_| bad("a number"))
     } else if default.is_bool() {
-        text.trim()
-            .parse::<bool>()
-            .map(Dynamic::from)
-            .or_else(|_| bad("true or false"))
+        text.trim().parse::<bool>().map(Dynamic::from).or_else(|_| bad("true or false"))
     } else {
         Ok(Dynamic::from(text.to_string()))
     }
@@ -133,22 +109,13 @@ fn parse_like(text: &str, default: &Dynamic, name: &str) -> RhaiResult<Dynamic> 
 
 fn to_json(d: &Dynamic) -> Value {
     if let Ok(f) = d.as_float() {
-        serde_json::Number::from_f64(f)
-            .map(Value::Number)
-            .unwrap_or(Value::Null)
+        serde_json::Number::from_f64(f).map(Value::Number).unwrap_or(Value::Null)
     } else if let Ok(i) = d.as_int() {
         Value::from(i)
     } else if let Ok(b) = d.as_bool() {
         Value::from(b)
     } else if d.is_array() {
-        Value::Array(
-            d.clone()
-                .into_array()
-                .unwrap_or_default()
-                .iter()
-                .map(to_json)
-                .collect(),
-        )
+        Value::Array(d.clone().into_array().unwrap_or_default().iter().map(to_json).collect())
     } else {
         Value::from(d.to_string())
     }
@@ -160,24 +127,14 @@ fn build_engine(ctx: &Arc<ScriptContext>) -> Engine {
     for kind in 0..4 {
         let c = ctx.clone();
         match kind {
-            0 => engine.register_fn("param", move |name: &str, d: f64| {
-                c.param(name, Dynamic::from(d))
-            }),
-            1 => engine.register_fn("param", move |name: &str, d: i64| {
-                c.param(name, Dynamic::from(d))
-            }),
-            2 => engine.register_fn("param", move |name: &str, d: &str| {
-                c.param(name, Dynamic::from(d.to_string()))
-            }),
-            _ => engine.register_fn("param", move |name: &str, d: bool| {
-                c.param(name, Dynamic::from(d))
-            }),
+            0 => engine.register_fn("param", move |name: &str, d: f64| c.param(name, Dynamic::from(d))),
+            1 => engine.register_fn("param", move |name: &str, d: i64| c.param(name, Dynamic::from(d))),
+            2 => engine.register_fn("param", move |name: &str, d: &str| c.param(name, Dynamic::from(d.to_string()))),
+            _ => engine.register_fn("param", move |name: &str, d: bool| c.param(name, Dynamic::from(d))),
         };
     }
     let c = ctx.clone();
-    engine.register_fn("summary", move |name: &str, value: Dynamic| {
-        c.set_summary(name, to_json(&value))
-    });
+    engine.register_fn("summary", move |name: &str, value: Dynamic| c.set_summary(name, to_json(&value)));
     let c = ctx.clone();
     engine.register_fn("out_dir", move || c.options.out_dir.display().to_string());
     engine.register_fn("print_line", |s: &str| println!("{s}"));
@@ -189,20 +146,12 @@ fn build_engine(ctx: &Arc<ScriptContext>) -> Engine {
 /// records `status: "failed"` and the error there too.
 pub fn run_script(path: &Path, registry: Registry, options: RunOptions) -> Result<RunReport> {
     let source = std::fs::read_to_string(path).map_err(|e| GraniteError::io(path, e))?;
-    let name = path
-        .file_name()
-        .map(|n| n.to_string_lossy().to_string())
-        .unwrap_or_default();
+    let name = path.file_name().map(|n| n.to_string_lossy().to_string()).unwrap_or_default();
     run_source(&name, &source, registry, options)
 }
 
 /// Runs script text; `name` is used in error messages.
-pub fn run_source(
-    name: &str,
-    source: &str,
-    registry: Registry,
-    options: RunOptions,
-) -> Result<RunReport> {
+pub fn run_source(name: &str, source: &str, registry: Registry, options: RunOptions) -> Result<RunReport> {
     let out_dir = options.out_dir.clone();
     std::fs::create_dir_all(&out_dir).map_err(|e| GraniteError::io(&out_dir, e))?;
     let ctx = Arc::new(ScriptContext::new(registry, options));
@@ -211,27 +160,14 @@ pub fn run_source(
     let outcome = engine
         .compile(source)
         .map_err(|e| format!("{name}: syntax error: {e}"))
-        .and_then(|ast| {
-            engine
-                .run_ast(&ast)
-                .map_err(|e| format!("{name}: {}", describe(&e)))
-        })
-        .and_then(|_| {
-            ctx.check_overrides()
-                .map_err(|e| format!("{name}: {}", describe(&e)))
-        });
+        .and_then(|ast| engine.run_ast(&ast).map_err(|e| format!("{name}: {}", describe(&e))))
+        .and_then(|_| ctx.check_overrides().map_err(|e| format!("{name}: {}", describe(&e))));
     let mut summary = ctx.summary.lock().unwrap().clone();
-    summary.insert(
-        "status".into(),
-        Value::from(if outcome.is_ok() { "ok" } else { "failed" }),
-    );
+    summary.insert("status".into(), Value::from(if outcome.is_ok() { "ok" } else { "failed" }));
     if let Err(e) = &outcome {
         summary.insert("error".into(), Value::from(e.clone()));
     }
-    summary.insert(
-        "wall_time_s".into(),
-        Value::from(started.elapsed().as_secs_f64()),
-    );
+    summary.insert("wall_time_s".into(), Value::from(started.elapsed().as_secs_f64()));
     crate::io::write_summary(&out_dir.join("summary.json"), &summary)?;
     match outcome {
         Ok(()) => Ok(RunReport { out_dir, summary }),
@@ -259,11 +195,7 @@ fn describe(e: &EvalAltResult) -> String {
             }
         }
     };
-    let p = if inner.position().is_none() {
-        pos
-    } else {
-        inner.position()
-    };
+    let p = if inner.position().is_none() { pos } else { inner.position() };
     match p.line() {
         Some(line) => format!("line {line}: {msg}"),
         None => msg,

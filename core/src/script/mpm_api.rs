@@ -1,16 +1,13 @@
 //! The `mpm(...)` simulation object of scripts and its methods.
 
 use super::convert::{
-    counts, err, get, integer, number, numbers, only_keys, param_map, string, vector, OrRhai,
-    RhaiResult,
+    counts, err, get, integer, number, numbers, only_keys, param_map, string, vector, OrRhai, RhaiResult,
 };
 use super::output::{Output, Runout};
 use super::ScriptContext;
 use crate::error::GraniteError;
 use crate::math::{Vec3, Voigt};
-use crate::mpm::boundary::{
-    Face, FrictionConstraint, NodalForce, TimeFunction, VelocityConstraint,
-};
+use crate::mpm::boundary::{Face, FrictionConstraint, NodalForce, TimeFunction, VelocityConstraint};
 use crate::mpm::fill::{cell_points, Layout};
 use crate::mpm::sim::Snapshot;
 use crate::mpm::{Boundary, Mesh, MpmSim, OutOfMeshPolicy, StressScheme};
@@ -95,10 +92,7 @@ fn axis_index(name: &str, dim: usize) -> RhaiResult<usize> {
         "x" => Ok(0),
         "y" => Ok(1),
         "z" if dim == 3 => Ok(2),
-        _ => err(format!(
-            "axis `{name}` must be one of {}",
-            if dim == 3 { "x, y, z" } else { "x, y" }
-        )),
+        _ => err(format!("axis `{name}` must be one of {}", if dim == 3 { "x, y, z" } else { "x, y" })),
     }
 }
 
@@ -120,21 +114,12 @@ fn stress_arg(d: &Dynamic) -> RhaiResult<Voigt> {
 impl SimHandle {
     fn new(ctx: Arc<ScriptContext>, opts: Map) -> RhaiResult<SimHandle> {
         let mut opts = opts;
-        let update = opts
-            .remove("velocity_update")
-            .map(|d| string(&d, "velocity_update"))
-            .transpose()?;
+        let update = opts.remove("velocity_update").map(|d| string(&d, "velocity_update")).transpose()?;
         let mesh = parse_mesh(&opts, None)?;
-        let strategy = ctx
-            .registry
-            .build_velocity_update(update.as_deref().unwrap_or("FLIP"), &ParamMap::new())
-            .or_rhai()?;
+        let strategy =
+            ctx.registry.build_velocity_update(update.as_deref().unwrap_or("FLIP"), &ParamMap::new()).or_rhai()?;
         let index = ctx.next_sim_index();
-        let prefix = if index == 1 {
-            String::new()
-        } else {
-            format!("sim{index}_")
-        };
+        let prefix = if index == 1 { String::new() } else { format!("sim{index}_") };
         let output = Output::new(ctx.options.out_dir.clone(), prefix);
         Ok(SimHandle(Arc::new(Mutex::new(SimState {
             sim: MpmSim::new(mesh, strategy),
@@ -170,11 +155,7 @@ impl SimHandle {
         region: Region,
         opts: Map,
     ) -> RhaiResult<i64> {
-        only_keys(
-            &opts,
-            &["per_cell", "layout", "velocity", "stress"],
-            "fill options",
-        )?;
+        only_keys(&opts, &["per_cell", "layout", "velocity", "stress"], "fill options")?;
         let mut st = self.lock();
         let dim = st.sim.dim();
         let per_dir = match get(&opts, "per_cell") {
@@ -182,9 +163,7 @@ impl SimHandle {
             None => 2,
         };
         if !(1..=20).contains(&per_dir) {
-            return err(format!(
-                "`per_cell` (points per cell direction) must be in [1, 20], got {per_dir}"
-            ));
+            return err(format!("`per_cell` (points per cell direction) must be in [1, 20], got {per_dir}"));
         }
         let layout = match get(&opts, "layout") {
             Some(l) => Layout::parse(&string(l, "layout")?).or_rhai()?,
@@ -220,10 +199,32 @@ impl SimHandle {
         if xs.is_empty() {
             return err("the region holds no material point: check its bounds against the mesh");
         }
-        st.sim
-            .add_points(mat.index, &xs, &vols, v, stress)
-            .or_rhai()?;
+        st.sim.add_points(mat.index, &xs, &vols, v, stress).or_rhai()?;
         Ok(xs.len() as i64)
+    }
+
+    /// A box region that must lie inside the mesh (a box poking out would silently lose points).
+    fn box_region(&self, lo: &Dynamic, hi: &Dynamic) -> RhaiResult<Region> {
+        let st = self.lock();
+        let dim = st.sim.dim();
+        let (lo, hi) = (vector(lo, dim, "lower corner")?, vector(hi, dim, "upper corner")?);
+        let (mlo, mhi) = (st.sim.mesh.origin, st.sim.mesh.upper());
+        for a in 0..dim {
+            if !(lo[a] < hi[a]) {
+                return err(format!("box corners must satisfy lower < upper on every axis, got {lo:?} and {hi:?}"));
+            }
+            let eps = 1e-9 * st.sim.mesh.cell[a];
+            if lo[a] < mlo[a] - eps || hi[a] > mhi[a] + eps {
+                return err(format!(
+                    "box [{:?}, {:?}] extends outside the mesh [{:?}, {:?}]",
+                    &lo[..dim],
+                    &hi[..dim],
+                    &mlo[..dim],
+                    &mhi[..dim]
+                ));
+            }
+        }
+        Ok(Region::Box(lo, hi))
     }
 
     fn select_nodes(&self, ctx: &NativeCallContext, selector: &Dynamic) -> RhaiResult<Vec<u32>> {
@@ -234,10 +235,7 @@ impl SimHandle {
         if let Some(f) = selector.clone().try_cast::<FnPtr>() {
             let mut nodes = Vec::new();
             for i in 0..mesh.node_count() {
-                if f.call_within_context::<bool>(
-                    ctx,
-                    (position_array(mesh.node_position(i), mesh.dim),),
-                )? {
+                if f.call_within_context::<bool>(ctx, (position_array(mesh.node_position(i), mesh.dim),))? {
                     nodes.push(i as u32);
                 }
             }
@@ -271,22 +269,12 @@ impl SimHandle {
         Ok((TimeFunction::Constant(number(value, name)?), None))
     }
 
-    fn fix(
-        &mut self,
-        ctx: &NativeCallContext,
-        selector: Dynamic,
-        axis: &str,
-        value: Dynamic,
-    ) -> RhaiResult<()> {
+    fn fix(&mut self, ctx: &NativeCallContext, selector: Dynamic, axis: &str, value: Dynamic) -> RhaiResult<()> {
         let nodes = self.select_nodes(ctx, &selector)?;
         let (f, driver) = Self::time_function(&value, "velocity")?;
         let mut st = self.lock();
         let axis = axis_index(axis, st.sim.dim())?;
-        st.sim.boundary.velocity.push(VelocityConstraint {
-            nodes,
-            axis,
-            value: f,
-        });
+        st.sim.boundary.velocity.push(VelocityConstraint { nodes, axis, value: f });
         let idx = st.sim.boundary.velocity.len() - 1;
         if let Some(fp) = driver {
             st.driven.push((Driven::Velocity(idx), fp));
@@ -302,23 +290,14 @@ impl SimHandle {
         let mut st = self.lock();
         let face = Face::parse(face, st.sim.dim()).or_rhai()?;
         let nodes = face.nodes(&st.sim.mesh);
-        st.sim.boundary.friction.push(FrictionConstraint {
-            nodes,
-            axis: face.axis,
-            sign: face.outward_sign(),
-            mu,
-        });
+        st.sim.boundary.friction.push(FrictionConstraint { nodes, axis: face.axis, sign: face.outward_sign(), mu });
         Ok(())
     }
 
     fn add_force(&mut self, nodes: Vec<u32>, force: Vec<Vec3>, factor: Dynamic) -> RhaiResult<()> {
         let (f, driver) = Self::time_function(&factor, "factor")?;
         let mut st = self.lock();
-        st.sim.boundary.forces.push(NodalForce {
-            nodes,
-            force,
-            factor: f,
-        });
+        st.sim.boundary.forces.push(NodalForce { nodes, force, factor: f });
         let idx = st.sim.boundary.forces.len() - 1;
         if let Some(fp) = driver {
             st.driven.push((Driven::Force(idx), fp));
@@ -386,9 +365,7 @@ impl SimHandle {
             st.output.series_every.get_or_insert(series_every);
             st.output.vtk_every.get_or_insert(vtk_every);
             let st = &mut *st;
-            st.output
-                .write_series(&st.sim, st.runout.as_ref())
-                .or_rhai()?;
+            st.output.write_series(&st.sim, st.runout.as_ref()).or_rhai()?;
             st.output.write_vtk(&st.sim).or_rhai()?;
             st.last_good = Some(st.sim.snapshot());
         }
@@ -401,8 +378,7 @@ impl SimHandle {
             let mut values = Vec::with_capacity(driven.len());
             for (_, f) in &driven {
                 values.push(
-                    f.call_within_context::<Dynamic>(ctx, (t,))
-                        .and_then(|d| number(&d, "boundary function value"))?,
+                    f.call_within_context::<Dynamic>(ctx, (t,)).and_then(|d| number(&d, "boundary function value"))?,
                 );
             }
             let due: Vec<FnPtr> = {
@@ -410,12 +386,8 @@ impl SimHandle {
                 let st = &mut *guard;
                 for ((which, _), v) in driven.iter().zip(values) {
                     match *which {
-                        Driven::Velocity(i) => {
-                            st.sim.boundary.velocity[i].value = TimeFunction::Driven(v)
-                        }
-                        Driven::Force(i) => {
-                            st.sim.boundary.forces[i].factor = TimeFunction::Driven(v)
-                        }
+                        Driven::Velocity(i) => st.sim.boundary.velocity[i].value = TimeFunction::Driven(v),
+                        Driven::Force(i) => st.sim.boundary.forces[i].factor = TimeFunction::Driven(v),
                     }
                 }
                 if let Err(e) = st.sim.step() {
@@ -429,20 +401,14 @@ impl SimHandle {
                 let step = st.sim.step;
                 let last = k + 1 == steps;
                 if step % st.output.series_every.unwrap_or(1) == 0 || last {
-                    st.output
-                        .write_series(&st.sim, st.runout.as_ref())
-                        .or_rhai()?;
+                    st.output.write_series(&st.sim, st.runout.as_ref()).or_rhai()?;
                     st.last_good = Some(st.sim.snapshot());
                 }
                 if step % st.output.vtk_every.unwrap_or(1) == 0 || last {
                     st.output.write_vtk(&st.sim).or_rhai()?;
                 }
                 progress.tick(k + 1, st.sim.time);
-                st.callbacks
-                    .iter()
-                    .filter(|(n, _)| step % n == 0)
-                    .map(|(_, f)| f.clone())
-                    .collect()
+                st.callbacks.iter().filter(|(n, _)| step % n == 0).map(|(_, f)| f.clone()).collect()
             };
             for f in due {
                 let _ = f.call_within_context::<Dynamic>(ctx, (self.clone(),))?;
@@ -489,8 +455,7 @@ impl SimState {
                 Err(w) => format!("{msg}\n(could not write the last good state: {w})"),
             };
         }
-        self.ctx
-            .set_summary("failed_at_step", serde_json::Value::from(failed_step));
+        self.ctx.set_summary("failed_at_step", serde_json::Value::from(failed_step));
         super::convert::to_rhai(GraniteError::Other(msg))
     }
 }
@@ -525,11 +490,7 @@ impl Progress {
         if !self.enabled {
             return;
         }
-        let every = if self.terminal {
-            Duration::from_millis(500)
-        } else {
-            Duration::from_secs(10)
-        };
+        let every = if self.terminal { Duration::from_millis(500) } else { Duration::from_secs(10) };
         if self.last.get().elapsed() < every {
             return;
         }
@@ -591,31 +552,23 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
     let c = ctx.clone();
     engine.register_fn("mpm", move |opts: Map| SimHandle::new(c.clone(), opts));
 
-    engine.register_fn("material", |s: &mut SimHandle, law: &str, opts: Map| {
-        s.material(law, opts)
+    engine.register_fn("material", |s: &mut SimHandle, law: &str, opts: Map| s.material(law, opts));
+    engine.register_fn("fill_box", |s: &mut SimHandle, m: MaterialHandle, lo: Dynamic, hi: Dynamic, opts: Map| {
+        let region = s.box_region(&lo, &hi)?;
+        s.fill(None, &m, region, opts)
     });
-    engine.register_fn(
-        "fill_box",
-        |s: &mut SimHandle, m: MaterialHandle, lo: Dynamic, hi: Dynamic, opts: Map| {
-            let dim = s.lock().sim.dim();
-            let (lo, hi) = (
-                vector(&lo, dim, "lower corner")?,
-                vector(&hi, dim, "upper corner")?,
-            );
-            s.fill(None, &m, Region::Box(lo, hi), opts)
-        },
-    );
-    engine.register_fn(
-        "fill_box",
-        |s: &mut SimHandle, m: MaterialHandle, lo: Dynamic, hi: Dynamic| {
-            let dim = s.lock().sim.dim();
-            let (lo, hi) = (
-                vector(&lo, dim, "lower corner")?,
-                vector(&hi, dim, "upper corner")?,
-            );
-            s.fill(None, &m, Region::Box(lo, hi), Map::new())
-        },
-    );
+    engine.register_fn("fill_box", |s: &mut SimHandle, m: MaterialHandle, lo: Dynamic, hi: Dynamic| {
+        let region = s.box_region(&lo, &hi)?;
+        s.fill(None, &m, region, Map::new())
+    });
+    engine.register_fn("add_points", |s: &mut SimHandle, m: MaterialHandle, positions: Array, volume: Dynamic| {
+        let volume = number(&volume, "volume")?;
+        let mut st = s.lock();
+        let dim = st.sim.dim();
+        let xs = positions.iter().map(|p| vector(p, dim, "position")).collect::<RhaiResult<Vec<_>>>()?;
+        let vols = vec![volume; xs.len()];
+        st.sim.add_points(m.index, &xs, &vols, [0.0; 3], [0.0; 6]).or_rhai()
+    });
     engine.register_fn(
         "fill_region",
         |ctx: NativeCallContext, s: &mut SimHandle, m: MaterialHandle, f: FnPtr, opts: Map| {
@@ -643,61 +596,34 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
     fn set_update(s: &mut SimHandle, name: &str, opts: Map) -> RhaiResult<()> {
         let mut st = s.lock();
         let params = param_map(&opts, &[], name)?;
-        st.sim.velocity_update = st
-            .ctx
-            .registry
-            .build_velocity_update(name, &params)
-            .or_rhai()?;
+        st.sim.velocity_update = st.ctx.registry.build_velocity_update(name, &params).or_rhai()?;
         Ok(())
     }
     engine.register_fn("velocity_update", set_update);
-    engine.register_fn("velocity_update", |s: &mut SimHandle, name: &str| {
-        set_update(s, name, Map::new())
+    engine.register_fn("velocity_update", |s: &mut SimHandle, name: &str| set_update(s, name, Map::new()));
+    engine.register_fn("dt", |s: &mut SimHandle, dt: Dynamic| s.lock().sim.set_dt(number(&dt, "dt")?).or_rhai());
+    engine.register_fn("critical_dt", |s: &mut SimHandle| s.lock().sim.critical_dt().unwrap_or(f64::INFINITY));
+    engine.register_fn("fix", |ctx: NativeCallContext, s: &mut SimHandle, sel: Dynamic, axis: &str, v: Dynamic| {
+        s.fix(&ctx, sel, axis, v)
     });
-    engine.register_fn("dt", |s: &mut SimHandle, dt: Dynamic| {
-        s.lock().sim.set_dt(number(&dt, "dt")?).or_rhai()
+    engine.register_fn("fix", |ctx: NativeCallContext, s: &mut SimHandle, sel: Dynamic, axis: &str| {
+        s.fix(&ctx, sel, axis, Dynamic::from(0.0))
     });
-    engine.register_fn("critical_dt", |s: &mut SimHandle| {
-        s.lock().sim.critical_dt().unwrap_or(f64::INFINITY)
+    engine.register_fn("friction", |s: &mut SimHandle, face: &str, mu: Dynamic| s.friction(face, mu));
+    engine.register_fn("traction", |s: &mut SimHandle, face: &str, t: Dynamic| s.traction(face, t, Dynamic::from(1.0)));
+    engine.register_fn("traction", |s: &mut SimHandle, face: &str, t: Dynamic, factor: Dynamic| {
+        s.traction(face, t, factor)
     });
-    engine.register_fn(
-        "fix",
-        |ctx: NativeCallContext, s: &mut SimHandle, sel: Dynamic, axis: &str, v: Dynamic| {
-            s.fix(&ctx, sel, axis, v)
-        },
-    );
-    engine.register_fn(
-        "fix",
-        |ctx: NativeCallContext, s: &mut SimHandle, sel: Dynamic, axis: &str| {
-            s.fix(&ctx, sel, axis, Dynamic::from(0.0))
-        },
-    );
-    engine.register_fn("friction", |s: &mut SimHandle, face: &str, mu: Dynamic| {
-        s.friction(face, mu)
+    engine.register_fn("nodal_force", |ctx: NativeCallContext, s: &mut SimHandle, sel: Dynamic, f: Dynamic| {
+        s.nodal_force(&ctx, sel, f, Dynamic::from(1.0))
     });
-    engine.register_fn("traction", |s: &mut SimHandle, face: &str, t: Dynamic| {
-        s.traction(face, t, Dynamic::from(1.0))
-    });
-    engine.register_fn(
-        "traction",
-        |s: &mut SimHandle, face: &str, t: Dynamic, factor: Dynamic| s.traction(face, t, factor),
-    );
-    engine.register_fn(
-        "nodal_force",
-        |ctx: NativeCallContext, s: &mut SimHandle, sel: Dynamic, f: Dynamic| {
-            s.nodal_force(&ctx, sel, f, Dynamic::from(1.0))
-        },
-    );
     engine.register_fn(
         "nodal_force",
         |ctx: NativeCallContext, s: &mut SimHandle, sel: Dynamic, f: Dynamic, factor: Dynamic| {
             s.nodal_force(&ctx, sel, f, factor)
         },
     );
-    engine.register_fn(
-        "geostatic_stress",
-        |s: &mut SimHandle, surface: Dynamic, k0: Dynamic| s.geostatic(surface, k0),
-    );
+    engine.register_fn("geostatic_stress", |s: &mut SimHandle, surface: Dynamic, k0: Dynamic| s.geostatic(surface, k0));
     engine.register_fn("initial_stress", |s: &mut SimHandle, stress: Dynamic| {
         let v = stress_arg(&stress)?;
         s.lock().sim.points.stress.iter_mut().for_each(|p| *p = v);
@@ -715,11 +641,7 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
         s.lock().sim.out_of_mesh = match what {
             "delete" => OutOfMeshPolicy::Delete,
             "stop" => OutOfMeshPolicy::Stop,
-            _ => {
-                return err(format!(
-                    "on_leave takes \"delete\" or \"stop\", got \"{what}\""
-                ))
-            }
+            _ => return err(format!("on_leave takes \"delete\" or \"stop\", got \"{what}\"")),
         };
         Ok(())
     });
@@ -737,23 +659,16 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
         s.lock().output.vtk_every = Some(n as u64);
         Ok(())
     });
-    engine.register_fn(
-        "track_runout",
-        |s: &mut SimHandle, width: Dynamic, height: Dynamic| {
-            let (w, h) = (number(&width, "width")?, number(&height, "height")?);
-            if !(w > 0.0 && h > 0.0) {
-                return err("track_runout needs the initial column width and height (> 0)");
-            }
-            let mut st = s.lock();
-            let t0 = st.sim.time;
-            st.runout = Some(Runout {
-                width0: w,
-                height0: h,
-                t0,
-            });
-            Ok(())
-        },
-    );
+    engine.register_fn("track_runout", |s: &mut SimHandle, width: Dynamic, height: Dynamic| {
+        let (w, h) = (number(&width, "width")?, number(&height, "height")?);
+        if !(w > 0.0 && h > 0.0) {
+            return err("track_runout needs the initial column width and height (> 0)");
+        }
+        let mut st = s.lock();
+        let t0 = st.sim.time;
+        st.runout = Some(Runout { width0: w, height0: h, t0 });
+        Ok(())
+    });
     engine.register_fn("every", |s: &mut SimHandle, n: i64, f: FnPtr| {
         if n < 1 {
             return err(format!("every(n, f) needs n >= 1, got {n}"));
@@ -761,33 +676,22 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
         s.lock().callbacks.push((n as u64, f));
         Ok(())
     });
-    engine.register_fn(
-        "run_until",
-        |ctx: NativeCallContext, s: &mut SimHandle, t: Dynamic| s.run_until(&ctx, t),
-    );
-    engine.register_fn(
-        "run_steps",
-        |ctx: NativeCallContext, s: &mut SimHandle, n: i64| {
-            if n < 0 {
-                return err(format!("run_steps needs n >= 0, got {n}"));
-            }
-            s.run(&ctx, n as u64)
-        },
-    );
+    engine.register_fn("run_until", |ctx: NativeCallContext, s: &mut SimHandle, t: Dynamic| s.run_until(&ctx, t));
+    engine.register_fn("run_steps", |ctx: NativeCallContext, s: &mut SimHandle, n: i64| {
+        if n < 0 {
+            return err(format!("run_steps needs n >= 0, got {n}"));
+        }
+        s.run(&ctx, n as u64)
+    });
     engine.register_fn("diagnostics", |s: &mut SimHandle| diag_map(&s.lock()));
     engine.register_fn("write_points", |s: &mut SimHandle, file: &str| {
         let st = s.lock();
-        st.output
-            .write_points(&st.sim, file)
-            .map(|p| p.display().to_string())
-            .or_rhai()
+        st.output.write_points(&st.sim, file).map(|p| p.display().to_string()).or_rhai()
     });
     engine.register_fn("write_series", |s: &mut SimHandle| {
         let mut guard = s.lock();
         let st = &mut *guard;
-        st.output
-            .write_series(&st.sim, st.runout.as_ref())
-            .or_rhai()
+        st.output.write_series(&st.sim, st.runout.as_ref()).or_rhai()
     });
     engine.register_fn("write_vtk", |s: &mut SimHandle| {
         let mut guard = s.lock();
@@ -796,36 +700,22 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
     });
     engine.register_get("time", |s: &mut SimHandle| s.lock().sim.time);
     engine.register_get("step", |s: &mut SimHandle| s.lock().sim.step as i64);
-    engine.register_get("points", |s: &mut SimHandle| {
-        s.lock().sim.points.len() as i64
-    });
+    engine.register_get("points", |s: &mut SimHandle| s.lock().sim.points.len() as i64);
     engine.register_get("dt", |s: &mut SimHandle| s.lock().sim.dt);
-    engine.register_fn(
-        "point_stress",
-        |s: &mut SimHandle, i: i64| -> RhaiResult<Array> {
-            let st = s.lock();
-            let n = st.sim.points.len();
-            if i < 0 || i as usize >= n {
-                return err(format!("point index {i} out of range 0..{n}"));
-            }
-            Ok(st.sim.points.stress[i as usize]
-                .iter()
-                .map(|&v| Dynamic::from(v))
-                .collect())
-        },
-    );
-    engine.register_fn(
-        "point_position",
-        |s: &mut SimHandle, i: i64| -> RhaiResult<Array> {
-            let st = s.lock();
-            let n = st.sim.points.len();
-            if i < 0 || i as usize >= n {
-                return err(format!("point index {i} out of range 0..{n}"));
-            }
-            Ok(st.sim.points.x[i as usize]
-                .iter()
-                .map(|&v| Dynamic::from(v))
-                .collect())
-        },
-    );
+    engine.register_fn("point_stress", |s: &mut SimHandle, i: i64| -> RhaiResult<Array> {
+        let st = s.lock();
+        let n = st.sim.points.len();
+        if i < 0 || i as usize >= n {
+            return err(format!("point index {i} out of range 0..{n}"));
+        }
+        Ok(st.sim.points.stress[i as usize].iter().map(|&v| Dynamic::from(v)).collect())
+    });
+    engine.register_fn("point_position", |s: &mut SimHandle, i: i64| -> RhaiResult<Array> {
+        let st = s.lock();
+        let n = st.sim.points.len();
+        if i < 0 || i as usize >= n {
+            return err(format!("point index {i} out of range 0..{n}"));
+        }
+        Ok(st.sim.points.x[i as usize].iter().map(|&v| Dynamic::from(v)).collect())
+    });
 }

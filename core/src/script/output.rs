@@ -23,12 +23,7 @@ impl Runout {
         let lx = sim.voxel_width();
         let dr = lx - self.width0;
         let g = crate::math::norm3(sim.gravity).max(f64::MIN_POSITIVE);
-        (
-            lx,
-            dr,
-            dr / self.width0,
-            (sim.time - self.t0) / (self.height0 / g).sqrt(),
-        )
+        (lx, dr, dr / self.width0, (sim.time - self.t0) / (self.height0 / g).sqrt())
     }
 }
 
@@ -110,10 +105,8 @@ impl Output {
                 None => format!("{}series.csv", self.prefix),
                 Some(_) => format!("{}series_runout.csv", self.prefix),
             };
-            self.series = Some(SeriesWriter::create(
-                &self.dir.join(name),
-                cols.iter().map(|s| s.to_string()).collect(),
-            )?);
+            self.series =
+                Some(SeriesWriter::create(&self.dir.join(name), cols.iter().map(|s| s.to_string()).collect())?);
         }
         if let Some(w) = self.series.as_mut() {
             w.write(&vals)?;
@@ -127,59 +120,24 @@ impl Output {
             return Ok(());
         }
         if self.vtk.is_none() {
-            self.vtk = Some(VtkWriter::new(
-                &self.dir.join("vtk"),
-                &format!("{}points", self.prefix),
-            )?);
+            self.vtk = Some(VtkWriter::new(&self.dir.join("vtk"), &format!("{}points", self.prefix))?);
         }
         let p = &sim.points;
         let n = p.len();
         let mut fields = vec![
-            Field {
-                name: "id",
-                components: 1,
-                values: p.id.iter().map(|&i| i as f64).collect(),
-            },
-            Field {
-                name: "material",
-                components: 1,
-                values: p.material.iter().map(|&m| m as f64).collect(),
-            },
-            Field {
-                name: "velocity",
-                components: 3,
-                values: p.v.iter().flatten().copied().collect(),
-            },
-            Field {
-                name: "stress",
-                components: 6,
-                values: p.stress.iter().flatten().copied().collect(),
-            },
-            Field {
-                name: "strain",
-                components: 6,
-                values: p.strain.iter().flatten().copied().collect(),
-            },
-            Field {
-                name: "mean_stress",
-                components: 1,
-                values: p.stress.iter().map(|s| p_q(s).0).collect(),
-            },
-            Field {
-                name: "deviatoric_stress",
-                components: 1,
-                values: p.stress.iter().map(|s| p_q(s).1).collect(),
-            },
+            Field { name: "id", components: 1, values: p.id.iter().map(|&i| i as f64).collect() },
+            Field { name: "material", components: 1, values: p.material.iter().map(|&m| m as f64).collect() },
+            Field { name: "velocity", components: 3, values: p.v.iter().flatten().copied().collect() },
+            Field { name: "stress", components: 6, values: p.stress.iter().flatten().copied().collect() },
+            Field { name: "strain", components: 6, values: p.strain.iter().flatten().copied().collect() },
+            Field { name: "mean_stress", components: 1, values: p.stress.iter().map(|s| p_q(s).0).collect() },
+            Field { name: "deviatoric_stress", components: 1, values: p.stress.iter().map(|s| p_q(s).1).collect() },
             Field {
                 name: "deviatoric_strain",
                 components: 1,
                 values: p.strain.iter().map(deviatoric_strain_norm).collect(),
             },
-            Field {
-                name: "volume",
-                components: 1,
-                values: p.volume.clone(),
-            },
+            Field { name: "volume", components: 1, values: p.volume.clone() },
         ];
         // Law state variables by name (zero for points whose law lacks that variable).
         let mut start = 0;
@@ -189,11 +147,7 @@ impl Output {
                 let idx = match fields.iter().position(|f| f.name == *name) {
                     Some(i) => i,
                     None => {
-                        fields.push(Field {
-                            name,
-                            components: 1,
-                            values: vec![0.0; n],
-                        });
+                        fields.push(Field { name, components: 1, values: vec![0.0; n] });
                         fields.len() - 1
                     }
                 };
@@ -229,18 +183,8 @@ impl Output {
             row.extend(p.v[i]);
             row.extend(p.stress[i]);
             row.extend(p.strain[i]);
-            row.extend([
-                mean,
-                q,
-                deviatoric_strain_norm(&p.strain[i]),
-                p.volume[i],
-                p.mass[i],
-            ]);
-            let line = row
-                .iter()
-                .map(|v| v.to_string())
-                .collect::<Vec<_>>()
-                .join(",");
+            row.extend([mean, q, deviatoric_strain_norm(&p.strain[i]), p.volume[i], p.mass[i]]);
+            let line = row.iter().map(|v| v.to_string()).collect::<Vec<_>>().join(",");
             writeln!(w, "{line}").map_err(|e| GraniteError::io(&path, e))?;
         }
         w.flush().map_err(|e| GraniteError::io(&path, e))?;

@@ -32,12 +32,7 @@ impl Isotropic {
     pub fn new(young: f64, poisson: f64) -> Isotropic {
         let lambda = young * poisson / ((1.0 + poisson) * (1.0 - 2.0 * poisson));
         let shear = young / (2.0 * (1.0 + poisson));
-        Isotropic {
-            young,
-            poisson,
-            lambda,
-            shear,
-        }
+        Isotropic { young, poisson, lambda, shear }
     }
 
     /// P-wave modulus `lambda + 2G`.

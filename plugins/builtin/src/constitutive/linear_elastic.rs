@@ -65,18 +65,12 @@ mod tests {
     #[test]
     fn uniaxial_strain_and_shear_follow_hooke() {
         let (e, nu) = (52.6e6, 0.3);
-        let law = LinearElasticFactory
-            .build(params(&[("young", e), ("poisson", nu)]))
-            .unwrap();
+        let law = LinearElasticFactory.build(params(&[("young", e), ("poisson", nu)])).unwrap();
         let eps = 1e-4;
         let gamma = 2e-4;
         let mut stress = [[0.0; 6]];
-        law.update(LawBatch {
-            stress: &mut stress,
-            dstrain: &[[eps, 0.0, 0.0, gamma, 0.0, 0.0]],
-            state: &mut [],
-        })
-        .unwrap();
+        law.update(LawBatch { stress: &mut stress, dstrain: &[[eps, 0.0, 0.0, gamma, 0.0, 0.0]], state: &mut [] })
+            .unwrap();
         // Hand-derived: sigma_xx = E(1-nu)/((1+nu)(1-2nu)) eps, sigma_yy = E nu/((1+nu)(1-2nu)) eps,
         // tau_xy = E/(2(1+nu)) gamma.
         let d = (1.0 + nu) * (1.0 - 2.0 * nu);
@@ -88,17 +82,9 @@ mod tests {
 
     #[test]
     fn rejects_incompressible_and_negative_modulus() {
-        let err = LinearElasticFactory
-            .build(params(&[("young", 1e6), ("poisson", 0.5)]))
-            .err()
-            .unwrap()
-            .to_string();
+        let err = LinearElasticFactory.build(params(&[("young", 1e6), ("poisson", 0.5)])).err().unwrap().to_string();
         assert!(err.contains("poisson") && err.contains("0.5"), "{err}");
-        let err = LinearElasticFactory
-            .build(params(&[("young", -1.0), ("poisson", 0.2)]))
-            .err()
-            .unwrap()
-            .to_string();
+        let err = LinearElasticFactory.build(params(&[("young", -1.0), ("poisson", 0.2)])).err().unwrap().to_string();
         assert!(err.contains("young") && err.contains("> 0"), "{err}");
     }
 }

@@ -26,12 +26,18 @@ const SPECS: &[ParamSpec] = &[
     ParamSpec::required("friction", "peak friction angle phi in degrees, in [0, 90)"),
     ParamSpec::optional("dilation", 0.0, "peak dilatancy angle psi in degrees, in [0, phi]"),
     ParamSpec::optional("cohesion", 0.0, "peak cohesion c in Pa, >= 0"),
-    ParamSpec::unset("tension_cutoff", "tensile strength T in Pa, >= 0; capped at (and by default) the apex c/tan(phi)"),
+    ParamSpec::unset(
+        "tension_cutoff",
+        "tensile strength T in Pa, >= 0; capped at (and by default) the apex c/tan(phi)",
+    ),
     ParamSpec::unset("friction_residual", "residual friction angle in degrees (softening; default: peak)"),
     ParamSpec::unset("dilation_residual", "residual dilatancy angle in degrees (softening; default: peak)"),
     ParamSpec::unset("cohesion_residual", "residual cohesion in Pa (softening; default: peak)"),
     ParamSpec::optional("pdstrain_peak", 0.0, "plastic deviatoric strain where softening starts"),
-    ParamSpec::unset("pdstrain_residual", "plastic deviatoric strain where the residual strength is reached; setting it enables softening"),
+    ParamSpec::unset(
+        "pdstrain_residual",
+        "plastic deviatoric strain where the residual strength is reached; setting it enables softening",
+    ),
 ];
 
 /// Strength parameters at one plastic deviatoric strain.
@@ -121,64 +127,50 @@ impl ConstitutiveLawFactory for MohrCoulombFactory {
         } else {
             None
         };
-        let softening =
-            if params.is_set("pdstrain_residual") {
-                let pick = |name: &str, peak_value: f64| {
-                    if params.is_set(name) {
-                        params.get(name)
-                    } else {
-                        peak_value
+        let softening = if params.is_set("pdstrain_residual") {
+            let pick = |name: &str, peak_value: f64| {
+                if params.is_set(name) {
+                    params.get(name)
+                } else {
+                    peak_value
+                }
+            };
+            let phi_r = pick("friction_residual", phi_deg);
+            let residual = Angles {
+                phi: {
+                    if !(0.0..90.0).contains(&phi_r) {
+                        return Err(GraniteError::param_in(
+                            format!("`friction_residual` of {}", params.owner()),
+                            phi_r,
+                            "must be in [0, 90) degrees",
+                        ));
                     }
-                };
-                let phi_r = pick("friction_residual", phi_deg);
-                let residual = Angles {
-                    phi: {
-                        if !(0.0..90.0).contains(&phi_r) {
-                            return Err(GraniteError::param_in(
-                                format!("`friction_residual` of {}", params.owner()),
-                                phi_r,
-                                "must be in [0, 90) degrees",
-                            ));
-                        }
-                        phi_r.to_radians()
-                    },
-                    psi: pick("dilation_residual", peak.psi.to_degrees()).to_radians(),
-                    cohesion: pick("cohesion_residual", peak.cohesion),
-                };
-                if residual.psi < 0.0
-                    || residual.psi > residual.phi + 1e-12
-                    || residual.cohesion < 0.0
-                {
-                    return Err(GraniteError::param_in(
+                    phi_r.to_radians()
+                },
+                psi: pick("dilation_residual", peak.psi.to_degrees()).to_radians(),
+                cohesion: pick("cohesion_residual", peak.cohesion),
+            };
+            if residual.psi < 0.0 || residual.psi > residual.phi + 1e-12 || residual.cohesion < 0.0 {
+                return Err(GraniteError::param_in(
                     format!("residual strength of {}", params.owner()),
                     format!("psi {} deg, c {}", residual.psi.to_degrees(), residual.cohesion),
                     "needs 0 <= dilation_residual <= friction_residual and cohesion_residual >= 0",
                 ));
-                }
-                let pd_peak = params.non_negative("pdstrain_peak")?;
-                let pd_residual = params.get("pdstrain_residual");
-                if !(pd_residual > pd_peak) {
-                    return Err(GraniteError::param_in(
-                        format!("`pdstrain_residual` of {}", params.owner()),
-                        pd_residual,
-                        "must be > pdstrain_peak",
-                    ));
-                }
-                Some(Softening {
-                    residual,
-                    pd_peak,
+            }
+            let pd_peak = params.non_negative("pdstrain_peak")?;
+            let pd_residual = params.get("pdstrain_residual");
+            if !(pd_residual > pd_peak) {
+                return Err(GraniteError::param_in(
+                    format!("`pdstrain_residual` of {}", params.owner()),
                     pd_residual,
-                })
-            } else {
-                None
-            };
-        Ok(Box::new(MohrCoulomb {
-            params,
-            elastic,
-            peak,
-            softening,
-            tension_cutoff,
-        }))
+                    "must be > pdstrain_peak",
+                ));
+            }
+            Some(Softening { residual, pd_peak, pd_residual })
+        } else {
+            None
+        };
+        Ok(Box::new(MohrCoulomb { params, elastic, peak, softening, tension_cutoff }))
     }
 }
 
@@ -200,19 +192,9 @@ impl Surface {
         let k = (1.0 + sp) / (1.0 - sp);
         let m = (1.0 + a.psi.sin()) / (1.0 - a.psi.sin());
         let sigma_c = 2.0 * a.cohesion * cp / (1.0 - sp);
-        let apex = if k > 1.0 {
-            sigma_c / (k - 1.0)
-        } else {
-            f64::INFINITY
-        };
+        let apex = if k > 1.0 { sigma_c / (k - 1.0) } else { f64::INFINITY };
         let tension = cutoff.filter(|&t| t < apex);
-        Surface {
-            k,
-            m,
-            sigma_c,
-            apex,
-            tension,
-        }
+        Surface { k, m, sigma_c, apex, tension }
     }
 }
 
@@ -237,22 +219,17 @@ impl MohrCoulomb {
 fn principal_values(s: &Voigt) -> [f64; 3] {
     let p = (s[0] + s[1] + s[2]) / 3.0;
     let d = [s[0] - p, s[1] - p, s[2] - p];
-    let j2 =
-        0.5 * (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]) + s[3] * s[3] + s[4] * s[4] + s[5] * s[5];
+    let j2 = 0.5 * (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]) + s[3] * s[3] + s[4] * s[4] + s[5] * s[5];
     if j2 <= 1e-30 * (p * p).max(1e-300) {
         return [p, p, p];
     }
-    let j3 = d[0] * (d[1] * d[2] - s[4] * s[4]) - s[3] * (s[3] * d[2] - s[4] * s[5])
-        + s[5] * (s[3] * s[4] - d[1] * s[5]);
+    let j3 =
+        d[0] * (d[1] * d[2] - s[4] * s[4]) - s[3] * (s[3] * d[2] - s[4] * s[5]) + s[5] * (s[3] * s[4] - d[1] * s[5]);
     let c3 = (1.5 * 3f64.sqrt() * j3 / j2.powf(1.5)).clamp(-1.0, 1.0);
     let theta = c3.acos() / 3.0;
     let r = 2.0 * (j2 / 3.0).sqrt();
     let tau = 2.0 * std::f64::consts::PI / 3.0;
-    [
-        p + r * theta.cos(),
-        p + r * (theta - tau).cos(),
-        p + r * (theta + tau).cos(),
-    ]
+    [p + r * theta.cos(), p + r * (theta - tau).cos(), p + r * (theta + tau).cos()]
 }
 
 /// A yield plane `a . s <= r` with flow direction `b`, in sorted principal space.
@@ -268,42 +245,12 @@ fn planes(sf: &Surface) -> ([Plane; 6], usize) {
     let (k, m, sc) = (sf.k, sf.m, sf.sigma_c);
     let t = sf.tension.unwrap_or(f64::INFINITY);
     let list = [
-        Plane {
-            a: [k, 0.0, -1.0],
-            b: [m, 0.0, -1.0],
-            r: sc,
-            tension: false,
-        },
-        Plane {
-            a: [0.0, k, -1.0],
-            b: [0.0, m, -1.0],
-            r: sc,
-            tension: false,
-        },
-        Plane {
-            a: [k, -1.0, 0.0],
-            b: [m, -1.0, 0.0],
-            r: sc,
-            tension: false,
-        },
-        Plane {
-            a: [1.0, 0.0, 0.0],
-            b: [1.0, 0.0, 0.0],
-            r: t,
-            tension: true,
-        },
-        Plane {
-            a: [0.0, 1.0, 0.0],
-            b: [0.0, 1.0, 0.0],
-            r: t,
-            tension: true,
-        },
-        Plane {
-            a: [0.0, 0.0, 1.0],
-            b: [0.0, 0.0, 1.0],
-            r: t,
-            tension: true,
-        },
+        Plane { a: [k, 0.0, -1.0], b: [m, 0.0, -1.0], r: sc, tension: false },
+        Plane { a: [0.0, k, -1.0], b: [0.0, m, -1.0], r: sc, tension: false },
+        Plane { a: [k, -1.0, 0.0], b: [m, -1.0, 0.0], r: sc, tension: false },
+        Plane { a: [1.0, 0.0, 0.0], b: [1.0, 0.0, 0.0], r: t, tension: true },
+        Plane { a: [0.0, 1.0, 0.0], b: [0.0, 1.0, 0.0], r: t, tension: true },
+        Plane { a: [0.0, 0.0, 1.0], b: [0.0, 0.0, 1.0], r: t, tension: true },
     ];
     (list, if sf.tension.is_some() { 6 } else { 3 })
 }
@@ -315,17 +262,11 @@ fn dot(a: &[f64; 3], b: &[f64; 3]) -> f64 {
 /// Returns sorted principal trial stresses to the yield surface. Returns the stresses and the mode.
 pub fn return_principal(trial: [f64; 3], el: &Isotropic, sf: &Surface) -> ([f64; 3], f64) {
     let (pl, count) = planes(sf);
-    let scale = trial
-        .iter()
-        .fold(sf.sigma_c.abs().max(1.0), |acc, s| acc.max(s.abs()));
+    let scale = trial.iter().fold(sf.sigma_c.abs().max(1.0), |acc, s| acc.max(s.abs()));
     let tol = 1e-10 * scale;
     let d_times = |b: &[f64; 3]| {
         let vol = el.lambda * (b[0] + b[1] + b[2]);
-        [
-            vol + 2.0 * el.shear * b[0],
-            vol + 2.0 * el.shear * b[1],
-            vol + 2.0 * el.shear * b[2],
-        ]
+        [vol + 2.0 * el.shear * b[0], vol + 2.0 * el.shear * b[1], vol + 2.0 * el.shear * b[2]]
     };
     let db: Vec<[f64; 3]> = pl.iter().map(|p| d_times(&p.b)).collect();
     let energy = |s: &[f64; 3]| {
@@ -334,9 +275,7 @@ pub fn return_principal(trial: [f64; 3], el: &Isotropic, sf: &Surface) -> ([f64;
         ((1.0 + el.poisson) * dot(&d, &d) - el.poisson * (d[0] + d[1] + d[2]).powi(2)) / el.young
     };
     let admissible = |s: &[f64; 3]| {
-        s[0] >= s[1] - tol
-            && s[1] >= s[2] - tol
-            && pl[..count].iter().all(|p| dot(&p.a, s) - p.r <= tol)
+        s[0] >= s[1] - tol && s[1] >= s[2] - tol && pl[..count].iter().all(|p| dot(&p.a, s) - p.r <= tol)
     };
     let mut subsets: Vec<Vec<usize>> = Vec::new();
     for size in 1..=3 {
@@ -357,9 +296,7 @@ pub fn return_principal(trial: [f64; 3], el: &Isotropic, sf: &Surface) -> ([f64;
                 continue;
             };
             let lambdas = inv * rhs;
-            if (0..n).any(|i| {
-                !(lambdas[i] >= -1e-12 * lambdas.amax().max(1e-300)) || !lambdas[i].is_finite()
-            }) {
+            if (0..n).any(|i| !(lambdas[i] >= -1e-12 * lambdas.amax().max(1e-300)) || !lambdas[i].is_finite()) {
                 continue;
             }
             let mut s = trial;
@@ -395,13 +332,7 @@ pub fn return_principal(trial: [f64; 3], el: &Isotropic, sf: &Surface) -> ([f64;
     ([tip; 3], mode::CORNER)
 }
 
-fn combinations(
-    n: usize,
-    size: usize,
-    current: &mut Vec<usize>,
-    from: usize,
-    out: &mut Vec<Vec<usize>>,
-) {
+fn combinations(n: usize, size: usize, current: &mut Vec<usize>, from: usize, out: &mut Vec<Vec<usize>>) {
     if current.len() == size {
         out.push(current.clone());
         return;
@@ -427,12 +358,7 @@ impl ConstitutiveLaw for MohrCoulomb {
         Some(self.elastic.wave_speed(density))
     }
     fn update(&self, batch: LawBatch<'_>) -> Result<()> {
-        for ((s, de), state) in batch
-            .stress
-            .iter_mut()
-            .zip(batch.dstrain)
-            .zip(batch.state.chunks_mut(2))
-        {
+        for ((s, de), state) in batch.stress.iter_mut().zip(batch.dstrain).zip(batch.state.chunks_mut(2)) {
             let pd = state[0];
             let sf = Surface::new(self.angles_at(pd), self.tension_cutoff);
             let ds = self.elastic.stress_increment(de);
@@ -441,9 +367,7 @@ impl ConstitutiveLaw for MohrCoulomb {
                 trial[c] += ds[c];
             }
             let pv = principal_values(&trial);
-            let tol = 1e-10
-                * pv.iter()
-                    .fold(sf.sigma_c.abs().max(1.0), |a, v| a.max(v.abs()));
+            let tol = 1e-10 * pv.iter().fold(sf.sigma_c.abs().max(1.0), |a, v| a.max(v.abs()));
             let (pl, count) = planes(&sf);
             if pl[..count].iter().all(|p| dot(&p.a, &pv) - p.r <= tol) {
                 *s = trial;
@@ -453,11 +377,7 @@ impl ConstitutiveLaw for MohrCoulomb {
             let eig = SymmetricEigen::new(stress_matrix(&trial));
             let mut order = [0usize, 1, 2];
             order.sort_by(|&a, &b| eig.eigenvalues[b].total_cmp(&eig.eigenvalues[a]));
-            let sorted = [
-                eig.eigenvalues[order[0]],
-                eig.eigenvalues[order[1]],
-                eig.eigenvalues[order[2]],
-            ];
+            let sorted = [eig.eigenvalues[order[0]], eig.eigenvalues[order[1]], eig.eigenvalues[order[2]]];
             let (ret, mode) = return_principal(sorted, &self.elastic, &sf);
             let mut m = Matrix3::<f64>::zeros();
             for (i, &o) in order.iter().enumerate() {
@@ -470,12 +390,9 @@ impl ConstitutiveLaw for MohrCoulomb {
             let d = [sorted[0] - ret[0], sorted[1] - ret[1], sorted[2] - ret[2]];
             let tr = d[0] + d[1] + d[2];
             let ep = [
-                ((1.0 + self.elastic.poisson) * d[0] - self.elastic.poisson * tr)
-                    / self.elastic.young,
-                ((1.0 + self.elastic.poisson) * d[1] - self.elastic.poisson * tr)
-                    / self.elastic.young,
-                ((1.0 + self.elastic.poisson) * d[2] - self.elastic.poisson * tr)
-                    / self.elastic.young,
+                ((1.0 + self.elastic.poisson) * d[0] - self.elastic.poisson * tr) / self.elastic.young,
+                ((1.0 + self.elastic.poisson) * d[1] - self.elastic.poisson * tr) / self.elastic.young,
+                ((1.0 + self.elastic.poisson) * d[2] - self.elastic.poisson * tr) / self.elastic.young,
             ];
             let mean = (ep[0] + ep[1] + ep[2]) / 3.0;
             let dev2 = (ep[0] - mean).powi(2) + (ep[1] - mean).powi(2) + (ep[2] - mean).powi(2);
@@ -491,9 +408,7 @@ mod tests {
     use super::*;
 
     fn law(pairs: &[(&str, f64)]) -> Box<dyn ConstitutiveLaw> {
-        MohrCoulombFactory
-            .build(crate::constitutive::test_params(SPECS, pairs).unwrap())
-            .unwrap()
+        MohrCoulombFactory.build(crate::constitutive::test_params(SPECS, pairs).unwrap()).unwrap()
     }
 
     fn f_shear(s: &Voigt, phi_deg: f64, c: f64) -> f64 {
@@ -508,21 +423,11 @@ mod tests {
 
     #[test]
     fn small_increment_is_elastic() {
-        let mc = law(&[
-            ("young", E),
-            ("poisson", NU),
-            ("friction", 33.75),
-            ("cohesion", 1.0),
-        ]);
+        let mc = law(&[("young", E), ("poisson", NU), ("friction", 33.75), ("cohesion", 1.0)]);
         let mut s = [[-1e4, -1e4, -1e4, 0.0, 0.0, 0.0]];
         let de = [[-1e-5, 0.0, 0.0, 1e-6, 0.0, 0.0]];
         let mut st = [0.0, 0.0];
-        mc.update(LawBatch {
-            stress: &mut s,
-            dstrain: &de,
-            state: &mut st,
-        })
-        .unwrap();
+        mc.update(LawBatch { stress: &mut s, dstrain: &de, state: &mut st }).unwrap();
         let el = Isotropic::new(E, NU).stress_increment(&de[0]);
         for c in 0..6 {
             assert!((s[0][c] - ([-1e4, -1e4, -1e4, 0.0, 0.0, 0.0][c] + el[c])).abs() < 1e-9);
@@ -535,12 +440,7 @@ mod tests {
     #[test]
     fn shear_return_matches_hand_derivation() {
         let (phi, c) = (30.0, 5e3);
-        let mc = law(&[
-            ("young", E),
-            ("poisson", NU),
-            ("friction", phi),
-            ("cohesion", c),
-        ]);
+        let mc = law(&[("young", E), ("poisson", NU), ("friction", phi), ("cohesion", c)]);
         let el = Isotropic::new(E, NU);
         let s0 = [-50e3, -50e3, -50e3, 0.0, 0.0, 0.0];
         let de = [[5e-3, 0.0, -5e-3, 0.0, 0.0, 0.0]];
@@ -552,26 +452,12 @@ mod tests {
         let f_trial = k * trial[0] - trial[2] - sc;
         assert!(f_trial > 0.0, "the increment must be plastic");
         let dl = f_trial / (2.0 * el.shear * (k + 1.0));
-        let expect = [
-            trial[0] - 2.0 * el.shear * dl,
-            trial[1],
-            trial[2] + 2.0 * el.shear * dl,
-        ];
+        let expect = [trial[0] - 2.0 * el.shear * dl, trial[1], trial[2] + 2.0 * el.shear * dl];
         let mut s = [s0];
         let mut st = [0.0, 0.0];
-        mc.update(LawBatch {
-            stress: &mut s,
-            dstrain: &de,
-            state: &mut st,
-        })
-        .unwrap();
+        mc.update(LawBatch { stress: &mut s, dstrain: &de, state: &mut st }).unwrap();
         for i in 0..3 {
-            assert!(
-                (s[0][i] - expect[i]).abs() < 1e-6 * 5e4,
-                "component {i}: {} vs {}",
-                s[0][i],
-                expect[i]
-            );
+            assert!((s[0][i] - expect[i]).abs() < 1e-6 * 5e4, "component {i}: {} vs {}", s[0][i], expect[i]);
         }
         assert!(f_shear(&s[0], phi, c).abs() < 1e-6, "on the yield surface");
         // psi = 0: no plastic volume change, the mean stress is that of the trial.
@@ -584,22 +470,11 @@ mod tests {
     /// A rotated plastic trial returns to the same principal stresses, rotated.
     #[test]
     fn return_is_frame_independent() {
-        let mc = law(&[
-            ("young", E),
-            ("poisson", NU),
-            ("friction", 33.75),
-            ("dilation", 10.0),
-            ("cohesion", 100.0),
-        ]);
+        let mc = law(&[("young", E), ("poisson", NU), ("friction", 33.75), ("dilation", 10.0), ("cohesion", 100.0)]);
         let s0 = [-2e4, -1e4, -1.5e4, 0.0, 0.0, 0.0];
         let de = [-1e-3, 5e-4, 0.0, 0.0, 0.0, 0.0];
         let mut a = [s0];
-        mc.update(LawBatch {
-            stress: &mut a,
-            dstrain: &[de],
-            state: &mut [0.0, 0.0],
-        })
-        .unwrap();
+        mc.update(LawBatch { stress: &mut a, dstrain: &[de], state: &mut [0.0, 0.0] }).unwrap();
         // Same state rotated by 90 degrees about z: xx <-> yy.
         let mut b = [[s0[1], s0[0], s0[2], 0.0, 0.0, 0.0]];
         mc.update(LawBatch {
@@ -609,31 +484,18 @@ mod tests {
         })
         .unwrap();
         assert!(
-            (a[0][0] - b[0][1]).abs() < 1e-6
-                && (a[0][1] - b[0][0]).abs() < 1e-6
-                && (a[0][2] - b[0][2]).abs() < 1e-6
+            (a[0][0] - b[0][1]).abs() < 1e-6 && (a[0][1] - b[0][0]).abs() < 1e-6 && (a[0][2] - b[0][2]).abs() < 1e-6
         );
     }
 
     #[test]
     fn tension_cutoff_caps_the_major_principal_stress() {
         let (c, t) = (1e4, 2e3);
-        let mc = law(&[
-            ("young", E),
-            ("poisson", NU),
-            ("friction", 30.0),
-            ("cohesion", c),
-            ("tension_cutoff", t),
-        ]);
+        let mc = law(&[("young", E), ("poisson", NU), ("friction", 30.0), ("cohesion", c), ("tension_cutoff", t)]);
         let mut s = [[0.0; 6]];
         let de = [[1e-3, 0.0, 0.0, 0.0, 0.0, 0.0]];
         let mut st = [0.0, 0.0];
-        mc.update(LawBatch {
-            stress: &mut s,
-            dstrain: &de,
-            state: &mut st,
-        })
-        .unwrap();
+        mc.update(LawBatch { stress: &mut s, dstrain: &de, state: &mut st }).unwrap();
         let p = principal_values(&s[0]);
         assert!((p[0] - t).abs() < 1e-6, "s1 = {} should equal T", p[0]);
         assert!(f_shear(&s[0], 30.0, c) <= 1e-6);
@@ -643,28 +505,14 @@ mod tests {
     #[test]
     fn isotropic_extension_returns_to_the_apex() {
         let (phi, c) = (33.75, 1.0);
-        let mc = law(&[
-            ("young", E),
-            ("poisson", NU),
-            ("friction", phi),
-            ("cohesion", c),
-        ]);
+        let mc = law(&[("young", E), ("poisson", NU), ("friction", phi), ("cohesion", c)]);
         let mut s = [[-250.0, -250.0, -250.0, 0.0, 0.0, 0.0]];
         let de = [[1e-3, 1e-3, 1e-3, 0.0, 0.0, 0.0]];
         let mut st = [0.0, 0.0];
-        mc.update(LawBatch {
-            stress: &mut s,
-            dstrain: &de,
-            state: &mut st,
-        })
-        .unwrap();
+        mc.update(LawBatch { stress: &mut s, dstrain: &de, state: &mut st }).unwrap();
         let apex = c / phi.to_radians().tan();
         for i in 0..3 {
-            assert!(
-                (s[0][i] - apex).abs() < 1e-9 * 1e4,
-                "{} vs apex {apex}",
-                s[0][i]
-            );
+            assert!((s[0][i] - apex).abs() < 1e-9 * 1e4, "{} vs apex {apex}", s[0][i]);
         }
         assert_eq!(st[1], mode::CORNER);
     }
@@ -683,31 +531,19 @@ mod tests {
         let mut s = [[-1e5, -1e5, -1e5, 0.0, 0.0, 0.0]];
         let mut st = [0.0, 0.0];
         for _ in 0..400 {
-            mc.update(LawBatch {
-                stress: &mut s,
-                dstrain: &[[1e-4, 0.0, -1e-4, 0.0, 0.0, 0.0]],
-                state: &mut st,
-            })
-            .unwrap();
+            mc.update(LawBatch { stress: &mut s, dstrain: &[[1e-4, 0.0, -1e-4, 0.0, 0.0, 0.0]], state: &mut st })
+                .unwrap();
         }
         assert!(st[0] > 0.01);
         // At residual strength (c = 0) the stress satisfies the cohesionless criterion.
-        assert!(
-            f_shear(&s[0], 30.0, 0.0).abs() < 1e-4 * 1e5,
-            "f = {}",
-            f_shear(&s[0], 30.0, 0.0)
-        );
+        assert!(f_shear(&s[0], 30.0, 0.0).abs() < 1e-4 * 1e5, "f = {}", f_shear(&s[0], 30.0, 0.0));
     }
 
     #[test]
     fn bad_parameters_name_themselves() {
         let err = MohrCoulombFactory
             .build(
-                crate::constitutive::test_params(
-                    SPECS,
-                    &[("young", E), ("poisson", NU), ("friction", 95.0)],
-                )
-                .unwrap(),
+                crate::constitutive::test_params(SPECS, &[("young", E), ("poisson", NU), ("friction", 95.0)]).unwrap(),
             )
             .err()
             .unwrap()
@@ -717,12 +553,7 @@ mod tests {
             .build(
                 crate::constitutive::test_params(
                     SPECS,
-                    &[
-                        ("young", E),
-                        ("poisson", NU),
-                        ("friction", 30.0),
-                        ("tension_cutoff", -1.0),
-                    ],
+                    &[("young", E), ("poisson", NU), ("friction", 30.0), ("tension_cutoff", -1.0)],
                 )
                 .unwrap(),
             )

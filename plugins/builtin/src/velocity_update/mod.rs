@@ -57,11 +57,8 @@ struct BlendFactory {
     affine: bool,
 }
 
-const FLIP_RATIO: &[ParamSpec] = &[ParamSpec::optional(
-    "flip_ratio",
-    0.9,
-    "P_FLIP in [0, 1]: weight of the FLIP velocity (eq. 3.33)",
-)];
+const FLIP_RATIO: &[ParamSpec] =
+    &[ParamSpec::optional("flip_ratio", 0.9, "P_FLIP in [0, 1]: weight of the FLIP velocity (eq. 3.33)")];
 
 impl VelocityUpdateFactory for BlendFactory {
     fn name(&self) -> &str {
@@ -82,68 +79,21 @@ impl VelocityUpdateFactory for BlendFactory {
             Some(w) => w,
             None => params.in_range("flip_ratio", 0.0, 1.0, true)?,
         };
-        Ok(Box::new(Blend {
-            name: self.name,
-            flip_weight,
-            move_with_new: self.move_with_new,
-            affine: self.affine,
-        }))
+        Ok(Box::new(Blend { name: self.name, flip_weight, move_with_new: self.move_with_new, affine: self.affine }))
     }
 }
 
 pub fn register(registry: &mut Registry) {
     let table = [
-        (
-            "PIC",
-            "particle in cell: dissipative, robust",
-            Some(0.0),
-            false,
-            false,
-        ),
-        (
-            "FLIP",
-            "fluid implicit particle: velocity from accelerations, moved with V_PIC",
-            Some(1.0),
-            false,
-            false,
-        ),
-        (
-            "NFLIP",
-            "naturally modified FLIP: moved with its own velocity",
-            Some(1.0),
-            true,
-            false,
-        ),
-        (
-            "FLIPX",
-            "blend of PIC and FLIP with weight flip_ratio",
-            None,
-            false,
-            false,
-        ),
-        (
-            "NFLIPX",
-            "blend of PIC and FLIP, moved with the blended velocity",
-            None,
-            true,
-            false,
-        ),
-        (
-            "APIC",
-            "affine particle in cell (Jiang et al. 2015)",
-            Some(0.0),
-            false,
-            true,
-        ),
+        ("PIC", "particle in cell: dissipative, robust", Some(0.0), false, false),
+        ("FLIP", "fluid implicit particle: velocity from accelerations, moved with V_PIC", Some(1.0), false, false),
+        ("NFLIP", "naturally modified FLIP: moved with its own velocity", Some(1.0), true, false),
+        ("FLIPX", "blend of PIC and FLIP with weight flip_ratio", None, false, false),
+        ("NFLIPX", "blend of PIC and FLIP, moved with the blended velocity", None, true, false),
+        ("APIC", "affine particle in cell (Jiang et al. 2015)", Some(0.0), false, true),
     ];
     for (name, description, flip_weight, move_with_new, affine) in table {
-        registry.add_velocity_update(Arc::new(BlendFactory {
-            name,
-            description,
-            flip_weight,
-            move_with_new,
-            affine,
-        }));
+        registry.add_velocity_update(Arc::new(BlendFactory { name, description, flip_weight, move_with_new, affine }));
     }
 }
 

@@ -1,0 +1,92 @@
+//! Bad input gives a clear error naming the script line and the parameter; a run that goes
+//! unstable stops, keeps and writes its last good state.
+
+mod common;
+use granite_core::script::{run_source, RunOptions};
+
+fn run_err(name: &str, source: &str, overrides: &[(&str, &str)]) -> String {
+    let options = RunOptions { out_dir: common::out_dir(name), overrides: common::sets(overrides), quiet: true };
+    match run_source(&format!("{name}.rhai"), source, granite::registry(), options) {
+        Ok(_) => panic!("{name}: the script should have failed"),
+        Err(e) => e.to_string(),
+    }
+}
+
+const HEAD: &str = "let sim = mpm(#{ dim: 2, cell: 0.1, cells: [4, 4] });\n";
+
+#[test]
+fn negative_modulus_names_the_parameter_and_line() {
+    let e = run_err(
+        "neg_young",
+        &format!(
+            "{HEAD}\nlet m = sim.material(\"linear_elastic\", #{{ density: 1000.0, young: -5.0, poisson: 0.2 }});"
+        ),
+        &[],
+    );
+    assert!(e.contains("line 3") && e.contains("`young`") && e.contains("> 0"), "{e}");
+}
+
+#[test]
+fn incompressible_poisson_ratio_is_rejected() {
+    let e = run_err(
+        "nu_half",
+        &format!("{HEAD}let m = sim.material(\"mohr_coulomb\", #{{ density: 1e3, young: 5e6, poisson: 0.5, friction: 30.0 }});"),
+        &[],
+    );
+    assert!(e.contains("line 2") && e.contains("`poisson`") && e.contains("0.5"), "{e}");
+}
+
+#[test]
+fn points_outside_the_mesh_are_refused() {
+    let make = "let m = sim.material(\"linear_elastic\", #{ density: 1e3, young: 5e6, poisson: 0.2 });\n";
+    let e =
+        run_err("outside_point", &format!("{HEAD}{make}sim.add_points(m, [[0.05, 0.05], [0.5, 0.1]], 0.001);"), &[]);
+    assert!(e.contains("line 3") && e.contains("outside the mesh"), "{e}");
+    let e = run_err("outside_box", &format!("{HEAD}{make}sim.fill_box(m, [0.0, 0.0], [1.0, 0.2]);"), &[]);
+    assert!(e.contains("line 3") && e.contains("extends outside the mesh"), "{e}");
+}
+
+#[test]
+fn time_step_above_the_stability_limit_is_refused() {
+    let src = format!(
+        "{HEAD}let m = sim.material(\"linear_elastic\", #{{ density: 1e3, young: 5e6, poisson: 0.2 }});\n\
+         sim.fill_box(m, [0.0, 0.0], [0.2, 0.2]);\nsim.dt(1.0);\nsim.run_steps(10);"
+    );
+    let e = run_err("big_dt", &src, &[]);
+    assert!(e.contains("line 5") && e.contains("`dt`") && e.contains("stability limit"), "{e}");
+}
+
+#[test]
+fn unknown_override_lists_the_declared_parameters() {
+    let src = "let e = param(\"young\", 5e6);\nlet n = param(\"steps\", 10);\n";
+    let e = run_err("unknown_set", src, &[("yung", "3")]);
+    assert!(e.contains("yung") && e.contains("young, steps"), "{e}");
+    let e = run_err("bad_set_type", src, &[("steps", "ten")]);
+    assert!(e.contains("steps") && e.contains("integer"), "{e}");
+}
+
+#[test]
+fn unknown_law_lists_the_registered_ones() {
+    let e = run_err("typo_law", &format!("{HEAD}let m = sim.material(\"mohr_colomb\", #{{ density: 1e3 }});"), &[]);
+    assert!(e.contains("mohr_colomb") && e.contains("linear_elastic, mohr_coulomb"), "{e}");
+}
+
+#[test]
+fn nan_stops_the_run_and_keeps_the_last_good_state() {
+    // A prescribed floor velocity that turns into NaN poisons the grid after t = 1 ms.
+    let src = format!(
+        "{HEAD}let m = sim.material(\"linear_elastic\", #{{ density: 1e3, young: 5e6, poisson: 0.2 }});\n\
+         sim.fill_box(m, [0.0, 0.0], [0.4, 0.2]);\nsim.gravity([0.0, -9.81]);\n\
+         sim.fix(\"y-\", \"y\", |t| if t > 0.001 {{ 0.0 / 0.0 }} else {{ 0.0 }});\nsim.dt(1e-4);\nsim.run_until(0.01);"
+    );
+    let e = run_err("nan_run", &src, &[]);
+    assert!(e.contains("line 7") && e.contains("non-finite") && e.contains("last good state"), "{e}");
+    let dir = common::root().join("target/test-out/nan_run");
+    let (h, rows) = common::read_csv(&dir.join("last_good_points.csv"));
+    assert_eq!(rows.len(), 4 * 2 * 4, "every point (4 x 2 cells, 2 x 2 per cell) of the last good state is written");
+    assert!(rows.iter().all(|r| r.iter().all(|v| v.is_finite())), "the kept state is finite");
+    let _ = h;
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(summary["status"], "failed");
+}
