@@ -1,0 +1,55 @@
+//! The `granite` command as a user runs it.
+
+mod common;
+use std::process::Command;
+
+fn granite() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_granite"))
+}
+
+#[test]
+fn version_and_help() {
+    let out = granite().arg("--version").output().unwrap();
+    assert!(out.status.success());
+    assert!(String::from_utf8_lossy(&out.stdout).contains(env!("CARGO_PKG_VERSION")));
+    let out = granite().args(["run", "--help"]).output().unwrap();
+    assert!(String::from_utf8_lossy(&out.stdout).contains("--set"));
+}
+
+#[test]
+fn run_writes_the_output_contract() {
+    let dir = common::out_dir("cli_cube");
+    let out = granite()
+        .args(["run", "scripts/mpm/bouncing_cube.rhai", "--quiet", "--threads", "1", "--set", "duration=0.1", "--out"])
+        .arg(&dir)
+        .current_dir(common::root())
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let (header, rows) = common::read_csv(&dir.join("series.csv"));
+    for col in ["step", "time", "kinetic_energy", "elastic_energy", "gravitational_energy", "max_height"] {
+        common::column(&header, col);
+    }
+    assert!(rows.len() > 10);
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(summary["status"], "ok");
+    let pvd = std::fs::read_to_string(dir.join("vtk/points.pvd")).unwrap();
+    assert!(pvd.contains("points_000000.vtu"));
+    let vtu = std::fs::read_to_string(dir.join("vtk/points_000000.vtu")).unwrap();
+    assert!(vtu.contains("NumberOfPoints=\"27\"") && vtu.contains("Name=\"stress\""));
+}
+
+#[test]
+fn unknown_parameter_fails_with_the_declared_list() {
+    let dir = common::out_dir("cli_unknown");
+    let out = granite()
+        .args(["run", "scripts/mpm/bouncing_cube.rhai", "--quiet", "--set", "sceme=USL", "--out"])
+        .arg(&dir)
+        .current_dir(common::root())
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("sceme") && err.contains("scheme, update, flip_ratio, duration"), "{err}");
+}
