@@ -1,3 +1,4 @@
+#![allow(clippy::needless_range_loop)]
 //! Transfers conserve mass and momentum; rigid motion strains nothing; thread count changes nothing.
 
 use granite_core::mpm::fill::{cell_points, Layout};

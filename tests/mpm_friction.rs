@@ -2,7 +2,6 @@
 //! friction coefficient mu decelerates at mu g until it stops.
 
 mod common;
-use granite_core::script::{run_source, RunOptions};
 
 fn slide(mu: f64, v0: f64, t_end: f64) -> f64 {
     let src = format!(
@@ -18,9 +17,7 @@ sim.dt(0.25 * sim.critical_dt());
 sim.run_until({t_end});
 "#
     );
-    let out = common::out_dir(&format!("friction_{mu}_{t_end}"));
-    let options = RunOptions { out_dir: out.clone(), overrides: vec![], quiet: true };
-    run_source("slide.rhai", &src, granite::registry(), options).unwrap();
+    let out = common::run_text(&format!("friction_{mu}_{t_end}"), &src);
     // Speed of the block from its kinetic energy: it slides as one body, Ek = m v^2 / 2.
     let (h, rows) = common::read_csv(&out.join("series.csv"));
     let ek = rows.last().unwrap()[common::column(&h, "kinetic_energy")];

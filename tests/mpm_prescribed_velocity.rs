@@ -2,7 +2,6 @@
 //! of the table; the same through a script function of time.
 
 mod common;
-use granite_core::script::{run_source, RunOptions};
 
 fn compress(value: &str, name: &str) -> f64 {
     let src = format!(
@@ -20,14 +19,7 @@ sim.run_until(0.6);
 sim.write_points("points.csv");
 "#
     );
-    let out = common::out_dir(name);
-    run_source(
-        &format!("{name}.rhai"),
-        &src,
-        granite::registry(),
-        RunOptions { out_dir: out.clone(), overrides: vec![], quiet: true },
-    )
-    .unwrap();
+    let out = common::run_text(name, &src);
     let (h, rows) = common::read_csv(&out.join("points.csv"));
     let eyy = common::column(&h, "eyy");
     rows.iter().map(|r| r[eyy]).sum::<f64>() / rows.len() as f64

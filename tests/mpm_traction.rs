@@ -1,7 +1,6 @@
 //! A traction on the top face of a column is carried down unchanged: sigma_yy = t_y everywhere.
 
 mod common;
-use granite_core::script::{run_source, RunOptions};
 
 #[test]
 fn top_traction_gives_uniform_vertical_stress() {
@@ -21,14 +20,7 @@ sim.run_until(0.3);
 sim.write_points("points.csv");
 "#
     );
-    let out = common::out_dir("traction");
-    run_source(
-        "traction.rhai",
-        &src,
-        granite::registry(),
-        RunOptions { out_dir: out.clone(), overrides: vec![], quiet: true },
-    )
-    .unwrap();
+    let out = common::run_text("traction", &src);
     let (h, rows) = common::read_csv(&out.join("points.csv"));
     let (syy, sxx) = (common::column(&h, "syy"), common::column(&h, "sxx"));
     // Oedometric: lateral strain is zero, so sigma_xx = nu/(1-nu) sigma_yy.

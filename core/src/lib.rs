@@ -4,6 +4,10 @@
 //! Tensors travel as Voigt 6-vectors in the order `xx, yy, zz, xy, yz, xz`; strains carry the
 //! engineering shear (`gamma_xy = 2 eps_xy`), stresses the plain shear stress.
 
+// Index loops over fixed-size arrays read better than iterator chains in the numerics, and negated
+// comparisons are deliberate: they also reject NaN.
+#![allow(clippy::needless_range_loop, clippy::neg_cmp_op_on_partial_ord)]
+
 pub mod error;
 pub mod ext;
 pub mod io;

@@ -49,3 +49,12 @@ pub fn read_csv(path: &Path) -> (Vec<String>, Vec<Vec<f64>>) {
 pub fn column(header: &[String], name: &str) -> usize {
     header.iter().position(|h| h == name).unwrap_or_else(|| panic!("no column `{name}` in {header:?}"))
 }
+
+/// Runs script text (no overrides) into a fresh output folder named `name`; returns the folder.
+pub fn run_text(name: &str, source: &str) -> PathBuf {
+    let out = out_dir(name);
+    let options = granite_core::script::RunOptions { out_dir: out.clone(), overrides: vec![], quiet: true };
+    granite_core::script::run_source(&format!("{name}.rhai"), source, granite::registry(), options)
+        .unwrap_or_else(|e| panic!("{name}: {e}"));
+    out
+}

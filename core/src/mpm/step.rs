@@ -370,6 +370,7 @@ fn velocity_gradient<S: ShapeFunction>(
 
 /// Strain increment (3.36-3.38) and volume update (3.39-3.40) of one point from a nodal velocity.
 #[inline(always)]
+#[allow(clippy::too_many_arguments)]
 fn apply_strain<S: ShapeFunction>(
     l: &Mat3,
     vel: &[Vec3],

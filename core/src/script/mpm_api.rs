@@ -400,15 +400,15 @@ impl SimHandle {
                 }
                 let step = st.sim.step;
                 let last = k + 1 == steps;
-                if step % st.output.series_every.unwrap_or(1) == 0 || last {
+                if step.is_multiple_of(st.output.series_every.unwrap_or(1)) || last {
                     st.output.write_series(&st.sim, st.runout.as_ref()).or_rhai()?;
                     st.last_good = Some(st.sim.snapshot());
                 }
-                if step % st.output.vtk_every.unwrap_or(1) == 0 || last {
+                if step.is_multiple_of(st.output.vtk_every.unwrap_or(1)) || last {
                     st.output.write_vtk(&st.sim).or_rhai()?;
                 }
                 progress.tick(k + 1, st.sim.time);
-                st.callbacks.iter().filter(|(n, _)| step % n == 0).map(|(_, f)| f.clone()).collect()
+                st.callbacks.iter().filter(|(n, _)| step.is_multiple_of(*n)).map(|(_, f)| f.clone()).collect()
             };
             for f in due {
                 let _ = f.call_within_context::<Dynamic>(ctx, (self.clone(),))?;

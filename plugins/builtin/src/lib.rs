@@ -1,6 +1,10 @@
 //! Built-in granite plugins: the constitutive laws and velocity-update strategies of the thesis,
 //! each registered by name in a [`Registry`].
 
+// Index loops over fixed-size arrays read better than iterator chains in the numerics, and negated
+// comparisons are deliberate: they also reject NaN.
+#![allow(clippy::needless_range_loop, clippy::neg_cmp_op_on_partial_ord)]
+
 pub mod constitutive;
 pub mod velocity_update;
 
