@@ -3,8 +3,9 @@
 mod common;
 use common::*;
 
-fn energy_change(scheme: &str, update: &str) -> f64 {
-    let name = format!("bouncing_cube_{scheme}_{update}");
+/// `test` keeps output folders of tests running in parallel apart.
+fn energy_change(test: &str, scheme: &str, update: &str) -> f64 {
+    let name = format!("bouncing_cube_{test}_{scheme}_{update}");
     let report =
         run("mpm/bouncing_cube.rhai", &name, &[("scheme", scheme), ("update", update), ("duration", "3.0")], 2)
             .unwrap_or_else(|e| panic!("{name}: {e}"));
@@ -22,14 +23,14 @@ fn energy_change(scheme: &str, update: &str) -> f64 {
 
 #[test]
 fn usf_flip_conserves_total_energy_within_two_percent() {
-    let change = energy_change("USF", "FLIP");
+    let change = energy_change("conserve", "USF", "FLIP");
     assert!(change.abs() < 0.02, "USF+FLIP total energy changed by {:.3} %", 100.0 * change);
 }
 
 #[test]
 fn usl_pic_dissipates_strongly() {
-    let usl_pic = energy_change("USL", "PIC");
-    let usf_flip = energy_change("USF", "FLIP");
+    let usl_pic = energy_change("dissipate", "USL", "PIC");
+    let usf_flip = energy_change("dissipate", "USF", "FLIP");
     // Thesis 3.5.2: USL+PIC is strongly dissipative. The cube can lose at most what it takes to
     // come to rest on the grid floor (11.1 % of the total here); by 3 s it has lost 9.9 % (10 % at
     // 3.07 s), against about 1 % for USF+FLIP.
