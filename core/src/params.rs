@@ -4,7 +4,7 @@ use crate::error::{GraniteError, Result};
 use indexmap::IndexMap;
 
 /// A parameter a plugin accepts: its name, a default (None = required) and a line of documentation.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, Copy)]
 pub struct ParamSpec {
     pub name: &'static str,
     pub default: Option<f64>,

@@ -2,7 +2,9 @@
 //! insertion order is kept so listings are stable.
 
 use crate::error::{GraniteError, Result};
-use crate::ext::{ConstitutiveLaw, ConstitutiveLawFactory, VelocityUpdate, VelocityUpdateFactory};
+use crate::ext::{
+    ConstitutiveLaw, ConstitutiveLawFactory, ContactLaw, ContactLawFactory, VelocityUpdate, VelocityUpdateFactory,
+};
 use crate::params::Params;
 use indexmap::IndexMap;
 use std::sync::Arc;
@@ -18,6 +20,7 @@ pub trait Plugin {
 pub struct Registry {
     laws: IndexMap<String, Arc<dyn ConstitutiveLawFactory>>,
     velocity_updates: IndexMap<String, Arc<dyn VelocityUpdateFactory>>,
+    contact_laws: IndexMap<String, Arc<dyn ContactLawFactory>>,
 }
 
 /// Exact match first, then case-insensitive: `flip` finds `FLIP`.
@@ -48,6 +51,24 @@ impl Registry {
 
     pub fn add_velocity_update(&mut self, factory: Arc<dyn VelocityUpdateFactory>) {
         self.velocity_updates.insert(factory.name().to_string(), factory);
+    }
+
+    pub fn add_contact_law(&mut self, factory: Arc<dyn ContactLawFactory>) {
+        self.contact_laws.insert(factory.name().to_string(), factory);
+    }
+
+    pub fn contact_law_names(&self) -> Vec<String> {
+        self.contact_laws.keys().cloned().collect()
+    }
+
+    pub fn contact_law_factory(&self, name: &str) -> Result<&Arc<dyn ContactLawFactory>> {
+        lookup(&self.contact_laws, name, "contact law")
+    }
+
+    pub fn build_contact_law(&self, name: &str, given: &ParamMap) -> Result<Box<dyn ContactLaw>> {
+        let factory = self.contact_law_factory(name)?;
+        let params = Params::resolve(&format!("contact law \"{}\"", factory.name()), factory.param_specs(), given)?;
+        factory.build(params)
     }
 
     pub fn law_names(&self) -> Vec<String> {

@@ -4,7 +4,9 @@
 //! [`Registry`]: crate::registry::Registry
 
 pub mod constitutive;
+pub mod contact;
 pub mod velocity_update;
 
 pub use constitutive::{ConstitutiveLaw, ConstitutiveLawFactory, LawBatch};
+pub use contact::{ContactBatch, ContactLaw, ContactLawFactory, PairInfo};
 pub use velocity_update::{G2pBatch, VelocityUpdate, VelocityUpdateFactory};

@@ -6,8 +6,8 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 /// A named per-point field with 1, 3, 6 or 9 components.
-pub struct Field<'a> {
-    pub name: &'a str,
+pub struct Field {
+    pub name: String,
     pub components: usize,
     pub values: Vec<f64>,
 }
@@ -29,7 +29,7 @@ impl VtkWriter {
     }
 
     /// Writes one frame and rewrites the `.pvd` index.
-    pub fn write_frame(&mut self, time: f64, positions: &[Vec3], fields: &[Field<'_>]) -> Result<PathBuf> {
+    pub fn write_frame(&mut self, time: f64, positions: &[Vec3], fields: &[Field]) -> Result<PathBuf> {
         let name = format!("{}_{:06}.vtu", self.stem, self.frames.len());
         let path = self.dir.join(&name);
         let text = vtu_text(positions, fields);
@@ -47,7 +47,7 @@ impl VtkWriter {
     }
 }
 
-fn vtu_text(positions: &[Vec3], fields: &[Field<'_>]) -> String {
+fn vtu_text(positions: &[Vec3], fields: &[Field]) -> String {
     let n = positions.len();
     let mut s = String::with_capacity(64 * n * (1 + fields.len()));
     let _ = write!(

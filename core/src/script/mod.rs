@@ -4,6 +4,7 @@
 //! Rhai is called at set-up and from callbacks every N steps, never per material point.
 
 pub mod convert;
+pub mod driver;
 mod mpm_api;
 mod output;
 
@@ -87,7 +88,7 @@ impl ScriptContext {
         self.summary.lock().unwrap().insert(name.to_string(), value);
     }
 
-    fn next_sim_index(&self) -> usize {
+    pub(crate) fn next_sim_index(&self) -> usize {
         let mut n = self.sims.lock().unwrap();
         *n += 1;
         *n

@@ -6,6 +6,7 @@
 #![allow(clippy::needless_range_loop, clippy::neg_cmp_op_on_partial_ord)]
 
 pub mod constitutive;
+pub mod contact;
 pub mod velocity_update;
 
 use granite_core::{Plugin, Registry};
@@ -16,6 +17,7 @@ pub struct DefaultPlugins;
 impl Plugin for DefaultPlugins {
     fn register(&self, registry: &mut Registry) {
         constitutive::register(registry);
+        contact::register(registry);
         velocity_update::register(registry);
     }
 }

@@ -1,0 +1,131 @@
+//! Candidate contact pairs with their per-pair parameters and history, kept across rebuilds of
+//! the candidate list, and the per-particle adjacency used to gather forces in a fixed order.
+
+use crate::math::Vec3;
+
+/// A list of pairs `(a, b)` sorted by `(a, b)`: sphere-sphere (b a sphere) or sphere-wall (b a wall).
+#[derive(Debug, Clone, Default)]
+pub struct PairList {
+    pub a: Vec<u32>,
+    pub b: Vec<u32>,
+    /// Contact law of the pair (index into the simulation's law table).
+    pub law: Vec<u16>,
+    pub param_stride: usize,
+    pub history_stride: usize,
+    pub params: Vec<f64>,
+    pub history: Vec<f64>,
+    pub touching: Vec<bool>,
+    /// Force on `a` (b gets the opposite), and the torques on `a` and `b` (lever arms included).
+    pub force: Vec<Vec3>,
+    pub torque_a: Vec<Vec3>,
+    pub torque_b: Vec<Vec3>,
+    /// Overlap of touching pairs (negative gap otherwise), for measures.
+    pub overlap: Vec<f64>,
+}
+
+impl PairList {
+    pub fn len(&self) -> usize {
+        self.a.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.a.is_empty()
+    }
+
+    pub fn touching_count(&self) -> usize {
+        self.touching.iter().filter(|t| **t).count()
+    }
+
+    /// Replaces the candidates by `pairs` (sorted), keeping parameters and history of pairs present
+    /// in both, and calling `init(a, b, law_out, params_out)` for new ones.
+    pub fn merge(
+        &mut self,
+        pairs: &[(u32, u32)],
+        param_stride: usize,
+        history_stride: usize,
+        mut init: impl FnMut(u32, u32, &mut u16, &mut [f64]),
+    ) {
+        let n = pairs.len();
+        let mut next = PairList {
+            a: Vec::with_capacity(n),
+            b: Vec::with_capacity(n),
+            law: Vec::with_capacity(n),
+            param_stride,
+            history_stride,
+            params: Vec::with_capacity(n * param_stride),
+            history: Vec::with_capacity(n * history_stride),
+            touching: Vec::with_capacity(n),
+            force: vec![[0.0; 3]; n],
+            torque_a: vec![[0.0; 3]; n],
+            torque_b: vec![[0.0; 3]; n],
+            overlap: vec![0.0; n],
+        };
+        let same_layout = self.param_stride == param_stride && self.history_stride == history_stride;
+        let mut old = 0;
+        let mut scratch = vec![0.0; param_stride];
+        for &(a, b) in pairs {
+            while old < self.a.len() && (self.a[old], self.b[old]) < (a, b) {
+                old += 1;
+            }
+            next.a.push(a);
+            next.b.push(b);
+            if same_layout && old < self.a.len() && (self.a[old], self.b[old]) == (a, b) {
+                next.law.push(self.law[old]);
+                next.params.extend_from_slice(&self.params[old * param_stride..(old + 1) * param_stride]);
+                next.history.extend_from_slice(&self.history[old * history_stride..(old + 1) * history_stride]);
+                next.touching.push(self.touching[old]);
+            } else {
+                let mut law = 0;
+                scratch.iter_mut().for_each(|v| *v = 0.0);
+                init(a, b, &mut law, &mut scratch);
+                next.law.push(law);
+                next.params.extend_from_slice(&scratch);
+                next.history.extend(std::iter::repeat_n(0.0, history_stride));
+                next.touching.push(false);
+            }
+        }
+        *self = next;
+    }
+}
+
+/// For each particle, the pairs it belongs to, in increasing pair index: entries are
+/// `pair << 1 | side` with side 0 when the particle is `a`, 1 when it is `b`.
+#[derive(Debug, Clone, Default)]
+pub struct Adjacency {
+    pub start: Vec<u32>,
+    pub entries: Vec<u32>,
+}
+
+impl Adjacency {
+    pub fn build(particles: usize, a: &[u32], b: Option<&[u32]>) -> Adjacency {
+        let mut start = vec![0u32; particles + 1];
+        for &i in a {
+            start[i as usize + 1] += 1;
+        }
+        if let Some(b) = b {
+            for &j in b {
+                start[j as usize + 1] += 1;
+            }
+        }
+        for i in 0..particles {
+            start[i + 1] += start[i];
+        }
+        let mut fill = start.clone();
+        let mut entries = vec![0u32; start[particles] as usize];
+        for k in 0..a.len() {
+            let i = a[k] as usize;
+            entries[fill[i] as usize] = (k as u32) << 1;
+            fill[i] += 1;
+            if let Some(b) = b {
+                let j = b[k] as usize;
+                entries[fill[j] as usize] = ((k as u32) << 1) | 1;
+                fill[j] += 1;
+            }
+        }
+        Adjacency { start, entries }
+    }
+
+    pub fn of(&self, particle: usize) -> &[u32] {
+        &self.entries[self.start[particle] as usize..self.start[particle + 1] as usize]
+    }
+}

@@ -1,0 +1,171 @@
+//! Measures of a DEM state: energies, unbalanced force, coordination (thesis 5.14), Love-Weber
+//! stress (4.7), global stress with gravity (appendix A, eq. .14).
+
+use crate::dem::sim::DemSim;
+use crate::math::{Vec3, Voigt};
+
+#[derive(Debug, Clone, Default)]
+pub struct DemDiagnostics {
+    pub particles: usize,
+    /// Touching sphere-sphere contacts.
+    pub contacts: usize,
+    pub wall_contacts: usize,
+    /// Translational plus rotational.
+    pub kinetic_energy: f64,
+    /// Stored in the contact springs.
+    pub elastic_energy: f64,
+    /// `-sum m g . x`.
+    pub gravitational_energy: f64,
+    /// Mean resultant force (contacts + gravity) on free spheres over the mean contact force.
+    pub unbalanced_force: f64,
+    /// 2 contacts / particles, every particle counted.
+    pub coordination: f64,
+    /// Eq. 5.14: without rattlers (one contact) and floaters (none).
+    pub coordination_no_rattlers: f64,
+    pub rattlers: usize,
+    pub floaters: usize,
+    pub max_height: f64,
+}
+
+impl DemSim {
+    /// Contacts per sphere (sphere-sphere and sphere-wall), in sphere order.
+    pub fn contact_counts(&self) -> Vec<u32> {
+        let mut count = vec![0u32; self.spheres.len()];
+        for k in 0..self.pairs.len() {
+            if self.pairs.touching[k] {
+                count[self.pairs.a[k] as usize] += 1;
+                count[self.pairs.b[k] as usize] += 1;
+            }
+        }
+        for k in 0..self.wall_pairs.len() {
+            if self.wall_pairs.touching[k] {
+                count[self.wall_pairs.a[k] as usize] += 1;
+            }
+        }
+        count
+    }
+
+    pub fn diagnostics(&self) -> DemDiagnostics {
+        let s = &self.spheres;
+        let n = s.len();
+        let g = self.gravity;
+        let mut d = DemDiagnostics { particles: n, max_height: f64::NEG_INFINITY, ..Default::default() };
+        let up = {
+            let gn = (g[0] * g[0] + g[1] * g[1] + g[2] * g[2]).sqrt();
+            if gn > 0.0 {
+                [-g[0] / gn, -g[1] / gn, -g[2] / gn]
+            } else {
+                [0.0, 0.0, 1.0]
+            }
+        };
+        let mut resultant = 0.0;
+        let mut free = 0usize;
+        for i in 0..n {
+            let (m, v, w, x) = (s.mass[i], s.v[i], s.w[i], s.x[i]);
+            d.kinetic_energy += 0.5 * m * (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+            d.kinetic_energy += 0.5 * s.inertia[i] * (w[0] * w[0] + w[1] * w[1] + w[2] * w[2]);
+            d.gravitational_energy -= m * (g[0] * x[0] + g[1] * x[1] + g[2] * x[2]);
+            d.max_height = d.max_height.max(x[0] * up[0] + x[1] * up[1] + x[2] * up[2]);
+            if s.blocked[i] & crate::dem::particles::dof::ALL == 0 {
+                let f = [s.force[i][0] + m * g[0], s.force[i][1] + m * g[1], s.force[i][2] + m * g[2]];
+                resultant += (f[0] * f[0] + f[1] * f[1] + f[2] * f[2]).sqrt();
+                free += 1;
+            }
+        }
+        let mut contact_force = 0.0;
+        let mut touching = 0usize;
+        for (list, wall) in [(&self.pairs, false), (&self.wall_pairs, true)] {
+            let (ps, hs) = (list.param_stride, list.history_stride);
+            for k in 0..list.len() {
+                if !list.touching[k] {
+                    continue;
+                }
+                let f = list.force[k];
+                contact_force += (f[0] * f[0] + f[1] * f[1] + f[2] * f[2]).sqrt();
+                touching += 1;
+                if wall {
+                    d.wall_contacts += 1;
+                } else {
+                    d.contacts += 1;
+                }
+                let law = &self.laws[list.law[k] as usize];
+                d.elastic_energy += law.elastic_energy(
+                    list.overlap[k],
+                    &list.params[k * ps..(k + 1) * ps],
+                    &list.history[k * hs..(k + 1) * hs],
+                );
+            }
+        }
+        d.unbalanced_force = if touching > 0 && free > 0 {
+            (resultant / free as f64) / (contact_force / touching as f64)
+        } else {
+            f64::NAN
+        };
+        let counts = self.contact_counts();
+        d.rattlers = counts.iter().filter(|&&c| c == 1).count();
+        d.floaters = counts.iter().filter(|&&c| c == 0).count();
+        let total_contacts = d.contacts + d.wall_contacts;
+        d.coordination = if n > 0 { 2.0 * d.contacts as f64 / n as f64 } else { 0.0 };
+        // Eq. 5.14 with N_contacts counted per particle end: each contact has two ends.
+        let ends: u64 = counts.iter().map(|&c| c as u64).sum();
+        let kept = n.saturating_sub(d.rattlers + d.floaters);
+        d.coordination_no_rattlers = if kept > 0 { (ends - d.rattlers as u64) as f64 / kept as f64 } else { 0.0 };
+        let _ = total_contacts;
+        d
+    }
+
+    /// Love-Weber stress of the sphere-sphere contacts over a volume (eq. 4.7):
+    /// `sigma_ij = (1/V) sum_c f_i l_j`, f the force on particle 1 and l the branch vector from 1
+    /// to 2. Tension positive: a compressed packing has negative diagonal stress.
+    pub fn love_weber_stress(&self, volume: f64) -> Voigt {
+        let mut s = [0.0; 9];
+        let p = &self.pairs;
+        for k in 0..p.len() {
+            if !p.touching[k] {
+                continue;
+            }
+            let (i, j) = (p.a[k] as usize, p.b[k] as usize);
+            let l: Vec3 = [0, 1, 2].map(|a| self.spheres.x[j][a] - self.spheres.x[i][a]);
+            let f = p.force[k];
+            for a in 0..3 {
+                for b in 0..3 {
+                    s[3 * a + b] += f[a] * l[b];
+                }
+            }
+        }
+        let sym = |a: usize, b: usize| 0.5 * (s[3 * a + b] + s[3 * b + a]) / volume;
+        [sym(0, 0), sym(1, 1), sym(2, 2), sym(0, 1), sym(1, 2), sym(0, 2)]
+    }
+
+    /// Global stress of a packing at rest under gravity (appendix A, eq. .14): wall contact forces
+    /// on the particles at their contact points plus `m g x` of every particle, over `volume`.
+    pub fn global_stress_with_gravity(&self, volume: f64) -> Voigt {
+        let mut s = [0.0; 9];
+        let p = &self.wall_pairs;
+        for k in 0..p.len() {
+            if !p.touching[k] {
+                continue;
+            }
+            let i = p.a[k] as usize;
+            let wall = &self.walls[p.b[k] as usize];
+            let Some(c) = wall.contact(self.spheres.x[i], self.spheres.radius[i], 0.0) else { continue };
+            let f = p.force[k];
+            for a in 0..3 {
+                for b in 0..3 {
+                    s[3 * a + b] += f[a] * c.point[b];
+                }
+            }
+        }
+        let g = self.gravity;
+        for i in 0..self.spheres.len() {
+            let (m, x) = (self.spheres.mass[i], self.spheres.x[i]);
+            for a in 0..3 {
+                for b in 0..3 {
+                    s[3 * a + b] += m * g[a] * x[b];
+                }
+            }
+        }
+        let sym = |a: usize, b: usize| 0.5 * (s[3 * a + b] + s[3 * b + a]) / volume;
+        [sym(0, 0), sym(1, 1), sym(2, 2), sym(0, 1), sym(1, 2), sym(0, 2)]
+    }
+}

@@ -1,0 +1,18 @@
+//! The Discrete Element Method engine (thesis chapters 1.1 and 2; YADE's feature set).
+//!
+//! One step: broad phase (cell lists + Verlet skin, rebuilt only when something moved more than
+//! half the skin) -> contact geometry -> contact law, per contact in parallel -> forces gathered per
+//! particle in a fixed order -> integration (gravity, Cundall damping, leapfrog).
+
+pub mod broad_phase;
+pub mod contacts;
+pub mod generate;
+pub mod measures;
+pub mod particles;
+pub mod sim;
+pub mod step;
+pub mod walls;
+
+pub use particles::Spheres;
+pub use sim::{DemMaterial, DemSim};
+pub use walls::{Wall, WallShape};

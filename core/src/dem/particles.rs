@@ -1,0 +1,78 @@
+//! Spheres as a structure of arrays.
+
+use crate::math::Vec3;
+
+/// Bit flags of blocked degrees of freedom (their velocity is kept as set).
+pub mod dof {
+    pub const X: u8 = 1;
+    pub const Y: u8 = 2;
+    pub const Z: u8 = 4;
+    pub const RX: u8 = 8;
+    pub const RY: u8 = 16;
+    pub const RZ: u8 = 32;
+    pub const ALL: u8 = 63;
+}
+
+#[derive(Debug, Clone, Default)]
+pub struct Spheres {
+    /// Stable identity (creation order), kept through deletions.
+    pub id: Vec<u64>,
+    pub x: Vec<Vec3>,
+    pub v: Vec<Vec3>,
+    /// Angular velocity.
+    pub w: Vec<Vec3>,
+    pub radius: Vec<f64>,
+    pub mass: Vec<f64>,
+    /// Moment of inertia of the sphere (2/5 m r^2).
+    pub inertia: Vec<f64>,
+    pub material: Vec<u16>,
+    pub force: Vec<Vec3>,
+    pub torque: Vec<Vec3>,
+    /// Blocked degrees of freedom, see [`dof`].
+    pub blocked: Vec<u8>,
+}
+
+impl Spheres {
+    pub fn len(&self) -> usize {
+        self.x.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.x.is_empty()
+    }
+
+    pub fn push(&mut self, id: u64, x: Vec3, radius: f64, density: f64, material: u16, v: Vec3) {
+        let mass = density * 4.0 / 3.0 * std::f64::consts::PI * radius.powi(3);
+        self.id.push(id);
+        self.x.push(x);
+        self.v.push(v);
+        self.w.push([0.0; 3]);
+        self.radius.push(radius);
+        self.mass.push(mass);
+        self.inertia.push(0.4 * mass * radius * radius);
+        self.material.push(material);
+        self.force.push([0.0; 3]);
+        self.torque.push([0.0; 3]);
+        self.blocked.push(0);
+    }
+
+    /// Keeps the spheres whose flag is true, in order.
+    pub fn retain(&mut self, keep: &[bool]) {
+        use crate::mpm::points::retain_by;
+        retain_by(&mut self.id, keep);
+        retain_by(&mut self.x, keep);
+        retain_by(&mut self.v, keep);
+        retain_by(&mut self.w, keep);
+        retain_by(&mut self.radius, keep);
+        retain_by(&mut self.mass, keep);
+        retain_by(&mut self.inertia, keep);
+        retain_by(&mut self.material, keep);
+        retain_by(&mut self.force, keep);
+        retain_by(&mut self.torque, keep);
+        retain_by(&mut self.blocked, keep);
+    }
+
+    pub fn volume(&self) -> f64 {
+        self.radius.iter().map(|r| 4.0 / 3.0 * std::f64::consts::PI * r * r * r).sum()
+    }
+}

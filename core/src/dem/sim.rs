@@ -1,0 +1,234 @@
+//! The state of a DEM simulation and its set-up operations. The step is in `step.rs`.
+
+use crate::dem::contacts::{Adjacency, PairList};
+use crate::dem::particles::Spheres;
+use crate::dem::walls::Wall;
+use crate::error::{GraniteError, Result};
+use crate::ext::{ContactLaw, PairInfo};
+use crate::math::Vec3;
+use std::collections::HashMap;
+
+#[derive(Debug, Clone)]
+pub struct DemMaterial {
+    pub name: String,
+    pub density: f64,
+}
+
+pub struct DemSim {
+    pub spheres: Spheres,
+    pub walls: Vec<Wall>,
+    pub materials: Vec<DemMaterial>,
+    /// Contact laws; `law_of` maps a material pair to one of them, `default_law` covers the rest.
+    pub laws: Vec<Box<dyn ContactLaw>>,
+    pub law_of: HashMap<(u16, u16), u16>,
+    pub default_law: Option<u16>,
+    pub gravity: Vec3,
+    /// Cundall local damping (applied to the whole acceleration, gravity included, as YADE does).
+    pub damping: f64,
+    pub dt: f64,
+    pub time: f64,
+    pub step: u64,
+    /// Verlet skin: extra distance within which pairs are kept as candidates.
+    pub skin: f64,
+    pub seed: u64,
+    pub pairs: PairList,
+    pub wall_pairs: PairList,
+    pub(crate) adjacency: Adjacency,
+    pub(crate) wall_adjacency: Adjacency,
+    /// Positions (spheres) and wall positions when the candidate lists were built.
+    pub(crate) x_at_build: Vec<Vec3>,
+    pub(crate) walls_at_build: Vec<Vec3>,
+    pub(crate) needs_rebuild: bool,
+    /// Number of candidate-list rebuilds so far.
+    pub rebuilds: u64,
+    pub events: Vec<String>,
+    next_id: u64,
+}
+
+impl Default for DemSim {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl DemSim {
+    pub fn new() -> DemSim {
+        DemSim {
+            spheres: Spheres::default(),
+            walls: Vec::new(),
+            materials: Vec::new(),
+            laws: Vec::new(),
+            law_of: HashMap::new(),
+            default_law: None,
+            gravity: [0.0; 3],
+            damping: 0.0,
+            dt: 0.0,
+            time: 0.0,
+            step: 0,
+            skin: 0.0,
+            seed: 0,
+            pairs: PairList::default(),
+            wall_pairs: PairList::default(),
+            adjacency: Adjacency::default(),
+            wall_adjacency: Adjacency::default(),
+            x_at_build: Vec::new(),
+            walls_at_build: Vec::new(),
+            needs_rebuild: true,
+            rebuilds: 0,
+            events: Vec::new(),
+            next_id: 0,
+        }
+    }
+
+    pub fn add_material(&mut self, name: &str, density: f64) -> Result<u16> {
+        if !(density > 0.0 && density.is_finite()) {
+            return Err(GraniteError::param_in(format!("`density` of material \"{name}\""), density, "must be > 0"));
+        }
+        if self.materials.len() >= u16::MAX as usize {
+            return Err(GraniteError::Setup("too many materials".into()));
+        }
+        self.materials.push(DemMaterial { name: name.into(), density });
+        Ok((self.materials.len() - 1) as u16)
+    }
+
+    /// Uses `law` for contacts between materials `a` and `b` (either order), or for every pair
+    /// without a law of its own when `pair` is None.
+    pub fn set_contact_law(&mut self, law: Box<dyn ContactLaw>, pair: Option<(u16, u16)>) -> Result<()> {
+        if let Some((a, b)) = pair {
+            for m in [a, b] {
+                if m as usize >= self.materials.len() {
+                    return Err(GraniteError::Setup(format!("no material with index {m}")));
+                }
+            }
+        }
+        self.laws.push(law);
+        let idx = (self.laws.len() - 1) as u16;
+        match pair {
+            Some((a, b)) => {
+                self.law_of.insert((a.min(b), a.max(b)), idx);
+            }
+            None => self.default_law = Some(idx),
+        }
+        // Every pair must be re-initialised with the new parameters.
+        self.pairs = PairList::default();
+        self.wall_pairs = PairList::default();
+        self.needs_rebuild = true;
+        Ok(())
+    }
+
+    pub fn law_for(&self, a: u16, b: u16) -> Option<u16> {
+        self.law_of.get(&(a.min(b), a.max(b))).copied().or(self.default_law)
+    }
+
+    pub fn add_sphere(&mut self, material: u16, x: Vec3, radius: f64, v: Vec3) -> Result<usize> {
+        if !(radius > 0.0 && radius.is_finite()) {
+            return Err(GraniteError::param("radius", radius, "must be > 0"));
+        }
+        if x.iter().any(|c| !c.is_finite()) {
+            return Err(GraniteError::param("position", format!("{x:?}"), "must be finite"));
+        }
+        let density = self
+            .materials
+            .get(material as usize)
+            .ok_or_else(|| GraniteError::Setup(format!("no material with index {material}")))?
+            .density;
+        self.spheres.push(self.next_id, x, radius, density, material, v);
+        self.next_id += 1;
+        self.needs_rebuild = true;
+        Ok(self.spheres.len() - 1)
+    }
+
+    pub fn add_wall(&mut self, wall: Wall) -> usize {
+        self.walls.push(wall);
+        self.needs_rebuild = true;
+        self.walls.len() - 1
+    }
+
+    /// Removes spheres by mask (and the contacts they were in).
+    pub fn remove_spheres(&mut self, keep: &[bool]) {
+        self.spheres.retain(keep);
+        self.pairs = PairList::default();
+        self.wall_pairs = PairList::default();
+        self.needs_rebuild = true;
+    }
+
+    fn pair_info(&self, i: usize, j: Option<usize>) -> PairInfo {
+        let s = &self.spheres;
+        let (r2, m2, id2) = match j {
+            Some(j) => (s.radius[j], s.mass[j], s.id[j]),
+            None => (f64::INFINITY, f64::INFINITY, u64::MAX),
+        };
+        let (lo, hi) = (s.id[i].min(id2), s.id[i].max(id2));
+        let seed = crate::ext::contact::uniform(self.seed ^ lo.wrapping_mul(0x100_0000_01B3), hi).to_bits();
+        PairInfo { radius: [s.radius[i], r2], mass: [s.mass[i], m2], seed }
+    }
+
+    /// Info for a sphere-sphere pair or, with `wall` set, a sphere-wall pair.
+    pub fn info_for(&self, i: usize, j: usize, wall: bool) -> PairInfo {
+        if wall {
+            let mut info = self.pair_info(i, None);
+            info.seed ^= (j as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15);
+            info
+        } else {
+            self.pair_info(i, Some(j))
+        }
+    }
+
+    /// Largest stable time step estimate: `min sqrt(m / k_n)` over one-contact oscillators of
+    /// each sphere with a copy of itself and with each wall (multiply by ~0.2-0.3 for packings).
+    pub fn critical_dt(&self) -> Option<f64> {
+        let mut best: Option<f64> = None;
+        for i in 0..self.spheres.len() {
+            let mi = self.spheres.material[i];
+            let mut consider = |law: Option<u16>, info: PairInfo| {
+                if let Some(l) = law {
+                    let k = self.laws[l as usize].max_normal_stiffness(&info);
+                    if k > 0.0 {
+                        let dt = (info.effective_mass() / k).sqrt();
+                        best = Some(best.map_or(dt, |b: f64| b.min(dt)));
+                    }
+                }
+            };
+            let mut self_pair = self.pair_info(i, Some(i));
+            self_pair.seed = 0;
+            consider(self.law_for(mi, mi), self_pair);
+            for w in &self.walls {
+                consider(self.law_for(mi, w.material), self.pair_info(i, None));
+            }
+        }
+        best
+    }
+
+    pub fn set_dt(&mut self, dt: f64) -> Result<()> {
+        if !(dt > 0.0 && dt.is_finite()) {
+            return Err(GraniteError::param("dt", dt, "must be > 0"));
+        }
+        self.dt = dt;
+        Ok(())
+    }
+
+    pub fn validate(&self) -> Result<()> {
+        if self.dt <= 0.0 {
+            return Err(GraniteError::Setup("no time step: call dt(...) before running".into()));
+        }
+        if !self.spheres.is_empty() && self.laws.is_empty() {
+            return Err(GraniteError::Setup("no contact law: call contact_law(...) before running".into()));
+        }
+        if let Some(crit) = self.critical_dt() {
+            if self.dt > crit {
+                return Err(GraniteError::param(
+                    "dt",
+                    format!("{:e}", self.dt),
+                    &format!("must not exceed sqrt(m/k_n) = {crit:.4e} s of the stiffest, lightest contact"),
+                ));
+            }
+        }
+        if !(0.0..1.0).contains(&self.damping) {
+            return Err(GraniteError::param("damping", self.damping, "must be in [0, 1)"));
+        }
+        if !(self.skin >= 0.0) {
+            return Err(GraniteError::param("skin", self.skin, "must be >= 0"));
+        }
+        Ok(())
+    }
+}

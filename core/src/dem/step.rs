@@ -1,0 +1,471 @@
+//! One DEM step as stages called in a fixed order; each is a free function that shows what it
+//! reads and writes.
+
+use crate::dem::broad_phase::{sphere_pairs, wall_pairs};
+use crate::dem::contacts::{Adjacency, PairList};
+use crate::dem::particles::{dof, Spheres};
+use crate::dem::sim::DemSim;
+use crate::dem::walls::Wall;
+use crate::error::{GraniteError, Result};
+use crate::ext::{ContactBatch, ContactLaw};
+use crate::math::Vec3;
+use rayon::prelude::*;
+
+/// Pairs per task and per law call.
+const CHUNK: usize = 128;
+const MIN_CHUNKS_PER_TASK: usize = 16;
+const MIN_PER_TASK: usize = 2048;
+/// Most per-pair parameters / history values a contact law may use.
+pub const MAX_PARAMS: usize = 16;
+pub const MAX_HISTORY: usize = 16;
+
+#[inline(always)]
+fn cross(a: Vec3, b: Vec3) -> Vec3 {
+    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+}
+
+#[inline(always)]
+fn sub(a: Vec3, b: Vec3) -> Vec3 {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+
+#[inline(always)]
+fn add(a: Vec3, b: Vec3) -> Vec3 {
+    [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
+}
+
+impl DemSim {
+    /// Advances the simulation by one time step.
+    pub fn step(&mut self) -> Result<()> {
+        if self.needs_rebuild {
+            self.rebuild_candidates()?;
+        }
+        let strides = (self.pairs.param_stride, self.pairs.history_stride);
+        sphere_contacts(&self.spheres, &mut self.pairs, &self.laws, self.dt, strides);
+        wall_contacts(&self.spheres, &self.walls, &mut self.wall_pairs, &self.laws, self.dt, strides);
+        gather(&mut self.spheres, &self.pairs, &self.adjacency, &self.wall_pairs, &self.wall_adjacency);
+        wall_forces(&mut self.walls, &self.wall_pairs);
+        let moved = integrate(&mut self.spheres, &self.x_at_build, self.gravity, self.damping, self.dt);
+        let mut wall_moved: f64 = 0.0;
+        for (w, at) in self.walls.iter_mut().zip(&self.walls_at_build) {
+            for a in 0..3 {
+                w.position[a] += w.velocity[a] * self.dt;
+            }
+            let d = sub(w.position, *at);
+            wall_moved = wall_moved.max((d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt());
+        }
+        self.time += self.dt;
+        self.step += 1;
+        if !moved.is_finite() {
+            let bad = (0..self.spheres.len())
+                .find(|&i| !self.spheres.x[i].iter().chain(&self.spheres.v[i]).all(|c| c.is_finite()))
+                .unwrap_or(0);
+            return Err(GraniteError::Unstable {
+                step: self.step,
+                time: self.time,
+                reason: format!(
+                    "non-finite position or velocity of sphere {} (x = {:?}, v = {:?}); the time step may be too large",
+                    self.spheres.id.get(bad).copied().unwrap_or(0),
+                    self.spheres.x.get(bad),
+                    self.spheres.v.get(bad)
+                ),
+            });
+        }
+        if 2.0 * moved > self.skin || moved + wall_moved > self.skin {
+            self.needs_rebuild = true;
+        }
+        Ok(())
+    }
+
+    /// Rebuilds the candidate pair lists (keeping the history of pairs still present).
+    pub fn rebuild_candidates(&mut self) -> Result<()> {
+        let p_stride = self.laws.iter().map(|l| l.param_count()).max().unwrap_or(0).max(1);
+        let h_stride = self.laws.iter().map(|l| l.history_count()).max().unwrap_or(0).max(1);
+        if p_stride > MAX_PARAMS || h_stride > MAX_HISTORY {
+            return Err(GraniteError::Setup(format!(
+                "a contact law uses more than {MAX_PARAMS} parameters or {MAX_HISTORY} history values per contact"
+            )));
+        }
+        let s = &self.spheres;
+        let candidates = sphere_pairs(&s.x, &s.radius, self.skin);
+        let wall_candidates = wall_pairs(&s.x, &s.radius, &self.walls, self.skin);
+        let mut missing = None;
+        let mut pairs = std::mem::take(&mut self.pairs);
+        pairs.merge(&candidates, p_stride, h_stride, |a, b, law, params| {
+            let (a, b) = (a as usize, b as usize);
+            match self.law_for(s.material[a], s.material[b]) {
+                Some(l) => {
+                    *law = l;
+                    self.laws[l as usize].init_pair(&self.info_for(a, b, false), params);
+                }
+                None => missing = Some((s.material[a], s.material[b])),
+            }
+        });
+        let mut wall_list = std::mem::take(&mut self.wall_pairs);
+        wall_list.merge(&wall_candidates, p_stride, h_stride, |a, w, law, params| {
+            let (a, w) = (a as usize, w as usize);
+            match self.law_for(s.material[a], self.walls[w].material) {
+                Some(l) => {
+                    *law = l;
+                    self.laws[l as usize].init_pair(&self.info_for(a, w, true), params);
+                }
+                None => missing = Some((s.material[a], self.walls[w].material)),
+            }
+        });
+        if let Some((a, b)) = missing {
+            let name = |m: u16| self.materials.get(m as usize).map(|m| m.name.clone()).unwrap_or_default();
+            return Err(GraniteError::Setup(format!(
+                "no contact law for materials \"{}\" and \"{}\": give a default law or one for this pair",
+                name(a),
+                name(b)
+            )));
+        }
+        self.adjacency = Adjacency::build(s.len(), &pairs.a, Some(&pairs.b));
+        self.wall_adjacency = Adjacency::build(s.len(), &wall_list.a, None);
+        self.pairs = pairs;
+        self.wall_pairs = wall_list;
+        self.x_at_build = self.spheres.x.clone();
+        self.walls_at_build = self.walls.iter().map(|w| w.position).collect();
+        self.needs_rebuild = false;
+        self.rebuilds += 1;
+        Ok(())
+    }
+}
+
+/// Touching contacts of one chunk, compacted for the law call.
+struct Scratch {
+    pair: [usize; CHUNK],
+    law: [u16; CHUNK],
+    normal: [Vec3; CHUNK],
+    overlap: [f64; CHUNK],
+    rel_velocity: [Vec3; CHUNK],
+    rel_spin: [Vec3; CHUNK],
+    arm_a: [Vec3; CHUNK],
+    arm_b: [Vec3; CHUNK],
+    params: [f64; CHUNK * MAX_PARAMS],
+    history: [f64; CHUNK * MAX_HISTORY],
+    force: [Vec3; CHUNK],
+    moment: [Vec3; CHUNK],
+    len: usize,
+}
+
+impl Scratch {
+    fn new() -> Box<Scratch> {
+        Box::new(Scratch {
+            pair: [0; CHUNK],
+            law: [0; CHUNK],
+            normal: [[0.0; 3]; CHUNK],
+            overlap: [0.0; CHUNK],
+            rel_velocity: [[0.0; 3]; CHUNK],
+            rel_spin: [[0.0; 3]; CHUNK],
+            arm_a: [[0.0; 3]; CHUNK],
+            arm_b: [[0.0; 3]; CHUNK],
+            params: [0.0; CHUNK * MAX_PARAMS],
+            history: [0.0; CHUNK * MAX_HISTORY],
+            force: [[0.0; 3]; CHUNK],
+            moment: [[0.0; 3]; CHUNK],
+            len: 0,
+        })
+    }
+
+    /// Calls each law present on its contacts (one call when the chunk has a single law).
+    fn run_laws(&mut self, laws: &[Box<dyn ContactLaw>], dt: f64, (ps, hs): (usize, usize)) {
+        let n = self.len;
+        if n == 0 {
+            return;
+        }
+        let first = self.law[0];
+        if self.law[..n].iter().all(|&l| l == first) {
+            laws[first as usize].compute(ContactBatch {
+                normal: &self.normal[..n],
+                overlap: &self.overlap[..n],
+                rel_velocity: &self.rel_velocity[..n],
+                rel_spin: &self.rel_spin[..n],
+                params: &self.params[..n * ps],
+                history: &mut self.history[..n * hs],
+                force: &mut self.force[..n],
+                moment: &mut self.moment[..n],
+                dt,
+            });
+            return;
+        }
+        // Mixed laws: run each on its own compacted subset.
+        let mut sub = Scratch::new();
+        let mut done = [false; CHUNK];
+        for k in 0..n {
+            if done[k] {
+                continue;
+            }
+            let l = self.law[k];
+            let members: Vec<usize> = (k..n).filter(|&m| self.law[m] == l).collect();
+            for (s, &m) in members.iter().enumerate() {
+                sub.normal[s] = self.normal[m];
+                sub.overlap[s] = self.overlap[m];
+                sub.rel_velocity[s] = self.rel_velocity[m];
+                sub.rel_spin[s] = self.rel_spin[m];
+                sub.params[s * ps..(s + 1) * ps].copy_from_slice(&self.params[m * ps..(m + 1) * ps]);
+                sub.history[s * hs..(s + 1) * hs].copy_from_slice(&self.history[m * hs..(m + 1) * hs]);
+            }
+            let c = members.len();
+            laws[l as usize].compute(ContactBatch {
+                normal: &sub.normal[..c],
+                overlap: &sub.overlap[..c],
+                rel_velocity: &sub.rel_velocity[..c],
+                rel_spin: &sub.rel_spin[..c],
+                params: &sub.params[..c * ps],
+                history: &mut sub.history[..c * hs],
+                force: &mut sub.force[..c],
+                moment: &mut sub.moment[..c],
+                dt,
+            });
+            for (s, &m) in members.iter().enumerate() {
+                self.force[m] = sub.force[s];
+                self.moment[m] = sub.moment[s];
+                self.history[m * hs..(m + 1) * hs].copy_from_slice(&sub.history[s * hs..(s + 1) * hs]);
+                done[m] = true;
+            }
+        }
+    }
+}
+
+/// The per-pair arrays of one chunk of a pair list.
+struct PairChunk<'a> {
+    first: usize,
+    a: &'a [u32],
+    b: &'a [u32],
+    law: &'a [u16],
+    params: &'a [f64],
+    history: &'a mut [f64],
+    touching: &'a mut [bool],
+    force: &'a mut [Vec3],
+    torque_a: &'a mut [Vec3],
+    torque_b: &'a mut [Vec3],
+    overlap: &'a mut [f64],
+}
+
+/// Runs `body` on chunks of a pair list in parallel.
+fn for_each_chunk(pairs: &mut PairList, (ps, hs): (usize, usize), body: impl Fn(PairChunk<'_>) + Sync) {
+    let PairList { a, b, law, params, history, touching, force, torque_a, torque_b, overlap, .. } = pairs;
+    (
+        a.par_chunks(CHUNK),
+        b.par_chunks(CHUNK),
+        law.par_chunks(CHUNK),
+        params.par_chunks(CHUNK * ps),
+        history.par_chunks_mut(CHUNK * hs),
+        touching.par_chunks_mut(CHUNK),
+        force.par_chunks_mut(CHUNK),
+        torque_a.par_chunks_mut(CHUNK),
+        torque_b.par_chunks_mut(CHUNK),
+        overlap.par_chunks_mut(CHUNK),
+    )
+        .into_par_iter()
+        .with_min_len(MIN_CHUNKS_PER_TASK)
+        .enumerate()
+        .for_each(|(j, (a, b, law, params, history, touching, force, torque_a, torque_b, overlap))| {
+            body(PairChunk {
+                first: j * CHUNK,
+                a,
+                b,
+                law,
+                params,
+                history,
+                touching,
+                force,
+                torque_a,
+                torque_b,
+                overlap,
+            })
+        });
+}
+
+/// Writes the law results of a chunk back to its pairs, with lever-arm torques.
+fn write_back(c: &mut PairChunk<'_>, s: &Scratch, hs: usize) {
+    for e in 0..s.len {
+        let k = s.pair[e] - c.first;
+        let (f, m) = (s.force[e], s.moment[e]);
+        c.force[k] = f;
+        c.torque_a[k] = add(cross(s.arm_a[e], f), m);
+        c.torque_b[k] = sub(cross(s.arm_b[e], [-f[0], -f[1], -f[2]]), m);
+        c.history[k * hs..(k + 1) * hs].copy_from_slice(&s.history[e * hs..(e + 1) * hs]);
+    }
+}
+
+fn open_contact(c: &mut PairChunk<'_>, k: usize, hs: usize, overlap: f64) {
+    c.touching[k] = false;
+    c.force[k] = [0.0; 3];
+    c.torque_a[k] = [0.0; 3];
+    c.torque_b[k] = [0.0; 3];
+    c.overlap[k] = overlap;
+    c.history[k * hs..(k + 1) * hs].iter_mut().for_each(|h| *h = 0.0);
+}
+
+/// Sphere-sphere geometry (`sphere_sphere`) and contact forces.
+fn sphere_contacts(sp: &Spheres, pairs: &mut PairList, laws: &[Box<dyn ContactLaw>], dt: f64, strides: (usize, usize)) {
+    let (ps, hs) = strides;
+    for_each_chunk(pairs, strides, |mut c| {
+        let mut s = Scratch::new();
+        for k in 0..c.a.len() {
+            let (i, j) = (c.a[k] as usize, c.b[k] as usize);
+            let d = sub(sp.x[j], sp.x[i]);
+            let reach = sp.radius[i] + sp.radius[j];
+            let dist2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
+            if dist2 >= reach * reach {
+                open_contact(&mut c, k, hs, reach - dist2.sqrt());
+                continue;
+            }
+            let dist = dist2.sqrt();
+            let n = [d[0] / dist, d[1] / dist, d[2] / dist];
+            let overlap = reach - dist;
+            let la = sp.radius[i] - 0.5 * overlap;
+            let arm_a = [n[0] * la, n[1] * la, n[2] * la];
+            let arm_b = sub(arm_a, d);
+            let va = add(sp.v[i], cross(sp.w[i], arm_a));
+            let vb = add(sp.v[j], cross(sp.w[j], arm_b));
+            c.touching[k] = true;
+            c.overlap[k] = overlap;
+            let e = s.len;
+            s.pair[e] = c.first + k;
+            s.law[e] = c.law[k];
+            s.normal[e] = n;
+            s.overlap[e] = overlap;
+            s.rel_velocity[e] = sub(vb, va);
+            s.rel_spin[e] = sub(sp.w[j], sp.w[i]);
+            s.arm_a[e] = arm_a;
+            s.arm_b[e] = arm_b;
+            s.params[e * ps..(e + 1) * ps].copy_from_slice(&c.params[k * ps..(k + 1) * ps]);
+            s.history[e * hs..(e + 1) * hs].copy_from_slice(&c.history[k * hs..(k + 1) * hs]);
+            s.len += 1;
+        }
+        s.run_laws(laws, dt, strides);
+        write_back(&mut c, &s, hs);
+    });
+}
+
+/// Sphere-wall geometry and contact forces (the wall is particle 2, infinitely heavy).
+fn wall_contacts(
+    sp: &Spheres,
+    walls: &[Wall],
+    pairs: &mut PairList,
+    laws: &[Box<dyn ContactLaw>],
+    dt: f64,
+    strides: (usize, usize),
+) {
+    let (ps, hs) = strides;
+    for_each_chunk(pairs, strides, |mut c| {
+        let mut s = Scratch::new();
+        for k in 0..c.a.len() {
+            let (i, w) = (c.a[k] as usize, c.b[k] as usize);
+            let wall = &walls[w];
+            let geo = match wall.contact(sp.x[i], sp.radius[i], 0.0) {
+                Some(g) if g.gap < 0.0 => g,
+                other => {
+                    open_contact(&mut c, k, hs, other.map_or(f64::NEG_INFINITY, |g| -g.gap));
+                    continue;
+                }
+            };
+            let overlap = -geo.gap;
+            let arm_a = sub(geo.point, sp.x[i]);
+            let va = add(sp.v[i], cross(sp.w[i], arm_a));
+            c.touching[k] = true;
+            c.overlap[k] = overlap;
+            let e = s.len;
+            s.pair[e] = c.first + k;
+            s.law[e] = c.law[k];
+            s.normal[e] = geo.normal;
+            s.overlap[e] = overlap;
+            s.rel_velocity[e] = sub(wall.velocity, va);
+            s.rel_spin[e] = [-sp.w[i][0], -sp.w[i][1], -sp.w[i][2]];
+            s.arm_a[e] = arm_a;
+            s.arm_b[e] = [0.0; 3];
+            s.params[e * ps..(e + 1) * ps].copy_from_slice(&c.params[k * ps..(k + 1) * ps]);
+            s.history[e * hs..(e + 1) * hs].copy_from_slice(&c.history[k * hs..(k + 1) * hs]);
+            s.len += 1;
+        }
+        s.run_laws(laws, dt, strides);
+        write_back(&mut c, &s, hs);
+    });
+}
+
+/// Sums each sphere's contact forces and torques, pair by pair in increasing pair index.
+fn gather(sp: &mut Spheres, pairs: &PairList, adj: &Adjacency, walls: &PairList, wall_adj: &Adjacency) {
+    (sp.force.par_iter_mut(), sp.torque.par_iter_mut())
+        .into_par_iter()
+        .with_min_len(MIN_PER_TASK)
+        .enumerate()
+        .for_each(|(i, (f, t))| {
+            let mut fs = [0.0; 3];
+            let mut ts = [0.0; 3];
+            for &e in adj.of(i) {
+                let k = (e >> 1) as usize;
+                let pf = pairs.force[k];
+                if e & 1 == 0 {
+                    fs = add(fs, pf);
+                    ts = add(ts, pairs.torque_a[k]);
+                } else {
+                    fs = sub(fs, pf);
+                    ts = add(ts, pairs.torque_b[k]);
+                }
+            }
+            for &e in wall_adj.of(i) {
+                let k = (e >> 1) as usize;
+                fs = add(fs, walls.force[k]);
+                ts = add(ts, walls.torque_a[k]);
+            }
+            *f = fs;
+            *t = ts;
+        });
+}
+
+/// Force on each wall: the opposite of what it exerts on the spheres, summed in pair order.
+fn wall_forces(walls: &mut [Wall], pairs: &PairList) {
+    for w in walls.iter_mut() {
+        w.force = [0.0; 3];
+    }
+    for k in 0..pairs.len() {
+        let w = &mut walls[pairs.b[k] as usize];
+        w.force = sub(w.force, pairs.force[k]);
+    }
+}
+
+/// Leapfrog integration with gravity and Cundall damping; returns the largest displacement since
+/// the candidate lists were built.
+fn integrate(sp: &mut Spheres, x_at_build: &[Vec3], gravity: Vec3, damping: f64, dt: f64) -> f64 {
+    let Spheres { x, v, w, mass, inertia, force, torque, blocked, .. } = sp;
+    (
+        x.par_iter_mut(),
+        v.par_iter_mut(),
+        w.par_iter_mut(),
+        mass.par_iter(),
+        inertia.par_iter(),
+        force.par_iter(),
+        torque.par_iter(),
+        blocked.par_iter(),
+        x_at_build.par_iter(),
+    )
+        .into_par_iter()
+        .with_min_len(MIN_PER_TASK)
+        .map(|(x, v, w, &m, &inertia, f, t, &blocked, x0)| {
+            for a in 0..3 {
+                if blocked & (dof::X << a) == 0 {
+                    let mut acc = f[a] / m + gravity[a];
+                    // YADE's Cundall damping: against the sign of the power at mid-step.
+                    acc *= 1.0 - damping * (acc * (v[a] + 0.5 * dt * acc)).signum();
+                    v[a] += acc * dt;
+                }
+                x[a] += v[a] * dt;
+                if blocked & (dof::RX << a) == 0 {
+                    let mut alpha = t[a] / inertia;
+                    alpha *= 1.0 - damping * (alpha * (w[a] + 0.5 * dt * alpha)).signum();
+                    w[a] += alpha * dt;
+                }
+            }
+            let d = sub(*x, *x0);
+            let moved = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+            if moved.is_finite() && v.iter().all(|c| c.is_finite()) {
+                moved
+            } else {
+                f64::NAN
+            }
+        })
+        .reduce(|| 0.0, |a: f64, b: f64| if a.is_nan() || b.is_nan() { f64::NAN } else { a.max(b) })
+}

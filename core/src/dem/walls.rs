@@ -1,0 +1,116 @@
+//! Walls: kinematic boundaries that move at a prescribed velocity and measure the force they take.
+
+use crate::math::{dot3, Vec3};
+
+#[derive(Debug, Clone, PartialEq)]
+pub enum WallShape {
+    /// Infinite plane through `position`; particles live on the side `normal` points to.
+    Plane { normal: Vec3 },
+    /// Rectangle centred on `position`, spanned by unit vectors `u` and `v` with half-sizes `half`;
+    /// touched from both sides, edges and corners included.
+    Rect { u: Vec3, v: Vec3, half: [f64; 2] },
+    /// Inner surface of a cylinder: axis through `position` along unit `axis`, from 0 to `length`.
+    Cylinder { axis: Vec3, radius: f64, length: f64 },
+}
+
+#[derive(Debug, Clone)]
+pub struct Wall {
+    pub name: String,
+    pub shape: WallShape,
+    pub position: Vec3,
+    pub velocity: Vec3,
+    pub material: u16,
+    /// Total force the particles exert on the wall (last step).
+    pub force: Vec3,
+}
+
+/// Contact of a sphere with a wall: unit normal from the sphere's centre towards the wall, the gap
+/// `distance - radius` (negative = overlap) and the contact point.
+#[derive(Debug, Clone, Copy)]
+pub struct WallContact {
+    pub normal: Vec3,
+    pub gap: f64,
+    pub point: Vec3,
+}
+
+impl Wall {
+    /// Geometry against a sphere, or None when the sphere is out of the wall's reach
+    /// (beyond its extent, or farther than `reach` from it).
+    pub fn contact(&self, x: Vec3, radius: f64, reach: f64) -> Option<WallContact> {
+        let d = [x[0] - self.position[0], x[1] - self.position[1], x[2] - self.position[2]];
+        match &self.shape {
+            WallShape::Plane { normal } => {
+                let dist = dot3(d, *normal);
+                let gap = dist - radius;
+                if gap > reach {
+                    return None;
+                }
+                let n = [-normal[0], -normal[1], -normal[2]];
+                let point = [x[0] - normal[0] * dist, x[1] - normal[1] * dist, x[2] - normal[2] * dist];
+                Some(WallContact { normal: n, gap, point })
+            }
+            WallShape::Rect { u, v, half } => {
+                let su = dot3(d, *u).clamp(-half[0], half[0]);
+                let sv = dot3(d, *v).clamp(-half[1], half[1]);
+                let point = [
+                    self.position[0] + su * u[0] + sv * v[0],
+                    self.position[1] + su * u[1] + sv * v[1],
+                    self.position[2] + su * u[2] + sv * v[2],
+                ];
+                let to = [point[0] - x[0], point[1] - x[1], point[2] - x[2]];
+                let dist = dot3(to, to).sqrt();
+                let gap = dist - radius;
+                if gap > reach || dist == 0.0 {
+                    return None;
+                }
+                Some(WallContact { normal: [to[0] / dist, to[1] / dist, to[2] / dist], gap, point })
+            }
+            WallShape::Cylinder { axis, radius: big_r, length } => {
+                let along = dot3(d, *axis);
+                if along < -radius || along > *length + radius {
+                    return None;
+                }
+                let radial = [d[0] - along * axis[0], d[1] - along * axis[1], d[2] - along * axis[2]];
+                let rho = dot3(radial, radial).sqrt();
+                let gap = (big_r - rho) - radius;
+                if gap > reach || rho == 0.0 {
+                    return None;
+                }
+                let n = [radial[0] / rho, radial[1] / rho, radial[2] / rho];
+                let point = [x[0] + n[0] * (big_r - rho), x[1] + n[1] * (big_r - rho), x[2] + n[2] * (big_r - rho)];
+                Some(WallContact { normal: n, gap, point })
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn plane_rect_and_cylinder_gaps() {
+        let floor = Wall {
+            name: "floor".into(),
+            shape: WallShape::Plane { normal: [0.0, 0.0, 1.0] },
+            position: [0.0; 3],
+            velocity: [0.0; 3],
+            material: 0,
+            force: [0.0; 3],
+        };
+        let c = floor.contact([1.0, 2.0, 0.09], 0.1, 0.0).unwrap();
+        assert!((c.gap + 0.01).abs() < 1e-15 && c.normal == [0.0, 0.0, -1.0]);
+        assert!(floor.contact([0.0, 0.0, 0.5], 0.1, 0.1).is_none());
+        let rect = Wall {
+            shape: WallShape::Rect { u: [1.0, 0.0, 0.0], v: [0.0, 1.0, 0.0], half: [1.0, 1.0] },
+            ..floor.clone()
+        };
+        // Beyond the edge: the closest point is on the edge.
+        let c = rect.contact([1.05, 0.0, 0.05], 0.1, 0.0).unwrap();
+        assert!((c.gap - (0.05f64.hypot(0.05) - 0.1)).abs() < 1e-12);
+        let cyl = Wall { shape: WallShape::Cylinder { axis: [0.0, 0.0, 1.0], radius: 1.0, length: 2.0 }, ..floor };
+        let c = cyl.contact([0.95, 0.0, 1.0], 0.1, 0.0).unwrap();
+        assert!((c.gap + 0.05).abs() < 1e-12 && (c.normal[0] - 1.0).abs() < 1e-15);
+        assert!(cyl.contact([0.95, 0.0, 3.0], 0.1, 0.0).is_none());
+    }
+}

@@ -1,0 +1,118 @@
+//! Contact laws (YADE's split: the engine computes contact geometry for a shape pair, the law turns
+//! geometry, per-contact parameters and history into a force). A law is chosen per material pair.
+//!
+//! Conventions: `normal` points from particle 1 to particle 2; `overlap` is positive in contact;
+//! velocities are those of particle 2 relative to particle 1 at the contact point; the law returns
+//! the force **on particle 1** (particle 2 gets its opposite) and an extra moment on particle 1
+//! (rolling/twisting resistance; particle 2 gets its opposite). The engine adds the lever-arm torques.
+
+use crate::error::Result;
+use crate::math::Vec3;
+use crate::params::{ParamSpec, Params};
+
+/// What a law knows about one contact pair when the pair is first met (to set its parameters).
+#[derive(Debug, Clone, Copy)]
+pub struct PairInfo {
+    /// Radii of the two particles; a wall has an infinite radius.
+    pub radius: [f64; 2],
+    /// Masses of the two bodies; a wall has an infinite mass.
+    pub mass: [f64; 2],
+    /// A reproducible seed for this pair (from the particle ids and the simulation seed).
+    pub seed: u64,
+}
+
+impl PairInfo {
+    /// `m1 m2 / (m1 + m2)`, or the finite mass against a wall.
+    pub fn effective_mass(&self) -> f64 {
+        let [a, b] = self.mass;
+        if a.is_infinite() {
+            b
+        } else if b.is_infinite() {
+            a
+        } else {
+            a * b / (a + b)
+        }
+    }
+
+    /// `r1 r2 / (r1 + r2)`, or the finite radius against a wall.
+    pub fn effective_radius(&self) -> f64 {
+        let [a, b] = self.radius;
+        if a.is_infinite() {
+            b
+        } else if b.is_infinite() {
+            a
+        } else {
+            a * b / (a + b)
+        }
+    }
+
+    /// The smaller radius.
+    pub fn min_radius(&self) -> f64 {
+        self.radius[0].min(self.radius[1])
+    }
+}
+
+/// A batch of touching contacts. Every slice has one entry per contact, except `params` and
+/// `history`, which hold `param_count()` and `history_count()` values per contact.
+pub struct ContactBatch<'a> {
+    pub normal: &'a [Vec3],
+    pub overlap: &'a [f64],
+    /// Velocity of particle 2 relative to particle 1 at the contact point.
+    pub rel_velocity: &'a [Vec3],
+    /// Angular velocity of particle 2 minus that of particle 1.
+    pub rel_spin: &'a [Vec3],
+    pub params: &'a [f64],
+    pub history: &'a mut [f64],
+    /// Output: force on particle 1.
+    pub force: &'a mut [Vec3],
+    /// Output: extra moment on particle 1 (not the lever-arm torque of `force`).
+    pub moment: &'a mut [Vec3],
+    pub dt: f64,
+}
+
+impl ContactBatch<'_> {
+    pub fn len(&self) -> usize {
+        self.overlap.len()
+    }
+    pub fn is_empty(&self) -> bool {
+        self.overlap.is_empty()
+    }
+}
+
+pub trait ContactLaw: Send + Sync {
+    fn name(&self) -> &str;
+    fn params(&self) -> &Params;
+    /// Values stored per contact pair, set once by `init_pair`.
+    fn param_count(&self) -> usize;
+    /// History values per contact (tangential spring, rolling...), zeroed when a contact opens.
+    fn history_count(&self) -> usize;
+    /// Sets the per-pair parameters (stiffness, damping, friction, possibly drawn at random).
+    fn init_pair(&self, info: &PairInfo, params: &mut [f64]);
+    /// Forces of a batch of touching contacts.
+    fn compute(&self, batch: ContactBatch<'_>);
+    /// Largest normal stiffness a pair can get (for the critical time step), given its info.
+    fn max_normal_stiffness(&self, info: &PairInfo) -> f64;
+    /// Elastic energy stored in one contact (for energy balances).
+    fn elastic_energy(&self, _overlap: f64, _params: &[f64], _history: &[f64]) -> f64 {
+        0.0
+    }
+}
+
+pub trait ContactLawFactory: Send + Sync {
+    fn name(&self) -> &str;
+    fn param_specs(&self) -> &[ParamSpec];
+    fn build(&self, params: Params) -> Result<Box<dyn ContactLaw>>;
+    fn description(&self) -> &str {
+        ""
+    }
+}
+
+/// Uniform number in [0, 1) from a seed and a stream index: splitmix64, so that a pair's random
+/// properties depend only on the pair, never on the order contacts are met or the thread count.
+pub fn uniform(seed: u64, stream: u64) -> f64 {
+    let mut z = seed.wrapping_add(stream.wrapping_mul(0x9E37_79B9_7F4A_7C15)).wrapping_add(0x9E37_79B9_7F4A_7C15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^= z >> 31;
+    (z >> 11) as f64 / (1u64 << 53) as f64
+}

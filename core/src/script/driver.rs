@@ -1,0 +1,307 @@
+//! What every scripted simulation shares: the handle scripts hold, the run loop (boundary
+//! functions once per step, callbacks every N steps, output, progress, falling back on the last
+//! good state), and the script methods built on it.
+
+use super::convert::{err, number, OrRhai, RhaiResult};
+use super::output::Output;
+use super::ScriptContext;
+use crate::error::{GraniteError, Result};
+use crate::io::vtk::Field;
+use crate::math::Vec3;
+use rhai::{Dynamic, Engine, FnPtr, Map, NativeCallContext};
+use std::io::IsTerminal;
+use std::path::Path;
+use std::sync::{Arc, Mutex, MutexGuard};
+use std::time::{Duration, Instant};
+
+/// An engine as scripts drive it.
+pub trait ScriptSim: Send + 'static {
+    type Snapshot: Send;
+    /// Checks the set-up before a run.
+    fn validate(&self) -> Result<()>;
+    /// One time step.
+    fn advance(&mut self) -> Result<()>;
+    fn time(&self) -> f64;
+    fn steps(&self) -> u64;
+    fn dt(&self) -> f64;
+    /// Column names and values of one `series.csv` row.
+    fn series_row(&self) -> (Vec<&'static str>, Vec<f64>);
+    /// Names the file that continues the series when its columns change.
+    fn series_tag(&self) -> &'static str {
+        "more"
+    }
+    /// Positions and per-point fields of one VTK frame.
+    fn vtk_frame(&self) -> (Vec<Vec3>, Vec<Field>);
+    /// A CSV table of every point or particle.
+    fn write_points(&self, path: &Path) -> Result<()>;
+    /// Global measures by name, for `sim.diagnostics()`.
+    fn diagnostics(&self) -> Vec<(&'static str, f64)>;
+    fn snapshot(&self) -> Self::Snapshot;
+    fn restore(&mut self, snapshot: Self::Snapshot);
+    /// Messages for the user since the last call (deletions, mesh changes...).
+    fn drain_events(&mut self) -> Vec<String>;
+    /// Sets the value of boundary condition `target` from a script function (see `Handle::drive`).
+    fn set_driven(&mut self, target: usize, value: f64);
+}
+
+pub struct State<S: ScriptSim> {
+    pub sim: S,
+    pub ctx: Arc<ScriptContext>,
+    pub output: Output,
+    callbacks: Vec<(u64, FnPtr)>,
+    driven: Vec<(usize, FnPtr)>,
+    last_good: Option<S::Snapshot>,
+}
+
+impl<S: ScriptSim> State<S> {
+    fn write_series(&mut self) -> Result<()> {
+        let (cols, vals) = self.sim.series_row();
+        self.output.write_series(self.sim.steps(), &cols, &vals, self.sim.series_tag())
+    }
+
+    fn write_vtk(&mut self) -> Result<()> {
+        let (x, fields) = self.sim.vtk_frame();
+        self.output.write_vtk(self.sim.steps(), self.sim.time(), &x, &fields)
+    }
+
+    pub fn points_path(&self, file: &str) -> std::path::PathBuf {
+        self.output.dir.join(file)
+    }
+
+    /// Restores the last good state, writes it out, and turns the failure into a script error.
+    fn fail(&mut self, e: GraniteError) -> Box<rhai::EvalAltResult> {
+        let failed_step = self.sim.steps();
+        let mut msg = e.to_string();
+        if let Some(snap) = self.last_good.take() {
+            self.sim.restore(snap);
+            self.output.last_vtk_step = None;
+            let path = self.points_path("last_good_points.csv");
+            let written = self.write_vtk().and_then(|_| self.sim.write_points(&path));
+            msg = match written {
+                Ok(()) => format!(
+                    "{msg}\nthe last good state (step {}, t = {:.6e} s) is kept and written to {} and vtk/",
+                    self.sim.steps(),
+                    self.sim.time(),
+                    path.display()
+                ),
+                Err(w) => format!("{msg}\n(could not write the last good state: {w})"),
+            };
+        }
+        self.ctx.set_summary("failed_at_step", serde_json::Value::from(failed_step));
+        super::convert::to_rhai(GraniteError::Other(msg))
+    }
+
+    /// Clears script functions driving boundary values (their targets are gone).
+    pub fn clear_driven(&mut self) {
+        self.driven.clear();
+    }
+}
+
+/// A script's handle on one simulation (shared: closures and callbacks may hold it too).
+pub struct Handle<S: ScriptSim>(Arc<Mutex<State<S>>>);
+
+impl<S: ScriptSim> Clone for Handle<S> {
+    fn clone(&self) -> Self {
+        Handle(self.0.clone())
+    }
+}
+
+impl<S: ScriptSim> Handle<S> {
+    pub fn new(sim: S, ctx: Arc<ScriptContext>) -> Handle<S> {
+        let index = ctx.next_sim_index();
+        let prefix = if index == 1 { String::new() } else { format!("sim{index}_") };
+        let output = Output::new(ctx.options.out_dir.clone(), prefix);
+        Handle(Arc::new(Mutex::new(State {
+            sim,
+            ctx,
+            output,
+            callbacks: Vec::new(),
+            driven: Vec::new(),
+            last_good: None,
+        })))
+    }
+
+    pub fn lock(&self) -> MutexGuard<'_, State<S>> {
+        self.0.lock().unwrap_or_else(|p| p.into_inner())
+    }
+
+    /// Registers a script function of time that sets boundary value `target` once per step.
+    pub fn drive(&self, target: usize, f: FnPtr) {
+        self.lock().driven.push((target, f));
+    }
+
+    pub fn run(&self, ctx: &NativeCallContext, steps: u64) -> RhaiResult<()> {
+        let quiet;
+        {
+            let mut guard = self.lock();
+            let st = &mut *guard;
+            st.ctx.check_overrides()?;
+            st.sim.validate().or_rhai()?;
+            quiet = st.ctx.options.quiet;
+            st.output.series_every.get_or_insert((steps / 500).max(1));
+            st.output.vtk_every.get_or_insert((steps / 20).max(1));
+            st.write_series().or_rhai()?;
+            st.write_vtk().or_rhai()?;
+            st.last_good = Some(st.sim.snapshot());
+        }
+        let progress = Progress::new(quiet, steps);
+        for k in 0..steps {
+            let (t, driven) = {
+                let st = self.lock();
+                (st.sim.time(), st.driven.clone())
+            };
+            let mut values = Vec::with_capacity(driven.len());
+            for (_, f) in &driven {
+                let v = f.call_within_context::<Dynamic>(ctx, (t,))?;
+                values.push(number(&v, "boundary function value")?);
+            }
+            let due: Vec<FnPtr> = {
+                let mut guard = self.lock();
+                let st = &mut *guard;
+                for ((target, _), v) in driven.iter().zip(values) {
+                    st.sim.set_driven(*target, v);
+                }
+                if let Err(e) = st.sim.advance() {
+                    return Err(st.fail(e));
+                }
+                for ev in st.sim.drain_events() {
+                    if !quiet {
+                        eprintln!("granite: {ev}");
+                    }
+                }
+                let step = st.sim.steps();
+                let last = k + 1 == steps;
+                if step.is_multiple_of(st.output.series_every.unwrap_or(1)) || last {
+                    st.write_series().or_rhai()?;
+                    st.last_good = Some(st.sim.snapshot());
+                }
+                if step.is_multiple_of(st.output.vtk_every.unwrap_or(1)) || last {
+                    st.write_vtk().or_rhai()?;
+                }
+                progress.tick(k + 1, st.sim.time());
+                st.callbacks.iter().filter(|(n, _)| step.is_multiple_of(*n)).map(|(_, f)| f.clone()).collect()
+            };
+            for f in due {
+                let _ = f.call_within_context::<Dynamic>(ctx, (self.clone(),))?;
+            }
+        }
+        progress.finish();
+        Ok(())
+    }
+
+    pub fn run_until(&self, ctx: &NativeCallContext, t_end: Dynamic) -> RhaiResult<()> {
+        let t_end = number(&t_end, "time")?;
+        let steps = {
+            let st = self.lock();
+            st.sim.validate().or_rhai()?;
+            let remaining = t_end - st.sim.time();
+            if remaining <= 0.0 {
+                return Ok(());
+            }
+            (remaining / st.sim.dt() - 1e-9).ceil() as u64
+        };
+        self.run(ctx, steps)
+    }
+}
+
+/// Periodic progress on stderr: a rewritten line on a terminal, a plain line every 10 s otherwise.
+struct Progress {
+    enabled: bool,
+    terminal: bool,
+    total: u64,
+    start: Instant,
+    last: std::cell::Cell<Instant>,
+}
+
+impl Progress {
+    fn new(quiet: bool, total: u64) -> Progress {
+        let now = Instant::now();
+        Progress {
+            enabled: !quiet,
+            terminal: std::io::stderr().is_terminal(),
+            total,
+            start: now,
+            last: std::cell::Cell::new(now),
+        }
+    }
+
+    fn tick(&self, done: u64, time: f64) {
+        if !self.enabled {
+            return;
+        }
+        let every = if self.terminal { Duration::from_millis(500) } else { Duration::from_secs(10) };
+        if self.last.get().elapsed() < every {
+            return;
+        }
+        self.last.set(Instant::now());
+        let elapsed = self.start.elapsed().as_secs_f64();
+        let rate = done as f64 / elapsed.max(1e-9);
+        let eta = (self.total - done) as f64 / rate.max(1e-9);
+        let line = format!(
+            "step {done}/{} ({:.0}%)  t = {time:.4e} s  {rate:.0} steps/s  ETA {eta:.0} s",
+            self.total,
+            100.0 * done as f64 / self.total as f64
+        );
+        if self.terminal {
+            eprint!("\r{line}   ");
+        } else {
+            eprintln!("{line}");
+        }
+    }
+
+    fn finish(&self) {
+        if self.enabled && self.terminal && self.start.elapsed() > Duration::from_millis(500) {
+            eprintln!();
+        }
+    }
+}
+
+/// Script methods every simulation type has.
+pub fn register_common<S: ScriptSim>(engine: &mut Engine) {
+    engine.register_fn("run_until", |ctx: NativeCallContext, s: &mut Handle<S>, t: Dynamic| s.run_until(&ctx, t));
+    engine.register_fn("run_steps", |ctx: NativeCallContext, s: &mut Handle<S>, n: i64| {
+        if n < 0 {
+            return err(format!("run_steps needs n >= 0, got {n}"));
+        }
+        s.run(&ctx, n as u64)
+    });
+    engine.register_fn("every", |s: &mut Handle<S>, n: i64, f: FnPtr| {
+        if n < 1 {
+            return err(format!("every(n, f) needs n >= 1, got {n}"));
+        }
+        s.lock().callbacks.push((n as u64, f));
+        Ok(())
+    });
+    engine.register_fn("series_every", |s: &mut Handle<S>, n: i64| {
+        if n < 1 {
+            return err(format!("series_every needs a step count >= 1, got {n}"));
+        }
+        s.lock().output.series_every = Some(n as u64);
+        Ok(())
+    });
+    engine.register_fn("vtk_every", |s: &mut Handle<S>, n: i64| {
+        if n < 1 {
+            return err(format!("vtk_every needs a step count >= 1, got {n}"));
+        }
+        s.lock().output.vtk_every = Some(n as u64);
+        Ok(())
+    });
+    engine.register_fn("diagnostics", |s: &mut Handle<S>| {
+        let st = s.lock();
+        let mut m = Map::new();
+        for (k, v) in st.sim.diagnostics() {
+            m.insert(k.into(), Dynamic::from(v));
+        }
+        m
+    });
+    engine.register_fn("write_points", |s: &mut Handle<S>, file: &str| {
+        let st = s.lock();
+        let path = st.points_path(file);
+        st.sim.write_points(&path).map(|_| path.display().to_string()).or_rhai()
+    });
+    engine.register_fn("write_series", |s: &mut Handle<S>| s.lock().write_series().or_rhai());
+    engine.register_fn("write_vtk", |s: &mut Handle<S>| s.lock().write_vtk().or_rhai());
+    engine.register_get("time", |s: &mut Handle<S>| s.lock().sim.time());
+    engine.register_get("step", |s: &mut Handle<S>| s.lock().sim.steps() as i64);
+    engine.register_get("dt", |s: &mut Handle<S>| s.lock().sim.dt());
+}

@@ -1,0 +1,146 @@
+//! `linear`: linear normal spring and incremental tangential spring with Coulomb friction
+//! (thesis eqs. 1.1-1.2). Stiffnesses are given directly (`kn`, `kt` or `kt_ratio`) or from a
+//! contact modulus as YADE does (`young`: `kn = 2 E r1 r2 / (r1 + r2)`; a wall counts as a sphere
+//! of the particle's own radius, so `kn = E r` against a wall).
+
+use super::tangential::{dot, spring_slider};
+use super::Ranged;
+use granite_core::ext::{ContactBatch, ContactLaw, ContactLawFactory, PairInfo};
+use granite_core::params::{ParamSpec, Params};
+use granite_core::{GraniteError, Result};
+
+pub struct LinearFactory;
+
+pub(crate) const STIFFNESS_SPECS: [ParamSpec; 4] = [
+    ParamSpec::unset("kn", "normal stiffness in N/m (or give `young`)"),
+    ParamSpec::unset("young", "contact modulus E in Pa: kn = 2 E r1 r2/(r1 + r2) (or give `kn`)"),
+    ParamSpec::unset("kt", "tangential stiffness in N/m (or give `kt_ratio`)"),
+    ParamSpec::optional("kt_ratio", 0.0, "kt / kn"),
+];
+
+const SPECS: &[ParamSpec] = &[
+    STIFFNESS_SPECS[0],
+    STIFFNESS_SPECS[1],
+    STIFFNESS_SPECS[2],
+    STIFFNESS_SPECS[3],
+    ParamSpec::optional("friction", 0.0, "inter-particle friction angle in degrees, [0, 90)"),
+    ParamSpec::unset("friction_max", "upper bound: friction drawn per contact pair in [friction, friction_max]"),
+];
+
+/// How a law gets its normal and tangential stiffness.
+#[derive(Debug, Clone, Copy)]
+pub(crate) enum Stiffness {
+    Fixed { kn: f64 },
+    Modulus { young: f64 },
+}
+
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Springs {
+    pub normal: Stiffness,
+    pub kt: Option<f64>,
+    pub kt_ratio: f64,
+}
+
+impl Springs {
+    pub fn read(p: &Params) -> Result<Springs> {
+        let normal = match (p.is_set("kn"), p.is_set("young")) {
+            (true, false) => Stiffness::Fixed { kn: p.positive("kn")? },
+            (false, true) => Stiffness::Modulus { young: p.positive("young")? },
+            _ => {
+                return Err(GraniteError::param_in(
+                    format!("stiffness of {}", p.owner()),
+                    "kn/young",
+                    "give exactly one of `kn` (N/m) and `young` (Pa)",
+                ))
+            }
+        };
+        let kt = if p.is_set("kt") { Some(p.non_negative("kt")?) } else { None };
+        let kt_ratio = p.non_negative("kt_ratio")?;
+        Ok(Springs { normal, kt, kt_ratio })
+    }
+
+    /// `(kn, kt)` of a pair; a wall (infinite radius) counts as a sphere of the particle's radius.
+    pub fn of(&self, info: &PairInfo) -> (f64, f64) {
+        let kn = match self.normal {
+            Stiffness::Fixed { kn } => kn,
+            Stiffness::Modulus { young } => {
+                let r1 = info.radius[0];
+                let r2 = if info.radius[1].is_finite() { info.radius[1] } else { r1 };
+                2.0 * young * r1 * r2 / (r1 + r2)
+            }
+        };
+        (kn, self.kt.unwrap_or(self.kt_ratio * kn))
+    }
+}
+
+pub(crate) fn read_friction(p: &Params) -> Result<Ranged> {
+    let f = Ranged::read(p, "friction");
+    f.check(p, "friction", 0.0, 89.999)?;
+    Ok(f)
+}
+
+struct Linear {
+    params: Params,
+    springs: Springs,
+    friction: Ranged,
+}
+
+impl ContactLawFactory for LinearFactory {
+    fn name(&self) -> &str {
+        "linear"
+    }
+    fn param_specs(&self) -> &[ParamSpec] {
+        SPECS
+    }
+    fn description(&self) -> &str {
+        "linear spring + Coulomb friction (eqs. 1.1-1.2)"
+    }
+    fn build(&self, params: Params) -> Result<Box<dyn ContactLaw>> {
+        let springs = Springs::read(&params)?;
+        let friction = read_friction(&params)?;
+        Ok(Box::new(Linear { params, springs, friction }))
+    }
+}
+
+impl ContactLaw for Linear {
+    fn name(&self) -> &str {
+        "linear"
+    }
+    fn params(&self) -> &Params {
+        &self.params
+    }
+    fn param_count(&self) -> usize {
+        3
+    }
+    fn history_count(&self) -> usize {
+        3
+    }
+    fn init_pair(&self, info: &PairInfo, out: &mut [f64]) {
+        let (kn, kt) = self.springs.of(info);
+        out[0] = kn;
+        out[1] = kt;
+        out[2] = self.friction.draw(info.seed, 0).to_radians().tan();
+    }
+    fn max_normal_stiffness(&self, info: &PairInfo) -> f64 {
+        self.springs.of(info).0
+    }
+    fn compute(&self, b: ContactBatch<'_>) {
+        let (ps, hs) = (3, 3);
+        for c in 0..b.len() {
+            let p = &b.params[c * ps..c * ps + ps];
+            let (kn, kt, mu) = (p[0], p[1], p[2]);
+            let n = b.normal[c];
+            let fn_ = kn * b.overlap[c];
+            let h = &mut b.history[c * hs..c * hs + hs];
+            let mut u = [h[0], h[1], h[2]];
+            let ft = spring_slider(&mut u, n, b.rel_velocity[c], b.dt, kt, mu, fn_);
+            h.copy_from_slice(&u);
+            b.force[c] = [ft[0] - fn_ * n[0], ft[1] - fn_ * n[1], ft[2] - fn_ * n[2]];
+            b.moment[c] = [0.0; 3];
+        }
+    }
+    fn elastic_energy(&self, overlap: f64, p: &[f64], h: &[f64]) -> f64 {
+        let u = [h[0], h[1], h[2]];
+        0.5 * p[0] * overlap * overlap + 0.5 * p[1] * dot(u, u)
+    }
+}

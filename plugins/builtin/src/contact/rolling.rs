@@ -1,0 +1,128 @@
+//! `rolling_resistance`: the contact law of the Camargue sand (thesis table 5.2, Aboul Hosn et al.
+//! 2017): `kn = 2 E r1 r2/(r1 + r2)`, `kt = alpha_s kn`, Coulomb friction, and elastic-perfectly
+//! plastic rolling and twisting resistance with `k_r = alpha_r kt r1 r2`, `k_tw = alpha_t kt r1 r2`,
+//! both capped at `eta_r |F_n| min(r1, r2)`. Relative rotations are incremental: the relative
+//! spin projected on the contact plane (rolling) or on the normal (twisting). A wall counts as a
+//! sphere of the particle's own radius.
+
+use super::linear::read_friction;
+use super::tangential::{dot, rotate_into_plane, rotational_spring, spring_slider};
+use super::Ranged;
+use granite_core::ext::{ContactBatch, ContactLaw, ContactLawFactory, PairInfo};
+use granite_core::params::{ParamSpec, Params};
+use granite_core::Result;
+
+pub struct RollingResistanceFactory;
+
+const SPECS: &[ParamSpec] = &[
+    ParamSpec::required("young", "contact modulus in Pa (the thesis's G, 2.8e8 for Camargue sand)"),
+    ParamSpec::optional("alpha_s", 0.2, "kt / kn"),
+    ParamSpec::optional("alpha_r", 7.5, "rolling stiffness factor: k_r = alpha_r kt r1 r2"),
+    ParamSpec::optional("alpha_t", 0.2, "twisting stiffness factor: k_tw = alpha_t kt r1 r2"),
+    ParamSpec::optional("friction", 25.0, "inter-particle friction angle in degrees"),
+    ParamSpec::unset("friction_max", "upper bound: friction drawn per contact pair in [friction, friction_max]"),
+    ParamSpec::optional("eta_r", 0.22, "rolling/twisting limit: moment <= eta_r |F_n| min(r1, r2)"),
+];
+
+struct RollingResistance {
+    params: Params,
+    young: f64,
+    alpha_s: f64,
+    alpha_r: f64,
+    alpha_t: f64,
+    eta_r: f64,
+    friction: Ranged,
+}
+
+impl ContactLawFactory for RollingResistanceFactory {
+    fn name(&self) -> &str {
+        "rolling_resistance"
+    }
+    fn param_specs(&self) -> &[ParamSpec] {
+        SPECS
+    }
+    fn description(&self) -> &str {
+        "Camargue sand law (table 5.2): friction with rolling and twisting resistance"
+    }
+    fn build(&self, params: Params) -> Result<Box<dyn ContactLaw>> {
+        Ok(Box::new(RollingResistance {
+            young: params.positive("young")?,
+            alpha_s: params.non_negative("alpha_s")?,
+            alpha_r: params.non_negative("alpha_r")?,
+            alpha_t: params.non_negative("alpha_t")?,
+            eta_r: params.non_negative("eta_r")?,
+            friction: read_friction(&params)?,
+            params,
+        }))
+    }
+}
+
+impl RollingResistance {
+    fn radii(info: &PairInfo) -> (f64, f64) {
+        let r1 = info.radius[0];
+        (r1, if info.radius[1].is_finite() { info.radius[1] } else { r1 })
+    }
+}
+
+const PARAMS: usize = 6;
+const HISTORY: usize = 7;
+
+impl ContactLaw for RollingResistance {
+    fn name(&self) -> &str {
+        "rolling_resistance"
+    }
+    fn params(&self) -> &Params {
+        &self.params
+    }
+    fn param_count(&self) -> usize {
+        PARAMS
+    }
+    fn history_count(&self) -> usize {
+        HISTORY
+    }
+    fn init_pair(&self, info: &PairInfo, out: &mut [f64]) {
+        let (r1, r2) = Self::radii(info);
+        let kn = 2.0 * self.young * r1 * r2 / (r1 + r2);
+        let kt = self.alpha_s * kn;
+        out[0] = kn;
+        out[1] = kt;
+        out[2] = self.friction.draw(info.seed, 0).to_radians().tan();
+        out[3] = self.alpha_r * kt * r1 * r2;
+        out[4] = self.alpha_t * kt * r1 * r2;
+        out[5] = self.eta_r * r1.min(r2);
+    }
+    fn max_normal_stiffness(&self, info: &PairInfo) -> f64 {
+        let (r1, r2) = Self::radii(info);
+        2.0 * self.young * r1 * r2 / (r1 + r2)
+    }
+    fn compute(&self, b: ContactBatch<'_>) {
+        for c in 0..b.len() {
+            let p = &b.params[c * PARAMS..(c + 1) * PARAMS];
+            let (kn, kt, mu, kr, ktw, arm) = (p[0], p[1], p[2], p[3], p[4], p[5]);
+            let n = b.normal[c];
+            let fn_ = kn * b.overlap[c];
+            let h = &mut b.history[c * HISTORY..(c + 1) * HISTORY];
+            let mut u = [h[0], h[1], h[2]];
+            let ft = spring_slider(&mut u, n, b.rel_velocity[c], b.dt, kt, mu, fn_);
+            let spin = b.rel_spin[c];
+            let s_n = dot(spin, n);
+            let roll = [spin[0] - s_n * n[0], spin[1] - s_n * n[1], spin[2] - s_n * n[2]];
+            let limit = arm * fn_;
+            let mut theta_r = rotate_into_plane([h[3], h[4], h[5]], n);
+            let m_roll = rotational_spring(&mut theta_r, roll, b.dt, kr, limit);
+            let mut theta_t = [h[6], 0.0, 0.0];
+            let m_twist = rotational_spring(&mut theta_t, [s_n, 0.0, 0.0], b.dt, ktw, limit)[0];
+            h[..3].copy_from_slice(&u);
+            h[3..6].copy_from_slice(&theta_r);
+            h[6] = theta_t[0];
+            b.force[c] = [ft[0] - fn_ * n[0], ft[1] - fn_ * n[1], ft[2] - fn_ * n[2]];
+            // Particle 1 is pulled along the relative rotation of 2 (and 2 held back).
+            b.moment[c] = [m_roll[0] + m_twist * n[0], m_roll[1] + m_twist * n[1], m_roll[2] + m_twist * n[2]];
+        }
+    }
+    fn elastic_energy(&self, overlap: f64, p: &[f64], h: &[f64]) -> f64 {
+        let u = [h[0], h[1], h[2]];
+        let tr = [h[3], h[4], h[5]];
+        0.5 * p[0] * overlap * overlap + 0.5 * p[1] * dot(u, u) + 0.5 * p[3] * dot(tr, tr) + 0.5 * p[4] * h[6] * h[6]
+    }
+}

@@ -1,0 +1,63 @@
+//! The incremental tangential spring with a Coulomb slider, shared by the laws.
+
+use granite_core::math::Vec3;
+
+#[inline(always)]
+pub fn dot(a: Vec3, b: Vec3) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+/// Removes the normal part of `u` and restores its length: the spring turns with the contact
+/// plane instead of leaking into the normal direction.
+#[inline(always)]
+pub fn rotate_into_plane(u: Vec3, n: Vec3) -> Vec3 {
+    let len2 = dot(u, u);
+    if len2 == 0.0 {
+        return u;
+    }
+    let un = dot(u, n);
+    let t = [u[0] - un * n[0], u[1] - un * n[1], u[2] - un * n[2]];
+    let t2 = dot(t, t);
+    if t2 == 0.0 {
+        return [0.0; 3];
+    }
+    let s = (len2 / t2).sqrt();
+    [t[0] * s, t[1] * s, t[2] * s]
+}
+
+/// Tangential force on particle 1 from the spring displacement `u` (of 2 relative to 1), updated
+/// with the tangential relative velocity over `dt`, limited to `mu * fn` (Coulomb, eq. 2.3).
+/// Returns the force; `u` is left consistent with it (slip shortens the spring).
+#[inline(always)]
+pub fn spring_slider(u: &mut Vec3, n: Vec3, rel_velocity: Vec3, dt: f64, kt: f64, mu: f64, fn_: f64) -> Vec3 {
+    let r = rotate_into_plane(*u, n);
+    let vn = dot(rel_velocity, n);
+    let vt = [rel_velocity[0] - vn * n[0], rel_velocity[1] - vn * n[1], rel_velocity[2] - vn * n[2]];
+    let mut s = [r[0] + vt[0] * dt, r[1] + vt[1] * dt, r[2] + vt[2] * dt];
+    let mut f = [kt * s[0], kt * s[1], kt * s[2]];
+    let limit = mu * fn_;
+    let norm = dot(f, f).sqrt();
+    if norm > limit {
+        let scale = if norm > 0.0 { limit / norm } else { 0.0 };
+        f = [f[0] * scale, f[1] * scale, f[2] * scale];
+        s = if kt > 0.0 { [f[0] / kt, f[1] / kt, f[2] / kt] } else { [0.0; 3] };
+    }
+    *u = s;
+    f
+}
+
+/// Elastic-perfectly plastic resistance to a relative rotation: the rotation `theta` grows with
+/// `omega dt`, the moment `k theta` is capped at `limit` (and `theta` shortened to match).
+#[inline(always)]
+pub fn rotational_spring(theta: &mut Vec3, omega: Vec3, dt: f64, k: f64, limit: f64) -> Vec3 {
+    let mut t = [theta[0] + omega[0] * dt, theta[1] + omega[1] * dt, theta[2] + omega[2] * dt];
+    let mut m = [k * t[0], k * t[1], k * t[2]];
+    let norm = dot(m, m).sqrt();
+    if norm > limit {
+        let scale = if norm > 0.0 { limit / norm } else { 0.0 };
+        m = [m[0] * scale, m[1] * scale, m[2] * scale];
+        t = if k > 0.0 { [m[0] / k, m[1] / k, m[2] / k] } else { [0.0; 3] };
+    }
+    *theta = t;
+    m
+}

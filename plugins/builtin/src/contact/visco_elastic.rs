@@ -1,0 +1,100 @@
+//! `visco_elastic`: linear spring and dashpot in the normal direction, clamped at zero
+//! (eqs. 2.2 and 2.40), tangential spring with Coulomb friction (2.3, 2.41). The dashpot `c_n`
+//! is derived per pair from a target restitution coefficient `e_n` and the pair's effective mass,
+//! following Schwager & Pöschel (2007), as YADE's ViscElPhys does.
+
+use super::linear::{read_friction, Springs, STIFFNESS_SPECS};
+use super::restitution::damping_ratio;
+use super::tangential::{dot, spring_slider};
+use super::Ranged;
+use granite_core::ext::{ContactBatch, ContactLaw, ContactLawFactory, PairInfo};
+use granite_core::params::{ParamSpec, Params};
+use granite_core::Result;
+
+pub struct ViscoElasticFactory;
+
+const SPECS: &[ParamSpec] = &[
+    STIFFNESS_SPECS[0],
+    STIFFNESS_SPECS[1],
+    STIFFNESS_SPECS[2],
+    STIFFNESS_SPECS[3],
+    ParamSpec::optional("friction", 0.0, "inter-particle friction angle in degrees, [0, 90)"),
+    ParamSpec::unset("friction_max", "upper bound: friction drawn per contact pair in [friction, friction_max]"),
+    ParamSpec::required("restitution", "normal restitution coefficient e_n in (0, 1]"),
+    ParamSpec::unset("restitution_max", "upper bound: e_n drawn per contact pair in [restitution, restitution_max]"),
+];
+
+struct ViscoElastic {
+    params: Params,
+    springs: Springs,
+    friction: Ranged,
+    restitution: Ranged,
+}
+
+impl ContactLawFactory for ViscoElasticFactory {
+    fn name(&self) -> &str {
+        "visco_elastic"
+    }
+    fn param_specs(&self) -> &[ParamSpec] {
+        SPECS
+    }
+    fn description(&self) -> &str {
+        "linear spring-dashpot from a restitution coefficient (Schwager & Poschel 2007) + Coulomb friction"
+    }
+    fn build(&self, params: Params) -> Result<Box<dyn ContactLaw>> {
+        let springs = Springs::read(&params)?;
+        let friction = read_friction(&params)?;
+        let restitution = Ranged::read(&params, "restitution");
+        restitution.check(&params, "restitution", 1e-6, 1.0)?;
+        Ok(Box::new(ViscoElastic { params, springs, friction, restitution }))
+    }
+}
+
+impl ContactLaw for ViscoElastic {
+    fn name(&self) -> &str {
+        "visco_elastic"
+    }
+    fn params(&self) -> &Params {
+        &self.params
+    }
+    fn param_count(&self) -> usize {
+        4
+    }
+    fn history_count(&self) -> usize {
+        3
+    }
+    fn init_pair(&self, info: &PairInfo, out: &mut [f64]) {
+        let (kn, kt) = self.springs.of(info);
+        let m = info.effective_mass();
+        let x = damping_ratio(self.restitution.draw(info.seed, 1));
+        out[0] = kn;
+        out[1] = kt;
+        out[2] = self.friction.draw(info.seed, 0).to_radians().tan();
+        // c_n = 2 m* beta, beta = x w0, w0 = sqrt(kn / m*).
+        out[3] = 2.0 * m * x * (kn / m).sqrt();
+    }
+    fn max_normal_stiffness(&self, info: &PairInfo) -> f64 {
+        self.springs.of(info).0
+    }
+    fn compute(&self, b: ContactBatch<'_>) {
+        let (ps, hs) = (4, 3);
+        for c in 0..b.len() {
+            let p = &b.params[c * ps..c * ps + ps];
+            let (kn, kt, mu, cn) = (p[0], p[1], p[2], p[3]);
+            let n = b.normal[c];
+            // Overlap rate: particle 2 approaching particle 1 means a negative normal velocity.
+            let rate = -dot(b.rel_velocity[c], n);
+            let fn_ = (kn * b.overlap[c] + cn * rate).max(0.0);
+            let h = &mut b.history[c * hs..c * hs + hs];
+            let mut u = [h[0], h[1], h[2]];
+            let ft = spring_slider(&mut u, n, b.rel_velocity[c], b.dt, kt, mu, fn_);
+            h.copy_from_slice(&u);
+            b.force[c] = [ft[0] - fn_ * n[0], ft[1] - fn_ * n[1], ft[2] - fn_ * n[2]];
+            b.moment[c] = [0.0; 3];
+        }
+    }
+    fn elastic_energy(&self, overlap: f64, p: &[f64], h: &[f64]) -> f64 {
+        let u = [h[0], h[1], h[2]];
+        0.5 * p[0] * overlap * overlap + 0.5 * p[1] * dot(u, u)
+    }
+}
