@@ -112,3 +112,80 @@ pub fn mpm(points: usize, steps: usize, threads: &[usize]) -> Result<()> {
     measure("2D Mohr-Coulomb column (table 5.1)", threads, steps, &|| mohr_coulomb_column(cell))?;
     Ok(())
 }
+
+/// The gravity-deposition scene of the DEM benchmark (see scripts/dem/gravity_deposition.rhai).
+pub fn gravity_deposition(count: usize) -> Result<granite_core::dem::DemSim> {
+    use granite_core::dem::generate::lattice;
+    use granite_core::dem::walls::{Wall, WallShape};
+    let reg = crate::registry();
+    let (r, rho, young) = (0.01, 2600.0, 1.0e7);
+    let spacing = 2.2 * r;
+    let side = ((count as f64 / 2.0).cbrt().ceil() as usize).max(1);
+    let lx = side as f64 * spacing;
+    let lz = (count as f64 / (side * side) as f64).ceil() * spacing;
+    let mut sim = granite_core::dem::DemSim::new();
+    sim.seed = 1;
+    sim.skin = 0.5 * r;
+    let m = sim.add_material("glass", rho)?;
+    sim.set_contact_law(
+        reg.build_contact_law("linear", &params(&[("young", young), ("kt_ratio", 0.3), ("friction", 30.0)]))?,
+        None,
+    )?;
+    let top = lz + 2.0 * spacing;
+    for (a, upper) in [(0, false), (0, true), (1, false), (1, true), (2, false)] {
+        let mut n = [0.0; 3];
+        n[a] = if upper { -1.0 } else { 1.0 };
+        let position = if upper { [lx, lx, top] } else { [0.0; 3] };
+        sim.add_wall(Wall {
+            name: String::new(),
+            shape: WallShape::Plane { normal: n },
+            position,
+            velocity: [0.0; 3],
+            material: m,
+            force: [0.0; 3],
+        });
+    }
+    for (x, radius) in lattice([0.0; 3], [lx, lx, lz], spacing, r, 0.05 * r, 1)? {
+        sim.add_sphere(m, x, radius, [0.0; 3])?;
+    }
+    sim.gravity = [0.0, 0.0, -9.81];
+    sim.damping = 0.4;
+    sim.set_dt(0.5 * r * (rho / young).sqrt())?;
+    Ok(sim)
+}
+
+/// `granite bench dem`: particle-steps per second of gravity deposition (2000 timed steps after
+/// 200 of warm-up, as in the protocol).
+pub fn dem(counts: &[usize], steps: usize, threads: &[usize]) -> Result<()> {
+    println!("granite bench dem: gravity deposition (linear law, Cundall 0.4, skin 0.5 r)");
+    for &count in counts {
+        let mut base = None;
+        for &n in threads {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(n)
+                .build()
+                .map_err(|e| GraniteError::Other(format!("thread pool: {e}")))?;
+            let (secs, particles, rebuilds, contacts) = pool.install(|| -> Result<(f64, usize, u64, usize)> {
+                let mut sim = gravity_deposition(count)?;
+                for _ in 0..200 {
+                    sim.step()?;
+                }
+                let before = sim.rebuilds;
+                let t = Instant::now();
+                for _ in 0..steps {
+                    sim.step()?;
+                }
+                Ok((t.elapsed().as_secs_f64(), sim.spheres.len(), sim.rebuilds - before, sim.pairs.touching_count()))
+            })?;
+            let rate = particles as f64 * steps as f64 / secs;
+            let speedup = base.map(|b: f64| rate / b).unwrap_or(1.0);
+            base.get_or_insert(rate);
+            println!(
+                "N = {particles:>6}  threads {n}  {steps} steps  {secs:>7.3} s  {:>7.2} M particle-steps/s  {:>6.2} M/s per thread  speed-up {speedup:.2}x  ({rebuilds} list rebuilds, {contacts} contacts at the end)",
+                rate / 1e6,
+                rate / 1e6 / n as f64
+            );
+        }
+    }
+    Ok(())
+}

@@ -39,6 +39,12 @@ enum Command {
         /// Steps to time.
         #[arg(long, default_value_t = 50)]
         steps: usize,
+        /// DEM: particle counts, comma separated.
+        #[arg(long, default_value = "10000,50000", value_delimiter = ',')]
+        particles: Vec<usize>,
+        /// DEM: timed steps (after 200 of warm-up).
+        #[arg(long, default_value_t = 2000)]
+        dem_steps: usize,
         /// Thread counts to measure, comma separated.
         #[arg(long, default_value = "1,2", value_delimiter = ',')]
         threads: Vec<usize>,
@@ -71,16 +77,23 @@ fn main() -> ExitCode {
                 }
             }
         }
-        Command::Bench { which, points, steps, threads } => match which.as_str() {
-            "mpm" => match granite::bench::mpm(points, steps, &threads) {
-                Ok(()) => ExitCode::SUCCESS,
-                Err(e) => {
-                    eprintln!("granite: bench failed: {e}");
-                    ExitCode::FAILURE
+        Command::Bench { which, points, steps, particles, dem_steps, threads } => match which.as_str() {
+            "mpm" | "dem" => {
+                let result = if which == "mpm" {
+                    granite::bench::mpm(points, steps, &threads)
+                } else {
+                    granite::bench::dem(&particles, dem_steps, &threads)
+                };
+                match result {
+                    Ok(()) => ExitCode::SUCCESS,
+                    Err(e) => {
+                        eprintln!("granite: bench failed: {e}");
+                        ExitCode::FAILURE
+                    }
                 }
-            },
+            }
             other => {
-                eprintln!("granite: unknown benchmark `{other}`; available: mpm");
+                eprintln!("granite: unknown benchmark `{other}`; available: mpm, dem");
                 ExitCode::from(2)
             }
         },

@@ -243,8 +243,8 @@ struct PairChunk<'a> {
     overlap: &'a mut [f64],
 }
 
-/// Runs `body` on chunks of a pair list in parallel.
-fn for_each_chunk(pairs: &mut PairList, (ps, hs): (usize, usize), body: impl Fn(PairChunk<'_>) + Sync) {
+/// Runs `body` on chunks of a pair list in parallel, with a scratch buffer per worker.
+fn for_each_chunk(pairs: &mut PairList, (ps, hs): (usize, usize), body: impl Fn(PairChunk<'_>, &mut Scratch) + Sync) {
     let PairList { a, b, law, params, history, touching, force, torque_a, torque_b, overlap, .. } = pairs;
     (
         a.par_chunks(CHUNK),
@@ -261,21 +261,26 @@ fn for_each_chunk(pairs: &mut PairList, (ps, hs): (usize, usize), body: impl Fn(
         .into_par_iter()
         .with_min_len(MIN_CHUNKS_PER_TASK)
         .enumerate()
-        .for_each(|(j, (a, b, law, params, history, touching, force, torque_a, torque_b, overlap))| {
-            body(PairChunk {
-                first: j * CHUNK,
-                a,
-                b,
-                law,
-                params,
-                history,
-                touching,
-                force,
-                torque_a,
-                torque_b,
-                overlap,
-            })
-        });
+        .for_each_init(
+            Scratch::new,
+            |scratch, (j, (a, b, law, params, history, touching, force, torque_a, torque_b, overlap))| {
+                scratch.len = 0;
+                let chunk = PairChunk {
+                    first: j * CHUNK,
+                    a,
+                    b,
+                    law,
+                    params,
+                    history,
+                    touching,
+                    force,
+                    torque_a,
+                    torque_b,
+                    overlap,
+                };
+                body(chunk, scratch)
+            },
+        );
 }
 
 /// Writes the law results of a chunk back to its pairs, with lever-arm torques.
@@ -291,19 +296,22 @@ fn write_back(c: &mut PairChunk<'_>, s: &Scratch, hs: usize) {
 }
 
 fn open_contact(c: &mut PairChunk<'_>, k: usize, hs: usize, overlap: f64) {
+    c.overlap[k] = overlap;
+    // Pairs that were already apart are clean: skip the writes (most candidates, most steps).
+    if !c.touching[k] {
+        return;
+    }
     c.touching[k] = false;
     c.force[k] = [0.0; 3];
     c.torque_a[k] = [0.0; 3];
     c.torque_b[k] = [0.0; 3];
-    c.overlap[k] = overlap;
     c.history[k * hs..(k + 1) * hs].iter_mut().for_each(|h| *h = 0.0);
 }
 
 /// Sphere-sphere geometry (`sphere_sphere`) and contact forces.
 fn sphere_contacts(sp: &Spheres, pairs: &mut PairList, laws: &[Box<dyn ContactLaw>], dt: f64, strides: (usize, usize)) {
     let (ps, hs) = strides;
-    for_each_chunk(pairs, strides, |mut c| {
-        let mut s = Scratch::new();
+    for_each_chunk(pairs, strides, |mut c, s| {
         for k in 0..c.a.len() {
             let (i, j) = (c.a[k] as usize, c.b[k] as usize);
             let d = sub(sp.x[j], sp.x[i]);
@@ -337,7 +345,7 @@ fn sphere_contacts(sp: &Spheres, pairs: &mut PairList, laws: &[Box<dyn ContactLa
             s.len += 1;
         }
         s.run_laws(laws, dt, strides);
-        write_back(&mut c, &s, hs);
+        write_back(&mut c, s, hs);
     });
 }
 
@@ -351,8 +359,7 @@ fn wall_contacts(
     strides: (usize, usize),
 ) {
     let (ps, hs) = strides;
-    for_each_chunk(pairs, strides, |mut c| {
-        let mut s = Scratch::new();
+    for_each_chunk(pairs, strides, |mut c, s| {
         for k in 0..c.a.len() {
             let (i, w) = (c.a[k] as usize, c.b[k] as usize);
             let wall = &walls[w];
@@ -382,7 +389,7 @@ fn wall_contacts(
             s.len += 1;
         }
         s.run_laws(laws, dt, strides);
-        write_back(&mut c, &s, hs);
+        write_back(&mut c, s, hs);
     });
 }
 

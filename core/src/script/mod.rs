@@ -4,6 +4,7 @@
 //! Rhai is called at set-up and from callbacks every N steps, never per material point.
 
 pub mod convert;
+mod dem_api;
 pub mod driver;
 mod mpm_api;
 mod output;
@@ -140,6 +141,7 @@ fn build_engine(ctx: &Arc<ScriptContext>) -> Engine {
     engine.register_fn("out_dir", move || c.options.out_dir.display().to_string());
     engine.register_fn("print_line", |s: &str| println!("{s}"));
     mpm_api::register(&mut engine, ctx);
+    dem_api::register(&mut engine, ctx);
     engine
 }
 

@@ -1,0 +1,471 @@
+//! The `dem(...)` simulation object of scripts and its methods.
+
+use super::convert::{err, get, integer, number, numbers, only_keys, param_map, string, vector, OrRhai, RhaiResult};
+use super::driver::{register_common, Handle, ScriptSim};
+use super::ScriptContext;
+use crate::dem::generate::{cloud, lattice, Psd};
+use crate::dem::particles::dof;
+use crate::dem::walls::{Wall, WallShape};
+use crate::dem::DemSim;
+use crate::error::{GraniteError, Result};
+use crate::io::vtk::Field;
+use crate::math::Vec3;
+use rhai::{Array, Dynamic, Engine, FnPtr, Map};
+use std::io::Write;
+use std::path::Path;
+use std::sync::Arc;
+
+/// A DEM simulation as scripts see it.
+pub struct DemScene {
+    pub dem: DemSim,
+    /// Wall velocity components driven by script functions: (wall, axis).
+    driven: Vec<(usize, usize)>,
+    /// The skin was left to its default (half the smallest radius, as YADE).
+    auto_skin: bool,
+}
+
+pub type DemHandle = Handle<DemScene>;
+
+/// A DEM material created by `sim.material(...)`.
+#[derive(Clone)]
+pub struct DemMaterialHandle {
+    index: u16,
+    name: String,
+}
+
+/// Everything a whole-state snapshot needs.
+pub struct DemSnapshot {
+    spheres: crate::dem::Spheres,
+    walls: Vec<Wall>,
+    time: f64,
+    step: u64,
+}
+
+impl ScriptSim for DemScene {
+    type Snapshot = DemSnapshot;
+
+    fn validate(&self) -> Result<()> {
+        self.dem.validate()
+    }
+    fn advance(&mut self) -> Result<()> {
+        if self.auto_skin {
+            let r_min = self.dem.spheres.radius.iter().cloned().fold(f64::INFINITY, f64::min);
+            if r_min.is_finite() {
+                self.dem.skin = 0.5 * r_min;
+            }
+            self.auto_skin = false;
+        }
+        self.dem.step()
+    }
+    fn time(&self) -> f64 {
+        self.dem.time
+    }
+    fn steps(&self) -> u64 {
+        self.dem.step
+    }
+    fn dt(&self) -> f64 {
+        self.dem.dt
+    }
+    fn series_row(&self) -> (Vec<&'static str>, Vec<f64>) {
+        let d = self.dem.diagnostics();
+        let cols = vec![
+            "step",
+            "time",
+            "kinetic_energy",
+            "elastic_energy",
+            "gravitational_energy",
+            "total_energy",
+            "unbalanced_force",
+            "contacts",
+            "wall_contacts",
+            "coordination",
+            "coordination_no_rattlers",
+            "rattlers",
+            "particles",
+            "max_height",
+        ];
+        let vals = vec![
+            self.dem.step as f64,
+            self.dem.time,
+            d.kinetic_energy,
+            d.elastic_energy,
+            d.gravitational_energy,
+            d.kinetic_energy + d.elastic_energy + d.gravitational_energy,
+            d.unbalanced_force,
+            d.contacts as f64,
+            d.wall_contacts as f64,
+            d.coordination,
+            d.coordination_no_rattlers,
+            d.rattlers as f64,
+            d.particles as f64,
+            d.max_height,
+        ];
+        (cols, vals)
+    }
+    fn vtk_frame(&self) -> (Vec<Vec3>, Vec<Field>) {
+        let s = &self.dem.spheres;
+        let counts = self.dem.contact_counts();
+        let field = |name: &str, components: usize, values: Vec<f64>| Field { name: name.into(), components, values };
+        let fields = vec![
+            field("id", 1, s.id.iter().map(|&i| i as f64).collect()),
+            field("radius", 1, s.radius.clone()),
+            field("material", 1, s.material.iter().map(|&m| m as f64).collect()),
+            field("velocity", 3, s.v.iter().flatten().copied().collect()),
+            field("angular_velocity", 3, s.w.iter().flatten().copied().collect()),
+            field("force", 3, s.force.iter().flatten().copied().collect()),
+            field("contacts", 1, counts.iter().map(|&c| c as f64).collect()),
+        ];
+        (s.x.clone(), fields)
+    }
+    fn write_points(&self, path: &Path) -> Result<()> {
+        let f = std::fs::File::create(path).map_err(|e| GraniteError::io(path, e))?;
+        let mut w = std::io::BufWriter::new(f);
+        let io = |e| GraniteError::io(path, e);
+        writeln!(w, "id,material,x,y,z,radius,vx,vy,vz,wx,wy,wz,contacts").map_err(io)?;
+        let s = &self.dem.spheres;
+        let counts = self.dem.contact_counts();
+        for i in 0..s.len() {
+            let mut row = vec![s.id[i] as f64, s.material[i] as f64];
+            row.extend(s.x[i]);
+            row.push(s.radius[i]);
+            row.extend(s.v[i]);
+            row.extend(s.w[i]);
+            row.push(counts[i] as f64);
+            let line = row.iter().map(|v| v.to_string()).collect::<Vec<_>>().join(",");
+            writeln!(w, "{line}").map_err(|e| GraniteError::io(path, e))?;
+        }
+        w.flush().map_err(|e| GraniteError::io(path, e))
+    }
+    fn diagnostics(&self) -> Vec<(&'static str, f64)> {
+        let (cols, vals) = self.series_row();
+        cols.into_iter().zip(vals).collect()
+    }
+    fn snapshot(&self) -> DemSnapshot {
+        DemSnapshot {
+            spheres: self.dem.spheres.clone(),
+            walls: self.dem.walls.clone(),
+            time: self.dem.time,
+            step: self.dem.step,
+        }
+    }
+    fn restore(&mut self, s: DemSnapshot) {
+        self.dem.spheres = s.spheres;
+        self.dem.walls = s.walls;
+        self.dem.time = s.time;
+        self.dem.step = s.step;
+        self.dem.pairs = Default::default();
+        self.dem.wall_pairs = Default::default();
+        let _ = self.dem.rebuild_candidates();
+    }
+    fn drain_events(&mut self) -> Vec<String> {
+        self.dem.events.drain(..).collect()
+    }
+    fn set_driven(&mut self, target: usize, value: f64) {
+        if let Some(&(w, axis)) = self.driven.get(target) {
+            if let Some(wall) = self.dem.walls.get_mut(w) {
+                wall.velocity[axis] = value;
+            }
+        }
+    }
+}
+
+fn unit(v: Vec3, name: &str) -> RhaiResult<Vec3> {
+    let n = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+    if !(n > 0.0) {
+        return err(format!("`{name}` must be a non-zero vector"));
+    }
+    Ok([v[0] / n, v[1] / n, v[2] / n])
+}
+
+fn psd_from(opts: &Map) -> RhaiResult<Psd> {
+    if let Some(p) = get(opts, "psd") {
+        let m = p.clone().try_cast::<Map>().ok_or_else(|| {
+            super::convert::to_rhai(GraniteError::Setup(
+                "`psd` must be a map #{ diameters: [...], passing: [...] }".into(),
+            ))
+        })?;
+        let diameters = numbers(get(&m, "diameters").unwrap_or(&Dynamic::UNIT), "psd.diameters")?;
+        let passing = numbers(get(&m, "passing").unwrap_or(&Dynamic::UNIT), "psd.passing")?;
+        let psd = Psd::Table { diameters, passing };
+        psd.validate().or_rhai()?;
+        return Ok(psd);
+    }
+    match get(opts, "radius") {
+        Some(r) if r.is_array() => {
+            let v = numbers(r, "radius")?;
+            if v.len() != 2 {
+                return err("`radius` is a number or a [min, max] pair");
+            }
+            let psd = Psd::Uniform { min: v[0], max: v[1] };
+            psd.validate().or_rhai()?;
+            Ok(psd)
+        }
+        Some(r) => {
+            let r = number(r, "radius")?;
+            let psd = Psd::Uniform { min: r, max: r };
+            psd.validate().or_rhai()?;
+            Ok(psd)
+        }
+        None => err("give the particle sizes: `radius` (number or [min, max]) or `psd`"),
+    }
+}
+
+impl Handle<DemScene> {
+    fn create(ctx: Arc<ScriptContext>, opts: Map) -> RhaiResult<DemHandle> {
+        only_keys(&opts, &["seed", "skin"], "dem options")?;
+        let mut dem = DemSim::new();
+        if let Some(s) = get(&opts, "seed") {
+            dem.seed = integer(s, "seed")? as u64;
+        }
+        let auto_skin = match get(&opts, "skin") {
+            Some(s) => {
+                dem.skin = number(s, "skin")?;
+                if !(dem.skin >= 0.0) {
+                    return err(format!("`skin` must be >= 0, got {}", dem.skin));
+                }
+                false
+            }
+            None => true,
+        };
+        Ok(Handle::new(DemScene { dem, driven: Vec::new(), auto_skin }, ctx))
+    }
+
+    fn material(&mut self, opts: Map) -> RhaiResult<DemMaterialHandle> {
+        only_keys(&opts, &["name", "density"], "DEM material")?;
+        let mut st = self.lock();
+        let density = number(get(&opts, "density").unwrap_or(&Dynamic::UNIT), "density")?;
+        let name = match get(&opts, "name") {
+            Some(n) => string(n, "name")?,
+            None => format!("material_{}", st.sim.dem.materials.len() + 1),
+        };
+        let index = st.sim.dem.add_material(&name, density).or_rhai()?;
+        Ok(DemMaterialHandle { index, name })
+    }
+
+    fn contact_law(&mut self, law: &str, pair: Option<(u16, u16)>, opts: Map) -> RhaiResult<()> {
+        let mut st = self.lock();
+        let params = param_map(&opts, &[], law)?;
+        let law = st.ctx.registry.build_contact_law(law, &params).or_rhai()?;
+        st.sim.dem.set_contact_law(law, pair).or_rhai()
+    }
+
+    fn add_generated(&mut self, m: &DemMaterialHandle, spheres: Vec<(Vec3, f64)>) -> RhaiResult<i64> {
+        let mut st = self.lock();
+        for (x, r) in &spheres {
+            st.sim.dem.add_sphere(m.index, *x, *r, [0.0; 3]).or_rhai()?;
+        }
+        Ok(spheres.len() as i64)
+    }
+
+    fn add_wall(&mut self, mat: &DemMaterialHandle, name: String, shape: WallShape, position: Vec3) -> i64 {
+        let wall = Wall { name, shape, position, velocity: [0.0; 3], material: mat.index, force: [0.0; 3] };
+        self.lock().sim.dem.add_wall(wall) as i64
+    }
+
+    fn wall_index(&self, w: i64) -> RhaiResult<usize> {
+        let n = self.lock().sim.dem.walls.len();
+        if w < 0 || w as usize >= n {
+            return err(format!("wall index {w} out of range 0..{n}"));
+        }
+        Ok(w as usize)
+    }
+}
+
+pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
+    engine.register_type_with_name::<DemHandle>("DemSim");
+    engine.register_type_with_name::<DemMaterialHandle>("DemMaterial");
+    register_common::<DemScene>(engine);
+    engine.register_get("name", |m: &mut DemMaterialHandle| m.name.clone());
+    let c = ctx.clone();
+    engine.register_fn("dem", move |opts: Map| DemHandle::create(c.clone(), opts));
+    let c = ctx.clone();
+    engine.register_fn("dem", move || DemHandle::create(c.clone(), Map::new()));
+    engine.register_fn("material", |s: &mut DemHandle, opts: Map| s.material(opts));
+    engine.register_fn("contact_law", |s: &mut DemHandle, law: &str, opts: Map| s.contact_law(law, None, opts));
+    engine.register_fn(
+        "contact_law",
+        |s: &mut DemHandle, law: &str, a: DemMaterialHandle, b: DemMaterialHandle, opts: Map| {
+            s.contact_law(law, Some((a.index, b.index)), opts)
+        },
+    );
+    fn sphere(s: &mut DemHandle, m: DemMaterialHandle, x: Dynamic, r: Dynamic, opts: Map) -> RhaiResult<i64> {
+        only_keys(&opts, &["velocity", "fixed"], "sphere options")?;
+        let x = vector(&x, 3, "position")?;
+        let r = number(&r, "radius")?;
+        let v = match get(&opts, "velocity") {
+            Some(v) => vector(v, 3, "velocity")?,
+            None => [0.0; 3],
+        };
+        let mut st = s.lock();
+        let i = st.sim.dem.add_sphere(m.index, x, r, v).or_rhai()?;
+        if let Some(f) = get(&opts, "fixed") {
+            if f.as_bool().unwrap_or(false) {
+                st.sim.dem.spheres.blocked[i] = dof::ALL;
+            }
+        }
+        Ok(i as i64)
+    }
+    engine.register_fn("sphere", sphere);
+    engine.register_fn("sphere", |s: &mut DemHandle, m: DemMaterialHandle, x: Dynamic, r: Dynamic| {
+        sphere(s, m, x, r, Map::new())
+    });
+    engine.register_fn("cloud", |s: &mut DemHandle, m: DemMaterialHandle, lo: Dynamic, hi: Dynamic, opts: Map| {
+        only_keys(&opts, &["count", "radius", "psd", "seed"], "cloud options")?;
+        let (lo, hi) = (vector(&lo, 3, "lower corner")?, vector(&hi, 3, "upper corner")?);
+        let count = integer(get(&opts, "count").unwrap_or(&Dynamic::UNIT), "count")?;
+        if count < 0 {
+            return err(format!("`count` must be >= 0, got {count}"));
+        }
+        let psd = psd_from(&opts)?;
+        let (seed, existing) = {
+            let st = s.lock();
+            let seed = match get(&opts, "seed") {
+                Some(v) => integer(v, "seed")? as u64,
+                None => st.sim.dem.seed,
+            };
+            let sp = &st.sim.dem.spheres;
+            (seed, sp.x.iter().copied().zip(sp.radius.iter().copied()).collect::<Vec<_>>())
+        };
+        let made = cloud(lo, hi, count as usize, &psd, seed, &existing).or_rhai()?;
+        s.add_generated(&m, made)
+    });
+    engine.register_fn("lattice", |s: &mut DemHandle, m: DemMaterialHandle, lo: Dynamic, hi: Dynamic, opts: Map| {
+        only_keys(&opts, &["spacing", "radius", "jitter", "seed"], "lattice options")?;
+        let (lo, hi) = (vector(&lo, 3, "lower corner")?, vector(&hi, 3, "upper corner")?);
+        let spacing = number(get(&opts, "spacing").unwrap_or(&Dynamic::UNIT), "spacing")?;
+        let radius = number(get(&opts, "radius").unwrap_or(&Dynamic::UNIT), "radius")?;
+        let jitter = match get(&opts, "jitter") {
+            Some(j) => number(j, "jitter")?,
+            None => 0.0,
+        };
+        let seed = match get(&opts, "seed") {
+            Some(v) => integer(v, "seed")? as u64,
+            None => s.lock().sim.dem.seed,
+        };
+        let made = lattice(lo, hi, spacing, radius, jitter, seed).or_rhai()?;
+        s.add_generated(&m, made)
+    });
+    engine.register_fn("wall_plane", |s: &mut DemHandle, m: DemMaterialHandle, point: Dynamic, normal: Dynamic| {
+        let (p, n) = (vector(&point, 3, "point")?, unit(vector(&normal, 3, "normal")?, "normal")?);
+        Ok::<_, Box<rhai::EvalAltResult>>(s.add_wall(&m, "plane".into(), WallShape::Plane { normal: n }, p))
+    });
+    engine.register_fn(
+        "wall_rect",
+        |s: &mut DemHandle, m: DemMaterialHandle, centre: Dynamic, u: Dynamic, v: Dynamic, half: Dynamic| {
+            let c = vector(&centre, 3, "centre")?;
+            let u = unit(vector(&u, 3, "u")?, "u")?;
+            let v = unit(vector(&v, 3, "v")?, "v")?;
+            let h = numbers(&half, "half sizes")?;
+            if h.len() != 2 || !(h[0] > 0.0 && h[1] > 0.0) {
+                return err("`half sizes` must be [half_u, half_v] > 0");
+            }
+            if (u[0] * v[0] + u[1] * v[1] + u[2] * v[2]).abs() > 1e-9 {
+                return err("rectangle sides `u` and `v` must be orthogonal");
+            }
+            Ok(s.add_wall(&m, "rect".into(), WallShape::Rect { u, v, half: [h[0], h[1]] }, c))
+        },
+    );
+    engine.register_fn(
+        "wall_cylinder",
+        |s: &mut DemHandle, m: DemMaterialHandle, base: Dynamic, axis: Dynamic, radius: Dynamic, length: Dynamic| {
+            let b = vector(&base, 3, "base")?;
+            let a = unit(vector(&axis, 3, "axis")?, "axis")?;
+            let (r, l) = (number(&radius, "radius")?, number(&length, "length")?);
+            if !(r > 0.0 && l > 0.0) {
+                return err("cylinder radius and length must be > 0");
+            }
+            Ok(s.add_wall(&m, "cylinder".into(), WallShape::Cylinder { axis: a, radius: r, length: l }, b))
+        },
+    );
+    engine.register_fn("box_walls", |s: &mut DemHandle, m: DemMaterialHandle, lo: Dynamic, hi: Dynamic, opts: Map| {
+        only_keys(&opts, &["open_top"], "box_walls options")?;
+        let (lo, hi) = (vector(&lo, 3, "lower corner")?, vector(&hi, 3, "upper corner")?);
+        let open_top = get(&opts, "open_top").and_then(|d| d.as_bool().ok()).unwrap_or(false);
+        let mut out = Array::new();
+        for a in 0..3 {
+            for (upper, point) in [(false, lo), (true, hi)] {
+                if upper && a == 2 && open_top {
+                    continue;
+                }
+                let mut n = [0.0; 3];
+                n[a] = if upper { -1.0 } else { 1.0 };
+                let name = format!("{}{}", ["x", "y", "z"][a], if upper { "+" } else { "-" });
+                out.push(Dynamic::from(s.add_wall(&m, name, WallShape::Plane { normal: n }, point)));
+            }
+        }
+        Ok::<_, Box<rhai::EvalAltResult>>(out)
+    });
+    engine.register_fn("box_walls", |s: &mut DemHandle, m: DemMaterialHandle, lo: Dynamic, hi: Dynamic| {
+        let (lo, hi) = (vector(&lo, 3, "lower corner")?, vector(&hi, 3, "upper corner")?);
+        let mut out = Array::new();
+        for a in 0..3 {
+            for (upper, point) in [(false, lo), (true, hi)] {
+                let mut n = [0.0; 3];
+                n[a] = if upper { -1.0 } else { 1.0 };
+                let name = format!("{}{}", ["x", "y", "z"][a], if upper { "+" } else { "-" });
+                out.push(Dynamic::from(s.add_wall(&m, name, WallShape::Plane { normal: n }, point)));
+            }
+        }
+        Ok::<_, Box<rhai::EvalAltResult>>(out)
+    });
+    engine.register_fn("wall_velocity", |s: &mut DemHandle, w: i64, v: Dynamic| {
+        let w = s.wall_index(w)?;
+        let v = vector(&v, 3, "velocity")?;
+        s.lock().sim.dem.walls[w].velocity = v;
+        Ok::<_, Box<rhai::EvalAltResult>>(())
+    });
+    engine.register_fn("wall_velocity", |s: &mut DemHandle, w: i64, axis: &str, f: FnPtr| {
+        let w = s.wall_index(w)?;
+        let axis = super::mpm_api::axis_index(axis, 3)?;
+        let target = {
+            let mut st = s.lock();
+            st.sim.driven.push((w, axis));
+            st.sim.driven.len() - 1
+        };
+        s.drive(target, f);
+        Ok::<_, Box<rhai::EvalAltResult>>(())
+    });
+    engine.register_fn("wall_force", |s: &mut DemHandle, w: i64| {
+        let w = s.wall_index(w)?;
+        let f = s.lock().sim.dem.walls[w].force;
+        Ok::<_, Box<rhai::EvalAltResult>>(f.iter().map(|&c| Dynamic::from(c)).collect::<Array>())
+    });
+    engine.register_fn("wall_position", |s: &mut DemHandle, w: i64| {
+        let w = s.wall_index(w)?;
+        let p = s.lock().sim.dem.walls[w].position;
+        Ok::<_, Box<rhai::EvalAltResult>>(p.iter().map(|&c| Dynamic::from(c)).collect::<Array>())
+    });
+    engine.register_fn("gravity", |s: &mut DemHandle, g: Dynamic| {
+        s.lock().sim.dem.gravity = vector(&g, 3, "gravity")?;
+        Ok::<_, Box<rhai::EvalAltResult>>(())
+    });
+    engine.register_fn("damping", |s: &mut DemHandle, d: Dynamic| {
+        let d = number(&d, "damping")?;
+        if !(0.0..1.0).contains(&d) {
+            return err(format!("Cundall damping must be in [0, 1), got {d}"));
+        }
+        s.lock().sim.dem.damping = d;
+        Ok(())
+    });
+    engine.register_fn("dt", |s: &mut DemHandle, dt: Dynamic| s.lock().sim.dem.set_dt(number(&dt, "dt")?).or_rhai());
+    engine.register_fn("critical_dt", |s: &mut DemHandle| s.lock().sim.dem.critical_dt().unwrap_or(f64::INFINITY));
+    engine.register_fn("erase_outside", |s: &mut DemHandle, lo: Dynamic, hi: Dynamic| {
+        let (lo, hi) = (vector(&lo, 3, "lower corner")?, vector(&hi, 3, "upper corner")?);
+        let mut st = s.lock();
+        let keep: Vec<bool> =
+            st.sim.dem.spheres.x.iter().map(|x| (0..3).all(|a| x[a] >= lo[a] && x[a] <= hi[a])).collect();
+        let lost = keep.iter().filter(|k| !**k).count();
+        if lost > 0 {
+            st.sim.dem.remove_spheres(&keep);
+        }
+        Ok::<_, Box<rhai::EvalAltResult>>(lost as i64)
+    });
+    engine.register_fn("love_weber_stress", |s: &mut DemHandle, volume: Dynamic| {
+        let v = number(&volume, "volume")?;
+        if !(v > 0.0) {
+            return err("volume must be > 0");
+        }
+        Ok(s.lock().sim.dem.love_weber_stress(v).iter().map(|&c| Dynamic::from(c)).collect::<Array>())
+    });
+    engine.register_get("particles", |s: &mut DemHandle| s.lock().sim.dem.spheres.len() as i64);
+}
