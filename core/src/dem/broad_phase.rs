@@ -1,14 +1,18 @@
 //! Broad phase: candidate sphere pairs from a cell list, with a Verlet skin so the list stays
 //! valid until some sphere has moved more than half the skin.
 
+use crate::dem::cell::PeriodicCell;
 use crate::dem::walls::Wall;
 use crate::math::Vec3;
 use rayon::prelude::*;
 
 const MIN_PER_TASK: usize = 2048;
 
+/// A candidate pair: `(a, b, shift of b's image)`.
+pub type Candidate = (u32, u32, [i32; 3]);
+
 /// Candidate pairs `(a, b)`, `a < b`, whose gap is below `skin`; sorted by `(a, b)`.
-pub fn sphere_pairs(x: &[Vec3], radius: &[f64], skin: f64) -> Vec<(u32, u32)> {
+pub fn sphere_pairs(x: &[Vec3], radius: &[f64], skin: f64) -> Vec<Candidate> {
     let n = x.len();
     if n < 2 {
         return Vec::new();
@@ -59,7 +63,7 @@ pub fn sphere_pairs(x: &[Vec3], radius: &[f64], skin: f64) -> Vec<(u32, u32)> {
         items[fill[c] as usize] = i as u32;
         fill[c] += 1;
     }
-    let per_particle: Vec<Vec<(u32, u32)>> = (0..n)
+    let per_particle: Vec<Vec<Candidate>> = (0..n)
         .into_par_iter()
         .with_min_len(MIN_PER_TASK)
         .map(|i| {
@@ -81,7 +85,7 @@ pub fn sphere_pairs(x: &[Vec3], radius: &[f64], skin: f64) -> Vec<(u32, u32)> {
                                 [x[j as usize][0] - x[i][0], x[j as usize][1] - x[i][1], x[j as usize][2] - x[i][2]];
                             let reach = radius[i] + radius[j as usize] + skin;
                             if d[0] * d[0] + d[1] * d[1] + d[2] * d[2] < reach * reach {
-                                found.push((i as u32, j));
+                                found.push((i as u32, j, [0; 3]));
                             }
                         }
                     }
@@ -94,12 +98,100 @@ pub fn sphere_pairs(x: &[Vec3], radius: &[f64], skin: f64) -> Vec<(u32, u32)> {
     per_particle.into_iter().flatten().collect()
 }
 
+/// Candidate pairs in a periodic cell. Positions must lie in the cell (reduced coordinates in
+/// [0, 1)); the cell must be at least twice the interaction reach wide, so that at most one image
+/// of a particle is near another. Each image is found through the neighbour cell it lies in, which
+/// gives its shift directly.
+pub fn periodic_sphere_pairs(x: &[Vec3], radius: &[f64], skin: f64, cell: &PeriodicCell) -> Vec<Candidate> {
+    let n = x.len();
+    if n < 2 {
+        return Vec::new();
+    }
+    let r_max = radius.iter().cloned().fold(0.0, f64::max);
+    let reach = (2.0 * r_max + skin).max(f64::MIN_POSITIVE);
+    let widths = cell.widths();
+    let mut dims = [1usize; 3];
+    for a in 0..3 {
+        dims[a] = ((widths[a] / reach).floor() as usize).clamp(1, 1 << 10);
+    }
+    while dims[0] * dims[1] * dims[2] > (2 * n).max(27) {
+        let a = (0..3).max_by_key(|&a| dims[a]).unwrap_or(0);
+        dims[a] = (dims[a] / 2).max(1);
+    }
+    let inv = cell.inverse();
+    let reduced: Vec<Vec3> = x.iter().map(|p| cell.reduced(&inv, *p)).collect();
+    let cell_of = |s: &Vec3| -> [usize; 3] {
+        [0, 1, 2].map(|a| ((s[a].rem_euclid(1.0) * dims[a] as f64) as usize).min(dims[a] - 1))
+    };
+    let index = |c: [usize; 3]| c[0] + dims[0] * (c[1] + dims[1] * c[2]);
+    let ncells = dims[0] * dims[1] * dims[2];
+    let mut start = vec![0u32; ncells + 1];
+    let cells: Vec<usize> = reduced.iter().map(|s| index(cell_of(s))).collect();
+    for &c in &cells {
+        start[c + 1] += 1;
+    }
+    for c in 0..ncells {
+        start[c + 1] += start[c];
+    }
+    let mut fill = start.clone();
+    let mut items = vec![0u32; n];
+    for (i, &c) in cells.iter().enumerate() {
+        items[fill[c] as usize] = i as u32;
+        fill[c] += 1;
+    }
+    let per_particle: Vec<Vec<Candidate>> = (0..n)
+        .into_par_iter()
+        .with_min_len(MIN_PER_TASK)
+        .map(|i| {
+            let c = cell_of(&reduced[i]);
+            let mut found = Vec::new();
+            for dz in -1i64..=1 {
+                for dy in -1i64..=1 {
+                    for dx in -1i64..=1 {
+                        let d = [dx, dy, dz];
+                        let mut q = [0usize; 3];
+                        let mut w = [0i32; 3];
+                        for a in 0..3 {
+                            let raw = c[a] as i64 + d[a];
+                            w[a] = raw.div_euclid(dims[a] as i64) as i32;
+                            q[a] = raw.rem_euclid(dims[a] as i64) as usize;
+                        }
+                        // Dims of 1 or 2 reach the same cell through several offsets: each
+                        // offset is then a different image, and each is checked once.
+                        let k = index(q);
+                        let image = cell.shift_vector(w);
+                        for &j in &items[start[k] as usize..start[k + 1] as usize] {
+                            let j = j as usize;
+                            if j < i || (j == i && w == [0; 3]) {
+                                continue;
+                            }
+                            let dv = [
+                                x[j][0] + image[0] - x[i][0],
+                                x[j][1] + image[1] - x[i][1],
+                                x[j][2] + image[2] - x[i][2],
+                            ];
+                            let r = radius[i] + radius[j] + skin;
+                            if dv[0] * dv[0] + dv[1] * dv[1] + dv[2] * dv[2] < r * r && j != i {
+                                found.push((i as u32, j as u32, w));
+                            }
+                        }
+                    }
+                }
+            }
+            found.sort_unstable();
+            found.dedup();
+            found
+        })
+        .collect();
+    per_particle.into_iter().flatten().collect()
+}
+
 /// Candidate sphere-wall pairs `(sphere, wall)` within `skin`, sorted by sphere then wall.
-pub fn wall_pairs(x: &[Vec3], radius: &[f64], walls: &[Wall], skin: f64) -> Vec<(u32, u32)> {
+pub fn wall_pairs(x: &[Vec3], radius: &[f64], walls: &[Wall], skin: f64) -> Vec<Candidate> {
     if walls.is_empty() {
         return Vec::new();
     }
-    let per_particle: Vec<Vec<(u32, u32)>> = (0..x.len())
+    let per_particle: Vec<Vec<Candidate>> = (0..x.len())
         .into_par_iter()
         .with_min_len(MIN_PER_TASK)
         .map(|i| {
@@ -107,7 +199,7 @@ pub fn wall_pairs(x: &[Vec3], radius: &[f64], walls: &[Wall], skin: f64) -> Vec<
                 .iter()
                 .enumerate()
                 .filter(|(_, w)| w.contact(x[i], radius[i], skin).is_some())
-                .map(|(k, _)| (i as u32, k as u32))
+                .map(|(k, _)| (i as u32, k as u32, [0; 3]))
                 .collect()
         })
         .collect();
@@ -138,7 +230,7 @@ mod tests {
             for j in i + 1..x.len() {
                 let d: f64 = (0..3).map(|a| (x[j][a] - x[i][a]).powi(2)).sum::<f64>().sqrt();
                 if d < r[i] + r[j] + skin {
-                    brute.push((i as u32, j as u32));
+                    brute.push((i as u32, j as u32, [0; 3]));
                 }
             }
         }

@@ -8,6 +8,8 @@ use crate::math::Vec3;
 pub struct PairList {
     pub a: Vec<u32>,
     pub b: Vec<u32>,
+    /// Periodic image of `b` this pair involves (`x_b + h shift`); zero without a periodic cell.
+    pub shift: Vec<[i32; 3]>,
     /// Contact law of the pair (index into the simulation's law table).
     pub law: Vec<u16>,
     pub param_stride: usize,
@@ -32,6 +34,36 @@ impl PairList {
         self.a.is_empty()
     }
 
+    /// Re-sorts the pairs by `(a, b, shift)` after their shifts changed (wrapping, flipping).
+    pub fn resort(&mut self) {
+        let n = self.len();
+        let mut order: Vec<usize> = (0..n).collect();
+        order.sort_by_key(|&k| (self.a[k], self.b[k], self.shift[k]));
+        if order.iter().enumerate().all(|(i, &k)| i == k) {
+            return;
+        }
+        let (ps, hs) = (self.param_stride, self.history_stride);
+        let pick = |v: &Vec<f64>, stride: usize| -> Vec<f64> {
+            order.iter().flat_map(|&k| v[k * stride..(k + 1) * stride].iter().copied()).collect()
+        };
+        let params = pick(&self.params, ps);
+        let history = pick(&self.history, hs);
+        fn permute<T: Copy>(v: &[T], order: &[usize]) -> Vec<T> {
+            order.iter().map(|&k| v[k]).collect()
+        }
+        self.a = permute(&self.a, &order);
+        self.b = permute(&self.b, &order);
+        self.shift = permute(&self.shift, &order);
+        self.law = permute(&self.law, &order);
+        self.touching = permute(&self.touching, &order);
+        self.force = permute(&self.force, &order);
+        self.torque_a = permute(&self.torque_a, &order);
+        self.torque_b = permute(&self.torque_b, &order);
+        self.overlap = permute(&self.overlap, &order);
+        self.params = params;
+        self.history = history;
+    }
+
     pub fn touching_count(&self) -> usize {
         self.touching.iter().filter(|t| **t).count()
     }
@@ -40,7 +72,7 @@ impl PairList {
     /// in both, and calling `init(a, b, law_out, params_out)` for new ones.
     pub fn merge(
         &mut self,
-        pairs: &[(u32, u32)],
+        pairs: &[(u32, u32, [i32; 3])],
         param_stride: usize,
         history_stride: usize,
         mut init: impl FnMut(u32, u32, &mut u16, &mut [f64]),
@@ -49,6 +81,7 @@ impl PairList {
         let mut next = PairList {
             a: Vec::with_capacity(n),
             b: Vec::with_capacity(n),
+            shift: Vec::with_capacity(n),
             law: Vec::with_capacity(n),
             param_stride,
             history_stride,
@@ -63,13 +96,14 @@ impl PairList {
         let same_layout = self.param_stride == param_stride && self.history_stride == history_stride;
         let mut old = 0;
         let mut scratch = vec![0.0; param_stride];
-        for &(a, b) in pairs {
-            while old < self.a.len() && (self.a[old], self.b[old]) < (a, b) {
+        for &(a, b, shift) in pairs {
+            while old < self.a.len() && (self.a[old], self.b[old], self.shift[old]) < (a, b, shift) {
                 old += 1;
             }
             next.a.push(a);
             next.b.push(b);
-            if same_layout && old < self.a.len() && (self.a[old], self.b[old]) == (a, b) {
+            next.shift.push(shift);
+            if same_layout && old < self.a.len() && (self.a[old], self.b[old], self.shift[old]) == (a, b, shift) {
                 next.law.push(self.law[old]);
                 next.params.extend_from_slice(&self.params[old * param_stride..(old + 1) * param_stride]);
                 next.history.extend_from_slice(&self.history[old * history_stride..(old + 1) * history_stride]);

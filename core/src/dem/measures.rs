@@ -125,7 +125,11 @@ impl DemSim {
                 continue;
             }
             let (i, j) = (p.a[k] as usize, p.b[k] as usize);
-            let l: Vec3 = [0, 1, 2].map(|a| self.spheres.x[j][a] - self.spheres.x[i][a]);
+            let image = match &self.cell {
+                Some(c) => c.shift_vector(p.shift[k]),
+                None => [0.0; 3],
+            };
+            let l: Vec3 = [0, 1, 2].map(|a| self.spheres.x[j][a] + image[a] - self.spheres.x[i][a]);
             let f = p.force[k];
             for a in 0..3 {
                 for b in 0..3 {

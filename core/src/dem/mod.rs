@@ -5,6 +5,7 @@
 //! particle in a fixed order -> integration (gravity, Cundall damping, leapfrog).
 
 pub mod broad_phase;
+pub mod cell;
 pub mod contacts;
 pub mod generate;
 pub mod measures;

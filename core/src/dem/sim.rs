@@ -1,5 +1,6 @@
 //! The state of a DEM simulation and its set-up operations. The step is in `step.rs`.
 
+use crate::dem::cell::PeriodicCell;
 use crate::dem::contacts::{Adjacency, PairList};
 use crate::dem::particles::Spheres;
 use crate::dem::walls::Wall;
@@ -7,6 +8,7 @@ use crate::error::{GraniteError, Result};
 use crate::ext::{ContactLaw, PairInfo};
 use crate::math::Vec3;
 use std::collections::HashMap;
+use std::sync::Arc;
 
 #[derive(Debug, Clone)]
 pub struct DemMaterial {
@@ -19,10 +21,13 @@ pub struct DemSim {
     pub walls: Vec<Wall>,
     pub materials: Vec<DemMaterial>,
     /// Contact laws; `law_of` maps a material pair to one of them, `default_law` covers the rest.
-    pub laws: Vec<Box<dyn ContactLaw>>,
+    pub laws: Vec<Arc<dyn ContactLaw>>,
     pub law_of: HashMap<(u16, u16), u16>,
     pub default_law: Option<u16>,
     pub gravity: Vec3,
+    /// A periodic cell, or None for an open domain. Sphere velocities are then the fluctuations
+    /// around the cell's affine field `L x`.
+    pub cell: Option<PeriodicCell>,
     /// Cundall local damping (applied to the whole acceleration, gravity included, as YADE does).
     pub damping: f64,
     pub dt: f64,
@@ -38,6 +43,8 @@ pub struct DemSim {
     /// Positions (spheres) and wall positions when the candidate lists were built.
     pub(crate) x_at_build: Vec<Vec3>,
     pub(crate) walls_at_build: Vec<Vec3>,
+    /// Cell matrix when the candidate lists were built.
+    pub(crate) h_at_build: Option<nalgebra::Matrix3<f64>>,
     pub(crate) needs_rebuild: bool,
     /// Number of candidate-list rebuilds so far.
     pub rebuilds: u64,
@@ -61,6 +68,7 @@ impl DemSim {
             law_of: HashMap::new(),
             default_law: None,
             gravity: [0.0; 3],
+            cell: None,
             damping: 0.0,
             dt: 0.0,
             time: 0.0,
@@ -73,6 +81,7 @@ impl DemSim {
             wall_adjacency: Adjacency::default(),
             x_at_build: Vec::new(),
             walls_at_build: Vec::new(),
+            h_at_build: None,
             needs_rebuild: true,
             rebuilds: 0,
             events: Vec::new(),
@@ -101,7 +110,7 @@ impl DemSim {
                 }
             }
         }
-        self.laws.push(law);
+        self.laws.push(Arc::from(law));
         let idx = (self.laws.len() - 1) as u16;
         match pair {
             Some((a, b)) => {
@@ -136,6 +145,18 @@ impl DemSim {
         self.next_id += 1;
         self.needs_rebuild = true;
         Ok(self.spheres.len() - 1)
+    }
+
+    /// Makes the domain periodic with the given cell (or open again with None).
+    pub fn set_cell(&mut self, cell: Option<PeriodicCell>) {
+        self.cell = cell;
+        self.pairs = PairList::default();
+        self.needs_rebuild = true;
+    }
+
+    /// Volume the packing occupies for stress measures: the periodic cell's, if any.
+    pub fn cell_volume(&self) -> Option<f64> {
+        self.cell.as_ref().map(|c| c.volume())
     }
 
     pub fn add_wall(&mut self, wall: Wall) -> usize {

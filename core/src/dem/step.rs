@@ -1,7 +1,8 @@
 //! One DEM step as stages called in a fixed order; each is a free function that shows what it
 //! reads and writes.
 
-use crate::dem::broad_phase::{sphere_pairs, wall_pairs};
+use crate::dem::broad_phase::{periodic_sphere_pairs, sphere_pairs, wall_pairs};
+use crate::dem::cell::{shift_after_flip, PeriodicCell};
 use crate::dem::contacts::{Adjacency, PairList};
 use crate::dem::particles::{dof, Spheres};
 use crate::dem::sim::DemSim;
@@ -9,7 +10,9 @@ use crate::dem::walls::Wall;
 use crate::error::{GraniteError, Result};
 use crate::ext::{ContactBatch, ContactLaw};
 use crate::math::Vec3;
+use nalgebra::Matrix3;
 use rayon::prelude::*;
+use std::sync::Arc;
 
 /// Pairs per task and per law call.
 const CHUNK: usize = 128;
@@ -41,11 +44,22 @@ impl DemSim {
             self.rebuild_candidates()?;
         }
         let strides = (self.pairs.param_stride, self.pairs.history_stride);
-        sphere_contacts(&self.spheres, &mut self.pairs, &self.laws, self.dt, strides);
+        sphere_contacts(&self.spheres, &mut self.pairs, &self.laws, self.dt, strides, self.cell.as_ref());
         wall_contacts(&self.spheres, &self.walls, &mut self.wall_pairs, &self.laws, self.dt, strides);
         gather(&mut self.spheres, &self.pairs, &self.adjacency, &self.wall_pairs, &self.wall_adjacency);
         wall_forces(&mut self.walls, &self.wall_pairs);
-        let moved = integrate(&mut self.spheres, &self.x_at_build, self.gravity, self.damping, self.dt);
+        // The cell deforms over the step; particles follow its affine field on top of their own motion.
+        let (affine, strain_since_build) = match (&mut self.cell, &self.h_at_build) {
+            (Some(cell), Some(h0)) => {
+                let l = cell.velocity_gradient;
+                cell.deform(self.dt);
+                let f = cell.h * h0.try_inverse().unwrap_or_else(Matrix3::identity);
+                let growth = (f - Matrix3::identity()).norm();
+                (Some((l, f)), growth)
+            }
+            _ => (None, 0.0),
+        };
+        let moved = integrate(&mut self.spheres, &self.x_at_build, self.gravity, self.damping, self.dt, affine);
         let mut wall_moved: f64 = 0.0;
         for (w, at) in self.walls.iter_mut().zip(&self.walls_at_build) {
             for a in 0..3 {
@@ -71,9 +85,61 @@ impl DemSim {
                 ),
             });
         }
-        if 2.0 * moved > self.skin || moved + wall_moved > self.skin {
+        if let Some(cell) = &mut self.cell {
+            if let Some(m) = cell.flip_if_needed() {
+                for s in self.pairs.shift.iter_mut() {
+                    *s = shift_after_flip(&m, *s);
+                }
+                self.pairs.resort();
+                self.adjacency = Adjacency::build(self.spheres.len(), &self.pairs.a, Some(&self.pairs.b));
+                self.needs_rebuild = true;
+            }
+        }
+        let r_max = self.spheres.radius.iter().cloned().fold(0.0, f64::max);
+        let affine_growth = strain_since_build * (2.0 * r_max + self.skin);
+        if 2.0 * moved + affine_growth > self.skin || moved + wall_moved > self.skin {
             self.needs_rebuild = true;
         }
+        Ok(())
+    }
+
+    /// Brings periodic positions back into the cell and fixes the shifts of their pairs.
+    fn wrap_into_cell(&mut self) -> Result<()> {
+        let Some(cell) = &self.cell else { return Ok(()) };
+        let r_max = self.spheres.radius.iter().cloned().fold(0.0, f64::max);
+        let reach = 2.0 * r_max + self.skin;
+        let widths = cell.widths();
+        if widths.iter().any(|&w| w < 2.0 * reach) {
+            return Err(GraniteError::Setup(format!(
+                "periodic cell too thin: its widths {widths:?} must be at least twice the interaction reach {reach:.4e} \
+                 (largest diameter + skin)"
+            )));
+        }
+        let inv = cell.inverse();
+        let offsets: Vec<[i32; 3]> = self
+            .spheres
+            .x
+            .iter()
+            .map(|x| {
+                let s = cell.reduced(&inv, *x);
+                [s[0].floor() as i32, s[1].floor() as i32, s[2].floor() as i32]
+            })
+            .collect();
+        if offsets.iter().all(|k| *k == [0; 3]) {
+            return Ok(());
+        }
+        for (x, k) in self.spheres.x.iter_mut().zip(&offsets) {
+            let v = cell.shift_vector(*k);
+            *x = sub(*x, v);
+        }
+        let p = &mut self.pairs;
+        for i in 0..p.len() {
+            let (ka, kb) = (offsets[p.a[i] as usize], offsets[p.b[i] as usize]);
+            for a in 0..3 {
+                p.shift[i][a] += kb[a] - ka[a];
+            }
+        }
+        p.resort();
         Ok(())
     }
 
@@ -86,8 +152,12 @@ impl DemSim {
                 "a contact law uses more than {MAX_PARAMS} parameters or {MAX_HISTORY} history values per contact"
             )));
         }
+        self.wrap_into_cell()?;
         let s = &self.spheres;
-        let candidates = sphere_pairs(&s.x, &s.radius, self.skin);
+        let candidates = match &self.cell {
+            Some(cell) => periodic_sphere_pairs(&s.x, &s.radius, self.skin, cell),
+            None => sphere_pairs(&s.x, &s.radius, self.skin),
+        };
         let wall_candidates = wall_pairs(&s.x, &s.radius, &self.walls, self.skin);
         let mut missing = None;
         let mut pairs = std::mem::take(&mut self.pairs);
@@ -126,6 +196,7 @@ impl DemSim {
         self.wall_pairs = wall_list;
         self.x_at_build = self.spheres.x.clone();
         self.walls_at_build = self.walls.iter().map(|w| w.position).collect();
+        self.h_at_build = self.cell.as_ref().map(|c| c.h);
         self.needs_rebuild = false;
         self.rebuilds += 1;
         Ok(())
@@ -169,7 +240,7 @@ impl Scratch {
     }
 
     /// Calls each law present on its contacts (one call when the chunk has a single law).
-    fn run_laws(&mut self, laws: &[Box<dyn ContactLaw>], dt: f64, (ps, hs): (usize, usize)) {
+    fn run_laws(&mut self, laws: &[Arc<dyn ContactLaw>], dt: f64, (ps, hs): (usize, usize)) {
         let n = self.len;
         if n == 0 {
             return;
@@ -233,6 +304,7 @@ struct PairChunk<'a> {
     first: usize,
     a: &'a [u32],
     b: &'a [u32],
+    shift: &'a [[i32; 3]],
     law: &'a [u16],
     params: &'a [f64],
     history: &'a mut [f64],
@@ -245,10 +317,9 @@ struct PairChunk<'a> {
 
 /// Runs `body` on chunks of a pair list in parallel, with a scratch buffer per worker.
 fn for_each_chunk(pairs: &mut PairList, (ps, hs): (usize, usize), body: impl Fn(PairChunk<'_>, &mut Scratch) + Sync) {
-    let PairList { a, b, law, params, history, touching, force, torque_a, torque_b, overlap, .. } = pairs;
+    let PairList { a, b, shift, law, params, history, touching, force, torque_a, torque_b, overlap, .. } = pairs;
     (
-        a.par_chunks(CHUNK),
-        b.par_chunks(CHUNK),
+        (a.par_chunks(CHUNK), b.par_chunks(CHUNK), shift.par_chunks(CHUNK)),
         law.par_chunks(CHUNK),
         params.par_chunks(CHUNK * ps),
         history.par_chunks_mut(CHUNK * hs),
@@ -263,12 +334,13 @@ fn for_each_chunk(pairs: &mut PairList, (ps, hs): (usize, usize), body: impl Fn(
         .enumerate()
         .for_each_init(
             Scratch::new,
-            |scratch, (j, (a, b, law, params, history, touching, force, torque_a, torque_b, overlap))| {
+            |scratch, (j, ((a, b, shift), law, params, history, touching, force, torque_a, torque_b, overlap))| {
                 scratch.len = 0;
                 let chunk = PairChunk {
                     first: j * CHUNK,
                     a,
                     b,
+                    shift,
                     law,
                     params,
                     history,
@@ -308,13 +380,26 @@ fn open_contact(c: &mut PairChunk<'_>, k: usize, hs: usize, overlap: f64) {
     c.history[k * hs..(k + 1) * hs].iter_mut().for_each(|h| *h = 0.0);
 }
 
-/// Sphere-sphere geometry (`sphere_sphere`) and contact forces.
-fn sphere_contacts(sp: &Spheres, pairs: &mut PairList, laws: &[Box<dyn ContactLaw>], dt: f64, strides: (usize, usize)) {
+/// Sphere-sphere geometry (`sphere_sphere`) and contact forces; in a periodic cell the second
+/// sphere may be an image, whose velocity includes the affine field across the cell.
+fn sphere_contacts(
+    sp: &Spheres,
+    pairs: &mut PairList,
+    laws: &[Arc<dyn ContactLaw>],
+    dt: f64,
+    strides: (usize, usize),
+    cell: Option<&PeriodicCell>,
+) {
     let (ps, hs) = strides;
+    let l = cell.map(|c| c.velocity_gradient);
     for_each_chunk(pairs, strides, |mut c, s| {
         for k in 0..c.a.len() {
             let (i, j) = (c.a[k] as usize, c.b[k] as usize);
-            let d = sub(sp.x[j], sp.x[i]);
+            let image = match (cell, c.shift[k]) {
+                (Some(cell), n) if n != [0; 3] => cell.shift_vector(n),
+                _ => [0.0; 3],
+            };
+            let d = add(sub(sp.x[j], sp.x[i]), image);
             let reach = sp.radius[i] + sp.radius[j];
             let dist2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
             if dist2 >= reach * reach {
@@ -328,7 +413,12 @@ fn sphere_contacts(sp: &Spheres, pairs: &mut PairList, laws: &[Box<dyn ContactLa
             let arm_a = [n[0] * la, n[1] * la, n[2] * la];
             let arm_b = sub(arm_a, d);
             let va = add(sp.v[i], cross(sp.w[i], arm_a));
-            let vb = add(sp.v[j], cross(sp.w[j], arm_b));
+            let mut vb = add(sp.v[j], cross(sp.w[j], arm_b));
+            if let Some(l) = &l {
+                // Affine part of the relative velocity: L (x_b + h n - x_a).
+                let ld = l * nalgebra::Vector3::new(d[0], d[1], d[2]);
+                vb = add(vb, [ld[0], ld[1], ld[2]]);
+            }
             c.touching[k] = true;
             c.overlap[k] = overlap;
             let e = s.len;
@@ -354,7 +444,7 @@ fn wall_contacts(
     sp: &Spheres,
     walls: &[Wall],
     pairs: &mut PairList,
-    laws: &[Box<dyn ContactLaw>],
+    laws: &[Arc<dyn ContactLaw>],
     dt: f64,
     strides: (usize, usize),
 ) {
@@ -434,9 +524,18 @@ fn wall_forces(walls: &mut [Wall], pairs: &PairList) {
     }
 }
 
-/// Leapfrog integration with gravity and Cundall damping; returns the largest displacement since
-/// the candidate lists were built.
-fn integrate(sp: &mut Spheres, x_at_build: &[Vec3], gravity: Vec3, damping: f64, dt: f64) -> f64 {
+/// Leapfrog integration with gravity and Cundall damping. In a periodic cell (`affine` =
+/// `(L, F)`) velocities are fluctuations and positions also follow the affine field `L x`.
+/// Returns the largest displacement since the candidate lists were built, not counting the
+/// affine part `F x_build`.
+fn integrate(
+    sp: &mut Spheres,
+    x_at_build: &[Vec3],
+    gravity: Vec3,
+    damping: f64,
+    dt: f64,
+    affine: Option<(Matrix3<f64>, Matrix3<f64>)>,
+) -> f64 {
     let Spheres { x, v, w, mass, inertia, force, torque, blocked, .. } = sp;
     (
         x.par_iter_mut(),
@@ -452,6 +551,13 @@ fn integrate(sp: &mut Spheres, x_at_build: &[Vec3], gravity: Vec3, damping: f64,
         .into_par_iter()
         .with_min_len(MIN_PER_TASK)
         .map(|(x, v, w, &m, &inertia, f, t, &blocked, x0)| {
+            let lx = match &affine {
+                Some((l, _)) => {
+                    let p = l * nalgebra::Vector3::new(x[0], x[1], x[2]);
+                    [p[0], p[1], p[2]]
+                }
+                None => [0.0; 3],
+            };
             for a in 0..3 {
                 if blocked & (dof::X << a) == 0 {
                     let mut acc = f[a] / m + gravity[a];
@@ -459,14 +565,21 @@ fn integrate(sp: &mut Spheres, x_at_build: &[Vec3], gravity: Vec3, damping: f64,
                     acc *= 1.0 - damping * (acc * (v[a] + 0.5 * dt * acc)).signum();
                     v[a] += acc * dt;
                 }
-                x[a] += v[a] * dt;
+                x[a] += (v[a] + lx[a]) * dt;
                 if blocked & (dof::RX << a) == 0 {
                     let mut alpha = t[a] / inertia;
                     alpha *= 1.0 - damping * (alpha * (w[a] + 0.5 * dt * alpha)).signum();
                     w[a] += alpha * dt;
                 }
             }
-            let d = sub(*x, *x0);
+            let reference = match &affine {
+                Some((_, f)) => {
+                    let p = f * nalgebra::Vector3::new(x0[0], x0[1], x0[2]);
+                    [p[0], p[1], p[2]]
+                }
+                None => *x0,
+            };
+            let d = sub(*x, reference);
             let moved = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
             if moved.is_finite() && v.iter().all(|c| c.is_finite()) {
                 moved
