@@ -154,6 +154,11 @@ impl DemSim {
         self.needs_rebuild = true;
     }
 
+    /// Forces a rebuild of the candidate lists at the next step (after moving particles by hand).
+    pub fn needs_rebuild_for_tests(&mut self) {
+        self.needs_rebuild = true;
+    }
+
     /// Volume the packing occupies for stress measures: the periodic cell's, if any.
     pub fn cell_volume(&self) -> Option<f64> {
         self.cell.as_ref().map(|c| c.volume())
