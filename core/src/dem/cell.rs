@@ -128,3 +128,53 @@ mod tests {
         }
     }
 }
+
+/// What drives one diagonal component of the cell's velocity gradient.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum AxisGoal {
+    /// Prescribed strain rate `L_aa` (1/s; negative compresses).
+    Rate(f64),
+    /// Servo on the stress `sigma_aa` (Pa, tension positive): the strain rate is proportional to
+    /// the error, full `max_rate` when it exceeds `band` times the target.
+    Stress { target: f64, max_rate: f64 },
+}
+
+/// A stress- or strain-controlled periodic cell (like YADE's PeriTriaxController): each diagonal
+/// component of `L` follows its goal, off-diagonal components are prescribed rates.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CellControl {
+    pub axes: [AxisGoal; 3],
+    /// Prescribed off-diagonal `L_ij` (shear rates), e.g. `(0, 2, rate)` for x velocity along z.
+    pub shear: Vec<(usize, usize, f64)>,
+    /// Relative stress error at which the servo runs at full rate.
+    pub band: f64,
+}
+
+impl CellControl {
+    /// The velocity gradient for the current stress (Voigt, tension positive).
+    pub fn velocity_gradient(&self, stress: &crate::math::Voigt) -> Matrix3<f64> {
+        let mut l = Matrix3::zeros();
+        for a in 0..3 {
+            l[(a, a)] = match self.axes[a] {
+                AxisGoal::Rate(r) => r,
+                AxisGoal::Stress { target, max_rate } => {
+                    let scale = (self.band * target.abs()).max(f64::MIN_POSITIVE);
+                    // Too little compression (stress above a negative target): compress.
+                    max_rate * ((target - stress[a]) / scale).clamp(-1.0, 1.0)
+                }
+            };
+        }
+        for &(i, j, r) in &self.shear {
+            l[(i, j)] = r;
+        }
+        l
+    }
+
+    /// True when every stress-controlled axis is within `tolerance` (relative) of its target.
+    pub fn stress_reached(&self, stress: &crate::math::Voigt, tolerance: f64) -> bool {
+        (0..3).all(|a| match self.axes[a] {
+            AxisGoal::Rate(_) => true,
+            AxisGoal::Stress { target, .. } => (stress[a] - target).abs() <= tolerance * target.abs(),
+        })
+    }
+}

@@ -1,6 +1,6 @@
 //! The state of a DEM simulation and its set-up operations. The step is in `step.rs`.
 
-use crate::dem::cell::PeriodicCell;
+use crate::dem::cell::{CellControl, PeriodicCell};
 use crate::dem::contacts::{Adjacency, PairList};
 use crate::dem::particles::Spheres;
 use crate::dem::walls::Wall;
@@ -28,6 +28,10 @@ pub struct DemSim {
     /// A periodic cell, or None for an open domain. Sphere velocities are then the fluctuations
     /// around the cell's affine field `L x`.
     pub cell: Option<PeriodicCell>,
+    /// Stress/strain control of the periodic cell, applied before every step.
+    pub cell_control: Option<CellControl>,
+    /// Cell matrix strains are measured from (set with the cell, reset on demand).
+    pub cell_reference: Option<nalgebra::Matrix3<f64>>,
     /// Cundall local damping (applied to the whole acceleration, gravity included, as YADE does).
     pub damping: f64,
     pub dt: f64,
@@ -69,6 +73,8 @@ impl DemSim {
             default_law: None,
             gravity: [0.0; 3],
             cell: None,
+            cell_control: None,
+            cell_reference: None,
             damping: 0.0,
             dt: 0.0,
             time: 0.0,
@@ -149,6 +155,7 @@ impl DemSim {
 
     /// Makes the domain periodic with the given cell (or open again with None).
     pub fn set_cell(&mut self, cell: Option<PeriodicCell>) {
+        self.cell_reference = cell.as_ref().map(|c| c.h);
         self.cell = cell;
         self.pairs = PairList::default();
         self.needs_rebuild = true;
@@ -157,6 +164,21 @@ impl DemSim {
     /// Forces a rebuild of the candidate lists at the next step (after moving particles by hand).
     pub fn needs_rebuild_for_tests(&mut self) {
         self.needs_rebuild = true;
+    }
+
+    /// Logarithmic strain of the cell since its reference state: `ln(|a_i| / |a_i,0|)` along each
+    /// base vector and the volumetric strain `ln(V / V_0)`.
+    pub fn cell_strain(&self) -> Option<([f64; 3], f64)> {
+        let (cell, h0) = (self.cell.as_ref()?, self.cell_reference.as_ref()?);
+        let axial = [0, 1, 2].map(|a| (cell.h.column(a).norm() / h0.column(a).norm()).ln());
+        Some((axial, (cell.volume() / h0.determinant().abs()).ln()))
+    }
+
+    /// Void ratio of the periodic cell (thesis 5.15): `(V_cell - V_particles) / V_particles`.
+    pub fn void_ratio(&self) -> Option<f64> {
+        let v = self.cell_volume()?;
+        let vp = self.spheres.volume();
+        Some((v - vp) / vp)
     }
 
     /// Volume the packing occupies for stress measures: the periodic cell's, if any.

@@ -43,6 +43,13 @@ impl DemSim {
         if self.needs_rebuild {
             self.rebuild_candidates()?;
         }
+        if let (Some(control), Some(cell)) = (&self.cell_control, &self.cell) {
+            let stress = self.love_weber_stress(cell.volume());
+            let l = control.velocity_gradient(&stress);
+            if let Some(cell) = self.cell.as_mut() {
+                cell.velocity_gradient = l;
+            }
+        }
         let strides = (self.pairs.param_stride, self.pairs.history_stride);
         sphere_contacts(&self.spheres, &mut self.pairs, &self.laws, self.dt, strides, self.cell.as_ref());
         wall_contacts(&self.spheres, &self.walls, &mut self.wall_pairs, &self.laws, self.dt, strides);

@@ -68,7 +68,7 @@ impl ScriptSim for DemScene {
     }
     fn series_row(&self) -> (Vec<&'static str>, Vec<f64>) {
         let d = self.dem.diagnostics();
-        let cols = vec![
+        let mut cols = vec![
             "step",
             "time",
             "kinetic_energy",
@@ -84,7 +84,7 @@ impl ScriptSim for DemScene {
             "particles",
             "max_height",
         ];
-        let vals = vec![
+        let mut vals = vec![
             self.dem.step as f64,
             self.dem.time,
             d.kinetic_energy,
@@ -100,6 +100,29 @@ impl ScriptSim for DemScene {
             d.particles as f64,
             d.max_height,
         ];
+        if let (Some(volume), Some(e), Some((strain, vol_strain))) =
+            (self.dem.cell_volume(), self.dem.void_ratio(), self.dem.cell_strain())
+        {
+            let s = self.dem.love_weber_stress(volume);
+            let (p, q) = crate::math::p_q(&s);
+            cols.extend([
+                "void_ratio",
+                "p",
+                "q",
+                "sxx",
+                "syy",
+                "szz",
+                "sxy",
+                "syz",
+                "sxz",
+                "strain_x",
+                "strain_y",
+                "strain_z",
+                "volumetric_strain",
+            ]);
+            // p and q as soil mechanics plots them: compression positive.
+            vals.extend([e, -p, q, s[0], s[1], s[2], s[3], s[4], s[5], strain[0], strain[1], strain[2], vol_strain]);
+        }
         (cols, vals)
     }
     fn vtk_frame(&self) -> (Vec<Vec3>, Vec<Field>) {
@@ -468,4 +491,137 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
         Ok(s.lock().sim.dem.love_weber_stress(v).iter().map(|&c| Dynamic::from(c)).collect::<Array>())
     });
     engine.register_get("particles", |s: &mut DemHandle| s.lock().sim.dem.spheres.len() as i64);
+    register_cell(engine);
+}
+
+fn cell_axis(name: &str) -> Option<usize> {
+    match name {
+        "x" => Some(0),
+        "y" => Some(1),
+        "z" => Some(2),
+        _ => None,
+    }
+}
+
+fn voigt_array(v: &crate::math::Voigt) -> Array {
+    v.iter().map(|&c| Dynamic::from(c)).collect()
+}
+
+/// Periodic cell methods (thesis 1.1.4; YADE's Cell and PeriTriaxController).
+fn register_cell(engine: &mut Engine) {
+    use crate::dem::cell::{AxisGoal, CellControl, PeriodicCell};
+    engine.register_fn("periodic", |s: &mut DemHandle, size: Dynamic| {
+        let size = vector(&size, 3, "cell size")?;
+        if size.iter().any(|&l| !(l > 0.0)) {
+            return err("periodic cell sizes must be > 0");
+        }
+        s.lock().sim.dem.set_cell(Some(PeriodicCell::new_box(size)));
+        Ok(())
+    });
+    fn cell_of(s: &DemHandle) -> RhaiResult<crate::dem::cell::PeriodicCell> {
+        s.lock().sim.dem.cell.clone().ok_or_else(|| {
+            super::convert::to_rhai(GraniteError::Setup(
+                "this simulation has no periodic cell: call periodic([lx, ly, lz]) first".into(),
+            ))
+        })
+    }
+    engine.register_fn("cell_velocity_gradient", |s: &mut DemHandle, l: Array| {
+        cell_of(s)?;
+        if l.len() != 3 {
+            return err("the velocity gradient is a 3 x 3 array of rows [[Lxx, Lxy, Lxz], ...]");
+        }
+        let mut m = nalgebra::Matrix3::zeros();
+        for (i, row) in l.iter().enumerate() {
+            let r = numbers(row, "velocity gradient row")?;
+            if r.len() != 3 {
+                return err("each velocity gradient row has 3 entries");
+            }
+            for j in 0..3 {
+                m[(i, j)] = r[j];
+            }
+        }
+        let mut st = s.lock();
+        st.sim.dem.cell_control = None;
+        if let Some(c) = st.sim.dem.cell.as_mut() {
+            c.velocity_gradient = m;
+        }
+        Ok(())
+    });
+    engine.register_fn("cell_control", |s: &mut DemHandle, opts: Map| {
+        cell_of(s)?;
+        only_keys(&opts, &["x", "y", "z", "xy", "xz", "yz", "yx", "zx", "zy", "band"], "cell_control")?;
+        let mut axes = [AxisGoal::Rate(0.0); 3];
+        let mut shear = Vec::new();
+        let mut band = 0.05;
+        for (k, v) in &opts {
+            if k == "band" {
+                band = number(v, "band")?;
+                if !(band > 0.0) {
+                    return err("`band` must be > 0");
+                }
+                continue;
+            }
+            if k.len() == 2 {
+                let (i, j) = (cell_axis(&k[0..1]).unwrap_or(0), cell_axis(&k[1..2]).unwrap_or(0));
+                shear.push((i, j, number(v, k)?));
+                continue;
+            }
+            let a = cell_axis(k).unwrap_or(0);
+            let m = v.clone().try_cast::<Map>().ok_or_else(|| {
+                super::convert::to_rhai(GraniteError::Setup(format!(
+                    "cell_control `{k}` takes #{{ rate: 1/s }} or #{{ stress: Pa, max_rate: 1/s }}"
+                )))
+            })?;
+            axes[a] = match (get(&m, "rate"), get(&m, "stress")) {
+                (Some(r), None) => AxisGoal::Rate(number(r, "rate")?),
+                (None, Some(t)) => {
+                    let max_rate = number(get(&m, "max_rate").unwrap_or(&Dynamic::from(1.0)), "max_rate")?;
+                    if !(max_rate > 0.0) {
+                        return err("`max_rate` must be > 0");
+                    }
+                    AxisGoal::Stress { target: number(t, "stress")?, max_rate }
+                }
+                _ => return err(format!("cell_control `{k}`: give exactly one of `rate` and `stress`")),
+            };
+        }
+        s.lock().sim.dem.cell_control = Some(CellControl { axes, shear, band });
+        Ok(())
+    });
+    engine.register_fn("cell_stress", |s: &mut DemHandle| {
+        let cell = cell_of(s)?;
+        Ok::<_, Box<rhai::EvalAltResult>>(voigt_array(&s.lock().sim.dem.love_weber_stress(cell.volume())))
+    });
+    engine.register_fn("stress_reached", |s: &mut DemHandle, tolerance: Dynamic| {
+        let cell = cell_of(s)?;
+        let tol = number(&tolerance, "tolerance")?;
+        let st = s.lock();
+        let stress = st.sim.dem.love_weber_stress(cell.volume());
+        Ok::<_, Box<rhai::EvalAltResult>>(
+            st.sim.dem.cell_control.as_ref().is_some_and(|c| c.stress_reached(&stress, tol)),
+        )
+    });
+    engine.register_fn("cell_size", |s: &mut DemHandle| {
+        let cell = cell_of(s)?;
+        Ok::<_, Box<rhai::EvalAltResult>>((0..3).map(|a| Dynamic::from(cell.h.column(a).norm())).collect::<Array>())
+    });
+    engine.register_fn("cell_volume", |s: &mut DemHandle| Ok::<_, Box<rhai::EvalAltResult>>(cell_of(s)?.volume()));
+    engine.register_fn("cell_strain", |s: &mut DemHandle| {
+        cell_of(s)?;
+        let (axial, vol) = s.lock().sim.dem.cell_strain().unwrap_or(([0.0; 3], 0.0));
+        let mut m = Map::new();
+        for (k, v) in ["x", "y", "z"].iter().zip(axial) {
+            m.insert((*k).into(), Dynamic::from(v));
+        }
+        m.insert("volumetric".into(), Dynamic::from(vol));
+        Ok::<_, Box<rhai::EvalAltResult>>(m)
+    });
+    engine.register_fn("reset_cell_strain", |s: &mut DemHandle| {
+        let cell = cell_of(s)?;
+        s.lock().sim.dem.cell_reference = Some(cell.h);
+        Ok::<_, Box<rhai::EvalAltResult>>(())
+    });
+    engine.register_fn("void_ratio", |s: &mut DemHandle| {
+        cell_of(s)?;
+        Ok::<_, Box<rhai::EvalAltResult>>(s.lock().sim.dem.void_ratio().unwrap_or(f64::NAN))
+    });
 }

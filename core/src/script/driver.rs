@@ -50,13 +50,21 @@ pub struct State<S: ScriptSim> {
     pub output: Output,
     callbacks: Vec<(u64, FnPtr)>,
     driven: Vec<(usize, FnPtr)>,
+    /// Extra series columns computed by script functions.
+    columns: Vec<(String, FnPtr)>,
     last_good: Option<S::Snapshot>,
 }
 
 impl<S: ScriptSim> State<S> {
-    fn write_series(&mut self) -> Result<()> {
-        let (cols, vals) = self.sim.series_row();
-        self.output.write_series(self.sim.steps(), &cols, &vals, self.sim.series_tag())
+    /// Writes a series row with the engine's columns and already computed extra values.
+    fn write_series_row(&mut self, extra: &[f64]) -> Result<()> {
+        let (mut cols, mut vals) = self.sim.series_row();
+        let names: Vec<&str> = self.columns.iter().map(|(n, _)| n.as_str()).collect();
+        let mut all: Vec<&str> = cols.drain(..).collect();
+        all.extend(names);
+        vals.extend_from_slice(extra);
+        let tag = self.sim.series_tag();
+        self.output.write_series(self.sim.steps(), &all, &vals, tag)
     }
 
     fn write_vtk(&mut self) -> Result<()> {
@@ -117,6 +125,7 @@ impl<S: ScriptSim> Handle<S> {
             output,
             callbacks: Vec::new(),
             driven: Vec::new(),
+            columns: Vec::new(),
             last_good: None,
         })))
     }
@@ -130,6 +139,18 @@ impl<S: ScriptSim> Handle<S> {
         self.lock().driven.push((target, f));
     }
 
+    /// Writes a series row now: extra columns are script functions, called without the lock held
+    /// (they may use the simulation).
+    pub fn write_series(&self, ctx: &NativeCallContext) -> RhaiResult<()> {
+        let columns: Vec<FnPtr> = self.lock().columns.iter().map(|(_, f)| f.clone()).collect();
+        let mut extra = Vec::with_capacity(columns.len());
+        for f in columns {
+            let v = f.call_within_context::<Dynamic>(ctx, (self.clone(),))?;
+            extra.push(number(&v, "series column value")?);
+        }
+        self.lock().write_series_row(&extra).or_rhai()
+    }
+
     pub fn run(&self, ctx: &NativeCallContext, steps: u64) -> RhaiResult<()> {
         let quiet;
         {
@@ -140,10 +161,10 @@ impl<S: ScriptSim> Handle<S> {
             quiet = st.ctx.options.quiet;
             st.output.series_every.get_or_insert((steps / 500).max(1));
             st.output.vtk_every.get_or_insert((steps / 20).max(1));
-            st.write_series().or_rhai()?;
             st.write_vtk().or_rhai()?;
             st.last_good = Some(st.sim.snapshot());
         }
+        self.write_series(ctx)?;
         let progress = Progress::new(quiet, steps);
         for k in 0..steps {
             let (t, driven) = {
@@ -155,7 +176,7 @@ impl<S: ScriptSim> Handle<S> {
                 let v = f.call_within_context::<Dynamic>(ctx, (t,))?;
                 values.push(number(&v, "boundary function value")?);
             }
-            let due: Vec<FnPtr> = {
+            let (due, series_due): (Vec<FnPtr>, bool) = {
                 let mut guard = self.lock();
                 let st = &mut *guard;
                 for ((target, _), v) in driven.iter().zip(values) {
@@ -171,16 +192,21 @@ impl<S: ScriptSim> Handle<S> {
                 }
                 let step = st.sim.steps();
                 let last = k + 1 == steps;
-                if step.is_multiple_of(st.output.series_every.unwrap_or(1)) || last {
-                    st.write_series().or_rhai()?;
+                let series_due = step.is_multiple_of(st.output.series_every.unwrap_or(1)) || last;
+                if series_due {
                     st.last_good = Some(st.sim.snapshot());
                 }
                 if step.is_multiple_of(st.output.vtk_every.unwrap_or(1)) || last {
                     st.write_vtk().or_rhai()?;
                 }
                 progress.tick(k + 1, st.sim.time());
-                st.callbacks.iter().filter(|(n, _)| step.is_multiple_of(*n)).map(|(_, f)| f.clone()).collect()
+                let due =
+                    st.callbacks.iter().filter(|(n, _)| step.is_multiple_of(*n)).map(|(_, f)| f.clone()).collect();
+                (due, series_due)
             };
+            if series_due {
+                self.write_series(ctx)?;
+            }
             for f in due {
                 let _ = f.call_within_context::<Dynamic>(ctx, (self.clone(),))?;
             }
@@ -299,7 +325,15 @@ pub fn register_common<S: ScriptSim>(engine: &mut Engine) {
         let path = st.points_path(file);
         st.sim.write_points(&path).map(|_| path.display().to_string()).or_rhai()
     });
-    engine.register_fn("write_series", |s: &mut Handle<S>| s.lock().write_series().or_rhai());
+    engine.register_fn("write_series", |ctx: NativeCallContext, s: &mut Handle<S>| s.write_series(&ctx));
+    engine.register_fn("series_column", |s: &mut Handle<S>, name: &str, f: FnPtr| {
+        let mut st = s.lock();
+        if st.output.last_series_step.is_some() {
+            return err(format!("series_column(\"{name}\", ...) must come before the first run: the columns of series.csv are fixed by its first row"));
+        }
+        st.columns.push((name.to_string(), f));
+        Ok(())
+    });
     engine.register_fn("write_vtk", |s: &mut Handle<S>| s.lock().write_vtk().or_rhai());
     engine.register_get("time", |s: &mut Handle<S>| s.lock().sim.time());
     engine.register_get("step", |s: &mut Handle<S>| s.lock().sim.steps() as i64);
