@@ -154,8 +154,49 @@ pub fn gravity_deposition(count: usize) -> Result<granite_core::dem::DemSim> {
     Ok(sim)
 }
 
+/// A periodic RVE of `count` spheres (radius 1.5 mm +- 30 %) compacted to 100 kPa, ready for
+/// constant-volume simple shear at `shear_rate` (the benchmark's scene (b)).
+pub fn periodic_rve(count: usize, shear_rate: f64) -> Result<granite_core::dem::DemSim> {
+    use granite_core::dem::cell::{AxisGoal, CellControl, PeriodicCell};
+    use granite_core::dem::generate::{cloud, Psd};
+    let reg = crate::registry();
+    let (r, rho): (f64, f64) = (1.5e-3, 2650.0);
+    let solid = count as f64 * 4.0 / 3.0 * std::f64::consts::PI * r.powi(3) * 1.1;
+    let side = (solid / 0.15).cbrt();
+    let mut sim = granite_core::dem::DemSim::new();
+    sim.seed = 1;
+    sim.skin = 0.5 * 0.7 * r;
+    let m = sim.add_material("grains", rho)?;
+    let law =
+        |phi: f64| reg.build_contact_law("linear", &params(&[("young", 1e8), ("kt_ratio", 0.5), ("friction", phi)]));
+    sim.set_contact_law(law(5.0)?, None)?;
+    sim.set_cell(Some(PeriodicCell::new_box([side; 3])));
+    for (x, radius) in cloud([0.0; 3], [side; 3], count, &Psd::Uniform { min: 0.7 * r, max: 1.3 * r }, 1, &[])? {
+        sim.add_sphere(m, x, radius, [0.0; 3])?;
+    }
+    sim.damping = 0.4;
+    sim.set_dt(0.3 * sim.critical_dt().unwrap_or(1e-6))?;
+    let goal = AxisGoal::Stress { target: -1e5, max_rate: 5.0 };
+    sim.cell_control = Some(CellControl { axes: [goal; 3], shear: vec![], band: 0.05 });
+    for round in 0.. {
+        for _ in 0..500 {
+            sim.step()?;
+        }
+        let volume = sim.cell_volume().unwrap_or(1.0);
+        let stress = sim.love_weber_stress(volume);
+        let reached = sim.cell_control.as_ref().is_some_and(|c| c.stress_reached(&stress, 0.01));
+        if (reached && sim.diagnostics().unbalanced_force < 0.01) || round > 400 {
+            break;
+        }
+    }
+    sim.set_contact_law(law(30.0)?, None)?;
+    sim.cell_control =
+        Some(CellControl { axes: [AxisGoal::Rate(0.0); 3], shear: vec![(0, 2, shear_rate)], band: 0.05 });
+    Ok(sim)
+}
+
 /// `granite bench dem`: particle-steps per second of gravity deposition (2000 timed steps after
-/// 200 of warm-up, as in the protocol).
+/// 200 of warm-up, as in the protocol) and time per step of a sheared periodic RVE.
 pub fn dem(counts: &[usize], steps: usize, threads: &[usize]) -> Result<()> {
     println!("granite bench dem: gravity deposition (linear law, Cundall 0.4, skin 0.5 r)");
     for &count in counts {
@@ -186,6 +227,30 @@ pub fn dem(counts: &[usize], steps: usize, threads: &[usize]) -> Result<()> {
                 rate / 1e6 / n as f64
             );
         }
+    }
+    println!("granite bench dem: 1500-sphere periodic RVE at 100 kPa, constant-volume simple shear");
+    let mut base = None;
+    for &n in threads {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(n)
+            .build()
+            .map_err(|e| GraniteError::Other(format!("thread pool: {e}")))?;
+        let (secs, particles, contacts) = pool.install(|| -> Result<(f64, usize, usize)> {
+            let mut sim = periodic_rve(1500, 1.0)?;
+            let t = Instant::now();
+            for _ in 0..steps {
+                sim.step()?;
+            }
+            Ok((t.elapsed().as_secs_f64(), sim.spheres.len(), sim.pairs.touching_count()))
+        })?;
+        let per_step = secs / steps as f64;
+        let speedup = base.map(|b: f64| b / per_step).unwrap_or(1.0);
+        base.get_or_insert(per_step);
+        println!(
+            "N = {particles:>6}  threads {n}  {steps} steps  {:>7.4} ms per step  {:>6.2} M particle-steps/s  speed-up {speedup:.2}x  ({contacts} contacts)",
+            per_step * 1e3,
+            particles as f64 / per_step / 1e6
+        );
     }
     Ok(())
 }

@@ -2,7 +2,7 @@
 //! reads and writes.
 
 use crate::dem::broad_phase::{periodic_sphere_pairs, sphere_pairs, wall_pairs};
-use crate::dem::cell::{shift_after_flip, PeriodicCell};
+use crate::dem::cell::{shift_after_flip, AxisGoal, PeriodicCell};
 use crate::dem::contacts::{Adjacency, PairList};
 use crate::dem::particles::{dof, Spheres};
 use crate::dem::sim::DemSim;
@@ -16,8 +16,8 @@ use std::sync::Arc;
 
 /// Pairs per task and per law call.
 const CHUNK: usize = 128;
-const MIN_CHUNKS_PER_TASK: usize = 16;
-const MIN_PER_TASK: usize = 2048;
+const MIN_CHUNKS_PER_TASK: usize = 4;
+const MIN_PER_TASK: usize = 512;
 /// Most per-pair parameters / history values a contact law may use.
 pub const MAX_PARAMS: usize = 16;
 pub const MAX_HISTORY: usize = 16;
@@ -43,8 +43,10 @@ impl DemSim {
         if self.needs_rebuild {
             self.rebuild_candidates()?;
         }
+        let servo =
+            self.cell_control.as_ref().is_some_and(|c| c.axes.iter().any(|a| matches!(a, AxisGoal::Stress { .. })));
         if let (Some(control), Some(cell)) = (&self.cell_control, &self.cell) {
-            let stress = self.love_weber_stress(cell.volume());
+            let stress = if servo { self.love_weber_stress(cell.volume()) } else { [0.0; 6] };
             let l = control.velocity_gradient(&stress);
             if let Some(cell) = self.cell.as_mut() {
                 cell.velocity_gradient = l;
