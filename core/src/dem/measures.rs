@@ -60,12 +60,34 @@ impl DemSim {
         };
         let mut resultant = 0.0;
         let mut free = 0usize;
+        let cl = &self.clumps;
+        for c in 0..cl.len() {
+            let (m, v, w, x) = (cl.mass[c], cl.v[c], cl.w[c], cl.x[c]);
+            d.kinetic_energy += 0.5 * m * (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+            // Rotational energy with the world-frame inertia.
+            let rot = cl.q[c].to_rotation_matrix();
+            let ib = nalgebra::Matrix3::from_diagonal(&nalgebra::Vector3::new(
+                cl.inertia[c][0],
+                cl.inertia[c][1],
+                cl.inertia[c][2],
+            ));
+            let iw = rot.matrix() * ib * rot.matrix().transpose();
+            let wv = nalgebra::Vector3::new(w[0], w[1], w[2]);
+            d.kinetic_energy += 0.5 * wv.dot(&(iw * wv));
+            d.gravitational_energy -= m * (g[0] * x[0] + g[1] * x[1] + g[2] * x[2]);
+            let f = [cl.force[c][0] + m * g[0], cl.force[c][1] + m * g[1], cl.force[c][2] + m * g[2]];
+            resultant += (f[0] * f[0] + f[1] * f[1] + f[2] * f[2]).sqrt();
+            free += 1;
+        }
         for i in 0..n {
             let (m, v, w, x) = (s.mass[i], s.v[i], s.w[i], s.x[i]);
+            d.max_height = d.max_height.max(x[0] * up[0] + x[1] * up[1] + x[2] * up[2]);
+            if s.clump[i] != crate::dem::particles::FREE {
+                continue;
+            }
             d.kinetic_energy += 0.5 * m * (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
             d.kinetic_energy += 0.5 * s.inertia[i] * (w[0] * w[0] + w[1] * w[1] + w[2] * w[2]);
             d.gravitational_energy -= m * (g[0] * x[0] + g[1] * x[1] + g[2] * x[2]);
-            d.max_height = d.max_height.max(x[0] * up[0] + x[1] * up[1] + x[2] * up[2]);
             if s.blocked[i] & crate::dem::particles::dof::ALL == 0 {
                 let f = [s.force[i][0] + m * g[0], s.force[i][1] + m * g[1], s.force[i][2] + m * g[2]];
                 resultant += (f[0] * f[0] + f[1] * f[1] + f[2] * f[2]).sqrt();

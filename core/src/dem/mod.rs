@@ -6,6 +6,7 @@
 
 pub mod broad_phase;
 pub mod cell;
+pub mod clump;
 pub mod contacts;
 pub mod generate;
 pub mod measures;

@@ -30,7 +30,12 @@ pub struct Spheres {
     pub torque: Vec<Vec3>,
     /// Blocked degrees of freedom, see [`dof`].
     pub blocked: Vec<u8>,
+    /// Index of the clump a sphere belongs to, or [`FREE`].
+    pub clump: Vec<u32>,
 }
+
+/// `clump` value of a sphere that belongs to no clump.
+pub const FREE: u32 = u32::MAX;
 
 impl Spheres {
     pub fn len(&self) -> usize {
@@ -54,6 +59,7 @@ impl Spheres {
         self.force.push([0.0; 3]);
         self.torque.push([0.0; 3]);
         self.blocked.push(0);
+        self.clump.push(FREE);
     }
 
     /// Keeps the spheres whose flag is true, in order.
@@ -70,6 +76,7 @@ impl Spheres {
         retain_by(&mut self.force, keep);
         retain_by(&mut self.torque, keep);
         retain_by(&mut self.blocked, keep);
+        retain_by(&mut self.clump, keep);
     }
 
     pub fn volume(&self) -> f64 {

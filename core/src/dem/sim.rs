@@ -1,6 +1,7 @@
 //! The state of a DEM simulation and its set-up operations. The step is in `step.rs`.
 
 use crate::dem::cell::{CellControl, PeriodicCell};
+use crate::dem::clump::{mass_properties, Clumps};
 use crate::dem::contacts::{Adjacency, PairList};
 use crate::dem::particles::Spheres;
 use crate::dem::walls::Wall;
@@ -18,6 +19,7 @@ pub struct DemMaterial {
 
 pub struct DemSim {
     pub spheres: Spheres,
+    pub clumps: Clumps,
     pub walls: Vec<Wall>,
     pub materials: Vec<DemMaterial>,
     /// Contact laws; `law_of` maps a material pair to one of them, `default_law` covers the rest.
@@ -66,6 +68,7 @@ impl DemSim {
     pub fn new() -> DemSim {
         DemSim {
             spheres: Spheres::default(),
+            clumps: Clumps::default(),
             walls: Vec::new(),
             materials: Vec::new(),
             laws: Vec::new(),
@@ -174,10 +177,20 @@ impl DemSim {
         Some((axial, (cell.volume() / h0.determinant().abs()).ln()))
     }
 
+    /// Volume of solid: free spheres plus the union volume of each clump.
+    pub fn solid_volume(&self) -> f64 {
+        let s = &self.spheres;
+        let free: f64 = (0..s.len())
+            .filter(|&i| s.clump[i] == crate::dem::particles::FREE)
+            .map(|i| 4.0 / 3.0 * std::f64::consts::PI * s.radius[i].powi(3))
+            .sum();
+        free + self.clumps.volume.iter().sum::<f64>()
+    }
+
     /// Void ratio of the periodic cell (thesis 5.15): `(V_cell - V_particles) / V_particles`.
     pub fn void_ratio(&self) -> Option<f64> {
         let v = self.cell_volume()?;
-        let vp = self.spheres.volume();
+        let vp = self.solid_volume();
         Some((v - vp) / vp)
     }
 
@@ -192,9 +205,93 @@ impl DemSim {
         self.walls.len() - 1
     }
 
-    /// Removes spheres by mask (and the contacts they were in).
+    /// Adds a clump of spheres `(centre, radius)` (world coordinates) of one material. Mass and
+    /// inertia come from the union of the members (voxels at `resolution` per axis when they
+    /// overlap). Returns the clump index.
+    pub fn add_clump(&mut self, material: u16, members: &[(Vec3, f64)], v: Vec3, resolution: usize) -> Result<usize> {
+        let density = self
+            .materials
+            .get(material as usize)
+            .ok_or_else(|| GraniteError::Setup(format!("no material with index {material}")))?
+            .density;
+        let props = mass_properties(members, density, resolution)?;
+        let first = self.spheres.len();
+        for (x, r) in members {
+            self.add_sphere(material, *x, *r, v)?;
+        }
+        let clump = self.clumps.len() as u32;
+        let ids: Vec<u32> = (first..self.spheres.len()).map(|i| i as u32).collect();
+        for &i in &ids {
+            // Contacts of a member see the whole clump's mass (restitution, time step).
+            self.spheres.mass[i as usize] = props.mass;
+            self.spheres.clump[i as usize] = clump;
+        }
+        let positions: Vec<Vec3> = members.iter().map(|(x, _)| *x).collect();
+        self.clumps.push(&ids, &positions, &props);
+        let c = self.clumps.len() - 1;
+        self.clumps.v[c] = v;
+        Ok(c)
+    }
+
+    /// Removes spheres by mask (and the contacts they were in). A clump goes as a whole when any
+    /// of its members is removed.
     pub fn remove_spheres(&mut self, keep: &[bool]) {
-        self.spheres.retain(keep);
+        let mut keep = keep.to_vec();
+        if !self.clumps.is_empty() {
+            let mut keep_clump = vec![true; self.clumps.len()];
+            for (i, &k) in keep.iter().enumerate() {
+                let c = self.spheres.clump[i];
+                if !k && c != crate::dem::particles::FREE {
+                    keep_clump[c as usize] = false;
+                }
+            }
+            for (i, k) in keep.iter_mut().enumerate() {
+                let c = self.spheres.clump[i];
+                if c != crate::dem::particles::FREE && !keep_clump[c as usize] {
+                    *k = false;
+                }
+            }
+            // New sphere indices after compaction, then the clumps that remain.
+            let mut new_index = vec![u32::MAX; keep.len()];
+            let mut next = 0u32;
+            for (i, &k) in keep.iter().enumerate() {
+                if k {
+                    new_index[i] = next;
+                    next += 1;
+                }
+            }
+            let old = std::mem::take(&mut self.clumps);
+            let mut new_clump = vec![u32::MAX; old.len()];
+            for c in 0..old.len() {
+                if !keep_clump[c] {
+                    continue;
+                }
+                new_clump[c] = self.clumps.len() as u32;
+                if self.clumps.start.is_empty() {
+                    self.clumps.start.push(0);
+                }
+                for m in old.members_of(c) {
+                    self.clumps.members.push(new_index[old.members[m] as usize]);
+                    self.clumps.local.push(old.local[m]);
+                }
+                self.clumps.start.push(self.clumps.members.len() as u32);
+                self.clumps.x.push(old.x[c]);
+                self.clumps.v.push(old.v[c]);
+                self.clumps.w.push(old.w[c]);
+                self.clumps.q.push(old.q[c]);
+                self.clumps.mass.push(old.mass[c]);
+                self.clumps.inertia.push(old.inertia[c]);
+                self.clumps.volume.push(old.volume[c]);
+                self.clumps.force.push(old.force[c]);
+                self.clumps.torque.push(old.torque[c]);
+            }
+            for c in self.spheres.clump.iter_mut() {
+                if *c != crate::dem::particles::FREE {
+                    *c = new_clump[*c as usize];
+                }
+            }
+        }
+        self.spheres.retain(&keep);
         self.pairs = PairList::default();
         self.wall_pairs = PairList::default();
         self.needs_rebuild = true;

@@ -3,8 +3,9 @@
 
 use crate::dem::broad_phase::{periodic_sphere_pairs, sphere_pairs, wall_pairs};
 use crate::dem::cell::{shift_after_flip, AxisGoal, PeriodicCell};
+use crate::dem::clump::Clumps;
 use crate::dem::contacts::{Adjacency, PairList};
-use crate::dem::particles::{dof, Spheres};
+use crate::dem::particles::{dof, Spheres, FREE};
 use crate::dem::sim::DemSim;
 use crate::dem::walls::Wall;
 use crate::error::{GraniteError, Result};
@@ -68,7 +69,19 @@ impl DemSim {
             }
             _ => (None, 0.0),
         };
-        let moved = integrate(&mut self.spheres, &self.x_at_build, self.gravity, self.damping, self.dt, affine);
+        let mut moved = integrate(&mut self.spheres, &self.x_at_build, self.gravity, self.damping, self.dt, affine);
+        if !self.clumps.is_empty() {
+            let clump_moved = integrate_clumps(
+                &mut self.clumps,
+                &mut self.spheres,
+                &self.x_at_build,
+                self.gravity,
+                self.damping,
+                self.dt,
+                affine,
+            );
+            moved = if moved.is_nan() || clump_moved.is_nan() { f64::NAN } else { moved.max(clump_moved) };
+        }
         let mut wall_moved: f64 = 0.0;
         for (w, at) in self.walls.iter_mut().zip(&self.walls_at_build) {
             for a in 0..3 {
@@ -125,17 +138,23 @@ impl DemSim {
             )));
         }
         let inv = cell.inverse();
-        let offsets: Vec<[i32; 3]> = self
-            .spheres
-            .x
-            .iter()
-            .map(|x| {
-                let s = cell.reduced(&inv, *x);
-                [s[0].floor() as i32, s[1].floor() as i32, s[2].floor() as i32]
+        let offset_of = |x: &Vec3| {
+            let s = cell.reduced(&inv, *x);
+            [s[0].floor() as i32, s[1].floor() as i32, s[2].floor() as i32]
+        };
+        let clump_offsets: Vec<[i32; 3]> = self.clumps.x.iter().map(offset_of).collect();
+        let offsets: Vec<[i32; 3]> = (0..self.spheres.len())
+            .map(|i| match self.spheres.clump[i] {
+                FREE => offset_of(&self.spheres.x[i]),
+                c => clump_offsets[c as usize],
             })
             .collect();
         if offsets.iter().all(|k| *k == [0; 3]) {
             return Ok(());
+        }
+        for (x, k) in self.clumps.x.iter_mut().zip(&clump_offsets) {
+            let v = cell.shift_vector(*k);
+            *x = sub(*x, v);
         }
         for (x, k) in self.spheres.x.iter_mut().zip(&offsets) {
             let v = cell.shift_vector(*k);
@@ -163,10 +182,17 @@ impl DemSim {
         }
         self.wrap_into_cell()?;
         let s = &self.spheres;
-        let candidates = match &self.cell {
+        let mut candidates = match &self.cell {
             Some(cell) => periodic_sphere_pairs(&s.x, &s.radius, self.skin, cell),
             None => sphere_pairs(&s.x, &s.radius, self.skin),
         };
+        if !self.clumps.is_empty() {
+            // Members of one clump never touch each other.
+            candidates.retain(|&(a, b, _)| {
+                let ca = s.clump[a as usize];
+                ca == FREE || ca != s.clump[b as usize]
+            });
+        }
         let wall_candidates = wall_pairs(&s.x, &s.radius, &self.walls, self.skin);
         let mut missing = None;
         let mut pairs = std::mem::take(&mut self.pairs);
@@ -545,7 +571,7 @@ fn integrate(
     dt: f64,
     affine: Option<(Matrix3<f64>, Matrix3<f64>)>,
 ) -> f64 {
-    let Spheres { x, v, w, mass, inertia, force, torque, blocked, .. } = sp;
+    let Spheres { x, v, w, mass, inertia, force, torque, blocked, clump, .. } = sp;
     (
         x.par_iter_mut(),
         v.par_iter_mut(),
@@ -554,12 +580,16 @@ fn integrate(
         inertia.par_iter(),
         force.par_iter(),
         torque.par_iter(),
-        blocked.par_iter(),
+        (blocked.par_iter(), clump.par_iter()),
         x_at_build.par_iter(),
     )
         .into_par_iter()
         .with_min_len(MIN_PER_TASK)
-        .map(|(x, v, w, &m, &inertia, f, t, &blocked, x0)| {
+        .map(|(x, v, w, &m, &inertia, f, t, (&blocked, &clump), x0)| {
+            if clump != FREE {
+                // Clump members move with their clump (see integrate_clumps).
+                return 0.0;
+            }
             let lx = match &affine {
                 Some((l, _)) => {
                     let p = l * nalgebra::Vector3::new(x[0], x[1], x[2]);
@@ -597,4 +627,81 @@ fn integrate(
             }
         })
         .reduce(|| 0.0, |a: f64, b: f64| if a.is_nan() || b.is_nan() { f64::NAN } else { a.max(b) })
+}
+
+/// Rigid-body integration of the clumps (forces and torques gathered from their members), then
+/// members placed and given the clump's velocity field. Returns the largest member displacement
+/// since the candidate lists were built (affine part excluded).
+fn integrate_clumps(
+    cl: &mut Clumps,
+    sp: &mut Spheres,
+    x_at_build: &[Vec3],
+    gravity: Vec3,
+    damping: f64,
+    dt: f64,
+    affine: Option<(Matrix3<f64>, Matrix3<f64>)>,
+) -> f64 {
+    use nalgebra::{UnitQuaternion, Vector3};
+    let damp = |acc: f64, vel: f64| acc * (1.0 - damping * (acc * (vel + 0.5 * dt * acc)).signum());
+    let mut moved: f64 = 0.0;
+    for c in 0..cl.len() {
+        let xc = cl.x[c];
+        let (mut f, mut t) = ([0.0; 3], [0.0; 3]);
+        for m in cl.members_of(c) {
+            let i = cl.members[m] as usize;
+            f = add(f, sp.force[i]);
+            t = add(add(t, sp.torque[i]), cross(sub(sp.x[i], xc), sp.force[i]));
+        }
+        cl.force[c] = f;
+        cl.torque[c] = t;
+        let mass = cl.mass[c];
+        let lx = match &affine {
+            Some((l, _)) => {
+                let p = l * Vector3::new(xc[0], xc[1], xc[2]);
+                [p[0], p[1], p[2]]
+            }
+            None => [0.0; 3],
+        };
+        for a in 0..3 {
+            let acc = damp(f[a] / mass + gravity[a], cl.v[c][a]);
+            cl.v[c][a] += acc * dt;
+            cl.x[c][a] += (cl.v[c][a] + lx[a]) * dt;
+        }
+        // Euler's equations in the world frame: I w' = T - w x (I w).
+        let rot = cl.q[c].to_rotation_matrix();
+        let i_body = Matrix3::from_diagonal(&Vector3::new(cl.inertia[c][0], cl.inertia[c][1], cl.inertia[c][2]));
+        let i_world = rot.matrix() * i_body * rot.matrix().transpose();
+        let w = Vector3::new(cl.w[c][0], cl.w[c][1], cl.w[c][2]);
+        let rhs = Vector3::new(t[0], t[1], t[2]) - w.cross(&(i_world * w));
+        let alpha = i_world.try_inverse().map(|inv| inv * rhs).unwrap_or_else(Vector3::zeros);
+        for a in 0..3 {
+            cl.w[c][a] += damp(alpha[a], cl.w[c][a]) * dt;
+        }
+        let wn = Vector3::new(cl.w[c][0], cl.w[c][1], cl.w[c][2]);
+        cl.q[c] = UnitQuaternion::from_scaled_axis(wn * dt) * cl.q[c];
+        let xc = cl.x[c];
+        for m in cl.members_of(c) {
+            let i = cl.members[m] as usize;
+            let l = cl.local[m];
+            let arm = cl.q[c] * Vector3::new(l[0], l[1], l[2]);
+            let arm = [arm[0], arm[1], arm[2]];
+            sp.x[i] = add(xc, arm);
+            sp.v[i] = add(cl.v[c], cross(cl.w[c], arm));
+            sp.w[i] = cl.w[c];
+            let reference = match &affine {
+                Some((_, fm)) => {
+                    let p = fm * Vector3::new(x_at_build[i][0], x_at_build[i][1], x_at_build[i][2]);
+                    [p[0], p[1], p[2]]
+                }
+                None => x_at_build[i],
+            };
+            let d = sub(sp.x[i], reference);
+            let dist = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+            if !dist.is_finite() {
+                return f64::NAN;
+            }
+            moved = moved.max(dist);
+        }
+    }
+    moved
 }
