@@ -16,6 +16,19 @@ pub struct MassProperties {
     pub inertia: Matrix3<f64>,
 }
 
+impl MassProperties {
+    /// The same body rotated by `q` (about the origin of its coordinates) then moved by `t`.
+    pub fn transformed(&self, q: &UnitQuaternion<f64>, t: Vec3) -> MassProperties {
+        let c = q * Vector3::new(self.centroid[0], self.centroid[1], self.centroid[2]);
+        let r = q.to_rotation_matrix();
+        MassProperties {
+            centroid: [c[0] + t[0], c[1] + t[1], c[2] + t[2]],
+            inertia: r.matrix() * self.inertia * r.matrix().transpose(),
+            ..*self
+        }
+    }
+}
+
 fn overlapping(members: &[(Vec3, f64)]) -> bool {
     for i in 0..members.len() {
         for j in i + 1..members.len() {
@@ -197,6 +210,29 @@ pub fn tetrahedral_members(centre: Vec3, r_sphere: f64, r_clump: f64) -> Result<
     let s = d / 3f64.sqrt();
     let verts = [[1.0, 1.0, 1.0], [1.0, -1.0, -1.0], [-1.0, 1.0, -1.0], [-1.0, -1.0, 1.0]];
     Ok(verts.iter().map(|v| ([centre[0] + s * v[0], centre[1] + s * v[1], centre[2] + s * v[2]], r_sphere)).collect())
+}
+
+/// Rotates template members (offsets from the template centre) by a uniformly random orientation
+/// drawn from `u` (three numbers in [0, 1)), and places them around `centre`. Returns the members
+/// and the rotation.
+pub fn place_template(template: &[(Vec3, f64)], centre: Vec3, u: [f64; 3]) -> (Vec<(Vec3, f64)>, UnitQuaternion<f64>) {
+    // Shoemake's uniform random unit quaternion.
+    let (a, b) = ((1.0 - u[0]).sqrt(), u[0].sqrt());
+    let (t1, t2) = (2.0 * std::f64::consts::PI * u[1], 2.0 * std::f64::consts::PI * u[2]);
+    let q = UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(
+        b * t2.cos(),
+        a * t1.sin(),
+        a * t1.cos(),
+        b * t2.sin(),
+    ));
+    let members = template
+        .iter()
+        .map(|(x, r)| {
+            let p = q * Vector3::new(x[0], x[1], x[2]);
+            ([centre[0] + p[0], centre[1] + p[1], centre[2] + p[2]], *r)
+        })
+        .collect();
+    (members, q)
 }
 
 #[cfg(test)]

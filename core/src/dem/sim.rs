@@ -215,6 +215,21 @@ impl DemSim {
             .ok_or_else(|| GraniteError::Setup(format!("no material with index {material}")))?
             .density;
         let props = mass_properties(members, density, resolution)?;
+        let c = self.add_clump_with(material, members, &props)?;
+        self.clumps.v[c] = v;
+        Ok(c)
+    }
+
+    /// Adds a clump whose mass properties are already known (a template computed once, then
+    /// moved with [`crate::dem::clump::MassProperties::transformed`]).
+    pub fn add_clump_with(
+        &mut self,
+        material: u16,
+        members: &[(Vec3, f64)],
+        props: &crate::dem::clump::MassProperties,
+    ) -> Result<usize> {
+        let props = *props;
+        let v = [0.0; 3];
         let first = self.spheres.len();
         for (x, r) in members {
             self.add_sphere(material, *x, *r, v)?;
@@ -228,9 +243,7 @@ impl DemSim {
         }
         let positions: Vec<Vec3> = members.iter().map(|(x, _)| *x).collect();
         self.clumps.push(&ids, &positions, &props);
-        let c = self.clumps.len() - 1;
-        self.clumps.v[c] = v;
-        Ok(c)
+        Ok(self.clumps.len() - 1)
     }
 
     /// Removes spheres by mask (and the contacts they were in). A clump goes as a whole when any
