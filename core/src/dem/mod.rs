@@ -8,11 +8,13 @@ pub mod broad_phase;
 pub mod cell;
 pub mod clump;
 pub mod contacts;
+pub mod delaunay;
 pub mod generate;
 pub mod measures;
 pub mod particles;
 pub mod sim;
 pub mod step;
+pub mod voids;
 pub mod walls;
 
 pub use particles::Spheres;

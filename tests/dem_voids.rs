@@ -1,0 +1,33 @@
+//! Void ratio methods (thesis 2.3.3) against the exact value of a regular packing.
+
+use granite_core::dem::voids::{
+    grains, void_ratio_bounding_box, void_ratio_sub_volume, void_ratio_tetrahedra, SubVolume,
+};
+use granite_core::dem::DemSim;
+
+#[test]
+fn void_ratio_methods_agree_with_a_simple_cubic_packing() {
+    let (n, r) = (10, 0.01);
+    let mut sim = DemSim::new();
+    let m = sim.add_material("m", 2500.0).unwrap();
+    for i in 0..n {
+        for j in 0..n {
+            for k in 0..n {
+                let x = [(2 * i + 1) as f64 * r, (2 * j + 1) as f64 * r, (2 * k + 1) as f64 * r];
+                sim.add_sphere(m, x, r, [0.0; 3]).unwrap();
+            }
+        }
+    }
+    // Simple cubic: one sphere per cube of side 2r.
+    let exact = 8.0 / (4.0 / 3.0 * std::f64::consts::PI) - 1.0;
+    let g = grains(&sim);
+    let e_ref = void_ratio_bounding_box(&g);
+    assert!((e_ref - exact).abs() < 1e-9, "bounding box: {e_ref} vs {exact}");
+    // C = 0.8 puts the sub-volume's faces on lattice planes (0.2 L = 4 r).
+    let e_sub = void_ratio_sub_volume(&g, &SubVolume::homothetic_box(&g, 0.8), 2000, 1);
+    assert!((e_sub - exact).abs() < 0.01 * exact, "sub-volume: {e_sub} vs {exact}");
+    let (e_tet, v_tot, _) = void_ratio_tetrahedra(&g, 200, 1);
+    let hull = (2.0 * r * (n - 1) as f64).powi(3);
+    assert!((v_tot - hull).abs() < 1e-6 * hull, "tetrahedra cover {v_tot}, the hull is {hull}");
+    assert!((e_tet - exact).abs() < 0.01 * exact, "tetrahedra: {e_tet} vs {exact}");
+}
