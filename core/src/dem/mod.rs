@@ -12,6 +12,7 @@ pub mod delaunay;
 pub mod generate;
 pub mod measures;
 pub mod particles;
+pub mod repose;
 pub mod sim;
 pub mod step;
 pub mod voids;
