@@ -2,8 +2,9 @@
 
 use granite_core::dem::repose::{measure, mobilised_friction_deg, Heap};
 
-/// Grain centres (diameter d) at random positions below a planar (plane strain) or conical
-/// (axisymmetric) surface of slope `alpha`, one per (d/2)^3 on average.
+/// Grain centres (diameter d) of a heap whose outer surface is a plane (plane strain) or a cone
+/// (axisymmetric) of slope `alpha`: grains lying on the surface (centres d/2 below it, +- 5 % of
+/// d) over a random interior.
 fn heap(alpha_deg: f64, axisymmetric: bool) -> (Vec<[f64; 3]>, Heap, f64) {
     let d: f64 = 0.01;
     let slope = alpha_deg.to_radians().tan();
@@ -26,10 +27,23 @@ fn heap(alpha_deg: f64, axisymmetric: bool) -> (Vec<[f64; 3]>, Heap, f64) {
                 } else {
                     (p[0] >= 0.0 && p[0] <= w && p[1] >= 0.0 && p[1] <= depth, p[0] * slope)
                 };
-                if inside && p[2] >= 0.0 && p[2] <= height {
+                if inside && p[2] >= 0.0 && p[2] <= height - d {
                     pts.push(p);
                 }
             }
+        }
+    }
+    // The surface layer, dense enough that every surface cell holds a surface grain.
+    for _ in 0..(4.0 * w * w / (d * d)) as usize * 16 {
+        let (x, y) = ((2.0 * rand() - 1.0) * w, (2.0 * rand() - 1.0) * w);
+        let (inside, height) = if axisymmetric {
+            let r = x.hypot(y);
+            (r <= w, (w - r) * slope)
+        } else {
+            (x >= 0.0 && x <= w && y >= 0.0 && y <= depth, x * slope)
+        };
+        if inside && height > 0.5 * d {
+            pts.push([x, y, height - 0.5 * d + 0.1 * d * (rand() - 0.5)]);
         }
     }
     let heap = if axisymmetric {
