@@ -91,7 +91,7 @@ pub fn measure(positions: &[Vec3], heap: &Heap, d: f64, x_min: f64, x_max: f64) 
     let points: Vec<[f64; 2]> =
         outer_surface(positions, heap, d).into_iter().filter(|p| p[0] >= x_min && p[0] <= x_max).collect();
     let n = points.len();
-    if n < 3 {
+    if n < 5 {
         return Err(GraniteError::Setup(format!(
             "only {n} outer-surface points in [{x_min}, {x_max}]: too few to fit a slope (check the heap geometry)"
         )));

@@ -9,6 +9,8 @@ pub enum WallShape {
     /// Rectangle centred on `position`, spanned by unit vectors `u` and `v` with half-sizes `half`;
     /// touched from both sides, edges and corners included.
     Rect { u: Vec3, v: Vec3, half: [f64; 2] },
+    /// Disk centred on `position` with unit `normal` and `radius`, touched from both sides.
+    Disk { normal: Vec3, radius: f64 },
     /// Inner surface of a cylinder: axis through `position` along unit `axis`, from 0 to `length`.
     Cylinder { axis: Vec3, radius: f64, length: f64 },
 }
@@ -56,6 +58,24 @@ impl Wall {
                     self.position[0] + su * u[0] + sv * v[0],
                     self.position[1] + su * u[1] + sv * v[1],
                     self.position[2] + su * u[2] + sv * v[2],
+                ];
+                let to = [point[0] - x[0], point[1] - x[1], point[2] - x[2]];
+                let dist = dot3(to, to).sqrt();
+                let gap = dist - radius;
+                if gap > reach || dist == 0.0 {
+                    return None;
+                }
+                Some(WallContact { normal: [to[0] / dist, to[1] / dist, to[2] / dist], gap, point })
+            }
+            WallShape::Disk { normal, radius: big_r } => {
+                let h = dot3(d, *normal);
+                let inplane = [d[0] - h * normal[0], d[1] - h * normal[1], d[2] - h * normal[2]];
+                let rho = dot3(inplane, inplane).sqrt();
+                let scale = if rho > *big_r { big_r / rho } else { 1.0 };
+                let point = [
+                    self.position[0] + inplane[0] * scale,
+                    self.position[1] + inplane[1] * scale,
+                    self.position[2] + inplane[2] * scale,
                 ];
                 let to = [point[0] - x[0], point[1] - x[1], point[2] - x[2]];
                 let dist = dot3(to, to).sqrt();

@@ -454,6 +454,18 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
         },
     );
     engine.register_fn(
+        "wall_disk",
+        |s: &mut DemHandle, m: DemMaterialHandle, centre: Dynamic, normal: Dynamic, radius: Dynamic| {
+            let c = vector(&centre, 3, "centre")?;
+            let n = unit(vector(&normal, 3, "normal")?, "normal")?;
+            let r = number(&radius, "radius")?;
+            if !(r > 0.0) {
+                return err("disk radius must be > 0");
+            }
+            Ok(s.add_wall(&m, "disk".into(), WallShape::Disk { normal: n, radius: r }, c))
+        },
+    );
+    engine.register_fn(
         "wall_cylinder",
         |s: &mut DemHandle, m: DemMaterialHandle, base: Dynamic, axis: Dynamic, radius: Dynamic, length: Dynamic| {
             let b = vector(&base, 3, "base")?;
@@ -556,7 +568,9 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
         Ok(s.lock().sim.dem.love_weber_stress(v).iter().map(|&c| Dynamic::from(c)).collect::<Array>())
     });
     engine.register_get("particles", |s: &mut DemHandle| s.lock().sim.dem.spheres.len() as i64);
+    engine.register_get("clumps", |s: &mut DemHandle| s.lock().sim.dem.clumps.len() as i64);
     register_cell(engine);
+    register_measures(engine);
 }
 
 fn cell_axis(name: &str) -> Option<usize> {
@@ -688,5 +702,102 @@ fn register_cell(engine: &mut Engine) {
     engine.register_fn("void_ratio", |s: &mut DemHandle| {
         cell_of(s)?;
         Ok::<_, Box<rhai::EvalAltResult>>(s.lock().sim.dem.void_ratio().unwrap_or(f64::NAN))
+    });
+}
+
+fn range2(d: Option<&Dynamic>, name: &str) -> RhaiResult<[f64; 2]> {
+    let v = numbers(d.unwrap_or(&Dynamic::UNIT), name)?;
+    if v.len() != 2 || !(v[1] > v[0]) {
+        return err(format!("`{name}` must be [min, max] with min < max"));
+    }
+    Ok([v[0], v[1]])
+}
+
+/// Heap and packing measures (thesis 2.3.2-2.3.3, appendix A).
+fn register_measures(engine: &mut Engine) {
+    use crate::dem::repose::{measure, Heap};
+    use crate::dem::voids::{grains, void_ratio_bounding_box, void_ratio_sub_volume, void_ratio_tetrahedra, SubVolume};
+    engine.register_fn("angle_of_repose", |s: &mut DemHandle, opts: Map| {
+        only_keys(
+            &opts,
+            &["heap", "x_range", "y_range", "open_x", "centre", "radius", "z_range", "d", "x_min", "x_max"],
+            "angle_of_repose",
+        )?;
+        let kind = string(get(&opts, "heap").unwrap_or(&Dynamic::from("plane_strain")), "heap")?;
+        let d = number(get(&opts, "d").unwrap_or(&Dynamic::UNIT), "d (grain diameter)")?;
+        let heap = match kind.as_str() {
+            "plane_strain" => Heap::PlaneStrain {
+                x_range: range2(get(&opts, "x_range"), "x_range")?,
+                y_range: range2(get(&opts, "y_range"), "y_range")?,
+                open_x: number(get(&opts, "open_x").unwrap_or(&Dynamic::UNIT), "open_x")?,
+            },
+            "axisymmetric" => {
+                let c = numbers(get(&opts, "centre").unwrap_or(&Dynamic::UNIT), "centre")?;
+                if c.len() != 2 {
+                    return err("`centre` is [x, y] of the heap's axis");
+                }
+                Heap::Axisymmetric {
+                    centre: [c[0], c[1]],
+                    radius: number(get(&opts, "radius").unwrap_or(&Dynamic::UNIT), "radius")?,
+                    z_range: range2(get(&opts, "z_range"), "z_range")?,
+                }
+            }
+            other => return err(format!("`heap` is \"plane_strain\" or \"axisymmetric\", got \"{other}\"")),
+        };
+        let x_min = number(get(&opts, "x_min").unwrap_or(&Dynamic::from(0.32 * d)), "x_min")?;
+        let x_max = number(get(&opts, "x_max").unwrap_or(&Dynamic::from(f64::INFINITY)), "x_max")?;
+        let positions = s.lock().sim.dem.spheres.x.clone();
+        let r = measure(&positions, &heap, d, x_min, x_max).or_rhai()?;
+        let mut m = Map::new();
+        m.insert("angle_deg".into(), Dynamic::from(r.angle_deg));
+        m.insert("std_deg".into(), Dynamic::from(r.std_deg));
+        m.insert("slope".into(), Dynamic::from(r.linear[0]));
+        m.insert("quadratic".into(), Dynamic::from(r.quadratic.iter().map(|&c| Dynamic::from(c)).collect::<Array>()));
+        m.insert("surface_points".into(), Dynamic::from(r.points.len() as i64));
+        Ok(m)
+    });
+    engine.register_fn("void_ratio_sub_volume", |s: &mut DemHandle, opts: Map| {
+        only_keys(&opts, &["c", "n_mc", "shape", "seed"], "void_ratio_sub_volume")?;
+        let c = number(get(&opts, "c").unwrap_or(&Dynamic::from(0.8)), "c")?;
+        if !(c > 0.5 && c <= 1.0) {
+            return err(format!("`c` must be in ]0.5, 1], got {c}"));
+        }
+        let n_mc = integer(get(&opts, "n_mc").unwrap_or(&Dynamic::from(100_i64)), "n_mc")?.max(1) as usize;
+        let seed = integer(get(&opts, "seed").unwrap_or(&Dynamic::from(1_i64)), "seed")? as u64;
+        let shape = string(get(&opts, "shape").unwrap_or(&Dynamic::from("box")), "shape")?;
+        let g = grains(&s.lock().sim.dem);
+        if g.is_empty() {
+            return err("no particles to measure");
+        }
+        let sub = match shape.as_str() {
+            "box" => SubVolume::homothetic_box(&g, c),
+            "cone" => SubVolume::homothetic_cone(&g, c),
+            other => return err(format!("`shape` is \"box\" or \"cone\", got \"{other}\"")),
+        };
+        Ok(void_ratio_sub_volume(&g, &sub, n_mc, seed))
+    });
+    engine.register_fn("void_ratio_tetrahedra", |s: &mut DemHandle, opts: Map| {
+        only_keys(&opts, &["n_mc", "seed"], "void_ratio_tetrahedra")?;
+        let n_mc = integer(get(&opts, "n_mc").unwrap_or(&Dynamic::from(100_i64)), "n_mc")?.max(1) as usize;
+        let seed = integer(get(&opts, "seed").unwrap_or(&Dynamic::from(1_i64)), "seed")? as u64;
+        let g = grains(&s.lock().sim.dem);
+        if g.len() < 4 {
+            return err("the tetrahedron method needs at least 4 particles");
+        }
+        Ok::<_, Box<rhai::EvalAltResult>>(void_ratio_tetrahedra(&g, n_mc, seed).0)
+    });
+    engine.register_fn("void_ratio_bounding_box", |s: &mut DemHandle| {
+        let g = grains(&s.lock().sim.dem);
+        if g.is_empty() {
+            return err("no particles to measure");
+        }
+        Ok(void_ratio_bounding_box(&g))
+    });
+    engine.register_fn("global_stress", |s: &mut DemHandle, volume: Dynamic| {
+        let v = number(&volume, "volume")?;
+        if !(v > 0.0) {
+            return err("volume must be > 0");
+        }
+        Ok(voigt_array(&s.lock().sim.dem.global_stress_with_gravity(v)))
     });
 }
