@@ -88,9 +88,19 @@ impl Registry {
     }
 
     pub fn build_law(&self, name: &str, given: &ParamMap) -> Result<Box<dyn ConstitutiveLaw>> {
+        self.build_law_with(name, given, &Default::default())
+    }
+
+    /// Builds a law from numbers and named objects (see [`crate::ext::constitutive::ObjectMap`]).
+    pub fn build_law_with(
+        &self,
+        name: &str,
+        given: &ParamMap,
+        objects: &crate::ext::constitutive::ObjectMap,
+    ) -> Result<Box<dyn ConstitutiveLaw>> {
         let factory = self.law_factory(name)?;
         let params = Params::resolve(&format!("law \"{}\"", factory.name()), factory.param_specs(), given)?;
-        factory.build(params)
+        factory.build_with(params, objects)
     }
 
     pub fn build_velocity_update(&self, name: &str, given: &ParamMap) -> Result<Box<dyn VelocityUpdate>> {

@@ -17,6 +17,7 @@ pub struct DemMaterial {
     pub density: f64,
 }
 
+#[derive(Clone)]
 pub struct DemSim {
     pub spheres: Spheres,
     pub clumps: Clumps,
@@ -42,6 +43,8 @@ pub struct DemSim {
     /// Verlet skin: extra distance within which pairs are kept as candidates.
     pub skin: f64,
     pub seed: u64,
+    /// Run every stage on the calling thread (an RVE inside a parallel loop over material points).
+    pub sequential: bool,
     pub pairs: PairList,
     pub wall_pairs: PairList,
     pub(crate) adjacency: Adjacency,
@@ -84,6 +87,7 @@ impl DemSim {
             step: 0,
             skin: 0.0,
             seed: 0,
+            sequential: false,
             pairs: PairList::default(),
             wall_pairs: PairList::default(),
             adjacency: Adjacency::default(),
@@ -175,6 +179,26 @@ impl DemSim {
         let (cell, h0) = (self.cell.as_ref()?, self.cell_reference.as_ref()?);
         let axial = [0, 1, 2].map(|a| (cell.h.column(a).norm() / h0.column(a).norm()).ln());
         Some((axial, (cell.volume() / h0.determinant().abs()).ln()))
+    }
+
+    /// Approximate memory held by this simulation's arrays, in bytes.
+    pub fn memory_bytes(&self) -> usize {
+        let s = &self.spheres;
+        let per_sphere = std::mem::size_of::<u64>()
+            + 6 * std::mem::size_of::<Vec3>()
+            + 3 * std::mem::size_of::<f64>()
+            + std::mem::size_of::<u16>()
+            + std::mem::size_of::<u8>()
+            + std::mem::size_of::<u32>();
+        let pairs = |p: &PairList| {
+            p.a.capacity() * (2 * 4 + 12 + 2 + 1 + 3 * 24 + 8) + (p.params.capacity() + p.history.capacity()) * 8
+        };
+        s.x.capacity() * per_sphere
+            + self.x_at_build.capacity() * 24
+            + pairs(&self.pairs)
+            + pairs(&self.wall_pairs)
+            + (self.adjacency.entries.capacity() + self.adjacency.start.capacity()) * 4
+            + self.clumps.len() * 200
     }
 
     /// Volume of solid: free spheres plus the union volume of each clump.

@@ -54,9 +54,10 @@ impl DemSim {
             }
         }
         let strides = (self.pairs.param_stride, self.pairs.history_stride);
-        sphere_contacts(&self.spheres, &mut self.pairs, &self.laws, self.dt, strides, self.cell.as_ref());
-        wall_contacts(&self.spheres, &self.walls, &mut self.wall_pairs, &self.laws, self.dt, strides);
-        gather(&mut self.spheres, &self.pairs, &self.adjacency, &self.wall_pairs, &self.wall_adjacency);
+        let grain = if self.sequential { (usize::MAX, usize::MAX) } else { (MIN_PER_TASK, MIN_CHUNKS_PER_TASK) };
+        sphere_contacts(&self.spheres, &mut self.pairs, &self.laws, self.dt, strides, self.cell.as_ref(), grain);
+        wall_contacts(&self.spheres, &self.walls, &mut self.wall_pairs, &self.laws, self.dt, strides, grain);
+        gather(&mut self.spheres, &self.pairs, &self.adjacency, &self.wall_pairs, &self.wall_adjacency, grain.0);
         wall_forces(&mut self.walls, &self.wall_pairs);
         // The cell deforms over the step; particles follow its affine field on top of their own motion.
         let (affine, strain_since_build) = match (&mut self.cell, &self.h_at_build) {
@@ -69,7 +70,8 @@ impl DemSim {
             }
             _ => (None, 0.0),
         };
-        let mut moved = integrate(&mut self.spheres, &self.x_at_build, self.gravity, self.damping, self.dt, affine);
+        let mut moved =
+            integrate(&mut self.spheres, &self.x_at_build, self.gravity, self.damping, self.dt, affine, grain.0);
         if !self.clumps.is_empty() {
             let clump_moved = integrate_clumps(
                 &mut self.clumps,
@@ -351,7 +353,12 @@ struct PairChunk<'a> {
 }
 
 /// Runs `body` on chunks of a pair list in parallel, with a scratch buffer per worker.
-fn for_each_chunk(pairs: &mut PairList, (ps, hs): (usize, usize), body: impl Fn(PairChunk<'_>, &mut Scratch) + Sync) {
+fn for_each_chunk(
+    pairs: &mut PairList,
+    (ps, hs): (usize, usize),
+    min_chunks: usize,
+    body: impl Fn(PairChunk<'_>, &mut Scratch) + Sync,
+) {
     let PairList { a, b, shift, law, params, history, touching, force, torque_a, torque_b, overlap, .. } = pairs;
     (
         (a.par_chunks(CHUNK), b.par_chunks(CHUNK), shift.par_chunks(CHUNK)),
@@ -365,7 +372,7 @@ fn for_each_chunk(pairs: &mut PairList, (ps, hs): (usize, usize), body: impl Fn(
         overlap.par_chunks_mut(CHUNK),
     )
         .into_par_iter()
-        .with_min_len(MIN_CHUNKS_PER_TASK)
+        .with_min_len(min_chunks)
         .enumerate()
         .for_each_init(
             Scratch::new,
@@ -424,10 +431,11 @@ fn sphere_contacts(
     dt: f64,
     strides: (usize, usize),
     cell: Option<&PeriodicCell>,
+    grain: (usize, usize),
 ) {
     let (ps, hs) = strides;
     let l = cell.map(|c| c.velocity_gradient);
-    for_each_chunk(pairs, strides, |mut c, s| {
+    for_each_chunk(pairs, strides, grain.1, |mut c, s| {
         for k in 0..c.a.len() {
             let (i, j) = (c.a[k] as usize, c.b[k] as usize);
             let image = match (cell, c.shift[k]) {
@@ -482,9 +490,10 @@ fn wall_contacts(
     laws: &[Arc<dyn ContactLaw>],
     dt: f64,
     strides: (usize, usize),
+    grain: (usize, usize),
 ) {
     let (ps, hs) = strides;
-    for_each_chunk(pairs, strides, |mut c, s| {
+    for_each_chunk(pairs, strides, grain.1, |mut c, s| {
         for k in 0..c.a.len() {
             let (i, w) = (c.a[k] as usize, c.b[k] as usize);
             let wall = &walls[w];
@@ -519,12 +528,9 @@ fn wall_contacts(
 }
 
 /// Sums each sphere's contact forces and torques, pair by pair in increasing pair index.
-fn gather(sp: &mut Spheres, pairs: &PairList, adj: &Adjacency, walls: &PairList, wall_adj: &Adjacency) {
-    (sp.force.par_iter_mut(), sp.torque.par_iter_mut())
-        .into_par_iter()
-        .with_min_len(MIN_PER_TASK)
-        .enumerate()
-        .for_each(|(i, (f, t))| {
+fn gather(sp: &mut Spheres, pairs: &PairList, adj: &Adjacency, walls: &PairList, wall_adj: &Adjacency, min_len: usize) {
+    (sp.force.par_iter_mut(), sp.torque.par_iter_mut()).into_par_iter().with_min_len(min_len).enumerate().for_each(
+        |(i, (f, t))| {
             let mut fs = [0.0; 3];
             let mut ts = [0.0; 3];
             for &e in adj.of(i) {
@@ -545,7 +551,8 @@ fn gather(sp: &mut Spheres, pairs: &PairList, adj: &Adjacency, walls: &PairList,
             }
             *f = fs;
             *t = ts;
-        });
+        },
+    );
 }
 
 /// Force on each wall: the opposite of what it exerts on the spheres, summed in pair order.
@@ -570,6 +577,7 @@ fn integrate(
     damping: f64,
     dt: f64,
     affine: Option<(Matrix3<f64>, Matrix3<f64>)>,
+    min_len: usize,
 ) -> f64 {
     let Spheres { x, v, w, mass, inertia, force, torque, blocked, clump, .. } = sp;
     (
@@ -584,7 +592,7 @@ fn integrate(
         x_at_build.par_iter(),
     )
         .into_par_iter()
-        .with_min_len(MIN_PER_TASK)
+        .with_min_len(min_len)
         .map(|(x, v, w, &m, &inertia, f, t, (&blocked, &clump), x0)| {
             if clump != FREE {
                 // Clump members move with their clump (see integrate_clumps).

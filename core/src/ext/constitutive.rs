@@ -8,6 +8,9 @@ use crate::params::{ParamSpec, Params};
 /// The points a law updates in one call. All slices have the same number of points `n`;
 /// `state` holds `n * state_names().len()` values, point after point.
 pub struct LawBatch<'a> {
+    /// Index, within the material's points, of the first point of this batch (laws that keep
+    /// per-point objects, like an RVE, find them with it).
+    pub first: usize,
     /// Stress at the start of the increment on entry, updated stress on return (tension positive).
     pub stress: &'a mut [Voigt],
     /// Strain increment (engineering shear) of this step.
@@ -45,7 +48,20 @@ pub trait ConstitutiveLaw: Send + Sync {
     }
     /// Updates stress and state of a batch of points from their strain increments.
     fn update(&self, batch: LawBatch<'_>) -> Result<()>;
+    /// `count` points were appended to the material (laws with per-point objects create them).
+    fn points_added(&self, _count: usize) -> Result<()> {
+        Ok(())
+    }
+    /// Points of the material were removed: keep those whose flag is true, in order.
+    fn points_removed(&self, _keep: &[bool]) {}
+    /// Memory held per point by the law's own objects, in bytes (0 for plain state variables).
+    fn bytes_per_point(&self) -> usize {
+        0
+    }
 }
+
+/// Non-numeric inputs of a law by name (e.g. a prepared DEM sample for `dem_rve`).
+pub type ObjectMap = indexmap::IndexMap<String, std::sync::Arc<dyn std::any::Any + Send + Sync>>;
 
 /// Builds a law from user parameters; this is what the registry stores under the law's name.
 pub trait ConstitutiveLawFactory: Send + Sync {
@@ -53,6 +69,17 @@ pub trait ConstitutiveLawFactory: Send + Sync {
     fn param_specs(&self) -> &[ParamSpec];
     /// Validates the parameters (a clear error names any bad one) and builds the law.
     fn build(&self, params: Params) -> Result<Box<dyn ConstitutiveLaw>>;
+    /// Builds with non-numeric inputs too; laws that take none refuse any.
+    fn build_with(&self, params: Params, objects: &ObjectMap) -> Result<Box<dyn ConstitutiveLaw>> {
+        if let Some(name) = objects.keys().next() {
+            return Err(crate::GraniteError::Unknown {
+                kind: format!("input of {}", params.owner()),
+                name: name.clone(),
+                known: "numbers only".into(),
+            });
+        }
+        self.build(params)
+    }
     fn description(&self) -> &str {
         ""
     }

@@ -172,6 +172,7 @@ impl MpmSim {
         let at = self.material_range(m).end;
         self.points.insert(at, m as u32, self.next_id, &new);
         self.next_id += new.len() as u64;
+        self.materials[m].law.points_added(new.len())?;
         let material = &mut self.materials[m];
         let stride = material.state_stride();
         let mut fresh = vec![0.0; stride];
@@ -266,6 +267,7 @@ impl MpmSim {
         for m in &mut self.materials {
             let mask = &keep[start..start + m.count];
             retain_strided(&mut m.state, m.law.state_names().len(), mask);
+            m.law.points_removed(mask);
             start += m.count;
             m.count = mask.iter().filter(|&&k| k).count();
         }

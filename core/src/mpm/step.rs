@@ -500,16 +500,24 @@ fn stress_update(pts: &mut Points, materials: &mut [Material]) -> Result<()> {
         }
         let stride = m.law.state_names().len();
         let law = m.law.as_ref();
-        let stress = pts.stress[range.clone()].par_chunks_mut(CHUNK);
-        let dstrain = pts.dstrain[range].par_chunks(CHUNK);
+        // Laws with per-point objects (an RVE per point) are expensive per point: one task each.
+        let (chunk, min_chunks) = if law.bytes_per_point() > 0 { (1, 1) } else { (CHUNK, MIN_CHUNKS_PER_TASK) };
+        let stress = pts.stress[range.clone()].par_chunks_mut(chunk);
+        let dstrain = pts.dstrain[range].par_chunks(chunk);
         let results: Vec<Result<()>> = if stride == 0 {
-            stress.zip(dstrain).map(|(s, de)| law.update(LawBatch { stress: s, dstrain: de, state: &mut [] })).collect()
+            stress
+                .zip(dstrain)
+                .enumerate()
+                .with_min_len(min_chunks)
+                .map(|(j, (s, de))| law.update(LawBatch { first: j * chunk, stress: s, dstrain: de, state: &mut [] }))
+                .collect()
         } else {
             stress
                 .zip(dstrain)
-                .zip(m.state.par_chunks_mut(CHUNK * stride))
-                .with_min_len(MIN_CHUNKS_PER_TASK)
-                .map(|((s, de), state)| law.update(LawBatch { stress: s, dstrain: de, state }))
+                .zip(m.state.par_chunks_mut(chunk * stride))
+                .enumerate()
+                .with_min_len(min_chunks)
+                .map(|(j, ((s, de), state))| law.update(LawBatch { first: j * chunk, stress: s, dstrain: de, state }))
                 .collect()
         };
         if let Some(Err(e)) = results.into_iter().find(|r| r.is_err()) {

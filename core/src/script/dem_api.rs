@@ -41,6 +41,20 @@ pub struct DemSnapshot {
     step: u64,
 }
 
+impl DemScene {
+    /// A copy ready to be stepped elsewhere (e.g. as an RVE): the default skin is settled.
+    pub fn prepared(&self) -> DemSim {
+        let mut dem = self.dem.clone();
+        if self.auto_skin {
+            let r_min = dem.spheres.radius.iter().cloned().fold(f64::INFINITY, f64::min);
+            if r_min.is_finite() {
+                dem.skin = 0.5 * r_min;
+            }
+        }
+        dem
+    }
+}
+
 impl ScriptSim for DemScene {
     type Snapshot = DemSnapshot;
 

@@ -318,8 +318,18 @@ impl Handle<MpmScene> {
             Some(n) => string(n, "name")?,
             None => format!("{law}_{}", st.sim.mpm.materials.len() + 1),
         };
-        let params = param_map(&opts, &["density", "name"], law)?;
-        let law_obj = st.ctx.registry.build_law(law, &params).or_rhai()?;
+        // Values that are simulations (a prepared DEM sample for `dem_rve`) go to the law as objects.
+        let mut objects = crate::ext::constitutive::ObjectMap::new();
+        let mut skip = vec!["density", "name"];
+        for (k, v) in &opts {
+            if let Some(h) = v.clone().try_cast::<super::dem_api::DemHandle>() {
+                let dem = h.lock().sim.prepared();
+                objects.insert(k.to_string(), Arc::new(dem));
+                skip.push(k.as_str());
+            }
+        }
+        let params = param_map(&opts, &skip, law)?;
+        let law_obj = st.ctx.registry.build_law_with(law, &params, &objects).or_rhai()?;
         let index = st.sim.mpm.add_material(&name, density, law_obj).or_rhai()?;
         Ok(MaterialHandle { index, name })
     }

@@ -69,8 +69,13 @@ mod tests {
         let eps = 1e-4;
         let gamma = 2e-4;
         let mut stress = [[0.0; 6]];
-        law.update(LawBatch { stress: &mut stress, dstrain: &[[eps, 0.0, 0.0, gamma, 0.0, 0.0]], state: &mut [] })
-            .unwrap();
+        law.update(LawBatch {
+            first: 0,
+            stress: &mut stress,
+            dstrain: &[[eps, 0.0, 0.0, gamma, 0.0, 0.0]],
+            state: &mut [],
+        })
+        .unwrap();
         // Hand-derived: sigma_xx = E(1-nu)/((1+nu)(1-2nu)) eps, sigma_yy = E nu/((1+nu)(1-2nu)) eps,
         // tau_xy = E/(2(1+nu)) gamma.
         let d = (1.0 + nu) * (1.0 - 2.0 * nu);

@@ -1,5 +1,6 @@
 //! Constitutive laws (CB-Geo's materials as pure functions of stress, strain increment and state).
 
+pub mod dem_rve;
 pub mod elasticity;
 pub mod linear_elastic;
 pub mod mohr_coulomb;
@@ -10,6 +11,7 @@ use std::sync::Arc;
 pub fn register(registry: &mut Registry) {
     registry.add_law(Arc::new(linear_elastic::LinearElasticFactory));
     registry.add_law(Arc::new(mohr_coulomb::MohrCoulombFactory));
+    registry.add_law(Arc::new(dem_rve::DemRveFactory));
 }
 
 /// Resolves parameters for a law's specs in unit tests.

@@ -427,7 +427,7 @@ mod tests {
         let mut s = [[-1e4, -1e4, -1e4, 0.0, 0.0, 0.0]];
         let de = [[-1e-5, 0.0, 0.0, 1e-6, 0.0, 0.0]];
         let mut st = [0.0, 0.0];
-        mc.update(LawBatch { stress: &mut s, dstrain: &de, state: &mut st }).unwrap();
+        mc.update(LawBatch { first: 0, stress: &mut s, dstrain: &de, state: &mut st }).unwrap();
         let el = Isotropic::new(E, NU).stress_increment(&de[0]);
         for c in 0..6 {
             assert!((s[0][c] - ([-1e4, -1e4, -1e4, 0.0, 0.0, 0.0][c] + el[c])).abs() < 1e-9);
@@ -455,7 +455,7 @@ mod tests {
         let expect = [trial[0] - 2.0 * el.shear * dl, trial[1], trial[2] + 2.0 * el.shear * dl];
         let mut s = [s0];
         let mut st = [0.0, 0.0];
-        mc.update(LawBatch { stress: &mut s, dstrain: &de, state: &mut st }).unwrap();
+        mc.update(LawBatch { first: 0, stress: &mut s, dstrain: &de, state: &mut st }).unwrap();
         for i in 0..3 {
             assert!((s[0][i] - expect[i]).abs() < 1e-6 * 5e4, "component {i}: {} vs {}", s[0][i], expect[i]);
         }
@@ -474,10 +474,11 @@ mod tests {
         let s0 = [-2e4, -1e4, -1.5e4, 0.0, 0.0, 0.0];
         let de = [-1e-3, 5e-4, 0.0, 0.0, 0.0, 0.0];
         let mut a = [s0];
-        mc.update(LawBatch { stress: &mut a, dstrain: &[de], state: &mut [0.0, 0.0] }).unwrap();
+        mc.update(LawBatch { first: 0, stress: &mut a, dstrain: &[de], state: &mut [0.0, 0.0] }).unwrap();
         // Same state rotated by 90 degrees about z: xx <-> yy.
         let mut b = [[s0[1], s0[0], s0[2], 0.0, 0.0, 0.0]];
         mc.update(LawBatch {
+            first: 0,
             stress: &mut b,
             dstrain: &[[de[1], de[0], de[2], 0.0, 0.0, 0.0]],
             state: &mut [0.0, 0.0],
@@ -495,7 +496,7 @@ mod tests {
         let mut s = [[0.0; 6]];
         let de = [[1e-3, 0.0, 0.0, 0.0, 0.0, 0.0]];
         let mut st = [0.0, 0.0];
-        mc.update(LawBatch { stress: &mut s, dstrain: &de, state: &mut st }).unwrap();
+        mc.update(LawBatch { first: 0, stress: &mut s, dstrain: &de, state: &mut st }).unwrap();
         let p = principal_values(&s[0]);
         assert!((p[0] - t).abs() < 1e-6, "s1 = {} should equal T", p[0]);
         assert!(f_shear(&s[0], 30.0, c) <= 1e-6);
@@ -509,7 +510,7 @@ mod tests {
         let mut s = [[-250.0, -250.0, -250.0, 0.0, 0.0, 0.0]];
         let de = [[1e-3, 1e-3, 1e-3, 0.0, 0.0, 0.0]];
         let mut st = [0.0, 0.0];
-        mc.update(LawBatch { stress: &mut s, dstrain: &de, state: &mut st }).unwrap();
+        mc.update(LawBatch { first: 0, stress: &mut s, dstrain: &de, state: &mut st }).unwrap();
         let apex = c / phi.to_radians().tan();
         for i in 0..3 {
             assert!((s[0][i] - apex).abs() < 1e-9 * 1e4, "{} vs apex {apex}", s[0][i]);
@@ -531,8 +532,13 @@ mod tests {
         let mut s = [[-1e5, -1e5, -1e5, 0.0, 0.0, 0.0]];
         let mut st = [0.0, 0.0];
         for _ in 0..400 {
-            mc.update(LawBatch { stress: &mut s, dstrain: &[[1e-4, 0.0, -1e-4, 0.0, 0.0, 0.0]], state: &mut st })
-                .unwrap();
+            mc.update(LawBatch {
+                first: 0,
+                stress: &mut s,
+                dstrain: &[[1e-4, 0.0, -1e-4, 0.0, 0.0, 0.0]],
+                state: &mut st,
+            })
+            .unwrap();
         }
         assert!(st[0] > 0.01);
         // At residual strength (c = 0) the stress satisfies the cohesionless criterion.

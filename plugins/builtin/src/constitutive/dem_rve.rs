@@ -1,0 +1,279 @@
+//! `dem_rve`: the MPMxDEM law (thesis chapter 4). Every material point owns a periodic DEM sample
+//! (a Representative Volume Element), a copy of a prepared one. Each call deforms the RVE by the
+//! point's strain increment as a velocity gradient applied over `T_DEM` (eqs. 4.1-4.6), on top of
+//! the contact forces, and returns its Love-Weber stress (4.7), tension positive like the MPM.
+
+use granite_core::dem::DemSim;
+use granite_core::ext::constitutive::ObjectMap;
+use granite_core::ext::{ConstitutiveLaw, ConstitutiveLawFactory, LawBatch};
+use granite_core::math::Voigt;
+use granite_core::params::{ParamSpec, Params};
+use granite_core::{GraniteError, Result};
+use nalgebra::{Matrix3, SymmetricEigen};
+use std::sync::{Mutex, RwLock};
+
+pub struct DemRveFactory;
+
+const SPECS: &[ParamSpec] = &[
+    ParamSpec::optional("inertial_number", 1e-2, "I_n of eq. 4.1 (quasi-static below about 1e-2)"),
+    ParamSpec::optional(
+        "strategy",
+        1.0,
+        "1: keep dt, ceil the deformation time (eq. 4.5); 0: keep T, shorten the last step (eq. 4.4)",
+    ),
+    ParamSpec::optional("vertical_axis", 2.0, "RVE axis along gravity for P_min (eq. 4.2): 0, 1 or 2"),
+    ParamSpec::optional("gravity", 9.81, "gravity magnitude for the RVE's weight in P_min (eq. 4.2), m/s^2"),
+    ParamSpec::unset("grain_size", "characteristic grain size l of eq. 4.1 (default: mean diameter of the RVE)"),
+    ParamSpec::optional("max_dem_steps", 1e7, "most DEM steps one call may take (a safeguard)"),
+];
+
+/// What one point's RVE carries between calls.
+struct Rve {
+    sim: DemSim,
+}
+
+pub struct DemRve {
+    params: Params,
+    template: DemSim,
+    rves: RwLock<Vec<Mutex<Rve>>>,
+    inertial_number: f64,
+    keep_dt: bool,
+    vertical_axis: usize,
+    /// Grain density rho_g and size l of eq. 4.1.
+    density: f64,
+    grain_size: f64,
+    /// Weight of the RVE W^RVE of eq. 4.2.
+    weight: f64,
+    max_steps: u64,
+}
+
+impl ConstitutiveLawFactory for DemRveFactory {
+    fn name(&self) -> &str {
+        "dem_rve"
+    }
+    fn param_specs(&self) -> &[ParamSpec] {
+        SPECS
+    }
+    fn description(&self) -> &str {
+        "MPMxDEM: a periodic DEM sample per material point (needs `rve`, a prepared periodic dem())"
+    }
+    fn build(&self, params: Params) -> Result<Box<dyn ConstitutiveLaw>> {
+        self.build_with(params, &ObjectMap::new())
+    }
+    fn build_with(&self, params: Params, objects: &ObjectMap) -> Result<Box<dyn ConstitutiveLaw>> {
+        let template = objects
+            .get("rve")
+            .and_then(|o| o.downcast_ref::<DemSim>())
+            .ok_or_else(|| GraniteError::MissingParameter {
+                name: "rve".into(),
+                context: params.owner().into(),
+                expected: "a prepared periodic DEM sample: a dem() simulation with periodic(...)".into(),
+            })?
+            .clone();
+        if template.cell.is_none() {
+            return Err(GraniteError::Setup(format!("{}: the `rve` must have a periodic cell", params.owner())));
+        }
+        if template.spheres.is_empty() || template.dt <= 0.0 || template.laws.is_empty() {
+            return Err(GraniteError::Setup(format!(
+                "{}: the `rve` needs spheres, a contact law and a time step",
+                params.owner()
+            )));
+        }
+        let inertial_number = params.positive("inertial_number")?;
+        let strategy = params.get("strategy");
+        if strategy != 0.0 && strategy != 1.0 {
+            return Err(GraniteError::param_in(
+                format!("`strategy` of {}", params.owner()),
+                strategy,
+                "must be 0 (eq. 4.4) or 1 (eq. 4.5)",
+            ));
+        }
+        let vertical = params.get("vertical_axis");
+        if ![0.0, 1.0, 2.0].contains(&vertical) {
+            return Err(GraniteError::param_in(
+                format!("`vertical_axis` of {}", params.owner()),
+                vertical,
+                "must be 0, 1 or 2",
+            ));
+        }
+        let s = &template.spheres;
+        let mass: f64 = s.mass.iter().sum();
+        let volume = template.solid_volume();
+        let mean_diameter = 2.0 * s.radius.iter().sum::<f64>() / s.len() as f64;
+        let grain_size = if params.is_set("grain_size") { params.positive("grain_size")? } else { mean_diameter };
+        let g = params.non_negative("gravity")?;
+        let max_steps = params.positive("max_dem_steps")? as u64;
+        let mut template = template;
+        template.sequential = true;
+        template.cell_control = None;
+        template.gravity = [0.0; 3];
+        Ok(Box::new(DemRve {
+            weight: mass * g,
+            density: mass / volume,
+            grain_size,
+            inertial_number,
+            keep_dt: strategy == 1.0,
+            vertical_axis: vertical as usize,
+            max_steps,
+            rves: RwLock::new(Vec::new()),
+            template,
+            params,
+        }))
+    }
+}
+
+/// Plan of one call: DEM steps of `dt` and, with eq. 4.4, a shorter last one.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DeformationPlan {
+    /// T^DEM: the time the increment is applied over.
+    pub duration: f64,
+    /// Full steps of the RVE's time step.
+    pub full_steps: u64,
+    /// A last step of this length (eq. 4.4), or 0.
+    pub last_step: f64,
+}
+
+impl DemRve {
+    /// P^min of eq. 4.2: the RVE's weight over the area of its bottom face.
+    pub fn p_min(&self, sim: &DemSim) -> f64 {
+        let Some(cell) = &sim.cell else { return 0.0 };
+        let (i, j) = match self.vertical_axis {
+            0 => (1, 2),
+            1 => (2, 0),
+            _ => (0, 1),
+        };
+        let area = cell.h.column(i).cross(&cell.h.column(j)).norm();
+        if area > 0.0 {
+            self.weight / area
+        } else {
+            0.0
+        }
+    }
+
+    /// T^eps of eq. 4.1 and the DEM steps of eqs. 4.4/4.5 for an increment whose largest
+    /// principal magnitude is `max_strain`, at mean stress `p` (already bounded below by P^min),
+    /// with DEM time step `dt`. At least one step is taken.
+    pub fn plan(&self, max_strain: f64, p: f64, dt: f64) -> DeformationPlan {
+        let t_eps = max_strain / self.inertial_number * (self.density * self.grain_size * self.grain_size / p).sqrt();
+        if !(t_eps > 0.0) || !t_eps.is_finite() {
+            return DeformationPlan { duration: dt, full_steps: 1, last_step: 0.0 };
+        }
+        if self.keep_dt {
+            let n = ((t_eps / dt).ceil() as u64).max(1);
+            DeformationPlan { duration: n as f64 * dt, full_steps: n, last_step: 0.0 }
+        } else {
+            let n = (t_eps / dt).floor() as u64;
+            let rest = t_eps - n as f64 * dt;
+            DeformationPlan { duration: t_eps, full_steps: n, last_step: if rest > 1e-12 * dt { rest } else { 0.0 } }
+        }
+    }
+}
+
+const STATE: &[&str] =
+    &["rve_mean_stress", "rve_deviatoric_stress", "void_ratio", "coordination", "rattlers", "dem_steps", "no_contacts"];
+
+impl ConstitutiveLaw for DemRve {
+    fn name(&self) -> &str {
+        "dem_rve"
+    }
+    fn params(&self) -> &Params {
+        &self.params
+    }
+    fn state_names(&self) -> &[&'static str] {
+        STATE
+    }
+    fn points_added(&self, count: usize) -> Result<()> {
+        let mut rves = self.rves.write().map_err(|_| GraniteError::Other("RVE store poisoned".into()))?;
+        for _ in 0..count {
+            rves.push(Mutex::new(Rve { sim: self.template.clone() }));
+        }
+        Ok(())
+    }
+    fn points_removed(&self, keep: &[bool]) {
+        if let Ok(mut rves) = self.rves.write() {
+            let mut k = keep.iter();
+            rves.retain(|_| *k.next().unwrap_or(&true));
+        }
+    }
+    fn bytes_per_point(&self) -> usize {
+        self.template.memory_bytes().max(1)
+    }
+    fn update(&self, batch: LawBatch<'_>) -> Result<()> {
+        let rves = self.rves.read().map_err(|_| GraniteError::Other("RVE store poisoned".into()))?;
+        let stride = STATE.len();
+        for k in 0..batch.len() {
+            let index = batch.first + k;
+            let mut rve = rves
+                .get(index)
+                .ok_or_else(|| GraniteError::Other(format!("no RVE for material point {index}")))?
+                .lock()
+                .map_err(|_| GraniteError::Other(format!("RVE {index} poisoned")))?;
+            let sim = &mut rve.sim;
+            let de = batch.dstrain[k];
+            let e = Matrix3::new(
+                de[0],
+                0.5 * de[3],
+                0.5 * de[5],
+                0.5 * de[3],
+                de[1],
+                0.5 * de[4],
+                0.5 * de[5],
+                0.5 * de[4],
+                de[2],
+            );
+            let max_strain = SymmetricEigen::new(e).eigenvalues.amax();
+            let volume = sim.cell_volume().unwrap_or(1.0);
+            let before = sim.love_weber_stress(volume);
+            let p = ((before[0] + before[1] + before[2]).abs() / 3.0).max(self.p_min(sim));
+            let dt = sim.dt;
+            let plan = self.plan(max_strain, p, dt);
+            let steps = plan.full_steps + u64::from(plan.last_step > 0.0);
+            if steps > self.max_steps {
+                return Err(GraniteError::Other(format!(
+                    "RVE of point {index} would need {steps} DEM steps for this increment (T = {:.3e} s, P = {p:.3e} Pa); \
+                     raise max_dem_steps or lower the MPM time step",
+                    plan.duration
+                )));
+            }
+            if let Some(cell) = sim.cell.as_mut() {
+                cell.velocity_gradient = if max_strain > 0.0 { e / plan.duration } else { Matrix3::zeros() };
+            }
+            for _ in 0..plan.full_steps {
+                sim.step()?;
+            }
+            if plan.last_step > 0.0 {
+                sim.dt = plan.last_step;
+                let r = sim.step();
+                sim.dt = dt;
+                r?;
+            }
+            if let Some(cell) = sim.cell.as_mut() {
+                cell.velocity_gradient = Matrix3::zeros();
+            }
+            let volume = sim.cell_volume().unwrap_or(1.0);
+            let stress: Voigt = sim.love_weber_stress(volume);
+            let d = sim.diagnostics();
+            let no_contacts = d.contacts == 0;
+            batch.stress[k] = if no_contacts { [0.0; 6] } else { stress };
+            let (mean, q) = granite_core::math::p_q(&batch.stress[k]);
+            let st = &mut batch.state[k * stride..(k + 1) * stride];
+            st[0] = mean;
+            st[1] = q;
+            st[2] = sim.void_ratio().unwrap_or(f64::NAN);
+            st[3] = d.coordination_no_rattlers;
+            st[4] = d.rattlers as f64;
+            st[5] = steps as f64;
+            st[6] = if no_contacts { 1.0 } else { 0.0 };
+        }
+        Ok(())
+    }
+}
+
+/// Read access to the RVEs (for output of chosen points and tests).
+impl DemRve {
+    pub fn with_rve<R>(&self, index: usize, f: impl FnOnce(&DemSim) -> R) -> Option<R> {
+        let rves = self.rves.read().ok()?;
+        let guard = rves.get(index)?.lock().ok()?;
+        Some(f(&guard.sim))
+    }
+}
