@@ -154,9 +154,9 @@ pub fn gravity_deposition(count: usize) -> Result<granite_core::dem::DemSim> {
     Ok(sim)
 }
 
-/// A periodic RVE of `count` spheres (radius 1.5 mm +- 30 %) compacted to 100 kPa, ready for
-/// constant-volume simple shear at `shear_rate` (the benchmark's scene (b)).
-pub fn periodic_rve(count: usize, shear_rate: f64) -> Result<granite_core::dem::DemSim> {
+/// A periodic RVE of `count` spheres (radius 1.5 mm +- 30 %) compacted to `pressure` (Pa) with a
+/// friction of 5 degrees, then given 30 degrees; left at rest with no cell control.
+pub fn periodic_rve(count: usize, pressure: f64) -> Result<granite_core::dem::DemSim> {
     use granite_core::dem::cell::{AxisGoal, CellControl, PeriodicCell};
     use granite_core::dem::generate::{cloud, Psd};
     let reg = crate::registry();
@@ -176,7 +176,7 @@ pub fn periodic_rve(count: usize, shear_rate: f64) -> Result<granite_core::dem::
     }
     sim.damping = 0.4;
     sim.set_dt(0.3 * sim.critical_dt().unwrap_or(1e-6))?;
-    let goal = AxisGoal::Stress { target: -1e5, max_rate: 5.0 };
+    let goal = AxisGoal::Stress { target: -pressure, max_rate: 5.0 };
     sim.cell_control = Some(CellControl { axes: [goal; 3], shear: vec![], band: 0.05 });
     for round in 0.. {
         for _ in 0..500 {
@@ -190,8 +190,11 @@ pub fn periodic_rve(count: usize, shear_rate: f64) -> Result<granite_core::dem::
         }
     }
     sim.set_contact_law(law(30.0)?, None)?;
-    sim.cell_control =
-        Some(CellControl { axes: [AxisGoal::Rate(0.0); 3], shear: vec![(0, 2, shear_rate)], band: 0.05 });
+    sim.cell_control = None;
+    // Let the contacts' tangential springs build up again under the new friction.
+    for _ in 0..500 {
+        sim.step()?;
+    }
     Ok(sim)
 }
 
@@ -236,7 +239,12 @@ pub fn dem(counts: &[usize], steps: usize, threads: &[usize]) -> Result<()> {
             .build()
             .map_err(|e| GraniteError::Other(format!("thread pool: {e}")))?;
         let (secs, particles, contacts) = pool.install(|| -> Result<(f64, usize, usize)> {
-            let mut sim = periodic_rve(1500, 1.0)?;
+            let mut sim = periodic_rve(1500, 1e5)?;
+            sim.cell_control = Some(granite_core::dem::cell::CellControl {
+                axes: [granite_core::dem::cell::AxisGoal::Rate(0.0); 3],
+                shear: vec![(0, 2, 1.0)],
+                band: 0.05,
+            });
             let t = Instant::now();
             for _ in 0..steps {
                 sim.step()?;

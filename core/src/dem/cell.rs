@@ -10,7 +10,7 @@
 use crate::math::Vec3;
 use nalgebra::{Matrix3, Vector3};
 
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct PeriodicCell {
     /// Base vectors as columns.
     pub h: Matrix3<f64>,
@@ -130,7 +130,7 @@ mod tests {
 }
 
 /// What drives one diagonal component of the cell's velocity gradient.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub enum AxisGoal {
     /// Prescribed strain rate `L_aa` (1/s; negative compresses).
     Rate(f64),
@@ -141,7 +141,7 @@ pub enum AxisGoal {
 
 /// A stress- or strain-controlled periodic cell (like YADE's PeriTriaxController): each diagonal
 /// component of `L` follows its goal, off-diagonal components are prescribed rates.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct CellControl {
     pub axes: [AxisGoal; 3],
     /// Prescribed off-diagonal `L_ij` (shear rates), e.g. `(0, 2, rate)` for x velocity along z.

@@ -8,7 +8,7 @@ use nalgebra::{Matrix3, SymmetricEigen, UnitQuaternion, Vector3};
 use rayon::prelude::*;
 
 /// Mass properties of a rigid body: mass, centre of mass and inertia tensor about it (world axes).
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone, Copy, serde::Serialize, serde::Deserialize)]
 pub struct MassProperties {
     pub volume: f64,
     pub mass: f64,
@@ -135,7 +135,7 @@ pub fn mass_properties(members: &[(Vec3, f64)], density: f64, resolution: usize)
 
 /// Clumps as a structure of arrays. Member spheres live in [`crate::dem::Spheres`] with their
 /// `clump` index; their positions and velocities follow the clump after every step.
-#[derive(Debug, Clone, Default)]
+#[derive(Debug, Clone, Default, serde::Serialize, serde::Deserialize)]
 pub struct Clumps {
     pub x: Vec<Vec3>,
     pub v: Vec<Vec3>,

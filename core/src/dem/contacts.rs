@@ -4,7 +4,7 @@
 use crate::math::Vec3;
 
 /// A list of pairs `(a, b)` sorted by `(a, b)`: sphere-sphere (b a sphere) or sphere-wall (b a wall).
-#[derive(Debug, Clone, Default)]
+#[derive(Debug, Clone, Default, serde::Serialize, serde::Deserialize)]
 pub struct PairList {
     pub a: Vec<u32>,
     pub b: Vec<u32>,
@@ -124,7 +124,7 @@ impl PairList {
 
 /// For each particle, the pairs it belongs to, in increasing pair index: entries are
 /// `pair << 1 | side` with side 0 when the particle is `a`, 1 when it is `b`.
-#[derive(Debug, Clone, Default)]
+#[derive(Debug, Clone, Default, serde::Serialize, serde::Deserialize)]
 pub struct Adjacency {
     pub start: Vec<u32>,
     pub entries: Vec<u32>,

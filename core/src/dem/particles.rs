@@ -13,7 +13,7 @@ pub mod dof {
     pub const ALL: u8 = 63;
 }
 
-#[derive(Debug, Clone, Default)]
+#[derive(Debug, Clone, Default, serde::Serialize, serde::Deserialize)]
 pub struct Spheres {
     /// Stable identity (creation order), kept through deletions.
     pub id: Vec<u64>,

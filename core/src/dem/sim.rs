@@ -11,7 +11,7 @@ use crate::math::Vec3;
 use std::collections::HashMap;
 use std::sync::Arc;
 
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct DemMaterial {
     pub name: String,
     pub density: f64,

@@ -2,7 +2,7 @@
 
 use crate::math::{dot3, Vec3};
 
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub enum WallShape {
     /// Infinite plane through `position`; particles live on the side `normal` points to.
     Plane { normal: Vec3 },
@@ -15,7 +15,7 @@ pub enum WallShape {
     Cylinder { axis: Vec3, radius: f64, length: f64 },
 }
 
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct Wall {
     pub name: String,
     pub shape: WallShape,

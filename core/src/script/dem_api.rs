@@ -321,6 +321,19 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
     let c = ctx.clone();
     engine.register_fn("dem", move || DemHandle::create(c.clone(), Map::new()));
     engine.register_fn("material", |s: &mut DemHandle, opts: Map| s.material(opts));
+    engine.register_fn("save", |s: &mut DemHandle, file: &str| {
+        let st = s.lock();
+        let path = st.points_path(file);
+        st.sim.prepared().save(&path).map(|_| path.display().to_string()).or_rhai()
+    });
+    let c = ctx.clone();
+    engine.register_fn("dem_load", move |file: &str| {
+        let dem = DemSim::load(std::path::Path::new(file), &c.registry).or_rhai()?;
+        Ok::<_, Box<rhai::EvalAltResult>>(Handle::new(
+            DemScene { dem, driven: Vec::new(), auto_skin: false },
+            c.clone(),
+        ))
+    });
     engine.register_fn("contact_law", |s: &mut DemHandle, law: &str, opts: Map| s.contact_law(law, None, opts));
     engine.register_fn(
         "contact_law",

@@ -14,7 +14,7 @@ use std::sync::{Mutex, RwLock};
 
 pub struct DemRveFactory;
 
-const SPECS: &[ParamSpec] = &[
+pub const SPECS: &[ParamSpec] = &[
     ParamSpec::optional("inertial_number", 1e-2, "I_n of eq. 4.1 (quasi-static below about 1e-2)"),
     ParamSpec::optional(
         "strategy",
@@ -61,6 +61,13 @@ impl ConstitutiveLawFactory for DemRveFactory {
         self.build_with(params, &ObjectMap::new())
     }
     fn build_with(&self, params: Params, objects: &ObjectMap) -> Result<Box<dyn ConstitutiveLaw>> {
+        Ok(Box::new(DemRve::new(params, objects)?))
+    }
+}
+
+impl DemRve {
+    /// The law for resolved parameters and the prepared sample in `objects["rve"]`.
+    pub fn new(params: Params, objects: &ObjectMap) -> Result<DemRve> {
         let template = objects
             .get("rve")
             .and_then(|o| o.downcast_ref::<DemSim>())
@@ -107,7 +114,7 @@ impl ConstitutiveLawFactory for DemRveFactory {
         template.sequential = true;
         template.cell_control = None;
         template.gravity = [0.0; 3];
-        Ok(Box::new(DemRve {
+        Ok(DemRve {
             weight: mass * g,
             density: mass / volume,
             grain_size,
@@ -118,7 +125,7 @@ impl ConstitutiveLawFactory for DemRveFactory {
             rves: RwLock::new(Vec::new()),
             template,
             params,
-        }))
+        })
     }
 }
 
