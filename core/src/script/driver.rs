@@ -52,12 +52,24 @@ pub struct State<S: ScriptSim> {
     driven: Vec<(usize, FnPtr)>,
     /// Extra series columns computed by script functions.
     columns: Vec<(String, FnPtr)>,
+    output_claimed: bool,
     last_good: Option<S::Snapshot>,
 }
 
 impl<S: ScriptSim> State<S> {
+    /// Claims this simulation's output file prefix on its first write: the first simulation of a
+    /// script that writes gets the plain names (series.csv, vtk/points...).
+    fn claim_output(&mut self) {
+        if !self.output_claimed {
+            let index = self.ctx.next_sim_index();
+            self.output.prefix = if index == 1 { String::new() } else { format!("sim{index}_") };
+            self.output_claimed = true;
+        }
+    }
+
     /// Writes a series row with the engine's columns and already computed extra values.
     fn write_series_row(&mut self, extra: &[f64]) -> Result<()> {
+        self.claim_output();
         let (mut cols, mut vals) = self.sim.series_row();
         let names: Vec<&str> = self.columns.iter().map(|(n, _)| n.as_str()).collect();
         let mut all: Vec<&str> = cols.drain(..).collect();
@@ -68,6 +80,7 @@ impl<S: ScriptSim> State<S> {
     }
 
     fn write_vtk(&mut self) -> Result<()> {
+        self.claim_output();
         let (x, fields) = self.sim.vtk_frame();
         self.output.write_vtk(self.sim.steps(), self.sim.time(), &x, &fields)
     }
@@ -116,9 +129,9 @@ impl<S: ScriptSim> Clone for Handle<S> {
 
 impl<S: ScriptSim> Handle<S> {
     pub fn new(sim: S, ctx: Arc<ScriptContext>) -> Handle<S> {
-        let index = ctx.next_sim_index();
-        let prefix = if index == 1 { String::new() } else { format!("sim{index}_") };
-        let output = Output::new(ctx.options.out_dir.clone(), prefix);
+        // The file prefix is chosen when the simulation first writes: a simulation that only
+        // serves as a template (e.g. a loaded RVE) does not take the main output names.
+        let output = Output::new(ctx.options.out_dir.clone(), String::new());
         Handle(Arc::new(Mutex::new(State {
             sim,
             ctx,
@@ -126,6 +139,7 @@ impl<S: ScriptSim> Handle<S> {
             callbacks: Vec::new(),
             driven: Vec::new(),
             columns: Vec::new(),
+            output_claimed: false,
             last_good: None,
         })))
     }
@@ -161,7 +175,9 @@ impl<S: ScriptSim> Handle<S> {
             quiet = st.ctx.options.quiet;
             st.output.series_every.get_or_insert((steps / 500).max(1));
             st.output.vtk_every.get_or_insert((steps / 20).max(1));
-            st.write_vtk().or_rhai()?;
+            if st.output.last_vtk_step.is_none() {
+                st.write_vtk().or_rhai()?;
+            }
             st.last_good = Some(st.sim.snapshot());
         }
         self.write_series(ctx)?;
@@ -196,7 +212,10 @@ impl<S: ScriptSim> Handle<S> {
                 if series_due {
                     st.last_good = Some(st.sim.snapshot());
                 }
-                if step.is_multiple_of(st.output.vtk_every.unwrap_or(1)) || last {
+                // A call's last state is written when the call spans a frame interval (short calls
+                // in a script loop would otherwise flood vtk/).
+                let every = st.output.vtk_every.unwrap_or(1);
+                if step.is_multiple_of(every) || (last && steps >= every) {
                     st.write_vtk().or_rhai()?;
                 }
                 progress.tick(k + 1, st.sim.time());

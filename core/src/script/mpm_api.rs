@@ -650,6 +650,30 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
         }
         Ok(st.sim.mpm.points.stress[i as usize].iter().map(|&v| Dynamic::from(v)).collect())
     });
+    engine.register_fn("point_strain", |s: &mut SimHandle, i: i64| -> RhaiResult<Array> {
+        let st = s.lock();
+        let n = st.sim.mpm.points.len();
+        if i < 0 || i as usize >= n {
+            return err(format!("point index {i} out of range 0..{n}"));
+        }
+        Ok(st.sim.mpm.points.strain[i as usize].iter().map(|&v| Dynamic::from(v)).collect())
+    });
+    engine.register_fn("point_state", |s: &mut SimHandle, i: i64, name: &str| -> RhaiResult<f64> {
+        let st = s.lock();
+        let sim = &st.sim.mpm;
+        let n = sim.points.len();
+        if i < 0 || i as usize >= n {
+            return err(format!("point index {i} out of range 0..{n}"));
+        }
+        let m = sim.points.material[i as usize] as usize;
+        let range = sim.material_range(m);
+        let law = &sim.materials[m].law;
+        let names = law.state_names();
+        match names.iter().position(|v| *v == name) {
+            Some(k) => Ok(sim.materials[m].state[(i as usize - range.start) * names.len() + k]),
+            None => err(format!("law \"{}\" has no state variable `{name}`; it has: {}", law.name(), names.join(", "))),
+        }
+    });
     engine.register_fn("point_position", |s: &mut SimHandle, i: i64| -> RhaiResult<Array> {
         let st = s.lock();
         let n = st.sim.mpm.points.len();
