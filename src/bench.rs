@@ -177,7 +177,7 @@ pub fn periodic_rve(count: usize, pressure: f64) -> Result<granite_core::dem::De
     sim.damping = 0.4;
     sim.set_dt(0.3 * sim.critical_dt().unwrap_or(1e-6))?;
     let goal = AxisGoal::Stress { target: -pressure, max_rate: 5.0 };
-    sim.cell_control = Some(CellControl { axes: [goal; 3], shear: vec![], band: 0.05 });
+    sim.cell_control = Some(CellControl { axes: [goal; 3], shear: vec![], relax_steps: 200.0 });
     for round in 0.. {
         for _ in 0..500 {
             sim.step()?;
@@ -243,7 +243,7 @@ pub fn dem(counts: &[usize], steps: usize, threads: &[usize]) -> Result<()> {
             sim.cell_control = Some(granite_core::dem::cell::CellControl {
                 axes: [granite_core::dem::cell::AxisGoal::Rate(0.0); 3],
                 shear: vec![(0, 2, 1.0)],
-                band: 0.05,
+                relax_steps: 200.0,
             });
             let t = Instant::now();
             for _ in 0..steps {

@@ -134,8 +134,8 @@ mod tests {
 pub enum AxisGoal {
     /// Prescribed strain rate `L_aa` (1/s; negative compresses).
     Rate(f64),
-    /// Servo on the stress `sigma_aa` (Pa, tension positive): the strain rate is proportional to
-    /// the error, full `max_rate` when it exceeds `band` times the target.
+    /// Servo on the stress `sigma_aa` (Pa, tension positive): the strain rate is the error over
+    /// the packing's stiffness along that axis and a relaxation time, at most `max_rate`.
     Stress { target: f64, max_rate: f64 },
 }
 
@@ -146,21 +146,29 @@ pub struct CellControl {
     pub axes: [AxisGoal; 3],
     /// Prescribed off-diagonal `L_ij` (shear rates), e.g. `(0, 2, rate)` for x velocity along z.
     pub shear: Vec<(usize, usize, f64)>,
-    /// Relative stress error at which the servo runs at full rate.
-    pub band: f64,
+    /// Steps over which the servo closes a stress error (its relaxation time, in time steps).
+    pub relax_steps: f64,
 }
 
 impl CellControl {
-    /// The velocity gradient for the current stress (Voigt, tension positive).
-    pub fn velocity_gradient(&self, stress: &crate::math::Voigt) -> Matrix3<f64> {
+    /// The velocity gradient for the current stress (Voigt, tension positive), given the
+    /// packing's stiffness along each axis (`d sigma_aa / d eps_aa`, Pa) and the time step: a
+    /// stress error is closed in about `relax_steps` steps, so the servo cannot outrun the contacts
+    /// (a loose cloud with no contact is squeezed at `max_rate`).
+    pub fn velocity_gradient(&self, stress: &crate::math::Voigt, stiffness: [f64; 3], dt: f64) -> Matrix3<f64> {
         let mut l = Matrix3::zeros();
         for a in 0..3 {
             l[(a, a)] = match self.axes[a] {
                 AxisGoal::Rate(r) => r,
                 AxisGoal::Stress { target, max_rate } => {
-                    let scale = (self.band * target.abs()).max(f64::MIN_POSITIVE);
                     // Too little compression (stress above a negative target): compress.
-                    max_rate * ((target - stress[a]) / scale).clamp(-1.0, 1.0)
+                    let error = target - stress[a];
+                    let rate = if stiffness[a] > 0.0 {
+                        error / (stiffness[a] * self.relax_steps.max(1.0) * dt)
+                    } else {
+                        error.signum() * max_rate
+                    };
+                    rate.clamp(-max_rate, max_rate)
                 }
             };
         }

@@ -163,6 +163,31 @@ impl DemSim {
         [sym(0, 0), sym(1, 1), sym(2, 2), sym(0, 1), sym(1, 2), sym(0, 2)]
     }
 
+    /// Stiffness of the packing along each axis, `(1/V) sum_c k_n l_a^2` over touching contacts:
+    /// the stress increment per unit strain of an affine deformation (normal springs only).
+    pub fn axis_stiffness(&self) -> [f64; 3] {
+        let Some(volume) = self.cell_volume() else { return [0.0; 3] };
+        let p = &self.pairs;
+        let ps = p.param_stride;
+        let mut k = [0.0; 3];
+        for c in 0..p.len() {
+            if !p.touching[c] {
+                continue;
+            }
+            let kn = self.laws[p.law[c] as usize].normal_stiffness(&p.params[c * ps..(c + 1) * ps]);
+            if !(kn > 0.0) {
+                continue;
+            }
+            let (i, j) = (p.a[c] as usize, p.b[c] as usize);
+            let image = self.cell.as_ref().map(|cell| cell.shift_vector(p.shift[c])).unwrap_or([0.0; 3]);
+            for a in 0..3 {
+                let l = self.spheres.x[j][a] + image[a] - self.spheres.x[i][a];
+                k[a] += kn * l * l;
+            }
+        }
+        k.map(|v| v / volume)
+    }
+
     /// Global stress of a packing at rest under gravity (appendix A, eq. .14): wall contact forces
     /// on the particles at their contact points plus `m g x` of every particle, over `volume`.
     pub fn global_stress_with_gravity(&self, volume: f64) -> Voigt {

@@ -92,6 +92,10 @@ pub trait ContactLaw: Send + Sync {
     fn compute(&self, batch: ContactBatch<'_>);
     /// Largest normal stiffness a pair can get (for the critical time step), given its info.
     fn max_normal_stiffness(&self, info: &PairInfo) -> f64;
+    /// Normal stiffness of a pair from its parameters (NaN when the law has none).
+    fn normal_stiffness(&self, _params: &[f64]) -> f64 {
+        f64::NAN
+    }
     /// Elastic energy stored in one contact (for energy balances).
     fn elastic_energy(&self, _overlap: f64, _params: &[f64], _history: &[f64]) -> f64 {
         0.0

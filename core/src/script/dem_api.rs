@@ -655,15 +655,15 @@ fn register_cell(engine: &mut Engine) {
     });
     engine.register_fn("cell_control", |s: &mut DemHandle, opts: Map| {
         cell_of(s)?;
-        only_keys(&opts, &["x", "y", "z", "xy", "xz", "yz", "yx", "zx", "zy", "band"], "cell_control")?;
+        only_keys(&opts, &["x", "y", "z", "xy", "xz", "yz", "yx", "zx", "zy", "relax_steps"], "cell_control")?;
         let mut axes = [AxisGoal::Rate(0.0); 3];
         let mut shear = Vec::new();
-        let mut band = 0.05;
+        let mut relax_steps = 200.0;
         for (k, v) in &opts {
-            if k == "band" {
-                band = number(v, "band")?;
-                if !(band > 0.0) {
-                    return err("`band` must be > 0");
+            if k == "relax_steps" {
+                relax_steps = number(v, "relax_steps")?;
+                if !(relax_steps >= 1.0) {
+                    return err("`relax_steps` must be >= 1");
                 }
                 continue;
             }
@@ -690,7 +690,7 @@ fn register_cell(engine: &mut Engine) {
                 _ => return err(format!("cell_control `{k}`: give exactly one of `rate` and `stress`")),
             };
         }
-        s.lock().sim.dem.cell_control = Some(CellControl { axes, shear, band });
+        s.lock().sim.dem.cell_control = Some(CellControl { axes, shear, relax_steps });
         Ok(())
     });
     engine.register_fn("cell_stress", |s: &mut DemHandle| {

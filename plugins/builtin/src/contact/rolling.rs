@@ -120,6 +120,9 @@ impl ContactLaw for RollingResistance {
             b.moment[c] = [m_roll[0] + m_twist * n[0], m_roll[1] + m_twist * n[1], m_roll[2] + m_twist * n[2]];
         }
     }
+    fn normal_stiffness(&self, params: &[f64]) -> f64 {
+        params[0]
+    }
     fn elastic_energy(&self, overlap: f64, p: &[f64], h: &[f64]) -> f64 {
         let u = [h[0], h[1], h[2]];
         let tr = [h[3], h[4], h[5]];
