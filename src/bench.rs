@@ -262,3 +262,59 @@ pub fn dem(counts: &[usize], steps: usize, threads: &[usize]) -> Result<()> {
     }
     Ok(())
 }
+
+/// `granite bench mpmxdem`: an oedometric scene of 16 material points, each with a 125-sphere
+/// periodic RVE, 200 MPM steps of 1e-5 s with 51 DEM steps each (the peer's protocol).
+pub fn mpmxdem(threads: &[usize]) -> Result<()> {
+    use granite_core::mpm::boundary::{TimeFunction, VelocityConstraint};
+    use granite_core::mpm::fill::{cell_points, Layout};
+    use granite_core::mpm::Face;
+    use std::sync::Arc;
+    println!("granite bench mpmxdem: 16 points x 125-sphere RVEs, 200 MPM steps x 51 DEM steps, oedometric");
+    let rve = periodic_rve(125, 1e5)?;
+    let mut base = None;
+    for &n in threads {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(n)
+            .build()
+            .map_err(|e| GraniteError::Other(format!("thread pool: {e}")))?;
+        let (secs, points, bytes) = pool.install(|| -> Result<(f64, usize, usize)> {
+            let reg = crate::registry();
+            let mesh = Mesh::new(2, [0.0; 3], [0.5, 0.5, 1.0], [2, 2, 1])?;
+            let mut sim = MpmSim::new(mesh.clone(), reg.build_velocity_update("PIC", &ParamMap::new())?);
+            let mut objects = granite_core::ext::constitutive::ObjectMap::new();
+            objects.insert("rve".into(), Arc::new(rve.clone()));
+            let law = reg.build_law_with("dem_rve", &params(&[("dem_steps", 51.0)]), &objects)?;
+            let bytes = law.bytes_per_point();
+            let m = sim.add_material("sand", 1700.0, law)?;
+            let (xs, vols) = cell_points(&mesh, Layout::Gauss, 2, |_| Ok(true))?;
+            let volume = rve.cell_volume().unwrap_or(1.0);
+            sim.add_points(m, &xs, &vols, [0.0; 3], rve.love_weber_stress(volume))?;
+            for (face, axis, v) in [("x-", 0, 0.0), ("x+", 0, 0.0), ("y-", 1, 0.0), ("y+", 1, -1e-2)] {
+                let f = Face::parse(face, 2)?;
+                sim.boundary.velocity.push(VelocityConstraint {
+                    nodes: f.nodes(&mesh),
+                    axis,
+                    value: TimeFunction::Constant(v),
+                });
+            }
+            sim.set_dt(1e-5)?;
+            let t = Instant::now();
+            for _ in 0..200 {
+                sim.step()?;
+            }
+            Ok((t.elapsed().as_secs_f64(), sim.points.len(), bytes))
+        })?;
+        let sphere_steps = points as f64 * 125.0 * 51.0 * 200.0;
+        let rate = sphere_steps / secs;
+        let speedup = base.map(|b: f64| rate / b).unwrap_or(1.0);
+        base.get_or_insert(rate);
+        println!(
+            "threads {n}  {points} RVEs  {secs:>7.3} s  {:>6.2} M sphere-steps/s  {:>6.2} M/s per thread  speed-up {speedup:.2}x  memory per RVE {:.3} MB",
+            rate / 1e6,
+            rate / 1e6 / n as f64,
+            bytes as f64 / 1e6
+        );
+    }
+    Ok(())
+}

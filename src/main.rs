@@ -78,11 +78,11 @@ fn main() -> ExitCode {
             }
         }
         Command::Bench { which, points, steps, particles, dem_steps, threads } => match which.as_str() {
-            "mpm" | "dem" => {
-                let result = if which == "mpm" {
-                    granite::bench::mpm(points, steps, &threads)
-                } else {
-                    granite::bench::dem(&particles, dem_steps, &threads)
+            "mpm" | "dem" | "mpmxdem" => {
+                let result = match which.as_str() {
+                    "mpm" => granite::bench::mpm(points, steps, &threads),
+                    "dem" => granite::bench::dem(&particles, dem_steps, &threads),
+                    _ => granite::bench::mpmxdem(&threads),
                 };
                 match result {
                     Ok(()) => ExitCode::SUCCESS,
@@ -93,7 +93,7 @@ fn main() -> ExitCode {
                 }
             }
             other => {
-                eprintln!("granite: unknown benchmark `{other}`; available: mpm, dem");
+                eprintln!("granite: unknown benchmark `{other}`; available: mpm, dem, mpmxdem");
                 ExitCode::from(2)
             }
         },

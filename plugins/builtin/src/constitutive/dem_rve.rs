@@ -25,6 +25,7 @@ pub const SPECS: &[ParamSpec] = &[
     ParamSpec::optional("gravity", 9.81, "gravity magnitude for the RVE's weight in P_min (eq. 4.2), m/s^2"),
     ParamSpec::unset("grain_size", "characteristic grain size l of eq. 4.1 (default: mean diameter of the RVE)"),
     ParamSpec::optional("max_dem_steps", 1e7, "most DEM steps one call may take (a safeguard)"),
+    ParamSpec::unset("dem_steps", "fixed DEM steps per call instead of eqs. 4.1-4.5 (benchmarks, comparisons)"),
 ];
 
 /// What one point's RVE carries between calls.
@@ -45,6 +46,7 @@ pub struct DemRve {
     /// Weight of the RVE W^RVE of eq. 4.2.
     weight: f64,
     max_steps: u64,
+    fixed_steps: Option<u64>,
 }
 
 impl ConstitutiveLawFactory for DemRveFactory {
@@ -110,6 +112,8 @@ impl DemRve {
         let grain_size = if params.is_set("grain_size") { params.positive("grain_size")? } else { mean_diameter };
         let g = params.non_negative("gravity")?;
         let max_steps = params.positive("max_dem_steps")? as u64;
+        let fixed_steps =
+            if params.is_set("dem_steps") { Some(params.positive("dem_steps")?.round().max(1.0) as u64) } else { None };
         let mut template = template;
         template.sequential = true;
         template.cell_control = None;
@@ -122,6 +126,7 @@ impl DemRve {
             keep_dt: strategy == 1.0,
             vertical_axis: vertical as usize,
             max_steps,
+            fixed_steps,
             rves: RwLock::new(Vec::new()),
             template,
             params,
@@ -161,6 +166,9 @@ impl DemRve {
     /// principal magnitude is `max_strain`, at mean stress `p` (already bounded below by P^min),
     /// with DEM time step `dt`. At least one step is taken.
     pub fn plan(&self, max_strain: f64, p: f64, dt: f64) -> DeformationPlan {
+        if let Some(n) = self.fixed_steps {
+            return DeformationPlan { duration: n as f64 * dt, full_steps: n, last_step: 0.0 };
+        }
         let t_eps = max_strain / self.inertial_number * (self.density * self.grain_size * self.grain_size / p).sqrt();
         if !(t_eps > 0.0) || !t_eps.is_finite() {
             return DeformationPlan { duration: dt, full_steps: 1, last_step: 0.0 };
