@@ -62,6 +62,30 @@ pub fn plugin_listing() -> String {
             }
         }
     }
+    let specs = |out: &mut String, list: &[granite_core::params::ParamSpec]| {
+        for s in list {
+            let default = match s.default {
+                None => "required".to_string(),
+                Some(d) if d.is_nan() => "optional".to_string(),
+                Some(d) => format!("default {d}"),
+            };
+            let _ = writeln!(out, "      {:<20} {} ({default})", s.name, s.doc);
+        }
+    };
+    out.push_str("contact laws (sim.contact_law(NAME, #{ PARAMS }) in dem()):\n");
+    for name in reg.contact_law_names() {
+        if let Ok(f) = reg.contact_law_factory(&name) {
+            let _ = writeln!(out, "  {name}: {}", f.description());
+            specs(&mut out, f.param_specs());
+        }
+    }
+    out.push_str("grain shapes (sim.clump_cloud(m, lo, hi, #{ shape: NAME, PARAMS })):\n");
+    for name in reg.shape_names() {
+        if let Ok(f) = reg.shape_factory(&name) {
+            let _ = writeln!(out, "  {name}: {}", f.description());
+            specs(&mut out, f.param_specs());
+        }
+    }
     out.push_str("velocity updates (sim.velocity_update(NAME, #{ PARAMS })):\n");
     for name in reg.velocity_update_names() {
         if let Ok(f) = reg.velocity_update_factory(&name) {

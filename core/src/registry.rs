@@ -3,7 +3,8 @@
 
 use crate::error::{GraniteError, Result};
 use crate::ext::{
-    ConstitutiveLaw, ConstitutiveLawFactory, ContactLaw, ContactLawFactory, VelocityUpdate, VelocityUpdateFactory,
+    ConstitutiveLaw, ConstitutiveLawFactory, ContactLaw, ContactLawFactory, ShapeModel, ShapeModelFactory,
+    VelocityUpdate, VelocityUpdateFactory,
 };
 use crate::params::Params;
 use indexmap::IndexMap;
@@ -21,6 +22,7 @@ pub struct Registry {
     laws: IndexMap<String, Arc<dyn ConstitutiveLawFactory>>,
     velocity_updates: IndexMap<String, Arc<dyn VelocityUpdateFactory>>,
     contact_laws: IndexMap<String, Arc<dyn ContactLawFactory>>,
+    shapes: IndexMap<String, Arc<dyn ShapeModelFactory>>,
 }
 
 /// Exact match first, then case-insensitive: `flip` finds `FLIP`.
@@ -68,6 +70,24 @@ impl Registry {
     pub fn build_contact_law(&self, name: &str, given: &ParamMap) -> Result<Box<dyn ContactLaw>> {
         let factory = self.contact_law_factory(name)?;
         let params = Params::resolve(&format!("contact law \"{}\"", factory.name()), factory.param_specs(), given)?;
+        factory.build(params)
+    }
+
+    pub fn add_shape(&mut self, factory: Arc<dyn ShapeModelFactory>) {
+        self.shapes.insert(factory.name().to_string(), factory);
+    }
+
+    pub fn shape_names(&self) -> Vec<String> {
+        self.shapes.keys().cloned().collect()
+    }
+
+    pub fn shape_factory(&self, name: &str) -> Result<&Arc<dyn ShapeModelFactory>> {
+        lookup(&self.shapes, name, "shape model")
+    }
+
+    pub fn build_shape(&self, name: &str, given: &ParamMap) -> Result<Box<dyn ShapeModel>> {
+        let factory = self.shape_factory(name)?;
+        let params = Params::resolve(&format!("shape \"{}\"", factory.name()), factory.param_specs(), given)?;
         factory.build(params)
     }
 

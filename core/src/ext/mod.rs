@@ -5,8 +5,10 @@
 
 pub mod constitutive;
 pub mod contact;
+pub mod shape;
 pub mod velocity_update;
 
 pub use constitutive::{ConstitutiveLaw, ConstitutiveLawFactory, LawBatch};
 pub use contact::{ContactBatch, ContactLaw, ContactLawFactory, PairInfo};
+pub use shape::{ShapeModel, ShapeModelFactory};
 pub use velocity_update::{G2pBatch, VelocityUpdate, VelocityUpdateFactory};

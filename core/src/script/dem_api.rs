@@ -406,42 +406,38 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
     engine.register_fn(
         "clump_cloud",
         |s: &mut DemHandle, m: DemMaterialHandle, lo: Dynamic, hi: Dynamic, opts: Map| {
-            only_keys(&opts, &["count", "template", "r_sphere", "r_clump", "seed"], "clump_cloud options")?;
             let (lo, hi) = (vector(&lo, 3, "lower corner")?, vector(&hi, 3, "upper corner")?);
             let count = integer(get(&opts, "count").unwrap_or(&Dynamic::UNIT), "count")?.max(0) as usize;
-            let template =
-                get(&opts, "template").map(|t| string(t, "template")).transpose()?.unwrap_or_else(|| "tetra".into());
-            if template != "tetra" {
-                return err(format!("clump template `{template}` is unknown; known: tetra"));
-            }
-            let r_sphere = number(get(&opts, "r_sphere").unwrap_or(&Dynamic::UNIT), "r_sphere")?;
-            let r_clump = number(get(&opts, "r_clump").unwrap_or(&Dynamic::UNIT), "r_clump")?;
-            let shape = crate::dem::clump::tetrahedral_members([0.0; 3], r_sphere, r_clump).or_rhai()?;
-            let (seed, existing) = {
+            let shape_name =
+                get(&opts, "shape").map(|t| string(t, "shape")).transpose()?.unwrap_or_else(|| "tetra".into());
+            let shape_params = param_map(&opts, &["count", "shape", "seed"], &shape_name)?;
+            let (seed, existing, shape) = {
                 let st = s.lock();
                 let seed = match get(&opts, "seed") {
                     Some(v) => integer(v, "seed")? as u64,
                     None => st.sim.dem.seed,
                 };
                 let sp = &st.sim.dem.spheres;
-                (seed, sp.x.iter().copied().zip(sp.radius.iter().copied()).collect::<Vec<_>>())
+                let shape = st.ctx.registry.build_shape(&shape_name, &shape_params).or_rhai()?;
+                (seed, sp.x.iter().copied().zip(sp.radius.iter().copied()).collect::<Vec<_>>(), shape)
             };
-            // Centres kept apart by the clumps' bounding spheres; orientations uniformly random.
-            let centres =
-                cloud(lo, hi, count, &Psd::Uniform { min: r_clump, max: r_clump }, seed, &existing).or_rhai()?;
-            let props = crate::dem::clump::mass_properties(
-                &shape,
-                s.lock().sim.dem.materials[m.index as usize].density,
-                CLUMP_VOXELS,
-            )
-            .or_rhai()?;
+            let template = shape.members();
+            let bound = shape.bounding_radius();
+            // Reference points kept apart by the grains' bounding spheres; orientations uniformly random.
+            let centres = cloud(lo, hi, count, &Psd::Uniform { min: bound, max: bound }, seed, &existing).or_rhai()?;
+            let density = s.lock().sim.dem.materials[m.index as usize].density;
+            let props = crate::dem::clump::mass_properties(&template, density, CLUMP_VOXELS).or_rhai()?;
             let mut st = s.lock();
             for (k, (c, _)) in centres.iter().enumerate() {
                 let u = [0, 1, 2].map(|j| crate::ext::contact::uniform(seed ^ 0xC1u64, (3 * k + j) as u64));
-                let (members, q) = crate::dem::clump::place_template(&shape, *c, u);
-                st.sim.dem.add_clump_with(m.index, &members, &props.transformed(&q, *c)).or_rhai()?;
+                let (members, q) = crate::dem::clump::place_template(&template, *c, u);
+                if members.len() == 1 {
+                    st.sim.dem.add_sphere(m.index, members[0].0, members[0].1, [0.0; 3]).or_rhai()?;
+                } else {
+                    st.sim.dem.add_clump_with(m.index, &members, &props.transformed(&q, *c)).or_rhai()?;
+                }
             }
-            Ok(count as i64)
+            Ok::<_, Box<rhai::EvalAltResult>>(count as i64)
         },
     );
     engine.register_fn("lattice", |s: &mut DemHandle, m: DemMaterialHandle, lo: Dynamic, hi: Dynamic, opts: Map| {

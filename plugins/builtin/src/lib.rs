@@ -7,6 +7,7 @@
 
 pub mod constitutive;
 pub mod contact;
+pub mod shape;
 pub mod velocity_update;
 
 use granite_core::{Plugin, Registry};
@@ -18,6 +19,7 @@ impl Plugin for DefaultPlugins {
     fn register(&self, registry: &mut Registry) {
         constitutive::register(registry);
         contact::register(registry);
+        shape::register(registry);
         velocity_update::register(registry);
     }
 }

@@ -1,0 +1,75 @@
+//! Grain shapes: a sphere, and the 4-sphere tetrahedral clump of the JGS round robin (thesis
+//! 2.2.1, table 2.3).
+
+use granite_core::dem::clump::tetrahedral_members;
+use granite_core::ext::{ShapeModel, ShapeModelFactory};
+use granite_core::math::Vec3;
+use granite_core::params::{ParamSpec, Params};
+use granite_core::{Registry, Result};
+use std::sync::Arc;
+
+pub fn register(registry: &mut Registry) {
+    registry.add_shape(Arc::new(SphereFactory));
+    registry.add_shape(Arc::new(TetraFactory));
+}
+
+struct Shape {
+    name: &'static str,
+    params: Params,
+    members: Vec<(Vec3, f64)>,
+}
+
+impl ShapeModel for Shape {
+    fn name(&self) -> &str {
+        self.name
+    }
+    fn params(&self) -> &Params {
+        &self.params
+    }
+    fn members(&self) -> Vec<(Vec3, f64)> {
+        self.members.clone()
+    }
+}
+
+pub struct SphereFactory;
+
+const SPHERE: &[ParamSpec] = &[ParamSpec::required("radius", "sphere radius in m, > 0")];
+
+impl ShapeModelFactory for SphereFactory {
+    fn name(&self) -> &str {
+        "sphere"
+    }
+    fn param_specs(&self) -> &[ParamSpec] {
+        SPHERE
+    }
+    fn description(&self) -> &str {
+        "a single sphere"
+    }
+    fn build(&self, params: Params) -> Result<Box<dyn ShapeModel>> {
+        let r = params.positive("radius")?;
+        Ok(Box::new(Shape { name: "sphere", members: vec![([0.0; 3], r)], params }))
+    }
+}
+
+pub struct TetraFactory;
+
+const TETRA: &[ParamSpec] = &[
+    ParamSpec::optional("r_sphere", 0.3101e-2, "member radius r_s in m (table 2.3: 3.101 mm)"),
+    ParamSpec::optional("r_clump", 0.5e-2, "radius of the sphere the clump is inscribed in (table 2.3: 5 mm)"),
+];
+
+impl ShapeModelFactory for TetraFactory {
+    fn name(&self) -> &str {
+        "tetra"
+    }
+    fn param_specs(&self) -> &[ParamSpec] {
+        TETRA
+    }
+    fn description(&self) -> &str {
+        "4 spheres at the vertices of a regular tetrahedron (JGS round robin)"
+    }
+    fn build(&self, params: Params) -> Result<Box<dyn ShapeModel>> {
+        let members = tetrahedral_members([0.0; 3], params.positive("r_sphere")?, params.positive("r_clump")?)?;
+        Ok(Box::new(Shape { name: "tetra", members, params }))
+    }
+}
