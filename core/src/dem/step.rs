@@ -504,7 +504,7 @@ fn wall_contacts(
             let geo = match wall.contact(sp.x[i], sp.radius[i], 0.0) {
                 Some(g) if g.gap < 0.0 => g,
                 other => {
-                    open_contact(&mut c, k, hs, other.map_or(f64::NEG_INFINITY, |g| -g.gap));
+                    open_contact(&mut c, k, hs, other.map_or(f64::MIN, |g| -g.gap));
                     continue;
                 }
             };
