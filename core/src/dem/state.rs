@@ -98,6 +98,17 @@ impl DemSim {
         }
     }
 
+    /// The whole state as a JSON value (for checkpoints that embed DEM samples).
+    pub fn to_json(&self) -> Result<serde_json::Value> {
+        serde_json::to_value(self.to_state()).map_err(|e| GraniteError::Other(format!("DEM state: {e}")))
+    }
+
+    /// A state from [`DemSim::to_json`]; contact laws are rebuilt from `registry`.
+    pub fn from_json(value: serde_json::Value, registry: &Registry) -> Result<DemSim> {
+        let st: DemState = serde_json::from_value(value).map_err(|e| GraniteError::Other(format!("DEM state: {e}")))?;
+        Self::from_state(st, registry, "checkpoint")
+    }
+
     /// Writes the whole state as JSON (f64 values round-trip exactly).
     pub fn save(&self, path: &Path) -> Result<()> {
         let text = serde_json::to_string(&self.to_state())
@@ -110,12 +121,14 @@ impl DemSim {
         let text = std::fs::read_to_string(path).map_err(|e| GraniteError::io(path, e))?;
         let st: DemState = serde_json::from_str(&text)
             .map_err(|e| GraniteError::Other(format!("{} is not a granite DEM state: {e}", path.display())))?;
+        Self::from_state(st, registry, &path.display().to_string())
+    }
+
+    fn from_state(st: DemState, registry: &Registry, source: &str) -> Result<DemSim> {
         if st.format != FORMAT || st.version != VERSION {
             return Err(GraniteError::Other(format!(
-                "{}: format {} version {} (this granite reads {FORMAT} version {VERSION})",
-                path.display(),
-                st.format,
-                st.version
+                "{source}: format {} version {} (this granite reads {FORMAT} version {VERSION})",
+                st.format, st.version
             )));
         }
         let mut sim = DemSim::new();

@@ -54,6 +54,14 @@ pub trait ConstitutiveLaw: Send + Sync {
     }
     /// Points of the material were removed: keep those whose flag is true, in order.
     fn points_removed(&self, _keep: &[bool]) {}
+    /// The law's own per-point objects as JSON for a checkpoint (None: it has none).
+    fn save_objects(&self) -> Result<Option<serde_json::Value>> {
+        Ok(None)
+    }
+    /// Restores objects written by `save_objects` (contact laws and the like come from `registry`).
+    fn load_objects(&self, _objects: serde_json::Value, _registry: &crate::registry::Registry) -> Result<()> {
+        Err(crate::GraniteError::Other(format!("law {} keeps no objects to restore", self.name())))
+    }
     /// Memory held per point by the law's own objects, in bytes (0 for plain state variables).
     fn bytes_per_point(&self) -> usize {
         0
@@ -82,5 +90,15 @@ pub trait ConstitutiveLawFactory: Send + Sync {
     }
     fn description(&self) -> &str {
         ""
+    }
+    /// Rebuilds a law with per-point objects from a checkpoint (`objects` from `save_objects`).
+    fn restore(
+        &self,
+        given: &crate::registry::ParamMap,
+        objects: serde_json::Value,
+        registry: &crate::registry::Registry,
+    ) -> Result<Box<dyn ConstitutiveLaw>> {
+        let _ = (given, objects, registry);
+        Err(crate::GraniteError::Other(format!("law {} cannot be restored from a checkpoint", self.name())))
     }
 }

@@ -27,6 +27,10 @@ pub trait VelocityUpdate: Send + Sync {
         false
     }
     fn update(&self, batch: G2pBatch<'_>);
+    /// The parameters it was built with (to rebuild it from the registry, e.g. on restart).
+    fn params(&self) -> crate::registry::ParamMap {
+        crate::registry::ParamMap::new()
+    }
 }
 
 pub trait VelocityUpdateFactory: Send + Sync {

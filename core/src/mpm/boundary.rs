@@ -6,7 +6,7 @@ use crate::math::Vec3;
 use crate::mpm::mesh::Mesh;
 
 /// A value that may change with time.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub enum TimeFunction {
     Constant(f64),
     /// Piecewise-linear table of (time, value), constant beyond its ends.
@@ -46,7 +46,7 @@ impl TimeFunction {
 }
 
 /// A face of the mesh box: axis and side (`x-` is axis 0, lower side).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub struct Face {
     pub axis: usize,
     pub upper: bool,
@@ -88,7 +88,7 @@ impl Face {
 }
 
 /// `V_axis = value(t)` on a set of nodes, and zero acceleration along `axis` there.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct VelocityConstraint {
     pub nodes: Vec<u32>,
     pub axis: usize,
@@ -98,7 +98,7 @@ pub struct VelocityConstraint {
 /// Coulomb friction with a planar boundary of outward normal `sign * e_axis`: while a node moves
 /// into the boundary, its normal velocity is removed and its tangential speed reduced by at most
 /// `mu` times the removed normal speed (the impulse ratio of Coulomb's law).
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct FrictionConstraint {
     pub nodes: Vec<u32>,
     pub axis: usize,
@@ -107,7 +107,7 @@ pub struct FrictionConstraint {
 }
 
 /// A force on each node of a set (N in 3D, N/m in 2D plane strain), scaled by `factor(t)`.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct NodalForce {
     pub nodes: Vec<u32>,
     /// Force per node at factor 1 (one entry per node: tractions give unequal nodal shares).
@@ -117,7 +117,7 @@ pub struct NodalForce {
 
 /// All boundary conditions of a simulation. They refer to node indices of one mesh and are
 /// cleared when the mesh is replaced.
-#[derive(Debug, Clone, Default)]
+#[derive(Debug, Clone, Default, serde::Serialize, serde::Deserialize)]
 pub struct Boundary {
     pub velocity: Vec<VelocityConstraint>,
     pub friction: Vec<FrictionConstraint>,

@@ -7,7 +7,7 @@
 use crate::error::{GraniteError, Result};
 use crate::math::Vec3;
 
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Mesh {
     pub dim: usize,
     pub origin: Vec3,

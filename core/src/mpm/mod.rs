@@ -1,6 +1,7 @@
 //! The Material Point Method engine (thesis chapter 3).
 
 pub mod boundary;
+pub mod checkpoint;
 pub mod diagnostics;
 pub mod fill;
 pub mod grid;

@@ -3,7 +3,7 @@
 
 use crate::math::{Mat3, Vec3, Voigt};
 
-#[derive(Debug, Clone, Default)]
+#[derive(Debug, Clone, Default, serde::Serialize, serde::Deserialize)]
 pub struct Points {
     /// Stable identity of each point (creation order), kept through deletions.
     pub id: Vec<u64>,

@@ -10,7 +10,7 @@ use crate::mpm::points::{retain_strided, NewPoint, Points};
 use std::ops::Range;
 
 /// When the stress is updated relative to the internal force (eq. 3.23).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub enum StressScheme {
     /// Update Stress First: strain from the mapped velocity, then forces from the new stress.
     Usf,
@@ -39,7 +39,7 @@ impl StressScheme {
 }
 
 /// What happens to a point that leaves the mesh (thesis 3.4.6).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub enum OutOfMeshPolicy {
     Delete,
     Stop,
@@ -117,6 +117,14 @@ impl MpmSim {
             slabs: SlabIndex::default(),
             loc: Vec::new(),
         }
+    }
+
+    pub(crate) fn next_id(&self) -> u64 {
+        self.next_id
+    }
+
+    pub(crate) fn set_next_id(&mut self, id: u64) {
+        self.next_id = id;
     }
 
     pub fn dim(&self) -> usize {

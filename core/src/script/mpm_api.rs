@@ -538,6 +538,16 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
     engine.register_fn("mpm", move |opts: Map| SimHandle::create(c.clone(), opts));
 
     engine.register_fn("material", |s: &mut SimHandle, law: &str, opts: Map| s.material(law, opts));
+    engine.register_fn("save", |s: &mut SimHandle, file: &str| {
+        let st = s.lock();
+        let path = st.points_path(file);
+        st.sim.mpm.save(&path).map(|_| path.display().to_string()).or_rhai()
+    });
+    let c = ctx.clone();
+    engine.register_fn("mpm_load", move |file: &str| {
+        let mpm = MpmSim::load(std::path::Path::new(file), &c.registry).or_rhai()?;
+        Ok::<_, Box<rhai::EvalAltResult>>(Handle::new(MpmScene { mpm, runout: None, driven: Vec::new() }, c.clone()))
+    });
     engine.register_fn("fill_box", |s: &mut SimHandle, m: MaterialHandle, lo: Dynamic, hi: Dynamic, opts: Map| {
         let region = s.box_region(&lo, &hi)?;
         s.fill(None, &m, region, opts)

@@ -65,6 +65,30 @@ impl ConstitutiveLawFactory for DemRveFactory {
     fn build_with(&self, params: Params, objects: &ObjectMap) -> Result<Box<dyn ConstitutiveLaw>> {
         Ok(Box::new(DemRve::new(params, objects)?))
     }
+    fn restore(
+        &self,
+        given: &granite_core::registry::ParamMap,
+        objects: serde_json::Value,
+        registry: &granite_core::Registry,
+    ) -> Result<Box<dyn ConstitutiveLaw>> {
+        let bad = || GraniteError::Other("dem_rve checkpoint: expected {template, rves}".into());
+        let serde_json::Value::Object(mut map) = objects else { return Err(bad()) };
+        let template = DemSim::from_json(map.remove("template").ok_or_else(bad)?, registry)?;
+        let params = Params::resolve("law \"dem_rve\"", SPECS, given)?;
+        let mut objects = ObjectMap::new();
+        objects.insert("rve".into(), std::sync::Arc::new(template));
+        let law = DemRve::new(params, &objects)?;
+        let serde_json::Value::Array(rves) = map.remove("rves").ok_or_else(bad)? else { return Err(bad()) };
+        {
+            let mut store = law.rves.write().map_err(|_| GraniteError::Other("RVE store poisoned".into()))?;
+            for v in rves {
+                let mut sim = DemSim::from_json(v, registry)?;
+                sim.sequential = true;
+                store.push(Mutex::new(Rve { sim }));
+            }
+        }
+        Ok(Box::new(law))
+    }
 }
 
 impl DemRve {
@@ -212,6 +236,15 @@ impl ConstitutiveLaw for DemRve {
     }
     fn bytes_per_point(&self) -> usize {
         self.template.memory_bytes().max(1)
+    }
+    fn save_objects(&self) -> Result<Option<serde_json::Value>> {
+        let rves = self.rves.read().map_err(|_| GraniteError::Other("RVE store poisoned".into()))?;
+        let mut list = Vec::with_capacity(rves.len());
+        for r in rves.iter() {
+            let guard = r.lock().map_err(|_| GraniteError::Other("RVE poisoned".into()))?;
+            list.push(guard.sim.to_json()?);
+        }
+        Ok(Some(serde_json::json!({ "template": self.template.to_json()?, "rves": list })))
     }
     fn update(&self, batch: LawBatch<'_>) -> Result<()> {
         let rves = self.rves.read().map_err(|_| GraniteError::Other("RVE store poisoned".into()))?;

@@ -16,7 +16,7 @@ use granite_core::registry::ParamMap;
 use granite_core::Registry;
 use std::sync::Arc;
 
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone)]
 pub struct Blend {
     name: &'static str,
     /// Weight P of the FLIP velocity in the new point velocity.
@@ -24,9 +24,14 @@ pub struct Blend {
     /// Move with the new point velocity (N-variants) instead of V_PIC.
     move_with_new: bool,
     affine: bool,
+    /// Parameters given at build (flip_ratio for the blends), to rebuild it.
+    given: ParamMap,
 }
 
 impl VelocityUpdate for Blend {
+    fn params(&self) -> ParamMap {
+        self.given.clone()
+    }
     fn name(&self) -> &str {
         self.name
     }
@@ -75,11 +80,22 @@ impl VelocityUpdateFactory for BlendFactory {
         }
     }
     fn build(&self, params: Params) -> granite_core::Result<Box<dyn VelocityUpdate>> {
+        let mut given = ParamMap::new();
         let flip_weight = match self.flip_weight {
             Some(w) => w,
-            None => params.in_range("flip_ratio", 0.0, 1.0, true)?,
+            None => {
+                let w = params.in_range("flip_ratio", 0.0, 1.0, true)?;
+                given.insert("flip_ratio".into(), w);
+                w
+            }
         };
-        Ok(Box::new(Blend { name: self.name, flip_weight, move_with_new: self.move_with_new, affine: self.affine }))
+        Ok(Box::new(Blend {
+            name: self.name,
+            flip_weight,
+            move_with_new: self.move_with_new,
+            affine: self.affine,
+            given,
+        }))
     }
 }
 
