@@ -244,6 +244,42 @@ impl DemSim {
     }
 }
 
+thread_local! {
+    /// Scratch buffers are large (tens of kB): keep one per thread across steps instead of
+    /// allocating and zeroing one per step (that dominated small RVEs).
+    static SCRATCH: std::cell::RefCell<Vec<Box<Scratch>>> = const { std::cell::RefCell::new(Vec::new()) };
+}
+
+/// A scratch buffer borrowed from the thread's pool, returned on drop.
+struct ScratchGuard(Option<Box<Scratch>>);
+
+impl ScratchGuard {
+    fn take() -> ScratchGuard {
+        ScratchGuard(Some(SCRATCH.with(|p| p.borrow_mut().pop()).unwrap_or_else(Scratch::new)))
+    }
+}
+
+impl std::ops::Deref for ScratchGuard {
+    type Target = Scratch;
+    fn deref(&self) -> &Scratch {
+        self.0.as_deref().expect("scratch present until drop")
+    }
+}
+
+impl std::ops::DerefMut for ScratchGuard {
+    fn deref_mut(&mut self) -> &mut Scratch {
+        self.0.as_deref_mut().expect("scratch present until drop")
+    }
+}
+
+impl Drop for ScratchGuard {
+    fn drop(&mut self) {
+        if let Some(s) = self.0.take() {
+            SCRATCH.with(|p| p.borrow_mut().push(s));
+        }
+    }
+}
+
 /// Touching contacts of one chunk, compacted for the law call.
 struct Scratch {
     pair: [usize; CHUNK],
@@ -363,6 +399,9 @@ fn for_each_chunk(
     min_chunks: usize,
     body: impl Fn(PairChunk<'_>, &mut Scratch) + Sync,
 ) {
+    if pairs.is_empty() {
+        return;
+    }
     let PairList { a, b, shift, law, params, history, touching, force, torque_a, torque_b, overlap, .. } = pairs;
     (
         (a.par_chunks(CHUNK), b.par_chunks(CHUNK), shift.par_chunks(CHUNK)),
@@ -379,7 +418,7 @@ fn for_each_chunk(
         .with_min_len(min_chunks)
         .enumerate()
         .for_each_init(
-            Scratch::new,
+            ScratchGuard::take,
             |scratch, (j, ((a, b, shift), law, params, history, touching, force, torque_a, torque_b, overlap))| {
                 scratch.len = 0;
                 let chunk = PairChunk {
