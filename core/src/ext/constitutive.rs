@@ -62,6 +62,11 @@ pub trait ConstitutiveLaw: Send + Sync {
     fn load_objects(&self, _objects: serde_json::Value, _registry: &crate::registry::Registry) -> Result<()> {
         Err(crate::GraniteError::Other(format!("law {} keeps no objects to restore", self.name())))
     }
+    /// A picture of one point's object (e.g. its RVE's particles) for ParaView: positions and
+    /// per-particle fields, or None when the law has no such object.
+    fn object_frame(&self, _point: usize) -> Option<(Vec<crate::math::Vec3>, Vec<crate::io::vtk::Field>)> {
+        None
+    }
     /// Memory held per point by the law's own objects, in bytes (0 for plain state variables).
     fn bytes_per_point(&self) -> usize {
         0

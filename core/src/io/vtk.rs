@@ -47,6 +47,14 @@ impl VtkWriter {
     }
 }
 
+/// Writes one stand-alone `.vtu` file.
+pub fn write_vtu(path: &Path, positions: &[Vec3], fields: &[Field]) -> Result<()> {
+    if let Some(dir) = path.parent() {
+        std::fs::create_dir_all(dir).map_err(|e| GraniteError::io(dir, e))?;
+    }
+    std::fs::write(path, vtu_text(positions, fields)).map_err(|e| GraniteError::io(path, e))
+}
+
 fn vtu_text(positions: &[Vec3], fields: &[Field]) -> String {
     let n = positions.len();
     let mut s = String::with_capacity(64 * n * (1 + fields.len()));

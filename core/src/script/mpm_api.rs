@@ -684,6 +684,22 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
             None => err(format!("law \"{}\" has no state variable `{name}`; it has: {}", law.name(), names.join(", "))),
         }
     });
+    engine.register_fn("write_point_object", |s: &mut SimHandle, i: i64, file: &str| -> RhaiResult<String> {
+        let st = s.lock();
+        let sim = &st.sim.mpm;
+        let n = sim.points.len();
+        if i < 0 || i as usize >= n {
+            return err(format!("point index {i} out of range 0..{n}"));
+        }
+        let m = sim.points.material[i as usize] as usize;
+        let local = i as usize - sim.material_range(m).start;
+        let Some((x, fields)) = sim.materials[m].law.object_frame(local) else {
+            return err(format!("law \"{}\" keeps no per-point object to write", sim.materials[m].law.name()));
+        };
+        let path = st.points_path(file);
+        crate::io::vtk::write_vtu(&path, &x, &fields).or_rhai()?;
+        Ok(path.display().to_string())
+    });
     engine.register_fn("point_position", |s: &mut SimHandle, i: i64| -> RhaiResult<Array> {
         let st = s.lock();
         let n = st.sim.mpm.points.len();

@@ -237,6 +237,38 @@ impl ConstitutiveLaw for DemRve {
     fn bytes_per_point(&self) -> usize {
         self.template.memory_bytes().max(1)
     }
+    fn object_frame(&self, point: usize) -> Option<(Vec<granite_core::math::Vec3>, Vec<granite_core::io::vtk::Field>)> {
+        use granite_core::io::vtk::Field;
+        self.with_rve(point, |sim| {
+            let s = &sim.spheres;
+            let counts = sim.contact_counts();
+            // Mean stress carried by each particle (its share of the Love-Weber sum), as figure 4.6.
+            let mut particle_p = vec![0.0; s.len()];
+            let p = &sim.pairs;
+            for c in 0..p.len() {
+                if !p.touching[c] {
+                    continue;
+                }
+                let (i, j) = (p.a[c] as usize, p.b[c] as usize);
+                let image = sim.cell.as_ref().map(|cell| cell.shift_vector(p.shift[c])).unwrap_or([0.0; 3]);
+                let l: Vec<f64> = (0..3).map(|a| s.x[j][a] + image[a] - s.x[i][a]).collect();
+                let work = p.force[c][0] * l[0] + p.force[c][1] * l[1] + p.force[c][2] * l[2];
+                for k in [i, j] {
+                    let v = 4.0 / 3.0 * std::f64::consts::PI * s.radius[k].powi(3);
+                    particle_p[k] += 0.5 * work / (3.0 * v);
+                }
+            }
+            let field =
+                |name: &str, components: usize, values: Vec<f64>| Field { name: name.into(), components, values };
+            let fields = vec![
+                field("radius", 1, s.radius.clone()),
+                field("velocity", 3, s.v.iter().flatten().copied().collect()),
+                field("contacts", 1, counts.iter().map(|&c| c as f64).collect()),
+                field("mean_stress", 1, particle_p),
+            ];
+            (s.x.clone(), fields)
+        })
+    }
     fn save_objects(&self) -> Result<Option<serde_json::Value>> {
         let rves = self.rves.read().map_err(|_| GraniteError::Other("RVE store poisoned".into()))?;
         let mut list = Vec::with_capacity(rves.len());
