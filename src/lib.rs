@@ -33,7 +33,8 @@ pub fn run(
         pool = pool.num_threads(n);
     }
     let pool = pool.build().map_err(|e| granite_core::GraniteError::Other(format!("thread pool: {e}")))?;
-    pool.install(|| run_script(script, registry(), RunOptions { out_dir, overrides, quiet }))
+    let program = format!("granite {} ({})", env!("CARGO_PKG_VERSION"), env!("GRANITE_GIT_COMMIT"));
+    pool.install(|| run_script(script, registry(), RunOptions { program, out_dir, overrides, quiet }))
 }
 
 /// Parses `NAME=VALUE`.

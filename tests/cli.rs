@@ -38,6 +38,13 @@ fn run_writes_the_output_contract() {
     assert!(pvd.contains("points_000000.vtu"));
     let vtu = std::fs::read_to_string(dir.join("vtk/points_000000.vtu")).unwrap();
     assert!(vtu.contains("NumberOfPoints=\"27\"") && vtu.contains("Name=\"stress\""));
+    let prov: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("provenance.json")).unwrap()).unwrap();
+    assert!(prov["program"].as_str().unwrap().contains(env!("CARGO_PKG_VERSION")));
+    assert_eq!(prov["parameters"]["duration"], 0.1);
+    assert_eq!(prov["threads"], 1);
+    assert!(prov["script_hash"].as_str().unwrap().starts_with("fnv1a64:"));
+    assert!(prov["plugins"]["constitutive_laws"].as_array().unwrap().iter().any(|l| l == "mohr_coulomb"));
 }
 
 #[test]

@@ -5,7 +5,12 @@ mod common;
 use granite_core::script::{run_source, RunOptions};
 
 fn run_err(name: &str, source: &str, overrides: &[(&str, &str)]) -> String {
-    let options = RunOptions { out_dir: common::out_dir(name), overrides: common::sets(overrides), quiet: true };
+    let options = RunOptions {
+        out_dir: common::out_dir(name),
+        overrides: common::sets(overrides),
+        quiet: true,
+        ..Default::default()
+    };
     match run_source(&format!("{name}.rhai"), source, granite::registry(), options) {
         Ok(_) => panic!("{name}: the script should have failed"),
         Err(e) => e.to_string(),

@@ -53,7 +53,8 @@ pub fn column(header: &[String], name: &str) -> usize {
 /// Runs script text (no overrides) into a fresh output folder named `name`; returns the folder.
 pub fn run_text(name: &str, source: &str) -> PathBuf {
     let out = out_dir(name);
-    let options = granite_core::script::RunOptions { out_dir: out.clone(), overrides: vec![], quiet: true };
+    let options =
+        granite_core::script::RunOptions { out_dir: out.clone(), overrides: vec![], quiet: true, ..Default::default() };
     granite_core::script::run_source(&format!("{name}.rhai"), source, granite::registry(), options)
         .unwrap_or_else(|e| panic!("{name}: {e}"));
     out

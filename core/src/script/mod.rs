@@ -23,6 +23,8 @@ use std::sync::{Arc, Mutex};
 /// How a script is run.
 #[derive(Debug, Clone, Default)]
 pub struct RunOptions {
+    /// Who runs it (version and commit), recorded in provenance.json.
+    pub program: String,
     /// Output folder (created if missing).
     pub out_dir: PathBuf,
     /// `--set NAME=VALUE` overrides of the script's `param(...)` declarations.
@@ -160,6 +162,7 @@ pub fn run_source(name: &str, source: &str, registry: Registry, options: RunOpti
     let ctx = Arc::new(ScriptContext::new(registry, options));
     let engine = build_engine(&ctx);
     let started = std::time::Instant::now();
+    let started_at = std::time::SystemTime::now();
     let outcome = engine
         .compile(source)
         .map_err(|e| format!("{name}: syntax error: {e}"))
@@ -172,10 +175,72 @@ pub fn run_source(name: &str, source: &str, registry: Registry, options: RunOpti
     }
     summary.insert("wall_time_s".into(), Value::from(started.elapsed().as_secs_f64()));
     crate::io::write_summary(&out_dir.join("summary.json"), &summary)?;
+    write_provenance(&out_dir, name, source, &ctx, started_at, summary.get("status"))?;
     match outcome {
         Ok(()) => Ok(RunReport { out_dir, summary }),
         Err(e) => Err(GraniteError::Other(e)),
     }
+}
+
+/// 64-bit FNV-1a of the script text: enough to tell two versions of a script apart.
+fn fnv1a(text: &str) -> String {
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    for b in text.bytes() {
+        h ^= b as u64;
+        h = h.wrapping_mul(0x0100_0000_01b3);
+    }
+    format!("fnv1a64:{h:016x}")
+}
+
+/// Seconds since the Unix epoch, UTC, as ISO 8601.
+fn iso8601(t: std::time::SystemTime) -> String {
+    let secs = t.duration_since(std::time::UNIX_EPOCH).map(|d| d.as_secs()).unwrap_or(0);
+    let (days, rem) = (secs / 86_400, secs % 86_400);
+    // Civil date from days since 1970-01-01 (Howard Hinnant's algorithm).
+    let z = days as i64 + 719_468;
+    let era = z.div_euclid(146_097);
+    let doe = z - era * 146_097;
+    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
+    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+    let mp = (5 * doy + 2) / 153;
+    let d = doy - (153 * mp + 2) / 5 + 1;
+    let m = if mp < 10 { mp + 3 } else { mp - 9 };
+    let y = yoe + era * 400 + if m <= 2 { 1 } else { 0 };
+    format!("{y:04}-{m:02}-{d:02}T{:02}:{:02}:{:02}Z", rem / 3600, rem % 3600 / 60, rem % 60)
+}
+
+/// `provenance.json`: what ran, with which parameters and plugins, on how many threads, when.
+fn write_provenance(
+    out_dir: &Path,
+    name: &str,
+    source: &str,
+    ctx: &ScriptContext,
+    started: std::time::SystemTime,
+    status: Option<&Value>,
+) -> Result<()> {
+    let params: IndexMap<String, Value> =
+        ctx.declared.lock().unwrap().iter().map(|(k, v)| (k.clone(), to_json(v))).collect();
+    let plugins = serde_json::json!({
+        "constitutive_laws": ctx.registry.law_names(),
+        "velocity_updates": ctx.registry.velocity_update_names(),
+        "contact_laws": ctx.registry.contact_law_names(),
+        "shapes": ctx.registry.shape_names(),
+    });
+    let mut p = IndexMap::new();
+    p.insert("program".to_string(), Value::from(ctx.options.program.clone()));
+    p.insert("script".to_string(), Value::from(name));
+    p.insert("script_hash".to_string(), Value::from(fnv1a(source)));
+    p.insert("parameters".to_string(), serde_json::to_value(params).unwrap_or(Value::Null));
+    p.insert(
+        "overrides".to_string(),
+        Value::from(ctx.options.overrides.iter().map(|(k, v)| format!("{k}={v}")).collect::<Vec<_>>()),
+    );
+    p.insert("plugins".to_string(), plugins);
+    p.insert("threads".to_string(), Value::from(rayon::current_num_threads()));
+    p.insert("started".to_string(), Value::from(iso8601(started)));
+    p.insert("ended".to_string(), Value::from(iso8601(std::time::SystemTime::now())));
+    p.insert("status".to_string(), status.cloned().unwrap_or(Value::Null));
+    crate::io::write_summary(&out_dir.join("provenance.json"), &p)
 }
 
 /// A script error in one line: the message first, then where it happened.
