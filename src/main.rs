@@ -51,6 +51,20 @@ enum Command {
     },
     /// List the registered plugins (constitutive laws, velocity updates) and their parameters.
     Plugins,
+    /// Plot series.csv columns against another column, as SVG.
+    Plot {
+        /// The CSV file (e.g. out/column_collapse/series.csv).
+        csv: PathBuf,
+        /// Column on the horizontal axis.
+        #[arg(long, default_value = "time")]
+        x: String,
+        /// Columns to plot, comma separated.
+        #[arg(long, value_delimiter = ',', required = true)]
+        y: Vec<String>,
+        /// Output file (default: plot_<columns>.svg next to the CSV).
+        #[arg(long)]
+        out: Option<PathBuf>,
+    },
 }
 
 fn main() -> ExitCode {
@@ -95,6 +109,16 @@ fn main() -> ExitCode {
             other => {
                 eprintln!("granite: unknown benchmark `{other}`; available: mpm, dem, mpmxdem");
                 ExitCode::from(2)
+            }
+        },
+        Command::Plot { csv, x, y, out } => match granite_core::io::plot::plot(&csv, &x, &y, out) {
+            Ok(path) => {
+                println!("granite: wrote {}", path.display());
+                ExitCode::SUCCESS
+            }
+            Err(e) => {
+                eprintln!("granite: error: {e}");
+                ExitCode::FAILURE
             }
         },
         Command::Plugins => {

@@ -60,3 +60,18 @@ fn unknown_parameter_fails_with_the_declared_list() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("sceme") && err.contains("scheme, update, flip_ratio, duration"), "{err}");
 }
+
+#[test]
+fn plot_writes_an_svg() {
+    let dir = common::out_dir("cli_plot");
+    std::fs::create_dir_all(&dir).unwrap();
+    let csv = dir.join("series.csv");
+    std::fs::write(&csv, "step,time,kinetic_energy,runout\n0,0,1.0,0\n1,0.1,0.5,0.2\n2,0.2,0.25,0.3\n").unwrap();
+    let out =
+        granite().args(["plot"]).arg(&csv).args(["--x", "time", "--y", "kinetic_energy,runout"]).output().unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let svg = std::fs::read_to_string(dir.join("plot_kinetic_energy_runout.svg")).unwrap();
+    assert!(svg.len() > 1000 && svg.contains("<svg") && svg.contains("polyline"), "an SVG with lines");
+    let bad = granite().args(["plot"]).arg(&csv).args(["--y", "nope"]).output().unwrap();
+    assert!(!bad.status.success() && String::from_utf8_lossy(&bad.stderr).contains("time, kinetic_energy, runout"));
+}

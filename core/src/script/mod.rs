@@ -142,6 +142,14 @@ fn build_engine(ctx: &Arc<ScriptContext>) -> Engine {
     let c = ctx.clone();
     engine.register_fn("out_dir", move || c.options.out_dir.display().to_string());
     engine.register_fn("print_line", |s: &str| println!("{s}"));
+    let c = ctx.clone();
+    engine.register_fn("plot", move |csv: &str, x: &str, ys: rhai::Array, out: &str| -> RhaiResult<String> {
+        let dir = &c.options.out_dir;
+        let ys: Vec<String> = ys.iter().map(|y| y.to_string()).collect();
+        crate::io::plot::plot(&dir.join(csv), x, &ys, Some(dir.join(out)))
+            .map(|p| p.display().to_string())
+            .map_err(convert::to_rhai)
+    });
     mpm_api::register(&mut engine, ctx);
     dem_api::register(&mut engine, ctx);
     engine
