@@ -1,5 +1,6 @@
 //! The `granite` command: thin wiring between the command line, the engine and the built-in plugins.
 
+pub mod batch;
 pub mod bench;
 
 use granite_core::script::{run_script, RunOptions, RunReport};

@@ -51,6 +51,21 @@ enum Command {
     },
     /// List the registered plugins (constitutive laws, velocity updates) and their parameters.
     Plugins,
+    /// Run a script over many parameter sets (a TOML file of [grid] lists and/or [[set]] tables).
+    Batch {
+        script: PathBuf,
+        /// The parameter file.
+        #[arg(long)]
+        params: PathBuf,
+        /// Runs at a time.
+        #[arg(long, default_value_t = 1)]
+        jobs: usize,
+        /// Output folder (default: out/<script stem>_batch/).
+        #[arg(long)]
+        out: Option<PathBuf>,
+        #[arg(long)]
+        quiet: bool,
+    },
     /// Plot series.csv columns against another column, as SVG.
     Plot {
         /// The CSV file (e.g. out/column_collapse/series.csv).
@@ -111,6 +126,39 @@ fn main() -> ExitCode {
                 ExitCode::from(2)
             }
         },
+        Command::Batch { script, params, jobs, out, quiet } => {
+            let out = out.unwrap_or_else(|| {
+                let stem = script.file_stem().map(|s| s.to_string_lossy().to_string()).unwrap_or_else(|| "run".into());
+                PathBuf::from("out").join(format!("{stem}_batch"))
+            });
+            let exe = match std::env::current_exe() {
+                Ok(e) => e,
+                Err(e) => {
+                    eprintln!("granite: cannot find the granite executable: {e}");
+                    return ExitCode::FAILURE;
+                }
+            };
+            match granite::batch::run(&exe, &script, &params, &out, jobs, quiet) {
+                Ok(outcomes) => {
+                    let failed = outcomes.iter().filter(|o| o.exit_code != Some(0)).count();
+                    println!(
+                        "granite batch: {} runs, {} ok, {failed} failed; summary in {}",
+                        outcomes.len(),
+                        outcomes.len() - failed,
+                        out.join("batch_summary.csv").display()
+                    );
+                    if failed > 0 {
+                        ExitCode::FAILURE
+                    } else {
+                        ExitCode::SUCCESS
+                    }
+                }
+                Err(e) => {
+                    eprintln!("granite: error: {e}");
+                    ExitCode::FAILURE
+                }
+            }
+        }
         Command::Plot { csv, x, y, out } => match granite_core::io::plot::plot(&csv, &x, &y, out) {
             Ok(path) => {
                 println!("granite: wrote {}", path.display());

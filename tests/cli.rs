@@ -75,3 +75,39 @@ fn plot_writes_an_svg() {
     let bad = granite().args(["plot"]).arg(&csv).args(["--y", "nope"]).output().unwrap();
     assert!(!bad.status.success() && String::from_utf8_lossy(&bad.stderr).contains("time, kinetic_energy, runout"));
 }
+
+#[test]
+fn batch_runs_every_set_and_reports_a_failure() {
+    let dir = common::out_dir("cli_batch");
+    std::fs::create_dir_all(&dir).unwrap();
+    let params = dir.join("params.toml");
+    // Three runs; the last asks for a scheme that does not exist.
+    std::fs::write(
+        &params,
+        "[grid]\nduration = 0.02\n[[set]]\nscheme = \"USF\"\n[[set]]\nscheme = \"USL\"\n[[set]]\nscheme = \"XYZ\"\n",
+    )
+    .unwrap();
+    let out = granite()
+        .args(["batch", "scripts/mpm/bouncing_cube.rhai", "--jobs", "2", "--quiet", "--params"])
+        .arg(&params)
+        .arg("--out")
+        .arg(dir.join("runs"))
+        .current_dir(common::root())
+        .output()
+        .unwrap();
+    assert!(!out.status.success(), "a failed run makes the batch fail");
+    assert!(
+        String::from_utf8_lossy(&out.stdout).contains("3 runs, 2 ok, 1 failed"),
+        "{}",
+        String::from_utf8_lossy(&out.stdout)
+    );
+    let (h, rows) = common::read_csv(&dir.join("runs/batch_summary.csv"));
+    assert_eq!(rows.len(), 3);
+    let exit = common::column(&h, "exit_code");
+    assert_eq!((rows[0][exit], rows[1][exit]), (0.0, 0.0));
+    assert_ne!(rows[2][exit], 0.0);
+    common::column(&h, "final_total_energy");
+    for k in 0..3 {
+        assert!(dir.join(format!("runs/run_{k:03}/summary.json")).exists());
+    }
+}
