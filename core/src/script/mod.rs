@@ -8,6 +8,7 @@ mod dem_api;
 pub mod driver;
 mod mpm_api;
 mod output;
+mod script_law;
 
 pub use mpm_api::SimHandle;
 
@@ -47,6 +48,8 @@ pub struct ScriptContext {
     declared: Mutex<IndexMap<String, Dynamic>>,
     summary: Mutex<IndexMap<String, Value>>,
     sims: Mutex<usize>,
+    /// The compiled script, for laws written as script functions.
+    pub(crate) ast: Mutex<Option<Arc<rhai::AST>>>,
 }
 
 impl ScriptContext {
@@ -57,6 +60,7 @@ impl ScriptContext {
             declared: Mutex::new(IndexMap::new()),
             summary: Mutex::new(IndexMap::new()),
             sims: Mutex::new(0),
+            ast: Mutex::new(None),
         }
     }
 
@@ -152,6 +156,7 @@ fn build_engine(ctx: &Arc<ScriptContext>) -> Engine {
     });
     mpm_api::register(&mut engine, ctx);
     dem_api::register(&mut engine, ctx);
+    script_law::register(&mut engine, ctx);
     engine
 }
 
@@ -174,7 +179,10 @@ pub fn run_source(name: &str, source: &str, registry: Registry, options: RunOpti
     let outcome = engine
         .compile(source)
         .map_err(|e| format!("{name}: syntax error: {e}"))
-        .and_then(|ast| engine.run_ast(&ast).map_err(|e| format!("{name}: {}", describe(&e))))
+        .and_then(|ast| {
+            *ctx.ast.lock().unwrap() = Some(Arc::new(ast.clone()));
+            engine.run_ast(&ast).map_err(|e| format!("{name}: {}", describe(&e)))
+        })
         .and_then(|_| ctx.check_overrides().map_err(|e| format!("{name}: {}", describe(&e))));
     let mut summary = ctx.summary.lock().unwrap().clone();
     summary.insert("status".into(), Value::from(if outcome.is_ok() { "ok" } else { "failed" }));

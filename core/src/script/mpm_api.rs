@@ -60,6 +60,12 @@ pub struct MaterialHandle {
     name: String,
 }
 
+impl MaterialHandle {
+    pub(super) fn new(index: usize, name: String) -> MaterialHandle {
+        MaterialHandle { index, name }
+    }
+}
+
 impl ScriptSim for MpmScene {
     type Snapshot = Snapshot;
 
