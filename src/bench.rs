@@ -9,6 +9,13 @@ use granite_core::registry::ParamMap;
 use granite_core::{GraniteError, Result};
 use std::time::Instant;
 
+fn pool(threads: usize) -> Result<rayon::ThreadPool> {
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .map_err(|e| GraniteError::Other(format!("thread pool: {e}")))
+}
+
 fn params(pairs: &[(&str, f64)]) -> ParamMap {
     pairs.iter().map(|(k, v)| (k.to_string(), *v)).collect()
 }
@@ -83,10 +90,7 @@ fn time_steps(sim: &mut MpmSim, steps: usize) -> Result<f64> {
 fn measure(label: &str, threads: &[usize], steps: usize, build: &(dyn Fn() -> Result<MpmSim> + Sync)) -> Result<()> {
     let mut base = None;
     for &n in threads {
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(n)
-            .build()
-            .map_err(|e| GraniteError::Other(format!("thread pool: {e}")))?;
+        let pool = pool(n)?;
         let (secs, points) = pool.install(|| -> Result<(f64, usize)> {
             let mut sim = build()?;
             let points = sim.points.len();
@@ -205,10 +209,7 @@ pub fn dem(counts: &[usize], steps: usize, threads: &[usize]) -> Result<()> {
     for &count in counts {
         let mut base = None;
         for &n in threads {
-            let pool = rayon::ThreadPoolBuilder::new()
-                .num_threads(n)
-                .build()
-                .map_err(|e| GraniteError::Other(format!("thread pool: {e}")))?;
+            let pool = pool(n)?;
             let (secs, particles, rebuilds, contacts) = pool.install(|| -> Result<(f64, usize, u64, usize)> {
                 let mut sim = gravity_deposition(count)?;
                 for _ in 0..200 {
@@ -234,10 +235,7 @@ pub fn dem(counts: &[usize], steps: usize, threads: &[usize]) -> Result<()> {
     println!("granite bench dem: 1500-sphere periodic RVE at 100 kPa, constant-volume simple shear");
     let mut base = None;
     for &n in threads {
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(n)
-            .build()
-            .map_err(|e| GraniteError::Other(format!("thread pool: {e}")))?;
+        let pool = pool(n)?;
         let (secs, particles, contacts) = pool.install(|| -> Result<(f64, usize, usize)> {
             let mut sim = periodic_rve(1500, 1e5)?;
             sim.cell_control = Some(granite_core::dem::cell::CellControl {
@@ -274,10 +272,7 @@ pub fn mpmxdem(threads: &[usize]) -> Result<()> {
     let rve = periodic_rve(125, 1e5)?;
     let mut base = None;
     for &n in threads {
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(n)
-            .build()
-            .map_err(|e| GraniteError::Other(format!("thread pool: {e}")))?;
+        let pool = pool(n)?;
         let (secs, points, bytes) = pool.install(|| -> Result<(f64, usize, usize)> {
             let reg = crate::registry();
             let mesh = Mesh::new(2, [0.0; 3], [0.5, 0.5, 1.0], [2, 2, 1])?;
@@ -317,16 +312,15 @@ pub fn mpmxdem(threads: &[usize]) -> Result<()> {
         );
     }
     // The coupling's own cost: the same RVE stepped alone, same steps, one thread.
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(1)
-        .build()
-        .map_err(|e| GraniteError::Other(format!("thread pool: {e}")))?;
+    let pool = pool(1)?;
     let standalone = pool.install(|| -> Result<f64> {
         let mut sim = rve.clone();
         sim.sequential = true;
         // The oedometric increment of one MPM step (1e-2 m/s over 1 m for 1e-5 s) in 51 DEM steps.
         let rate = 1e-2 * 1e-5 / (51.0 * sim.dt);
-        sim.cell.as_mut().map(|c| c.velocity_gradient[(1, 1)] = -rate);
+        if let Some(c) = sim.cell.as_mut() {
+            c.velocity_gradient[(1, 1)] = -rate;
+        }
         let t = Instant::now();
         for _ in 0..16 * 51 * 200 / 4 {
             sim.step()?;

@@ -1,3 +1,4 @@
+#![allow(clippy::needless_range_loop)]
 //! Clumps: rigid aggregates of spheres. Free rotation keeps the angular momentum; collisions keep
 //! the linear momentum; a clump dropped on a floor comes to rest on it.
 

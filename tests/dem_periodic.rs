@@ -1,3 +1,4 @@
+#![allow(clippy::needless_range_loop)]
 //! Periodic cell: affine motion of a sheared gas, flips that keep every particle and contact,
 //! and the Love-Weber stress of a hand-built packing.
 

@@ -1,3 +1,4 @@
+#![allow(clippy::needless_range_loop)]
 //! MPMxDEM (thesis chapter 4): the `dem_rve` law against hand-checked numbers, its own RVE at
 //! rest, a pure DEM run of the same strain path, and thread-count independence.
 

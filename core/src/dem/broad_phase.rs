@@ -8,6 +8,25 @@ use rayon::prelude::*;
 
 const MIN_PER_TASK: usize = 2048;
 
+/// Counting sort of items by cell: `items[start[c]..start[c + 1]]` are the items of cell `c`,
+/// in increasing index.
+fn bucket(cells: &[usize], ncells: usize) -> (Vec<u32>, Vec<u32>) {
+    let mut start = vec![0u32; ncells + 1];
+    for &c in cells {
+        start[c + 1] += 1;
+    }
+    for c in 0..ncells {
+        start[c + 1] += start[c];
+    }
+    let mut fill = start.clone();
+    let mut items = vec![0u32; cells.len()];
+    for (i, &c) in cells.iter().enumerate() {
+        items[fill[c] as usize] = i as u32;
+        fill[c] += 1;
+    }
+    (start, items)
+}
+
 /// A candidate pair: `(a, b, shift of b's image)`.
 pub type Candidate = (u32, u32, [i32; 3]);
 
@@ -48,21 +67,8 @@ pub fn sphere_pairs(x: &[Vec3], radius: &[f64], skin: f64) -> Vec<Candidate> {
         c
     };
     let index = |c: [usize; 3]| c[0] + dims[0] * (c[1] + dims[1] * c[2]);
-    let ncells = dims[0] * dims[1] * dims[2];
-    let mut start = vec![0u32; ncells + 1];
     let cells: Vec<usize> = x.iter().map(|p| index(cell_of(p))).collect();
-    for &c in &cells {
-        start[c + 1] += 1;
-    }
-    for c in 0..ncells {
-        start[c + 1] += start[c];
-    }
-    let mut fill = start.clone();
-    let mut items = vec![0u32; n];
-    for (i, &c) in cells.iter().enumerate() {
-        items[fill[c] as usize] = i as u32;
-        fill[c] += 1;
-    }
+    let (start, items) = bucket(&cells, dims[0] * dims[1] * dims[2]);
     let per_particle: Vec<Vec<Candidate>> = (0..n)
         .into_par_iter()
         .with_min_len(MIN_PER_TASK)
@@ -124,21 +130,8 @@ pub fn periodic_sphere_pairs(x: &[Vec3], radius: &[f64], skin: f64, cell: &Perio
         [0, 1, 2].map(|a| ((s[a].rem_euclid(1.0) * dims[a] as f64) as usize).min(dims[a] - 1))
     };
     let index = |c: [usize; 3]| c[0] + dims[0] * (c[1] + dims[1] * c[2]);
-    let ncells = dims[0] * dims[1] * dims[2];
-    let mut start = vec![0u32; ncells + 1];
     let cells: Vec<usize> = reduced.iter().map(|s| index(cell_of(s))).collect();
-    for &c in &cells {
-        start[c + 1] += 1;
-    }
-    for c in 0..ncells {
-        start[c + 1] += start[c];
-    }
-    let mut fill = start.clone();
-    let mut items = vec![0u32; n];
-    for (i, &c) in cells.iter().enumerate() {
-        items[fill[c] as usize] = i as u32;
-        fill[c] += 1;
-    }
+    let (start, items) = bucket(&cells, dims[0] * dims[1] * dims[2]);
     let per_particle: Vec<Vec<Candidate>> = (0..n)
         .into_par_iter()
         .with_min_len(MIN_PER_TASK)

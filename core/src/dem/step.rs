@@ -316,6 +316,21 @@ impl Scratch {
         })
     }
 
+    /// One law call on the first `n` contacts.
+    fn call(&mut self, law: &dyn ContactLaw, n: usize, dt: f64, (ps, hs): (usize, usize)) {
+        law.compute(ContactBatch {
+            normal: &self.normal[..n],
+            overlap: &self.overlap[..n],
+            rel_velocity: &self.rel_velocity[..n],
+            rel_spin: &self.rel_spin[..n],
+            params: &self.params[..n * ps],
+            history: &mut self.history[..n * hs],
+            force: &mut self.force[..n],
+            moment: &mut self.moment[..n],
+            dt,
+        });
+    }
+
     /// Calls each law present on its contacts (one call when the chunk has a single law).
     fn run_laws(&mut self, laws: &[Arc<dyn ContactLaw>], dt: f64, (ps, hs): (usize, usize)) {
         let n = self.len;
@@ -324,17 +339,7 @@ impl Scratch {
         }
         let first = self.law[0];
         if self.law[..n].iter().all(|&l| l == first) {
-            laws[first as usize].compute(ContactBatch {
-                normal: &self.normal[..n],
-                overlap: &self.overlap[..n],
-                rel_velocity: &self.rel_velocity[..n],
-                rel_spin: &self.rel_spin[..n],
-                params: &self.params[..n * ps],
-                history: &mut self.history[..n * hs],
-                force: &mut self.force[..n],
-                moment: &mut self.moment[..n],
-                dt,
-            });
+            self.call(laws[first as usize].as_ref(), n, dt, (ps, hs));
             return;
         }
         // Mixed laws: run each on its own compacted subset.
@@ -354,18 +359,7 @@ impl Scratch {
                 sub.params[s * ps..(s + 1) * ps].copy_from_slice(&self.params[m * ps..(m + 1) * ps]);
                 sub.history[s * hs..(s + 1) * hs].copy_from_slice(&self.history[m * hs..(m + 1) * hs]);
             }
-            let c = members.len();
-            laws[l as usize].compute(ContactBatch {
-                normal: &sub.normal[..c],
-                overlap: &sub.overlap[..c],
-                rel_velocity: &sub.rel_velocity[..c],
-                rel_spin: &sub.rel_spin[..c],
-                params: &sub.params[..c * ps],
-                history: &mut sub.history[..c * hs],
-                force: &mut sub.force[..c],
-                moment: &mut sub.moment[..c],
-                dt,
-            });
+            sub.call(laws[l as usize].as_ref(), members.len(), dt, (ps, hs));
             for (s, &m) in members.iter().enumerate() {
                 self.force[m] = sub.force[s];
                 self.moment[m] = sub.moment[s];

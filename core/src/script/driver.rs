@@ -70,10 +70,8 @@ impl<S: ScriptSim> State<S> {
     /// Writes a series row with the engine's columns and already computed extra values.
     fn write_series_row(&mut self, extra: &[f64]) -> Result<()> {
         self.claim_output();
-        let (mut cols, mut vals) = self.sim.series_row();
-        let names: Vec<&str> = self.columns.iter().map(|(n, _)| n.as_str()).collect();
-        let mut all: Vec<&str> = cols.drain(..).collect();
-        all.extend(names);
+        let (mut all, mut vals) = self.sim.series_row();
+        all.extend(self.columns.iter().map(|(n, _)| n.as_str()));
         vals.extend_from_slice(extra);
         let tag = self.sim.series_tag();
         self.output.write_series(self.sim.steps(), &all, &vals, tag)

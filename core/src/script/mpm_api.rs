@@ -263,6 +263,15 @@ pub(super) fn axis_index(name: &str, dim: usize) -> RhaiResult<usize> {
     }
 }
 
+/// A point index from a script, checked.
+fn point_index(sim: &MpmSim, i: i64) -> RhaiResult<usize> {
+    let n = sim.points.len();
+    if i < 0 || i as usize >= n {
+        return err(format!("point index {i} out of range 0..{n}"));
+    }
+    Ok(i as usize)
+}
+
 fn position_array(x: Vec3, dim: usize) -> Array {
     x[..dim].iter().map(|&v| Dynamic::from(v)).collect()
 }
@@ -660,27 +669,18 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
     engine.register_get("points", |s: &mut SimHandle| s.lock().sim.mpm.points.len() as i64);
     engine.register_fn("point_stress", |s: &mut SimHandle, i: i64| -> RhaiResult<Array> {
         let st = s.lock();
-        let n = st.sim.mpm.points.len();
-        if i < 0 || i as usize >= n {
-            return err(format!("point index {i} out of range 0..{n}"));
-        }
+        let i = point_index(&st.sim.mpm, i)? as i64;
         Ok(st.sim.mpm.points.stress[i as usize].iter().map(|&v| Dynamic::from(v)).collect())
     });
     engine.register_fn("point_strain", |s: &mut SimHandle, i: i64| -> RhaiResult<Array> {
         let st = s.lock();
-        let n = st.sim.mpm.points.len();
-        if i < 0 || i as usize >= n {
-            return err(format!("point index {i} out of range 0..{n}"));
-        }
+        let i = point_index(&st.sim.mpm, i)? as i64;
         Ok(st.sim.mpm.points.strain[i as usize].iter().map(|&v| Dynamic::from(v)).collect())
     });
     engine.register_fn("point_state", |s: &mut SimHandle, i: i64, name: &str| -> RhaiResult<f64> {
         let st = s.lock();
         let sim = &st.sim.mpm;
-        let n = sim.points.len();
-        if i < 0 || i as usize >= n {
-            return err(format!("point index {i} out of range 0..{n}"));
-        }
+        let i = point_index(sim, i)? as i64;
         let m = sim.points.material[i as usize] as usize;
         let range = sim.material_range(m);
         let law = &sim.materials[m].law;
@@ -693,10 +693,7 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
     engine.register_fn("write_point_object", |s: &mut SimHandle, i: i64, file: &str| -> RhaiResult<String> {
         let st = s.lock();
         let sim = &st.sim.mpm;
-        let n = sim.points.len();
-        if i < 0 || i as usize >= n {
-            return err(format!("point index {i} out of range 0..{n}"));
-        }
+        let i = point_index(sim, i)? as i64;
         let m = sim.points.material[i as usize] as usize;
         let local = i as usize - sim.material_range(m).start;
         let Some((x, fields)) = sim.materials[m].law.object_frame(local) else {
@@ -708,10 +705,7 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
     });
     engine.register_fn("point_position", |s: &mut SimHandle, i: i64| -> RhaiResult<Array> {
         let st = s.lock();
-        let n = st.sim.mpm.points.len();
-        if i < 0 || i as usize >= n {
-            return err(format!("point index {i} out of range 0..{n}"));
-        }
+        let i = point_index(&st.sim.mpm, i)? as i64;
         Ok(st.sim.mpm.points.x[i as usize].iter().map(|&v| Dynamic::from(v)).collect())
     });
 }
