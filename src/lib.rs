@@ -28,6 +28,18 @@ pub fn run(
     quiet: bool,
     threads: Option<usize>,
 ) -> Result<RunReport> {
+    run_with_plugins(script, overrides, out_dir, quiet, threads, Vec::new())
+}
+
+/// [`run`], loading native law plugins first (`--plugin`).
+pub fn run_with_plugins(
+    script: &Path,
+    overrides: Vec<(String, String)>,
+    out_dir: Option<PathBuf>,
+    quiet: bool,
+    threads: Option<usize>,
+    plugins: Vec<PathBuf>,
+) -> Result<RunReport> {
     let out_dir = out_dir.unwrap_or_else(|| default_out_dir(script));
     let mut pool = rayon::ThreadPoolBuilder::new();
     if let Some(n) = threads {
@@ -35,7 +47,7 @@ pub fn run(
     }
     let pool = pool.build().map_err(|e| granite_core::GraniteError::Other(format!("thread pool: {e}")))?;
     let program = format!("granite {} ({})", env!("CARGO_PKG_VERSION"), env!("GRANITE_GIT_COMMIT"));
-    pool.install(|| run_script(script, registry(), RunOptions { program, out_dir, overrides, quiet }))
+    pool.install(|| run_script(script, registry(), RunOptions { program, out_dir, overrides, quiet, plugins }))
 }
 
 /// Parses `NAME=VALUE`.

@@ -28,6 +28,9 @@ enum Command {
         /// No progress lines.
         #[arg(long)]
         quiet: bool,
+        /// Load a native constitutive-law plugin (a granite-plugin-abi cdylib) first; repeatable.
+        #[arg(long = "plugin", value_name = "LIBRARY")]
+        plugins: Vec<PathBuf>,
     },
     /// Print performance figures.
     Bench {
@@ -85,12 +88,12 @@ enum Command {
 fn main() -> ExitCode {
     let cli = Cli::parse();
     match cli.command {
-        Command::Run { script, set, out, threads, quiet } => {
+        Command::Run { script, set, out, threads, quiet, plugins } => {
             if threads == Some(0) {
                 eprintln!("granite: --threads must be >= 1");
                 return ExitCode::from(2);
             }
-            match granite::run(&script, set, out, quiet, threads) {
+            match granite::run_with_plugins(&script, set, out, quiet, threads, plugins) {
                 Ok(report) => {
                     if !quiet {
                         println!("granite: done; outputs in {}", report.out_dir.display());

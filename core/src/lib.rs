@@ -15,6 +15,7 @@ pub mod io;
 pub mod math;
 pub mod mpm;
 pub mod params;
+pub mod plugin;
 pub mod registry;
 pub mod script;
 

@@ -285,7 +285,7 @@ impl Handle<DemScene> {
     fn contact_law(&mut self, law: &str, pair: Option<(u16, u16)>, opts: Map) -> RhaiResult<()> {
         let mut st = self.lock();
         let params = param_map(&opts, &[], law)?;
-        let law = st.ctx.registry.build_contact_law(law, &params).or_rhai()?;
+        let law = st.ctx.registry().build_contact_law(law, &params).or_rhai()?;
         st.sim.dem.set_contact_law(law, pair).or_rhai()
     }
 
@@ -328,7 +328,7 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
     });
     let c = ctx.clone();
     engine.register_fn("dem_load", move |file: &str| {
-        let dem = DemSim::load(std::path::Path::new(file), &c.registry).or_rhai()?;
+        let dem = DemSim::load(std::path::Path::new(file), &c.registry()).or_rhai()?;
         Ok::<_, Box<rhai::EvalAltResult>>(Handle::new(
             DemScene { dem, driven: Vec::new(), auto_skin: false },
             c.clone(),
@@ -418,7 +418,7 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
                     None => st.sim.dem.seed,
                 };
                 let sp = &st.sim.dem.spheres;
-                let shape = st.ctx.registry.build_shape(&shape_name, &shape_params).or_rhai()?;
+                let shape = st.ctx.registry().build_shape(&shape_name, &shape_params).or_rhai()?;
                 (seed, sp.x.iter().copied().zip(sp.radius.iter().copied()).collect::<Vec<_>>(), shape)
             };
             let template = shape.members();

@@ -32,6 +32,8 @@ pub struct RunOptions {
     pub overrides: Vec<(String, String)>,
     /// No progress lines.
     pub quiet: bool,
+    /// Native plugin libraries to load before the script runs (`--plugin`).
+    pub plugins: Vec<std::path::PathBuf>,
 }
 
 /// What a finished script leaves behind.
@@ -43,7 +45,9 @@ pub struct RunReport {
 
 /// State shared by every function a script calls.
 pub struct ScriptContext {
-    pub registry: Registry,
+    registry: std::sync::RwLock<Registry>,
+    /// Native plugins loaded by this script: (library, law, version).
+    plugins: Mutex<Vec<(String, String, String)>>,
     pub options: RunOptions,
     declared: Mutex<IndexMap<String, Dynamic>>,
     summary: Mutex<IndexMap<String, Value>>,
@@ -55,13 +59,27 @@ pub struct ScriptContext {
 impl ScriptContext {
     fn new(registry: Registry, options: RunOptions) -> ScriptContext {
         ScriptContext {
-            registry,
+            registry: std::sync::RwLock::new(registry),
+            plugins: Mutex::new(Vec::new()),
             options,
             declared: Mutex::new(IndexMap::new()),
             summary: Mutex::new(IndexMap::new()),
             sims: Mutex::new(0),
             ast: Mutex::new(None),
         }
+    }
+
+    /// The registry (read access; plugins may be added by `load_plugin`).
+    pub fn registry(&self) -> std::sync::RwLockReadGuard<'_, Registry> {
+        self.registry.read().unwrap_or_else(|p| p.into_inner())
+    }
+
+    /// Loads a native law plugin into this script's registry.
+    pub fn load_plugin(&self, path: &Path) -> Result<(String, String)> {
+        let mut reg = self.registry.write().unwrap_or_else(|p| p.into_inner());
+        let (name, version) = crate::plugin::load_plugin(path, &mut reg)?;
+        self.plugins.lock().unwrap().push((path.display().to_string(), name.clone(), version.clone()));
+        Ok((name, version))
     }
 
     /// `param(name, default)`: the override if one was given, parsed like the default.
@@ -144,6 +162,10 @@ fn build_engine(ctx: &Arc<ScriptContext>) -> Engine {
     let c = ctx.clone();
     engine.register_fn("summary", move |name: &str, value: Dynamic| c.set_summary(name, to_json(&value)));
     let c = ctx.clone();
+    engine.register_fn("load_plugin", move |path: &str| -> RhaiResult<String> {
+        c.load_plugin(Path::new(path)).map(|(name, _)| name).map_err(convert::to_rhai)
+    });
+    let c = ctx.clone();
     engine.register_fn("out_dir", move || c.options.out_dir.display().to_string());
     engine.register_fn("print_line", |s: &str| println!("{s}"));
     let c = ctx.clone();
@@ -172,7 +194,11 @@ pub fn run_script(path: &Path, registry: Registry, options: RunOptions) -> Resul
 pub fn run_source(name: &str, source: &str, registry: Registry, options: RunOptions) -> Result<RunReport> {
     let out_dir = options.out_dir.clone();
     std::fs::create_dir_all(&out_dir).map_err(|e| GraniteError::io(&out_dir, e))?;
+    let plugins = options.plugins.clone();
     let ctx = Arc::new(ScriptContext::new(registry, options));
+    for p in &plugins {
+        ctx.load_plugin(p)?;
+    }
     let engine = build_engine(&ctx);
     let started = std::time::Instant::now();
     let started_at = std::time::SystemTime::now();
@@ -237,10 +263,11 @@ fn write_provenance(
     let params: IndexMap<String, Value> =
         ctx.declared.lock().unwrap().iter().map(|(k, v)| (k.clone(), to_json(v))).collect();
     let plugins = serde_json::json!({
-        "constitutive_laws": ctx.registry.law_names(),
-        "velocity_updates": ctx.registry.velocity_update_names(),
-        "contact_laws": ctx.registry.contact_law_names(),
-        "shapes": ctx.registry.shape_names(),
+        "constitutive_laws": ctx.registry().law_names(),
+        "velocity_updates": ctx.registry().velocity_update_names(),
+        "contact_laws": ctx.registry().contact_law_names(),
+        "shapes": ctx.registry().shape_names(),
+        "loaded": ctx.plugins.lock().unwrap().iter().map(|(lib, law, version)| serde_json::json!({ "library": lib, "law": law, "version": version })).collect::<Vec<_>>(),
     });
     let mut p = IndexMap::new();
     p.insert("program".to_string(), Value::from(ctx.options.program.clone()));

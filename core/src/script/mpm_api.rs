@@ -318,7 +318,7 @@ impl Handle<MpmScene> {
         let update = opts.remove("velocity_update").map(|d| string(&d, "velocity_update")).transpose()?;
         let mesh = parse_mesh(&opts, None)?;
         let strategy =
-            ctx.registry.build_velocity_update(update.as_deref().unwrap_or("FLIP"), &ParamMap::new()).or_rhai()?;
+            ctx.registry().build_velocity_update(update.as_deref().unwrap_or("FLIP"), &ParamMap::new()).or_rhai()?;
         let scene = MpmScene { mpm: MpmSim::new(mesh, strategy), runout: None, driven: Vec::new() };
         Ok(Handle::new(scene, ctx))
     }
@@ -344,7 +344,7 @@ impl Handle<MpmScene> {
             }
         }
         let params = param_map(&opts, &skip, law)?;
-        let law_obj = st.ctx.registry.build_law_with(law, &params, &objects).or_rhai()?;
+        let law_obj = st.ctx.registry().build_law_with(law, &params, &objects).or_rhai()?;
         let index = st.sim.mpm.add_material(&name, density, law_obj).or_rhai()?;
         Ok(MaterialHandle { index, name })
     }
@@ -560,7 +560,7 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
     });
     let c = ctx.clone();
     engine.register_fn("mpm_load", move |file: &str| {
-        let mpm = MpmSim::load(std::path::Path::new(file), &c.registry).or_rhai()?;
+        let mpm = MpmSim::load(std::path::Path::new(file), &c.registry()).or_rhai()?;
         Ok::<_, Box<rhai::EvalAltResult>>(Handle::new(MpmScene { mpm, runout: None, driven: Vec::new() }, c.clone()))
     });
     engine.register_fn("fill_box", |s: &mut SimHandle, m: MaterialHandle, lo: Dynamic, hi: Dynamic, opts: Map| {
@@ -606,7 +606,8 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
     fn set_update(s: &mut SimHandle, name: &str, opts: Map) -> RhaiResult<()> {
         let mut st = s.lock();
         let params = param_map(&opts, &[], name)?;
-        st.sim.mpm.velocity_update = st.ctx.registry.build_velocity_update(name, &params).or_rhai()?;
+        let update = st.ctx.registry().build_velocity_update(name, &params).or_rhai()?;
+        st.sim.mpm.velocity_update = update;
         Ok(())
     }
     engine.register_fn("velocity_update", set_update);

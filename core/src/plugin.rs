@@ -1,0 +1,165 @@
+//! Loading native constitutive-law plugins (see the granite-plugin-abi crate). A library is
+//! checked (symbol, ABI version, table size) and then kept loaded for the life of the process:
+//! granite never unloads a library, so no law can outlive its code.
+
+use crate::error::{GraniteError, Result};
+use crate::ext::{ConstitutiveLaw, ConstitutiveLawFactory, LawBatch};
+use crate::params::{ParamSpec, Params};
+use crate::registry::Registry;
+use granite_plugin_abi::{ErrorBuffer, LawTable, ABI_VERSION};
+use std::ffi::{c_void, CStr};
+use std::path::Path;
+use std::sync::Arc;
+
+/// Static strings of a plugin table (the library is never unloaded).
+unsafe fn text(p: granite_plugin_abi::CStrPtr) -> &'static str {
+    if p.0.is_null() {
+        return "";
+    }
+    let s: &'static CStr = unsafe { CStr::from_ptr(p.0) };
+    s.to_str().unwrap_or("")
+}
+
+/// A loaded law plugin: its table and where it came from.
+pub struct NativeLawFactory {
+    table: &'static LawTable,
+    name: String,
+    version: String,
+    library: String,
+    specs: Vec<ParamSpec>,
+    state_names: Vec<&'static str>,
+}
+
+/// Loads a plugin library and registers its law; returns the law's name and version.
+pub fn load_plugin(path: &Path, registry: &mut Registry) -> Result<(String, String)> {
+    let library = path.display().to_string();
+    let lib = unsafe { libloading::Library::new(path) }
+        .map_err(|e| GraniteError::Other(format!("plugin {library}: cannot load the library: {e}")))?;
+    // Never unloaded: laws built from it must keep their code.
+    let lib: &'static libloading::Library = Box::leak(Box::new(lib));
+    let entry: libloading::Symbol<'static, unsafe extern "C" fn() -> *const LawTable> = unsafe {
+        lib.get(b"granite_law_table\0")
+    }
+    .map_err(|e| {
+        GraniteError::Other(format!("plugin {library}: no `granite_law_table` symbol ({e}): not a granite law plugin"))
+    })?;
+    let table = unsafe { entry() };
+    if table.is_null() {
+        return Err(GraniteError::Other(format!("plugin {library}: `granite_law_table` returned null")));
+    }
+    let table: &'static LawTable = unsafe { &*table };
+    if table.abi_version != ABI_VERSION {
+        return Err(GraniteError::Other(format!(
+            "plugin {library}: built for plugin ABI version {}, this granite speaks version {ABI_VERSION}: rebuild it against granite-plugin-abi",
+            table.abi_version
+        )));
+    }
+    if table.table_size as usize != std::mem::size_of::<LawTable>() {
+        return Err(GraniteError::Other(format!(
+            "plugin {library}: its law table has {} bytes, granite expects {}",
+            table.table_size,
+            std::mem::size_of::<LawTable>()
+        )));
+    }
+    let name = unsafe { text(table.name) }.to_string();
+    let version = unsafe { text(table.version) }.to_string();
+    if name.is_empty() {
+        return Err(GraniteError::Other(format!("plugin {library}: the law has no name")));
+    }
+    let list = |ptr: *const granite_plugin_abi::CStrPtr, n: usize| -> Vec<&'static str> {
+        (0..n).map(|k| unsafe { text(*ptr.add(k)) }).collect()
+    };
+    let specs = list(table.param_names, table.param_count)
+        .into_iter()
+        .map(|p| ParamSpec::required(p, "a parameter of the plugin law"))
+        .collect();
+    let state_names = list(table.state_names, table.state_count);
+    registry.add_law(Arc::new(NativeLawFactory {
+        table,
+        name: name.clone(),
+        version: version.clone(),
+        library,
+        specs,
+        state_names,
+    }));
+    Ok((name, version))
+}
+
+impl ConstitutiveLawFactory for NativeLawFactory {
+    fn name(&self) -> &str {
+        &self.name
+    }
+    fn param_specs(&self) -> &[ParamSpec] {
+        &self.specs
+    }
+    fn description(&self) -> &str {
+        &self.library
+    }
+    fn build(&self, params: Params) -> Result<Box<dyn ConstitutiveLaw>> {
+        let values: Vec<f64> = self.specs.iter().map(|s| params.get(s.name)).collect();
+        let mut err = ErrorBuffer { text: [0; 512], len: 0 };
+        let law = unsafe { (self.table.create)(values.as_ptr(), values.len(), &mut err) };
+        if law.is_null() {
+            return Err(GraniteError::Other(format!("plugin {} (law {}): {}", self.library, self.name, err.message())));
+        }
+        Ok(Box::new(NativeLaw {
+            table: self.table,
+            law: LawPtr(law),
+            name: self.name.clone(),
+            library: format!("{} {}", self.library, self.version),
+            params,
+            state_names: self.state_names.clone(),
+        }))
+    }
+}
+
+struct LawPtr(*mut c_void);
+// The plugin contract: a law object may be used from several threads at once (update is
+// called on disjoint batches), as built-in laws are.
+unsafe impl Send for LawPtr {}
+unsafe impl Sync for LawPtr {}
+
+struct NativeLaw {
+    table: &'static LawTable,
+    law: LawPtr,
+    name: String,
+    library: String,
+    params: Params,
+    state_names: Vec<&'static str>,
+}
+
+impl Drop for NativeLaw {
+    fn drop(&mut self) {
+        unsafe { (self.table.destroy)(self.law.0) };
+    }
+}
+
+impl ConstitutiveLaw for NativeLaw {
+    fn name(&self) -> &str {
+        &self.name
+    }
+    fn params(&self) -> &Params {
+        &self.params
+    }
+    fn state_names(&self) -> &[&'static str] {
+        &self.state_names
+    }
+    fn update(&self, batch: LawBatch<'_>) -> Result<()> {
+        let n = batch.len();
+        let mut err = ErrorBuffer { text: [0; 512], len: 0 };
+        let code = unsafe {
+            (self.table.update)(
+                self.law.0,
+                n,
+                batch.stress.as_mut_ptr() as *mut f64,
+                batch.dstrain.as_ptr() as *const f64,
+                batch.state.as_mut_ptr(),
+                &mut err,
+            )
+        };
+        if code != 0 {
+            return Err(GraniteError::Other(format!("plugin {} (law {}): {}", self.library, self.name, err.message())));
+        }
+        Ok(())
+    }
+}
