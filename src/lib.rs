@@ -2,6 +2,7 @@
 
 pub mod batch;
 pub mod bench;
+pub mod repl;
 
 use granite_core::script::{run_script, RunOptions, RunReport};
 use granite_core::{Registry, Result};

@@ -32,6 +32,23 @@ enum Command {
         #[arg(long = "plugin", value_name = "LIBRARY")]
         plugins: Vec<PathBuf>,
     },
+    /// Interactive session: the script API one input at a time; Ctrl-C pauses a run.
+    Repl {
+        /// A script to run first (its variables stay available).
+        script: Option<PathBuf>,
+        /// Output folder (default: out/repl/).
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Override a parameter declared with param("NAME", default) in the script.
+        #[arg(long = "set", value_name = "NAME=VALUE", value_parser = granite::parse_override)]
+        set: Vec<(String, String)>,
+        /// Load a native constitutive-law plugin first; repeatable.
+        #[arg(long = "plugin", value_name = "LIBRARY")]
+        plugins: Vec<PathBuf>,
+        /// No progress lines.
+        #[arg(long)]
+        quiet: bool,
+    },
     /// Print performance figures.
     Bench {
         /// Which benchmark: mpm.
@@ -172,6 +189,22 @@ fn main() -> ExitCode {
                 ExitCode::FAILURE
             }
         },
+        Command::Repl { script, out, set, plugins, quiet } => {
+            let program = format!("granite {} ({})", env!("CARGO_PKG_VERSION"), env!("GRANITE_GIT_COMMIT"));
+            let out_dir = out.unwrap_or_else(|| PathBuf::from("out").join("repl"));
+            let options = granite_core::script::RunOptions { program, out_dir, overrides: set, quiet, plugins };
+            match granite::repl::run(script.as_deref(), options) {
+                Ok(0) => ExitCode::SUCCESS,
+                Ok(failed) => {
+                    eprintln!("granite: {failed} input(s) failed");
+                    ExitCode::FAILURE
+                }
+                Err(e) => {
+                    eprintln!("granite: error: {e}");
+                    ExitCode::FAILURE
+                }
+            }
+        }
         Command::Plugins => {
             print!("{}", granite::plugin_listing());
             ExitCode::SUCCESS

@@ -183,6 +183,11 @@ impl<S: ScriptSim> Handle<S> {
         for k in 0..steps {
             let (t, driven) = {
                 let st = self.lock();
+                if st.ctx.interrupt.load(std::sync::atomic::Ordering::Relaxed) {
+                    progress.finish();
+                    eprintln!("granite: paused at step {} (t = {:.6e} s)", st.sim.steps(), st.sim.time());
+                    return Ok(());
+                }
                 (st.sim.time(), st.driven.clone())
             };
             let mut values = Vec::with_capacity(driven.len());

@@ -8,6 +8,7 @@ mod dem_api;
 pub mod driver;
 mod mpm_api;
 mod output;
+pub mod repl;
 mod script_law;
 
 pub use mpm_api::SimHandle;
@@ -54,10 +55,12 @@ pub struct ScriptContext {
     sims: Mutex<usize>,
     /// The compiled script, for laws written as script functions.
     pub(crate) ast: Mutex<Option<Arc<rhai::AST>>>,
+    /// Set by Ctrl-C in the REPL: runs return at the next step boundary until the next prompt.
+    pub interrupt: std::sync::atomic::AtomicBool,
 }
 
 impl ScriptContext {
-    fn new(registry: Registry, options: RunOptions) -> ScriptContext {
+    pub(crate) fn new(registry: Registry, options: RunOptions) -> ScriptContext {
         ScriptContext {
             registry: std::sync::RwLock::new(registry),
             plugins: Mutex::new(Vec::new()),
@@ -66,6 +69,7 @@ impl ScriptContext {
             summary: Mutex::new(IndexMap::new()),
             sims: Mutex::new(0),
             ast: Mutex::new(None),
+            interrupt: std::sync::atomic::AtomicBool::new(false),
         }
     }
 
@@ -147,7 +151,7 @@ fn to_json(d: &Dynamic) -> Value {
     }
 }
 
-fn build_engine(ctx: &Arc<ScriptContext>) -> Engine {
+pub(crate) fn build_engine(ctx: &Arc<ScriptContext>) -> Engine {
     let mut engine = Engine::new();
     engine.set_max_expr_depths(128, 64);
     for kind in 0..4 {
@@ -287,7 +291,7 @@ fn write_provenance(
 }
 
 /// A script error in one line: the message first, then where it happened.
-fn describe(e: &EvalAltResult) -> String {
+pub(crate) fn describe(e: &EvalAltResult) -> String {
     let mut inner = e;
     let mut pos = e.position();
     while let EvalAltResult::ErrorInFunctionCall(_, _, next, p) = inner {
