@@ -164,15 +164,17 @@ impl<S: ScriptSim> Handle<S> {
     }
 
     pub fn run(&self, ctx: &NativeCallContext, steps: u64) -> RhaiResult<()> {
-        let quiet;
+        let (quiet, series_every, vtk_every);
         {
             let mut guard = self.lock();
             let st = &mut *guard;
             st.ctx.check_overrides()?;
             st.sim.validate().or_rhai()?;
             quiet = st.ctx.options.quiet;
-            st.output.series_every.get_or_insert((steps / 500).max(1));
-            st.output.vtk_every.get_or_insert((steps / 20).max(1));
+            // Unless the script set them, output intervals follow each call's length: a short
+            // first call (common in the REPL) must not fix every-step output for later long ones.
+            series_every = st.output.series_every.unwrap_or((steps / 500).max(1));
+            vtk_every = st.output.vtk_every.unwrap_or((steps / 20).max(1));
             if st.output.last_vtk_step.is_none() {
                 st.write_vtk().or_rhai()?;
             }
@@ -211,14 +213,13 @@ impl<S: ScriptSim> Handle<S> {
                 }
                 let step = st.sim.steps();
                 let last = k + 1 == steps;
-                let series_due = step.is_multiple_of(st.output.series_every.unwrap_or(1)) || last;
+                let series_due = step.is_multiple_of(series_every) || last;
                 if series_due {
                     st.last_good = Some(st.sim.snapshot());
                 }
                 // A call's last state is written when the call spans a frame interval (short calls
                 // in a script loop would otherwise flood vtk/).
-                let every = st.output.vtk_every.unwrap_or(1);
-                if step.is_multiple_of(every) || (last && steps >= every) {
+                if step.is_multiple_of(vtk_every) || (last && steps >= vtk_every) {
                     st.write_vtk().or_rhai()?;
                 }
                 progress.tick(k + 1, st.sim.time());
