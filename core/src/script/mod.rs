@@ -60,7 +60,7 @@ pub struct ScriptContext {
 }
 
 impl ScriptContext {
-    pub(crate) fn new(registry: Registry, options: RunOptions) -> ScriptContext {
+    fn new(registry: Registry, options: RunOptions) -> ScriptContext {
         ScriptContext {
             registry: std::sync::RwLock::new(registry),
             plugins: Mutex::new(Vec::new()),
@@ -151,7 +151,7 @@ fn to_json(d: &Dynamic) -> Value {
     }
 }
 
-pub(crate) fn build_engine(ctx: &Arc<ScriptContext>) -> Engine {
+fn build_engine(ctx: &Arc<ScriptContext>) -> Engine {
     let mut engine = Engine::new();
     engine.set_max_expr_depths(128, 64);
     for kind in 0..4 {
@@ -186,6 +186,19 @@ pub(crate) fn build_engine(ctx: &Arc<ScriptContext>) -> Engine {
     engine
 }
 
+/// The output folder, the context with `--plugin` libraries loaded, and an engine on it.
+pub(crate) fn prepare(registry: Registry, options: RunOptions) -> Result<(Arc<ScriptContext>, Engine)> {
+    let out_dir = options.out_dir.clone();
+    std::fs::create_dir_all(&out_dir).map_err(|e| GraniteError::io(&out_dir, e))?;
+    let plugins = options.plugins.clone();
+    let ctx = Arc::new(ScriptContext::new(registry, options));
+    for p in &plugins {
+        ctx.load_plugin(p)?;
+    }
+    let engine = build_engine(&ctx);
+    Ok((ctx, engine))
+}
+
 /// Runs a script file. The output folder gets `summary.json` whatever happens; a failed run
 /// records `status: "failed"` and the error there too.
 pub fn run_script(path: &Path, registry: Registry, options: RunOptions) -> Result<RunReport> {
@@ -197,13 +210,7 @@ pub fn run_script(path: &Path, registry: Registry, options: RunOptions) -> Resul
 /// Runs script text; `name` is used in error messages.
 pub fn run_source(name: &str, source: &str, registry: Registry, options: RunOptions) -> Result<RunReport> {
     let out_dir = options.out_dir.clone();
-    std::fs::create_dir_all(&out_dir).map_err(|e| GraniteError::io(&out_dir, e))?;
-    let plugins = options.plugins.clone();
-    let ctx = Arc::new(ScriptContext::new(registry, options));
-    for p in &plugins {
-        ctx.load_plugin(p)?;
-    }
-    let engine = build_engine(&ctx);
+    let (ctx, engine) = prepare(registry, options)?;
     let started = std::time::Instant::now();
     let started_at = std::time::SystemTime::now();
     let outcome = engine

@@ -1,8 +1,8 @@
 //! An interactive session: the script API one statement at a time, with variables and functions
 //! kept between inputs, so that a user can run, pause, inspect, change a parameter and resume.
 
-use super::{build_engine, describe, RunOptions, ScriptContext};
-use crate::error::{GraniteError, Result};
+use super::{describe, prepare, RunOptions, ScriptContext};
+use crate::error::Result;
 use crate::registry::Registry;
 use rhai::{Dynamic, Engine, Scope, AST};
 use std::sync::atomic::Ordering;
@@ -30,14 +30,7 @@ pub enum Outcome {
 
 impl ReplSession {
     pub fn new(registry: Registry, options: RunOptions) -> Result<ReplSession> {
-        let out_dir = options.out_dir.clone();
-        std::fs::create_dir_all(&out_dir).map_err(|e| GraniteError::io(&out_dir, e))?;
-        let plugins = options.plugins.clone();
-        let ctx = Arc::new(ScriptContext::new(registry, options));
-        for p in &plugins {
-            ctx.load_plugin(p)?;
-        }
-        let engine = build_engine(&ctx);
+        let (ctx, engine) = prepare(registry, options)?;
         Ok(ReplSession { engine, scope: Scope::new(), functions: AST::empty(), ctx })
     }
 
