@@ -13,25 +13,30 @@ const G2: f64 = 2.0;
 const DT: f64 = 1e-5;
 const RESUMED_STEPS: u64 = 1000;
 
-const SESSION: &str = r#"let sim = mpm(#{ dim: 2, origin: [0.0, 0.0], cell: 0.1, cells: [10, 40] });
-let soil = sim.material("linear_elastic", #{ density: 1000.0, young: 1e6, poisson: 0.3 });
-let filled = sim.fill_box(soil, [0.3, 3.5], [0.7, 3.9], #{ per_cell: 2 });
-sim.gravity([0.0, -9.81]);
-sim.dt(1e-5);
-fn speed(s) {
+/// The session piped in; its numbers come from the constants above.
+fn session() -> String {
+    format!(
+        r#"let sim = mpm(#{{ dim: 2, origin: [0.0, 0.0], cell: 0.1, cells: [10, 40] }});
+let soil = sim.material("linear_elastic", #{{ density: 1000.0, young: 1e6, poisson: 0.3 }});
+let filled = sim.fill_box(soil, [0.3, 3.5], [0.7, 3.9], #{{ per_cell: 2 }});
+sim.gravity([0.0, -{G1:?}]);
+sim.dt({DT:e});
+fn speed(s) {{
   let d = s.diagnostics();
   (2.0 * d.kinetic_energy / d.mass).sqrt()
-}
+}}
 let points = sim.diagnostics().points;
 print_line("running");
 sim.run_steps(1000000000);
-print_line(`paused ${sim.step} ${sim.time} ${speed(sim)}`);
+print_line(`paused ${{sim.step}} ${{sim.time}} ${{speed(sim)}}`);
 sim.gravity([0.0, -2.0], 7);
 let broken = (1 + ;
-sim.gravity([0.0, -2.0]);
-sim.run_steps(1000);
-print_line(`resumed ${sim.step} ${sim.time} ${speed(sim)} ${sim.diagnostics().points - points}`);
-"#;
+sim.gravity([0.0, -{G2:?}]);
+sim.run_steps({RESUMED_STEPS});
+print_line(`resumed ${{sim.step}} ${{sim.time}} ${{speed(sim)}} ${{sim.diagnostics().points - points}}`);
+"#
+    )
+}
 
 fn numbers(line: &str, tag: &str) -> Vec<f64> {
     line.trim_start_matches(tag).split_whitespace().map(|w| w.parse().expect("a number")).collect()
@@ -48,7 +53,7 @@ fn pause_change_gravity_resume() {
         .stderr(Stdio::piped())
         .spawn()
         .expect("granite starts");
-    child.stdin.take().unwrap().write_all(SESSION.as_bytes()).unwrap();
+    child.stdin.take().unwrap().write_all(session().as_bytes()).unwrap();
     let (tx, rx) = mpsc::channel();
     let stdout = child.stdout.take().unwrap();
     std::thread::spawn(move || {
