@@ -8,17 +8,18 @@ use std::io::{BufRead, IsTerminal};
 use std::path::Path;
 
 const HELP: &str = "granite repl: the script API one input at a time (variables and functions are kept).
-  sim.run_steps(n), sim.run_until(t)   run; Ctrl-C pauses at the next step, state kept
-  sim.diagnostics(), sim.time, sim.step   inspect
-  sim.gravity([..]), sim.damping(d), sim.dt(..), sim.vtk_every(n) ...   change, then run again to resume
+  sim.run(), sim.run(n)   run in the background (until paused, or n steps); the prompt stays usable
+  sim.pause(), sim.wait(), sim.running, sim.step()   pause, wait for the end, ask, one step
+  sim.run_steps(n), sim.run_until(t)   run at the prompt; Ctrl-C pauses any run, state kept
+  sim.diagnostics(), sim.time, sim.step   inspect (between two steps, also while running)
+  sim.gravity([..]), sim.damping(d), sim.vtk_every(n) ...   change (between two steps, also while running)
   a line ending inside { ( [ continues on the next line; an empty line ends it
   :help this text, :quit or Ctrl-D leaves";
 
 /// Runs the session; returns the number of inputs that failed.
 pub fn run(script: Option<&Path>, options: RunOptions) -> Result<usize> {
     let mut session = ReplSession::new(crate::registry(), options)?;
-    let pause = session.pause_handle();
-    if let Err(e) = ctrlc::set_handler(pause) {
+    if let Err(e) = ctrlc::set_handler(session.pause_handle()) {
         eprintln!("granite: Ctrl-C will not pause runs ({e})");
     }
     let mut failures = 0;
@@ -30,7 +31,7 @@ pub fn run(script: Option<&Path>, options: RunOptions) -> Result<usize> {
         }
     }
     let interactive = std::io::stdin().is_terminal();
-    let mut reader = Input::new(interactive);
+    let mut reader = Input::new(interactive, Box::new(session.pause_handle()));
     if interactive {
         println!("{HELP}");
     }
@@ -70,20 +71,22 @@ pub fn run(script: Option<&Path>, options: RunOptions) -> Result<usize> {
         reader.remember(pending.trim_end());
         pending.clear();
     }
+    session.finish();
     Ok(failures)
 }
 
 /// A terminal with line editing and history, or plain lines from a pipe.
 enum Input {
-    Editor(Box<rustyline::DefaultEditor>),
+    /// The editor, and what Ctrl-C at its prompt does (the terminal then sends no signal).
+    Editor(Box<rustyline::DefaultEditor>, Box<dyn Fn()>),
     Plain(std::io::StdinLock<'static>),
 }
 
 impl Input {
-    fn new(interactive: bool) -> Input {
+    fn new(interactive: bool, on_ctrl_c: Box<dyn Fn()>) -> Input {
         if interactive {
             if let Ok(editor) = rustyline::DefaultEditor::new() {
-                return Input::Editor(Box::new(editor));
+                return Input::Editor(Box::new(editor), on_ctrl_c);
             }
         }
         Input::Plain(std::io::stdin().lock())
@@ -91,11 +94,12 @@ impl Input {
 
     fn read(&mut self, prompt: &str) -> Option<String> {
         match self {
-            Input::Editor(editor) => loop {
+            Input::Editor(editor, on_ctrl_c) => loop {
                 match editor.readline(prompt) {
                     Ok(line) => return Some(line),
                     Err(rustyline::error::ReadlineError::Interrupted) => {
-                        println!("(Ctrl-C at the prompt does nothing; :quit or Ctrl-D leaves)");
+                        on_ctrl_c();
+                        println!("(Ctrl-C pauses background runs; :quit or Ctrl-D leaves)");
                     }
                     Err(_) => return None,
                 }
@@ -111,7 +115,7 @@ impl Input {
     }
 
     fn remember(&mut self, entry: &str) {
-        if let Input::Editor(editor) = self {
+        if let Input::Editor(editor, _) = self {
             let _ = editor.add_history_entry(entry);
         }
     }

@@ -1,7 +1,7 @@
 //! `granite repl` driven through standard input: start a long run, pause it with Ctrl-C (SIGINT),
 //! inspect, change gravity, resume, and check against free fall that the change took effect at
 //! the pause and that no state was lost. A bad input is reported with its position and leaves
-//! the simulation untouched.
+//! the simulation untouched. The same with a run in the background while the prompt is used.
 
 use std::io::{BufRead, BufReader, Write};
 use std::process::{Command, Stdio};
@@ -13,8 +13,8 @@ const G2: f64 = 2.0;
 const DT: f64 = 1e-5;
 const RESUMED_STEPS: u64 = 1000;
 
-/// The session piped in; its numbers come from the constants above.
-fn session() -> String {
+/// A block falling freely in a tall mesh, and a function of its speed; numbers from the constants.
+fn falling_block() -> String {
     format!(
         r#"let sim = mpm(#{{ dim: 2, origin: [0.0, 0.0], cell: 0.1, cells: [10, 40] }});
 let soil = sim.material("linear_elastic", #{{ density: 1000.0, young: 1e6, poisson: 0.3 }});
@@ -26,7 +26,15 @@ fn speed(s) {{
   (2.0 * d.kinetic_energy / d.mass).sqrt()
 }}
 let points = sim.diagnostics().points;
-print_line("running");
+"#
+    )
+}
+
+/// The session piped in; its numbers come from the constants above.
+fn session() -> String {
+    falling_block()
+        + &format!(
+            r#"print_line("running");
 sim.run_steps(1000000000);
 print_line(`paused ${{sim.step}} ${{sim.time}} ${{speed(sim)}}`);
 sim.gravity([0.0, -2.0], 7);
@@ -35,34 +43,71 @@ sim.gravity([0.0, -{G2:?}]);
 sim.run_steps({RESUMED_STEPS});
 print_line(`resumed ${{sim.step}} ${{sim.time}} ${{speed(sim)}} ${{sim.diagnostics().points - points}}`);
 "#
-    )
+        )
 }
 
 fn numbers(line: &str, tag: &str) -> Vec<f64> {
     line.trim_start_matches(tag).split_whitespace().map(|w| w.parse().expect("a number")).collect()
 }
 
+/// A REPL process: its stdin, its stdout lines as they come, and its whole stderr at the end.
+struct Repl {
+    child: std::process::Child,
+    stdin: Option<std::process::ChildStdin>,
+    lines: mpsc::Receiver<String>,
+    errors: std::thread::JoinHandle<String>,
+    out: std::path::PathBuf,
+}
+
+impl Repl {
+    fn start(name: &str) -> Repl {
+        let out = std::env::temp_dir().join(format!("granite_repl_{name}_{}", std::process::id()));
+        let mut child = Command::new(env!("CARGO_BIN_EXE_granite"))
+            .args(["repl", "--quiet", "--out"])
+            .arg(&out)
+            .stdin(Stdio::piped())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("granite starts");
+        let (tx, lines) = mpsc::channel();
+        let stdout = child.stdout.take().unwrap();
+        std::thread::spawn(move || {
+            for line in BufReader::new(stdout).lines().map_while(Result::ok) {
+                let _ = tx.send(line);
+            }
+        });
+        let stderr = child.stderr.take().unwrap();
+        let errors = std::thread::spawn(move || std::io::read_to_string(stderr).unwrap_or_default());
+        let stdin = child.stdin.take();
+        Repl { child, stdin, lines, errors, out }
+    }
+
+    fn send(&mut self, input: &str) {
+        let stdin = self.stdin.as_mut().expect("stdin open");
+        stdin.write_all(input.as_bytes()).unwrap();
+        stdin.flush().unwrap();
+    }
+
+    fn line(&self, what: &str) -> String {
+        self.lines.recv_timeout(Duration::from_secs(60)).unwrap_or_else(|_| panic!("no line: {what}"))
+    }
+
+    /// Closes stdin; the exit code and stderr.
+    fn finish(mut self) -> (Option<i32>, String) {
+        drop(self.stdin.take());
+        let status = self.child.wait().unwrap();
+        let errors = self.errors.join().unwrap();
+        let _ = std::fs::remove_dir_all(&self.out);
+        (status.code(), errors)
+    }
+}
+
 #[test]
 fn pause_change_gravity_resume() {
-    let out = std::env::temp_dir().join(format!("granite_repl_{}", std::process::id()));
-    let mut child = Command::new(env!("CARGO_BIN_EXE_granite"))
-        .args(["repl", "--quiet", "--out"])
-        .arg(&out)
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("granite starts");
-    child.stdin.take().unwrap().write_all(session().as_bytes()).unwrap();
-    let (tx, rx) = mpsc::channel();
-    let stdout = child.stdout.take().unwrap();
-    std::thread::spawn(move || {
-        for line in BufReader::new(stdout).lines().map_while(Result::ok) {
-            let _ = tx.send(line);
-        }
-    });
-    let stderr = child.stderr.take().unwrap();
-    let errors = std::thread::spawn(move || std::io::read_to_string(stderr).unwrap_or_default());
+    let mut repl = Repl::start("ctrl_c");
+    repl.send(&session());
+    let (child, rx) = (&repl.child, &repl.lines);
 
     assert_eq!(rx.recv_timeout(Duration::from_secs(60)).expect("session starts"), "running");
     // Ctrl-C until the run reports back (a signal before the run began would be cleared).
@@ -76,9 +121,8 @@ fn pause_change_gravity_resume() {
         }
     }
     let paused = paused.expect("Ctrl-C pauses the run");
-    let resumed = rx.recv_timeout(Duration::from_secs(60)).expect("resumed run reports");
-    let status = child.wait().unwrap();
-    let errors = errors.join().unwrap();
+    let resumed = repl.line("resumed run reports");
+    let (status, errors) = repl.finish();
 
     let p = numbers(&paused, "paused");
     let (step1, t1, v1) = (p[0], p[1], p[2]);
@@ -98,6 +142,53 @@ fn pause_change_gravity_resume() {
     assert!(errors.contains("paused at step"), "{errors}");
     assert!(errors.contains("gravity"), "the bad call is reported: {errors}");
     assert!(errors.contains("line 1, column 19"), "the syntax error gives its position: {errors}");
-    assert_eq!(status.code(), Some(1), "two inputs failed: {errors}");
-    let _ = std::fs::remove_dir_all(&out);
+    assert_eq!(status, Some(1), "two inputs failed: {errors}");
+}
+
+/// `sim.run()` returns at once; the prompt inspects the running simulation, a blocking run is
+/// refused meanwhile, `sim.pause()` stops it between two steps, `sim.step()` does one step, and a
+/// gravity change followed by `sim.run(n)` and `sim.wait()` acts from the pause on.
+#[test]
+fn background_run_pause_change_wait() {
+    let mut repl = Repl::start("background");
+    repl.send(&falling_block());
+    repl.send("sim.run();\nprint_line(`started ${sim.running}`);\n");
+    assert_eq!(repl.line("started"), "started true");
+    std::thread::sleep(Duration::from_millis(500));
+    repl.send("print_line(`running ${sim.step} ${sim.running}`);\nsim.run_steps(5);\n");
+    let running = numbers(&repl.line("inspected while running").replace("true", "1"), "running");
+    assert!(running[0] > 0.0 && running[1] == 1.0, "the run goes on behind the prompt: {running:?}");
+
+    repl.send("sim.pause();\nprint_line(`paused ${sim.step} ${sim.time} ${speed(sim)} ${sim.running}`);\n");
+    let paused = repl.line("paused");
+    assert!(paused.ends_with("false"), "{paused}");
+    let p = numbers(paused.trim_end_matches("false"), "paused");
+    let (step1, t1, v1) = (p[0], p[1], p[2]);
+    assert!(step1 >= running[0], "{paused}");
+    assert!((t1 - step1 * DT).abs() < 1e-9 * t1.max(1.0), "{paused}");
+    assert!((v1 - G1 * t1).abs() < 1e-6 * G1 * t1, "speed at pause {v1}, free fall gives {}", G1 * t1);
+
+    // Paused means paused: the state does not move until asked.
+    std::thread::sleep(Duration::from_millis(200));
+    repl.send("sim.step();\nprint_line(`stepped ${sim.step}`);\n");
+    let stepped = numbers(&repl.line("one step"), "stepped");
+    assert_eq!(stepped[0], step1 + 1.0, "sim.step() does one step after the pause");
+
+    repl.send(&format!(
+        "sim.gravity([0.0, -{G2:?}]);\nsim.run({RESUMED_STEPS});\nsim.wait();\nprint_line(`resumed ${{sim.step}} ${{sim.time}} ${{speed(sim)}} ${{sim.diagnostics().points - points}} ${{sim.running}}`);\n"
+    ));
+    let resumed = repl.line("resumed");
+    assert!(resumed.ends_with("false"), "the run has ended after sim.wait(): {resumed}");
+    let r = numbers(resumed.trim_end_matches("false"), "resumed");
+    let (step2, t2, v2, lost) = (r[0], r[1], r[2], r[3]);
+    assert_eq!(step2 - step1, RESUMED_STEPS as f64 + 1.0, "{resumed}");
+    // One step under G1 after the pause, then G2.
+    let t_step = t1 + DT;
+    let expected = G1 * t_step + G2 * (t2 - t_step);
+    assert!((v2 - expected).abs() < 1e-6 * expected, "speed after resume {v2}, expected {expected}");
+    assert_eq!(lost, 0.0, "material points lost: {resumed}");
+
+    let (status, errors) = repl.finish();
+    assert!(errors.contains("running in the background"), "the blocking run is refused: {errors}");
+    assert_eq!(status, Some(1), "one input failed: {errors}");
 }

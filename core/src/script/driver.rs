@@ -11,7 +11,8 @@ use crate::math::Vec3;
 use rhai::{Dynamic, Engine, FnPtr, Map, NativeCallContext};
 use std::io::IsTerminal;
 use std::path::Path;
-use std::sync::{Arc, Mutex, MutexGuard};
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::sync::{Arc, Condvar, Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
 /// An engine as scripts drive it.
@@ -54,6 +55,7 @@ pub struct State<S: ScriptSim> {
     columns: Vec<(String, FnPtr)>,
     output_claimed: bool,
     last_good: Option<S::Snapshot>,
+    background: Option<Background>,
 }
 
 impl<S: ScriptSim> State<S> {
@@ -116,12 +118,82 @@ impl<S: ScriptSim> State<S> {
     }
 }
 
-/// A script's handle on one simulation (shared: closures and callbacks may hold it too).
-pub struct Handle<S: ScriptSim>(Arc<Mutex<State<S>>>);
+/// A script's handle on one simulation (shared: closures, callbacks and a background run may
+/// hold it too).
+pub struct Handle<S: ScriptSim>(Arc<Shared<S>>);
+
+pub struct Shared<S: ScriptSim> {
+    state: Mutex<State<S>>,
+    /// Threads other than a background run's waiting for the state: the run lets them in
+    /// between two steps (a plain mutex may hand it straight back to the running loop).
+    waiting: AtomicUsize,
+}
 
 impl<S: ScriptSim> Clone for Handle<S> {
     fn clone(&self) -> Self {
         Handle(self.0.clone())
+    }
+}
+
+/// Calls script functions during a run: from inside a script call, or from a background thread
+/// with the session's engine and latest compiled functions.
+enum Caller<'a, 'b> {
+    Within(&'a NativeCallContext<'b>),
+    Detached { engine: Arc<Engine>, ctx: Arc<ScriptContext> },
+}
+
+impl Caller<'_, '_> {
+    fn call(&self, f: &FnPtr, args: impl rhai::FuncArgs) -> RhaiResult<Dynamic> {
+        match self {
+            Caller::Within(ctx) => f.call_within_context::<Dynamic>(ctx, args),
+            Caller::Detached { engine, ctx } => {
+                let ast = ctx.ast.lock().unwrap().clone().unwrap_or_else(|| Arc::new(rhai::AST::empty()));
+                f.call::<Dynamic>(engine, &ast, args)
+            }
+        }
+    }
+}
+
+/// How one run goes: how long, what it writes, what stops it.
+struct Plan {
+    /// None: until paused.
+    steps: Option<u64>,
+    series_every: u64,
+    vtk_every: u64,
+    progress: bool,
+    /// Set by `sim.pause()` for a background run.
+    stop: Option<Arc<AtomicBool>>,
+    /// Ctrl-C requests made before the run: a later one pauses it.
+    pauses_at_start: u64,
+}
+
+/// A run going on in a thread of its own while the script or the REPL goes on.
+#[derive(Clone)]
+struct Background {
+    stop: Arc<AtomicBool>,
+    done: Arc<(Mutex<Ending>, Condvar)>,
+}
+
+#[derive(Default)]
+struct Ending {
+    ended: bool,
+    /// The run's result until someone collects it.
+    result: Option<RhaiResult<()>>,
+}
+
+impl Background {
+    fn finished(&self) -> bool {
+        self.done.0.lock().unwrap_or_else(|p| p.into_inner()).ended
+    }
+
+    /// Waits for the end; the run's result for the first caller, Ok after.
+    fn join(&self) -> RhaiResult<()> {
+        let (slot, cv) = &*self.done;
+        let mut guard = slot.lock().unwrap_or_else(|p| p.into_inner());
+        while !guard.ended {
+            guard = cv.wait(guard).unwrap_or_else(|p| p.into_inner());
+        }
+        guard.result.take().unwrap_or(Ok(()))
     }
 }
 
@@ -130,7 +202,7 @@ impl<S: ScriptSim> Handle<S> {
         // The file prefix is chosen when the simulation first writes: a simulation that only
         // serves as a template (e.g. a loaded RVE) does not take the main output names.
         let output = Output::new(ctx.options.out_dir.clone(), String::new());
-        Handle(Arc::new(Mutex::new(State {
+        let state = State {
             sim,
             ctx,
             output,
@@ -139,11 +211,20 @@ impl<S: ScriptSim> Handle<S> {
             columns: Vec::new(),
             output_claimed: false,
             last_good: None,
-        })))
+            background: None,
+        };
+        Handle(Arc::new(Shared { state: Mutex::new(state), waiting: AtomicUsize::new(0) }))
     }
 
     pub fn lock(&self) -> MutexGuard<'_, State<S>> {
-        self.0.lock().unwrap_or_else(|p| p.into_inner())
+        self.0.waiting.fetch_add(1, Ordering::SeqCst);
+        let guard = self.lock_for_run();
+        self.0.waiting.fetch_sub(1, Ordering::SeqCst);
+        guard
+    }
+
+    fn lock_for_run(&self) -> MutexGuard<'_, State<S>> {
+        self.0.state.lock().unwrap_or_else(|p| p.into_inner())
     }
 
     /// Registers a script function of time that sets boundary value `target` once per step.
@@ -154,51 +235,103 @@ impl<S: ScriptSim> Handle<S> {
     /// Writes a series row now: extra columns are script functions, called without the lock held
     /// (they may use the simulation).
     pub fn write_series(&self, ctx: &NativeCallContext) -> RhaiResult<()> {
-        let columns: Vec<FnPtr> = self.lock().columns.iter().map(|(_, f)| f.clone()).collect();
-        let mut extra = Vec::with_capacity(columns.len());
-        for f in columns {
-            let v = f.call_within_context::<Dynamic>(ctx, (self.clone(),))?;
-            extra.push(number(&v, "series column value")?);
-        }
-        self.lock().write_series_row(&extra).or_rhai()
+        self.write_series_with(&Caller::Within(ctx))
     }
 
-    pub fn run(&self, ctx: &NativeCallContext, steps: u64) -> RhaiResult<()> {
-        let (quiet, series_every, vtk_every);
-        {
-            let mut guard = self.lock();
-            let st = &mut *guard;
-            st.ctx.check_overrides()?;
-            st.sim.validate().or_rhai()?;
-            quiet = st.ctx.options.quiet;
-            // Unless the script set them, output intervals follow each call's length: a short
-            // first call (common in the REPL) must not fix every-step output for later long ones.
-            series_every = st.output.series_every.unwrap_or((steps / 500).max(1));
-            vtk_every = st.output.vtk_every.unwrap_or((steps / 20).max(1));
-            if st.output.last_vtk_step.is_none() {
-                st.write_vtk().or_rhai()?;
-            }
-            st.last_good = Some(st.sim.snapshot());
+    fn write_series_with(&self, caller: &Caller) -> RhaiResult<()> {
+        let columns: Vec<FnPtr> = self.lock_for_run().columns.iter().map(|(_, f)| f.clone()).collect();
+        let mut extra = Vec::with_capacity(columns.len());
+        for f in columns {
+            let v = caller.call(&f, (self.clone(),))?;
+            extra.push(number(&v, "series column value")?);
         }
-        self.write_series(ctx)?;
-        let progress = Progress::new(quiet, steps);
-        for k in 0..steps {
-            let (t, driven) = {
-                let st = self.lock();
-                if st.ctx.interrupt.load(std::sync::atomic::Ordering::Relaxed) {
-                    progress.finish();
-                    eprintln!("granite: paused at step {} (t = {:.6e} s)", st.sim.steps(), st.sim.time());
-                    return Ok(());
+        self.lock_for_run().write_series_row(&extra).or_rhai()
+    }
+
+    /// Checks that no background run is going (collecting one that ended), then the set-up; writes
+    /// the first frame and keeps the state to fall back on. `steps` of None: open-ended.
+    fn begin(&self, steps: Option<u64>, stop: Option<Arc<AtomicBool>>) -> RhaiResult<Plan> {
+        self.collect_finished()?;
+        let mut guard = self.lock();
+        let st = &mut *guard;
+        if st.background.is_some() {
+            return err(format!(
+                "the simulation is running in the background (step {}): sim.pause() or sim.wait() first",
+                st.sim.steps()
+            ));
+        }
+        st.ctx.check_overrides()?;
+        st.sim.validate().or_rhai()?;
+        // Unless the script set them, output intervals follow each call's length: a short first
+        // call (common in the REPL) must not fix every-step output for later long ones.
+        let (series_every, vtk_every) = match steps {
+            Some(n) => ((n / 500).max(1), (n / 20).max(1)),
+            None => (OPEN_RUN_SERIES_EVERY, OPEN_RUN_VTK_EVERY),
+        };
+        let plan = Plan {
+            steps,
+            series_every: st.output.series_every.unwrap_or(series_every),
+            vtk_every: st.output.vtk_every.unwrap_or(vtk_every),
+            progress: !st.ctx.options.quiet && stop.is_none(),
+            stop,
+            pauses_at_start: st.ctx.pause_requests(),
+        };
+        if st.output.last_vtk_step.is_none() {
+            st.write_vtk().or_rhai()?;
+        }
+        st.last_good = Some(st.sim.snapshot());
+        Ok(plan)
+    }
+
+    /// Runs `steps` steps now, returning when they are done or Ctrl-C pauses the run.
+    pub fn run(&self, ctx: &NativeCallContext, steps: u64) -> RhaiResult<()> {
+        let plan = self.begin(Some(steps), None)?;
+        self.run_plan(&Caller::Within(ctx), plan)
+    }
+
+    /// One step, with its boundary functions, callbacks and due output.
+    pub fn step(&self, ctx: &NativeCallContext) -> RhaiResult<()> {
+        let mut plan = self.begin(Some(1), None)?;
+        let st = self.lock();
+        // A single step writes a frame only on the run's own frame interval.
+        plan.vtk_every = st.output.vtk_every.unwrap_or(u64::MAX);
+        drop(st);
+        self.run_plan(&Caller::Within(ctx), plan)
+    }
+
+    fn run_plan(&self, caller: &Caller, plan: Plan) -> RhaiResult<()> {
+        self.write_series_with(caller)?;
+        let progress = Progress::new(!plan.progress, plan.steps);
+        let background = plan.stop.is_some();
+        let mut k = 0u64;
+        while plan.steps.is_none_or(|n| k < n) {
+            if background {
+                // Someone (the prompt) waits for the state: let it in before the next step.
+                while self.0.waiting.load(Ordering::SeqCst) > 0 {
+                    std::thread::yield_now();
                 }
-                (st.sim.time(), st.driven.clone())
+            }
+            let (t, driven, paused) = {
+                let st = self.lock_for_run();
+                let stopped = plan.stop.as_ref().is_some_and(|s| s.load(Ordering::SeqCst));
+                let interrupted = st.ctx.pause_requests() != plan.pauses_at_start;
+                if interrupted && !stopped {
+                    eprintln!("granite: paused at step {} (t = {:.6e} s)", st.sim.steps(), st.sim.time());
+                }
+                (st.sim.time(), st.driven.clone(), stopped || interrupted)
             };
+            if paused {
+                progress.finish();
+                // The series ends on the paused state, whatever the interval.
+                return self.write_series_with(caller);
+            }
             let mut values = Vec::with_capacity(driven.len());
             for (_, f) in &driven {
-                let v = f.call_within_context::<Dynamic>(ctx, (t,))?;
+                let v = caller.call(f, (t,))?;
                 values.push(number(&v, "boundary function value")?);
             }
             let (due, series_due): (Vec<FnPtr>, bool) = {
-                let mut guard = self.lock();
+                let mut guard = self.lock_for_run();
                 let st = &mut *guard;
                 for ((target, _), v) in driven.iter().zip(values) {
                     st.sim.set_driven(*target, v);
@@ -207,31 +340,32 @@ impl<S: ScriptSim> Handle<S> {
                     return Err(st.fail(e));
                 }
                 for ev in st.sim.drain_events() {
-                    if !quiet {
+                    if !st.ctx.options.quiet {
                         eprintln!("granite: {ev}");
                     }
                 }
+                k += 1;
                 let step = st.sim.steps();
-                let last = k + 1 == steps;
-                let series_due = step.is_multiple_of(series_every) || last;
+                let last = plan.steps == Some(k);
+                let series_due = step.is_multiple_of(plan.series_every) || last;
                 if series_due {
                     st.last_good = Some(st.sim.snapshot());
                 }
                 // A call's last state is written when the call spans a frame interval (short calls
                 // in a script loop would otherwise flood vtk/).
-                if step.is_multiple_of(vtk_every) || (last && steps >= vtk_every) {
+                if step.is_multiple_of(plan.vtk_every) || (last && k >= plan.vtk_every) {
                     st.write_vtk().or_rhai()?;
                 }
-                progress.tick(k + 1, st.sim.time());
+                progress.tick(k, st.sim.time());
                 let due =
                     st.callbacks.iter().filter(|(n, _)| step.is_multiple_of(*n)).map(|(_, f)| f.clone()).collect();
                 (due, series_due)
             };
             if series_due {
-                self.write_series(ctx)?;
+                self.write_series_with(caller)?;
             }
             for f in due {
-                let _ = f.call_within_context::<Dynamic>(ctx, (self.clone(),))?;
+                let _ = caller.call(&f, (self.clone(),))?;
             }
         }
         progress.finish();
@@ -251,7 +385,94 @@ impl<S: ScriptSim> Handle<S> {
         };
         self.run(ctx, steps)
     }
+
+    /// Starts a run in a thread of its own and returns at once: `steps` steps, or until paused.
+    /// Script functions (boundary values, callbacks) are called with the session's engine.
+    pub fn start(&self, steps: Option<u64>) -> RhaiResult<()> {
+        let ctx = self.lock().ctx.clone();
+        let Some(engine) = ctx.engine() else {
+            return err("background runs need a script session (granite run or granite repl)");
+        };
+        let stop = Arc::new(AtomicBool::new(false));
+        let plan = self.begin(steps, Some(stop.clone()))?;
+        let done = Arc::new((Mutex::new(Ending::default()), Condvar::new()));
+        self.lock().background = Some(Background { stop, done: done.clone() });
+        let handle = self.clone();
+        let caller_ctx = ctx.clone();
+        let thread = std::thread::spawn(move || {
+            IN_BACKGROUND_RUN.set(true);
+            let caller = Caller::Detached { engine, ctx: caller_ctx };
+            let result = handle.run_plan(&caller, plan);
+            let report = match &result {
+                Ok(()) => None,
+                Err(e) => Some(super::describe(e)),
+            };
+            if let Some(e) = &report {
+                eprintln!("granite: the background run stopped: {e}");
+            }
+            let (slot, cv) = &*done;
+            *slot.lock().unwrap_or_else(|p| p.into_inner()) = Ending { ended: true, result: Some(result) };
+            cv.notify_all();
+            report
+        });
+        ctx.add_background(thread);
+        Ok(())
+    }
+
+    /// Takes the background run out once it has ended, passing on its error.
+    fn collect_finished(&self) -> RhaiResult<()> {
+        let run = self.lock().background.clone();
+        match run {
+            Some(run) if run.finished() => self.collect(&run),
+            _ => Ok(()),
+        }
+    }
+
+    /// Waits for `run` to end and forgets it.
+    fn collect(&self, run: &Background) -> RhaiResult<()> {
+        let result = run.join();
+        let mut st = self.lock();
+        if st.background.as_ref().is_some_and(|b| Arc::ptr_eq(&b.done, &run.done)) {
+            st.background = None;
+        }
+        result
+    }
+
+    /// Waits for the background run to end (Ctrl-C pauses it); its error, if it failed.
+    pub fn wait(&self) -> RhaiResult<()> {
+        if IN_BACKGROUND_RUN.get() {
+            return err("sim.wait() in a callback of a background run would wait for itself");
+        }
+        let run = self.lock().background.clone();
+        run.map_or(Ok(()), |run| self.collect(&run))
+    }
+
+    /// Stops the background run after the step under way; the state stays as it is then.
+    /// From a callback of that run, it only asks it to stop once the callback returns.
+    pub fn pause(&self) -> RhaiResult<()> {
+        let Some(run) = self.lock().background.clone() else {
+            return Ok(());
+        };
+        run.stop.store(true, Ordering::SeqCst);
+        if IN_BACKGROUND_RUN.get() {
+            return Ok(());
+        }
+        self.collect(&run)
+    }
+
+    pub fn running(&self) -> bool {
+        self.lock().background.as_ref().is_some_and(|b| !b.finished())
+    }
 }
+
+thread_local! {
+    /// Whether this thread runs a background run (its callbacks must not wait for it).
+    static IN_BACKGROUND_RUN: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
+}
+
+/// Output intervals of an open-ended run (`sim.run()`) unless the script set them.
+const OPEN_RUN_SERIES_EVERY: u64 = 100;
+const OPEN_RUN_VTK_EVERY: u64 = 2000;
 
 /// Periodic progress on stderr: a rewritten line on a terminal, a plain line every 10 s otherwise.
 struct Progress {
@@ -263,12 +484,12 @@ struct Progress {
 }
 
 impl Progress {
-    fn new(quiet: bool, total: u64) -> Progress {
+    fn new(quiet: bool, total: Option<u64>) -> Progress {
         let now = Instant::now();
         Progress {
-            enabled: !quiet,
+            enabled: !quiet && total.is_some(),
             terminal: std::io::stderr().is_terminal(),
-            total,
+            total: total.unwrap_or(0),
             start: now,
             last: std::cell::Cell::new(now),
         }
@@ -314,6 +535,17 @@ pub fn register_common<S: ScriptSim>(engine: &mut Engine) {
         }
         s.run(&ctx, n as u64)
     });
+    engine.register_fn("run", |s: &mut Handle<S>| s.start(None));
+    engine.register_fn("run", |s: &mut Handle<S>, n: i64| {
+        if n < 0 {
+            return err(format!("run(n) needs n >= 0, got {n}"));
+        }
+        s.start(Some(n as u64))
+    });
+    engine.register_fn("step", |ctx: NativeCallContext, s: &mut Handle<S>| s.step(&ctx));
+    engine.register_fn("pause", |s: &mut Handle<S>| s.pause());
+    engine.register_fn("wait", |s: &mut Handle<S>| s.wait());
+    engine.register_get("running", |s: &mut Handle<S>| s.running());
     engine.register_fn("every", |s: &mut Handle<S>, n: i64, f: FnPtr| {
         if n < 1 {
             return err(format!("every(n, f) needs n >= 1, got {n}"));

@@ -55,8 +55,12 @@ pub struct ScriptContext {
     sims: Mutex<usize>,
     /// The compiled script, for laws written as script functions.
     pub(crate) ast: Mutex<Option<Arc<rhai::AST>>>,
-    /// Set by Ctrl-C in the REPL: runs return at the next step boundary until the next prompt.
-    pub interrupt: std::sync::atomic::AtomicBool,
+    /// Ctrl-C presses so far: a run pauses at its next step when this count changes.
+    pauses: std::sync::atomic::AtomicU64,
+    /// The engine running the script, for runs in background threads.
+    engine: Mutex<std::sync::Weak<Engine>>,
+    /// Background run threads; each returns its error, if it failed.
+    background: Mutex<Vec<std::thread::JoinHandle<Option<String>>>>,
 }
 
 impl ScriptContext {
@@ -69,8 +73,42 @@ impl ScriptContext {
             summary: Mutex::new(IndexMap::new()),
             sims: Mutex::new(0),
             ast: Mutex::new(None),
-            interrupt: std::sync::atomic::AtomicBool::new(false),
+            pauses: std::sync::atomic::AtomicU64::new(0),
+            engine: Mutex::new(std::sync::Weak::new()),
+            background: Mutex::new(Vec::new()),
         }
+    }
+
+    /// Pauses every run at its next step (Ctrl-C).
+    pub fn request_pause(&self) {
+        self.pauses.fetch_add(1, std::sync::atomic::Ordering::SeqCst);
+    }
+
+    pub(crate) fn pause_requests(&self) -> u64 {
+        self.pauses.load(std::sync::atomic::Ordering::SeqCst)
+    }
+
+    pub(crate) fn engine(&self) -> Option<Arc<Engine>> {
+        self.engine.lock().unwrap().upgrade()
+    }
+
+    pub(crate) fn add_background(&self, thread: std::thread::JoinHandle<Option<String>>) {
+        let mut threads = self.background.lock().unwrap();
+        threads.retain(|t| !t.is_finished());
+        threads.push(thread);
+    }
+
+    /// Waits for every background run to end (pausing them first if asked); the errors of
+    /// those that failed.
+    pub fn finish_background(&self, pause: bool) -> Vec<String> {
+        if pause {
+            self.request_pause();
+        }
+        let threads = std::mem::take(&mut *self.background.lock().unwrap());
+        threads
+            .into_iter()
+            .filter_map(|t| t.join().unwrap_or_else(|_| Some("a background run panicked".into())))
+            .collect()
     }
 
     /// The registry (read access; plugins may be added by `load_plugin`).
@@ -187,7 +225,7 @@ fn build_engine(ctx: &Arc<ScriptContext>) -> Engine {
 }
 
 /// The output folder, the context with `--plugin` libraries loaded, and an engine on it.
-pub(crate) fn prepare(registry: Registry, options: RunOptions) -> Result<(Arc<ScriptContext>, Engine)> {
+pub(crate) fn prepare(registry: Registry, options: RunOptions) -> Result<(Arc<ScriptContext>, Arc<Engine>)> {
     let out_dir = options.out_dir.clone();
     std::fs::create_dir_all(&out_dir).map_err(|e| GraniteError::io(&out_dir, e))?;
     let plugins = options.plugins.clone();
@@ -195,7 +233,8 @@ pub(crate) fn prepare(registry: Registry, options: RunOptions) -> Result<(Arc<Sc
     for p in &plugins {
         ctx.load_plugin(p)?;
     }
-    let engine = build_engine(&ctx);
+    let engine = Arc::new(build_engine(&ctx));
+    *ctx.engine.lock().unwrap() = Arc::downgrade(&engine);
     Ok((ctx, engine))
 }
 
@@ -218,7 +257,13 @@ pub fn run_source(name: &str, source: &str, registry: Registry, options: RunOpti
         .map_err(|e| format!("{name}: syntax error: {e}"))
         .and_then(|ast| {
             *ctx.ast.lock().unwrap() = Some(Arc::new(ast.clone()));
-            engine.run_ast(&ast).map_err(|e| format!("{name}: {}", describe(&e)))
+            let ran = engine.run_ast(&ast).map_err(|e| format!("{name}: {}", describe(&e)));
+            // Runs the script left going in the background finish before its outputs are closed.
+            let failed = ctx.finish_background(false);
+            ran.and_then(|_| match failed.first() {
+                Some(e) => Err(format!("{name}: background run: {e}")),
+                None => Ok(()),
+            })
         })
         .and_then(|_| ctx.check_overrides().map_err(|e| format!("{name}: {}", describe(&e))));
     let mut summary = ctx.summary.lock().unwrap().clone();

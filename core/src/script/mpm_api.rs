@@ -349,6 +349,40 @@ impl Handle<MpmScene> {
         Ok(MaterialHandle { index, name })
     }
 
+    /// New values for some parameters of a material's law, between two steps. The law is rebuilt
+    /// from its current parameters and the new ones; the points keep their stress and state.
+    fn set_material(&mut self, m: &MaterialHandle, opts: Map) -> RhaiResult<()> {
+        if get(&opts, "density").is_some() {
+            return err(format!(
+                "set_material(\"{}\"): the density cannot change (point masses are fixed when points are made)",
+                m.name
+            ));
+        }
+        let mut guard = self.lock();
+        let st = &mut *guard;
+        let Some(material) = st.sim.mpm.materials.get(m.index) else {
+            return err(format!("material \"{}\" does not belong to this simulation", m.name));
+        };
+        let law = material.law.name().to_string();
+        if material.law.save_objects().or_rhai()?.is_some() {
+            return err(format!(
+                "set_material(\"{}\"): law \"{law}\" keeps an object per point; its parameters are fixed",
+                m.name
+            ));
+        }
+        let mut params: crate::registry::ParamMap =
+            material.law.params().iter().filter(|(_, v)| !v.is_nan()).map(|(k, v)| (k.to_string(), v)).collect();
+        params.extend(param_map(&opts, &[], &law)?);
+        let rebuilt = st.ctx.registry().build_law(&law, &params).or_rhai()?;
+        let old = std::mem::replace(&mut st.sim.mpm.materials[m.index].law, rebuilt);
+        // A stiffer law may need a smaller time step: refuse the change rather than blow up.
+        if let Err(e) = st.sim.mpm.validate() {
+            st.sim.mpm.materials[m.index].law = old;
+            return err(format!("set_material(\"{}\") refused: {e}", m.name));
+        }
+        Ok(())
+    }
+
     /// A box region that must lie inside the mesh (a box poking out would silently lose points).
     fn box_region(&self, lo: &Dynamic, hi: &Dynamic) -> RhaiResult<Region> {
         let st = self.lock();
@@ -553,6 +587,7 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
     engine.register_fn("mpm", move |opts: Map| SimHandle::create(c.clone(), opts));
 
     engine.register_fn("material", |s: &mut SimHandle, law: &str, opts: Map| s.material(law, opts));
+    engine.register_fn("set_material", |s: &mut SimHandle, m: MaterialHandle, opts: Map| s.set_material(&m, opts));
     engine.register_fn("save", |s: &mut SimHandle, file: &str| {
         let st = s.lock();
         let path = st.points_path(file);

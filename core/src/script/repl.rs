@@ -5,11 +5,10 @@ use super::{describe, prepare, RunOptions, ScriptContext};
 use crate::error::Result;
 use crate::registry::Registry;
 use rhai::{Dynamic, Engine, Scope, AST};
-use std::sync::atomic::Ordering;
 use std::sync::Arc;
 
 pub struct ReplSession {
-    engine: Engine,
+    engine: Arc<Engine>,
     scope: Scope<'static>,
     /// Functions defined so far: every later input can call them.
     functions: AST,
@@ -37,7 +36,6 @@ impl ReplSession {
     /// Evaluates one input (one or more statements). With `may_continue`, an input that stops in
     /// the middle of a block or bracket asks for more lines instead of failing.
     pub fn eval(&mut self, input: &str, may_continue: bool) -> Outcome {
-        self.ctx.interrupt.store(false, Ordering::Relaxed);
         let ast = match self.engine.compile_with_scope(&self.scope, input) {
             Ok(ast) => ast,
             Err(e) if may_continue && stops_at_end(&e, input) => return Outcome::Incomplete,
@@ -62,10 +60,15 @@ impl ReplSession {
         }
     }
 
-    /// Makes runs return at their next step, keeping the state (Ctrl-C); cleared by the next input.
+    /// Makes every run, in the background or not, pause at its next step, keeping the state (Ctrl-C).
     pub fn pause_handle(&self) -> impl Fn() + Send + 'static {
         let ctx = self.ctx.clone();
-        move || ctx.interrupt.store(true, Ordering::Relaxed)
+        move || ctx.request_pause()
+    }
+
+    /// Pauses the runs still going in the background and waits for them (leaving the session).
+    pub fn finish(&self) {
+        self.ctx.finish_background(true);
     }
 }
 
