@@ -474,54 +474,64 @@ thread_local! {
 const OPEN_RUN_SERIES_EVERY: u64 = 100;
 const OPEN_RUN_VTK_EVERY: u64 = 2000;
 
-/// Periodic progress on stderr: a rewritten line on a terminal, a plain line every 10 s otherwise.
+/// Progress of a run on stderr: a bar on a terminal, a plain status line every 10 s otherwise.
 struct Progress {
-    enabled: bool,
-    terminal: bool,
+    bar: Option<indicatif::ProgressBar>,
+    /// Not on a terminal: when the last status line went out.
+    plain: Option<std::cell::Cell<Instant>>,
     total: u64,
     start: Instant,
-    last: std::cell::Cell<Instant>,
 }
 
 impl Progress {
     fn new(quiet: bool, total: Option<u64>) -> Progress {
         let now = Instant::now();
-        Progress {
-            enabled: !quiet && total.is_some(),
-            terminal: std::io::stderr().is_terminal(),
-            total: total.unwrap_or(0),
-            start: now,
-            last: std::cell::Cell::new(now),
+        let mut progress = Progress { bar: None, plain: None, total: total.unwrap_or(0), start: now };
+        let Some(total) = total.filter(|_| !quiet) else {
+            return progress;
+        };
+        if std::io::stderr().is_terminal() {
+            let bar = indicatif::ProgressBar::new(total);
+            let style =
+                indicatif::ProgressStyle::with_template("{bar:30.cyan/blue} {pos}/{len} steps  {msg}  ETA {eta}")
+                    .map(|s| s.progress_chars("=> "));
+            if let Ok(style) = style {
+                bar.set_style(style);
+            }
+            // Small runs finish before the first redraw and leave nothing behind.
+            bar.set_draw_target(indicatif::ProgressDrawTarget::stderr_with_hz(4));
+            progress.bar = Some(bar);
+        } else {
+            progress.plain = Some(std::cell::Cell::new(now));
         }
+        progress
     }
 
     fn tick(&self, done: u64, time: f64) {
-        if !self.enabled {
-            return;
-        }
-        let every = if self.terminal { Duration::from_millis(500) } else { Duration::from_secs(10) };
-        if self.last.get().elapsed() < every {
-            return;
-        }
-        self.last.set(Instant::now());
-        let elapsed = self.start.elapsed().as_secs_f64();
-        let rate = done as f64 / elapsed.max(1e-9);
-        let eta = (self.total - done) as f64 / rate.max(1e-9);
-        let line = format!(
-            "step {done}/{} ({:.0}%)  t = {time:.4e} s  {rate:.0} steps/s  ETA {eta:.0} s",
-            self.total,
-            100.0 * done as f64 / self.total as f64
-        );
-        if self.terminal {
-            eprint!("\r{line}   ");
-        } else {
-            eprintln!("{line}");
+        if let Some(bar) = &self.bar {
+            bar.set_position(done);
+            if done.is_multiple_of(64) {
+                let rate = done as f64 / self.start.elapsed().as_secs_f64().max(1e-9);
+                bar.set_message(format!("t = {time:.4e} s  {rate:.0} steps/s"));
+            }
+        } else if let Some(last) = &self.plain {
+            if last.get().elapsed() < Duration::from_secs(10) {
+                return;
+            }
+            last.set(Instant::now());
+            let rate = done as f64 / self.start.elapsed().as_secs_f64().max(1e-9);
+            let eta = (self.total - done) as f64 / rate.max(1e-9);
+            eprintln!(
+                "step {done}/{} ({:.0}%)  t = {time:.4e} s  {rate:.0} steps/s  ETA {eta:.0} s",
+                self.total,
+                100.0 * done as f64 / self.total as f64
+            );
         }
     }
 
     fn finish(&self) {
-        if self.enabled && self.terminal && self.start.elapsed() > Duration::from_millis(500) {
-            eprintln!();
+        if let Some(bar) = &self.bar {
+            bar.finish_and_clear();
         }
     }
 }
