@@ -23,6 +23,28 @@ const MIN_PER_TASK: usize = 512;
 pub const MAX_PARAMS: usize = 16;
 pub const MAX_HISTORY: usize = 16;
 
+/// Values per contact in a pair list: `N` when fixed at compile time (N > 0), else the field.
+#[derive(Clone, Copy)]
+struct Stride<const N: usize>(usize);
+
+impl<const N: usize> Stride<N> {
+    #[inline(always)]
+    fn get(self) -> usize {
+        if N > 0 {
+            N
+        } else {
+            self.0
+        }
+    }
+
+    /// The values of contact `k`.
+    #[inline(always)]
+    fn of(self, k: usize) -> std::ops::Range<usize> {
+        let n = self.get();
+        k * n..k * n + n
+    }
+}
+
 #[inline(always)]
 fn cross(a: Vec3, b: Vec3) -> Vec3 {
     [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
@@ -59,9 +81,18 @@ impl DemSim {
         }
         let strides = (self.pairs.param_stride, self.pairs.history_stride);
         let grain = if self.sequential { (usize::MAX, usize::MAX) } else { (MIN_PER_TASK, MIN_CHUNKS_PER_TASK) };
-        sphere_contacts(&self.spheres, &mut self.pairs, &self.laws, self.dt, strides, self.cell.as_ref(), grain);
-        wall_contacts(&self.spheres, &self.walls, &mut self.wall_pairs, &self.laws, self.dt, strides, grain);
-        gather(&mut self.spheres, &self.pairs, &self.adjacency, &self.wall_pairs, &self.wall_adjacency, grain.0);
+        // The usual laws' per-contact counts are compile-time constants in the contact loops.
+        match strides {
+            (3, 3) => self.contacts(Stride::<3>(3), Stride::<3>(3), grain),
+            (4, 3) => self.contacts(Stride::<4>(4), Stride::<3>(3), grain),
+            (6, 7) => self.contacts(Stride::<6>(6), Stride::<7>(7), grain),
+            (ps, hs) => self.contacts(Stride::<0>(ps), Stride::<0>(hs), grain),
+        }
+        if self.sequential {
+            scatter(&mut self.spheres, &self.pairs, &self.wall_pairs);
+        } else {
+            gather(&mut self.spheres, &self.pairs, &self.adjacency, &self.wall_pairs, &self.wall_adjacency, grain.0);
+        }
         wall_forces(&mut self.walls, &self.wall_pairs);
         // The cell deforms over the step; particles follow its affine field on top of their own motion.
         let (affine, strain_since_build) = match (&mut self.cell, &self.h_at_build) {
@@ -129,6 +160,12 @@ impl DemSim {
             self.needs_rebuild = true;
         }
         Ok(())
+    }
+
+    /// Sphere-sphere and sphere-wall contact forces of this step.
+    fn contacts<const PS: usize, const HS: usize>(&mut self, ps: Stride<PS>, hs: Stride<HS>, grain: (usize, usize)) {
+        sphere_contacts(&self.spheres, &mut self.pairs, &self.laws, self.dt, (ps, hs), self.cell.as_ref(), grain);
+        wall_contacts(&self.spheres, &self.walls, &mut self.wall_pairs, &self.laws, self.dt, (ps, hs), grain);
     }
 
     /// Brings periodic positions back into the cell and fixes the shifts of their pairs.
@@ -435,42 +472,44 @@ fn for_each_chunk(
 }
 
 /// Writes the law results of a chunk back to its pairs, with lever-arm torques.
-fn write_back(c: &mut PairChunk<'_>, s: &Scratch, hs: usize) {
+fn write_back<const HS: usize>(c: &mut PairChunk<'_>, s: &Scratch, hs: Stride<HS>) {
     for e in 0..s.len {
         let k = s.pair[e] - c.first;
         let (f, m) = (s.force[e], s.moment[e]);
         c.force[k] = f;
         c.torque_a[k] = add(cross(s.arm_a[e], f), m);
         c.torque_b[k] = sub(cross(s.arm_b[e], [-f[0], -f[1], -f[2]]), m);
-        c.history[k * hs..(k + 1) * hs].copy_from_slice(&s.history[e * hs..(e + 1) * hs]);
+        c.history[hs.of(k)].copy_from_slice(&s.history[hs.of(e)]);
     }
 }
 
-fn open_contact(c: &mut PairChunk<'_>, k: usize, hs: usize, overlap: f64) {
-    c.overlap[k] = overlap;
+/// Marks a pair apart. Its overlap is not kept (only touching pairs' overlaps are read), which
+/// saves a square root per candidate.
+fn open_contact<const HS: usize>(c: &mut PairChunk<'_>, k: usize, hs: Stride<HS>) {
     // Pairs that were already apart are clean: skip the writes (most candidates, most steps).
     if !c.touching[k] {
         return;
     }
     c.touching[k] = false;
+    c.overlap[k] = 0.0;
     c.force[k] = [0.0; 3];
     c.torque_a[k] = [0.0; 3];
     c.torque_b[k] = [0.0; 3];
-    c.history[k * hs..(k + 1) * hs].iter_mut().for_each(|h| *h = 0.0);
+    c.history[hs.of(k)].iter_mut().for_each(|h| *h = 0.0);
 }
 
 /// Sphere-sphere geometry (`sphere_sphere`) and contact forces; in a periodic cell the second
 /// sphere may be an image, whose velocity includes the affine field across the cell.
-fn sphere_contacts(
+fn sphere_contacts<const PS: usize, const HS: usize>(
     sp: &Spheres,
     pairs: &mut PairList,
     laws: &[Arc<dyn ContactLaw>],
     dt: f64,
-    strides: (usize, usize),
+    (ps, hs): (Stride<PS>, Stride<HS>),
     cell: Option<&PeriodicCell>,
     grain: (usize, usize),
 ) {
-    let (ps, hs) = strides;
+    let strides = (ps.get(), hs.get());
     let l = cell.map(|c| c.velocity_gradient);
     for_each_chunk(pairs, strides, grain.1, |mut c, s| {
         for k in 0..c.a.len() {
@@ -483,7 +522,7 @@ fn sphere_contacts(
             let reach = sp.radius[i] + sp.radius[j];
             let dist2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
             if dist2 >= reach * reach {
-                open_contact(&mut c, k, hs, reach - dist2.sqrt());
+                open_contact(&mut c, k, hs);
                 continue;
             }
             let dist = dist2.sqrt();
@@ -510,8 +549,8 @@ fn sphere_contacts(
             s.rel_spin[e] = sub(sp.w[j], sp.w[i]);
             s.arm_a[e] = arm_a;
             s.arm_b[e] = arm_b;
-            s.params[e * ps..(e + 1) * ps].copy_from_slice(&c.params[k * ps..(k + 1) * ps]);
-            s.history[e * hs..(e + 1) * hs].copy_from_slice(&c.history[k * hs..(k + 1) * hs]);
+            s.params[ps.of(e)].copy_from_slice(&c.params[ps.of(k)]);
+            s.history[hs.of(e)].copy_from_slice(&c.history[hs.of(k)]);
             s.len += 1;
         }
         s.run_laws(laws, dt, strides);
@@ -520,24 +559,24 @@ fn sphere_contacts(
 }
 
 /// Sphere-wall geometry and contact forces (the wall is particle 2, infinitely heavy).
-fn wall_contacts(
+fn wall_contacts<const PS: usize, const HS: usize>(
     sp: &Spheres,
     walls: &[Wall],
     pairs: &mut PairList,
     laws: &[Arc<dyn ContactLaw>],
     dt: f64,
-    strides: (usize, usize),
+    (ps, hs): (Stride<PS>, Stride<HS>),
     grain: (usize, usize),
 ) {
-    let (ps, hs) = strides;
+    let strides = (ps.get(), hs.get());
     for_each_chunk(pairs, strides, grain.1, |mut c, s| {
         for k in 0..c.a.len() {
             let (i, w) = (c.a[k] as usize, c.b[k] as usize);
             let wall = &walls[w];
             let geo = match wall.contact(sp.x[i], sp.radius[i], 0.0) {
                 Some(g) if g.gap < 0.0 => g,
-                other => {
-                    open_contact(&mut c, k, hs, other.map_or(f64::MIN, |g| -g.gap));
+                _ => {
+                    open_contact(&mut c, k, hs);
                     continue;
                 }
             };
@@ -555,8 +594,8 @@ fn wall_contacts(
             s.rel_spin[e] = [-sp.w[i][0], -sp.w[i][1], -sp.w[i][2]];
             s.arm_a[e] = arm_a;
             s.arm_b[e] = [0.0; 3];
-            s.params[e * ps..(e + 1) * ps].copy_from_slice(&c.params[k * ps..(k + 1) * ps]);
-            s.history[e * hs..(e + 1) * hs].copy_from_slice(&c.history[k * hs..(k + 1) * hs]);
+            s.params[ps.of(e)].copy_from_slice(&c.params[ps.of(k)]);
+            s.history[hs.of(e)].copy_from_slice(&c.history[hs.of(k)]);
             s.len += 1;
         }
         s.run_laws(laws, dt, strides);
@@ -592,6 +631,33 @@ fn gather(sp: &mut Spheres, pairs: &PairList, adj: &Adjacency, walls: &PairList,
     );
 }
 
+/// The sequential form of `gather`: touching pairs add to both their spheres, in increasing pair
+/// index, sphere pairs before wall pairs, so each sphere sums the same terms in the same order
+/// (pairs apart contribute exact zeros to `gather` and nothing here).
+fn scatter(sp: &mut Spheres, pairs: &PairList, walls: &PairList) {
+    sp.force.iter_mut().for_each(|f| *f = [0.0; 3]);
+    sp.torque.iter_mut().for_each(|t| *t = [0.0; 3]);
+    let (force, torque) = (&mut sp.force, &mut sp.torque);
+    for k in 0..pairs.len() {
+        if !pairs.touching[k] {
+            continue;
+        }
+        let (i, j) = (pairs.a[k] as usize, pairs.b[k] as usize);
+        let f = pairs.force[k];
+        force[i] = add(force[i], f);
+        torque[i] = add(torque[i], pairs.torque_a[k]);
+        force[j] = sub(force[j], f);
+        torque[j] = add(torque[j], pairs.torque_b[k]);
+    }
+    for k in 0..walls.len() {
+        if walls.touching[k] {
+            let i = walls.a[k] as usize;
+            force[i] = add(force[i], walls.force[k]);
+            torque[i] = add(torque[i], walls.torque_a[k]);
+        }
+    }
+}
+
 /// Force on each wall: the opposite of what it exerts on the spheres, summed in pair order.
 fn wall_forces(walls: &mut [Wall], pairs: &PairList) {
     for w in walls.iter_mut() {
@@ -606,7 +672,7 @@ fn wall_forces(walls: &mut [Wall], pairs: &PairList) {
 /// Leapfrog integration with gravity and Cundall damping. In a periodic cell (`affine` =
 /// `(L, F)`) velocities are fluctuations and positions also follow the affine field `L x`.
 /// Returns the largest displacement since the candidate lists were built, not counting the
-/// affine part `F x_build`.
+/// affine part `F x_build` (NaN if a sphere's state stopped being finite).
 fn integrate(
     sp: &mut Spheres,
     x_at_build: &[Vec3],
@@ -616,62 +682,113 @@ fn integrate(
     affine: Option<(Matrix3<f64>, Matrix3<f64>)>,
     min_len: usize,
 ) -> f64 {
+    let motion = Motion { gravity, damping, dt, affine };
     let Spheres { x, v, w, mass, inertia, force, torque, blocked, clump, .. } = sp;
-    (
-        x.par_iter_mut(),
-        v.par_iter_mut(),
-        w.par_iter_mut(),
-        mass.par_iter(),
-        inertia.par_iter(),
-        force.par_iter(),
-        torque.par_iter(),
-        (blocked.par_iter(), clump.par_iter()),
-        x_at_build.par_iter(),
-    )
-        .into_par_iter()
-        .with_min_len(min_len)
-        .map(|(x, v, w, &m, &inertia, f, t, (&blocked, &clump), x0)| {
-            if clump != FREE {
-                // Clump members move with their clump (see integrate_clumps).
-                return 0.0;
+    let moved2 = if min_len == usize::MAX {
+        // One task: a plain loop, without the parallel iterator's per-item bookkeeping.
+        let mut worst: f64 = 0.0;
+        for i in 0..x.len() {
+            let d2 = motion.advance(
+                (&mut x[i], &mut v[i], &mut w[i]),
+                (mass[i], inertia[i], blocked[i], clump[i]),
+                (&force[i], &torque[i]),
+                &x_at_build[i],
+            );
+            worst = worst_of(worst, d2);
+        }
+        worst
+    } else {
+        (
+            x.par_iter_mut(),
+            v.par_iter_mut(),
+            w.par_iter_mut(),
+            mass.par_iter(),
+            inertia.par_iter(),
+            force.par_iter(),
+            torque.par_iter(),
+            (blocked.par_iter(), clump.par_iter()),
+            x_at_build.par_iter(),
+        )
+            .into_par_iter()
+            .with_min_len(min_len)
+            .map(|(x, v, w, &m, &inertia, f, t, (&blocked, &clump), x0)| {
+                motion.advance((x, v, w), (m, inertia, blocked, clump), (f, t), x0)
+            })
+            .reduce(|| 0.0, worst_of)
+    };
+    moved2.sqrt()
+}
+
+/// The larger of two squared displacements, NaN winning.
+#[inline(always)]
+fn worst_of(a: f64, b: f64) -> f64 {
+    if a.is_nan() || b.is_nan() {
+        f64::NAN
+    } else {
+        a.max(b)
+    }
+}
+
+/// What moves every free sphere in one step.
+struct Motion {
+    gravity: Vec3,
+    damping: f64,
+    dt: f64,
+    affine: Option<(Matrix3<f64>, Matrix3<f64>)>,
+}
+
+impl Motion {
+    /// Moves one sphere; its squared displacement since the build (NaN if not finite).
+    #[inline(always)]
+    fn advance(
+        &self,
+        (x, v, w): (&mut Vec3, &mut Vec3, &mut Vec3),
+        (m, inertia, blocked, clump): (f64, f64, u8, u32),
+        (f, t): (&Vec3, &Vec3),
+        x0: &Vec3,
+    ) -> f64 {
+        let Motion { gravity, damping, dt, affine } = self;
+        let (damping, dt) = (*damping, *dt);
+        if clump != FREE {
+            // Clump members move with their clump (see integrate_clumps).
+            return 0.0;
+        }
+        let lx = match affine {
+            Some((l, _)) => {
+                let p = l * nalgebra::Vector3::new(x[0], x[1], x[2]);
+                [p[0], p[1], p[2]]
             }
-            let lx = match &affine {
-                Some((l, _)) => {
-                    let p = l * nalgebra::Vector3::new(x[0], x[1], x[2]);
-                    [p[0], p[1], p[2]]
-                }
-                None => [0.0; 3],
-            };
-            for a in 0..3 {
-                if blocked & (dof::X << a) == 0 {
-                    let mut acc = f[a] / m + gravity[a];
-                    // YADE's Cundall damping: against the sign of the power at mid-step.
-                    acc *= 1.0 - damping * (acc * (v[a] + 0.5 * dt * acc)).signum();
-                    v[a] += acc * dt;
-                }
-                x[a] += (v[a] + lx[a]) * dt;
-                if blocked & (dof::RX << a) == 0 {
-                    let mut alpha = t[a] / inertia;
-                    alpha *= 1.0 - damping * (alpha * (w[a] + 0.5 * dt * alpha)).signum();
-                    w[a] += alpha * dt;
-                }
+            None => [0.0; 3],
+        };
+        for a in 0..3 {
+            if blocked & (dof::X << a) == 0 {
+                let mut acc = f[a] / m + gravity[a];
+                // YADE's Cundall damping: against the sign of the power at mid-step.
+                acc *= 1.0 - damping * (acc * (v[a] + 0.5 * dt * acc)).signum();
+                v[a] += acc * dt;
             }
-            let reference = match &affine {
-                Some((_, f)) => {
-                    let p = f * nalgebra::Vector3::new(x0[0], x0[1], x0[2]);
-                    [p[0], p[1], p[2]]
-                }
-                None => *x0,
-            };
-            let d = sub(*x, reference);
-            let moved = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
-            if moved.is_finite() && v.iter().all(|c| c.is_finite()) {
-                moved
-            } else {
-                f64::NAN
+            x[a] += (v[a] + lx[a]) * dt;
+            if blocked & (dof::RX << a) == 0 {
+                let mut alpha = t[a] / inertia;
+                alpha *= 1.0 - damping * (alpha * (w[a] + 0.5 * dt * alpha)).signum();
+                w[a] += alpha * dt;
             }
-        })
-        .reduce(|| 0.0, |a: f64, b: f64| if a.is_nan() || b.is_nan() { f64::NAN } else { a.max(b) })
+        }
+        let reference = match affine {
+            Some((_, f)) => {
+                let p = f * nalgebra::Vector3::new(x0[0], x0[1], x0[2]);
+                [p[0], p[1], p[2]]
+            }
+            None => *x0,
+        };
+        let d = sub(*x, reference);
+        let moved2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
+        if moved2.is_finite() && v.iter().all(|c| c.is_finite()) {
+            moved2
+        } else {
+            f64::NAN
+        }
+    }
 }
 
 /// Rigid-body integration of the clumps (forces and torques gathered from their members), then
