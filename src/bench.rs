@@ -315,7 +315,7 @@ pub fn mpmxdem(threads: &[usize]) -> Result<()> {
     let pool = pool(1)?;
     let standalone = pool.install(|| -> Result<f64> {
         let mut sim = rve.clone();
-        sim.sequential = true;
+        sim.set_sequential(true);
         // The oedometric increment of one MPM step (1e-2 m/s over 1 m for 1e-5 s) in 51 DEM steps.
         let rate = 1e-2 * 1e-5 / (51.0 * sim.dt);
         if let Some(c) = sim.cell.as_mut() {
@@ -330,5 +330,59 @@ pub fn mpmxdem(threads: &[usize]) -> Result<()> {
     println!("standalone DEM on the same RVE, 1 thread: {:.2} M sphere-steps/s", standalone / 1e6);
     let big = periodic_rve(1000, 1e5)?;
     println!("memory of a 1000-sphere RVE: {:.3} MB", big.memory_bytes() as f64 / 1e6);
+    Ok(())
+}
+
+/// `granite bench triaxial`: benchmark (a) of the coupling issue, the one-cell triaxial of thesis
+/// 4.4.1 run by the scripts themselves: 8 material points, each with a copy of the RVE that
+/// `scripts/mpmxdem/prepare_rve.rhai` makes with its defaults (1000 spheres), at the scripts'
+/// I_n = 1e-2, to `axial_strain`. Run from the repository root (it reads `scripts/`).
+pub fn triaxial(threads: &[usize], axial_strain: f64) -> Result<()> {
+    let scripts = std::path::Path::new("scripts/mpmxdem");
+    if !scripts.is_dir() {
+        return Err(granite_core::GraniteError::Other(
+            "granite bench triaxial runs scripts/mpmxdem/*.rhai: start it from the repository root".into(),
+        ));
+    }
+    let root = std::path::PathBuf::from("out/bench_triaxial");
+    println!(
+        "granite bench triaxial: one MPM cell, 8 points x RVE of prepare_rve defaults, to {:.1} % axial strain",
+        100.0 * axial_strain
+    );
+    let t = Instant::now();
+    let prepared = crate::run(&scripts.join("prepare_rve.rhai"), vec![], Some(root.join("rve")), true, None)?;
+    let rve =
+        prepared.summary.get("file").and_then(|v| v.as_str()).map(std::path::PathBuf::from).ok_or_else(|| {
+            granite_core::GraniteError::Other("prepare_rve.rhai did not report its saved `file`".into())
+        })?;
+    println!("RVE prepared in {:.1} s: {}", t.elapsed().as_secs_f64(), rve.display());
+    let mut base = None;
+    for &n in threads {
+        let sets = vec![
+            ("rve".to_string(), rve.display().to_string()),
+            ("axial_strain".to_string(), axial_strain.to_string()),
+        ];
+        let t = Instant::now();
+        let report = crate::run(
+            &scripts.join("triaxial_one_cell.rhai"),
+            sets,
+            Some(root.join(format!("threads_{n}"))),
+            true,
+            Some(n),
+        )?;
+        let secs = t.elapsed().as_secs_f64();
+        let number = |key: &str| report.summary.get(key).and_then(|v| v.as_f64()).unwrap_or(f64::NAN);
+        let rate = number("dem_sphere_steps") / secs;
+        let speedup = base.map(|b: f64| rate / b).unwrap_or(1.0);
+        base.get_or_insert(rate);
+        println!(
+            "threads {n}  wall {secs:>8.1} s  {:>6.2} M sphere-steps/s  {:>6.2} M/s per thread  speed-up {speedup:.2}x  memory per {}-sphere RVE {:.3} MB  final q {:.4e} Pa",
+            rate / 1e6,
+            rate / 1e6 / n as f64,
+            number("rve_particles"),
+            number("rve_memory_mb"),
+            number("final_q"),
+        );
+    }
     Ok(())
 }

@@ -51,7 +51,7 @@ enum Command {
     },
     /// Print performance figures.
     Bench {
-        /// Which benchmark: mpm.
+        /// Which benchmark: mpm, dem, mpmxdem, triaxial.
         which: String,
         /// Material points in the 3D block (about).
         #[arg(long, default_value_t = 100_000)]
@@ -68,6 +68,9 @@ enum Command {
         /// Thread counts to measure, comma separated.
         #[arg(long, default_value = "1,2", value_delimiter = ',')]
         threads: Vec<usize>,
+        /// triaxial: axial strain to reach.
+        #[arg(long, default_value_t = 0.1)]
+        axial_strain: f64,
     },
     /// List the registered plugins (constitutive laws, velocity updates) and their parameters.
     Plugins,
@@ -126,11 +129,12 @@ fn main() -> ExitCode {
                 }
             }
         }
-        Command::Bench { which, points, steps, particles, dem_steps, threads } => match which.as_str() {
-            "mpm" | "dem" | "mpmxdem" => {
+        Command::Bench { which, points, steps, particles, dem_steps, threads, axial_strain } => match which.as_str() {
+            "mpm" | "dem" | "mpmxdem" | "triaxial" => {
                 let result = match which.as_str() {
                     "mpm" => granite::bench::mpm(points, steps, &threads),
                     "dem" => granite::bench::dem(&particles, dem_steps, &threads),
+                    "triaxial" => granite::bench::triaxial(&threads, axial_strain),
                     _ => granite::bench::mpmxdem(&threads),
                 };
                 match result {
@@ -142,7 +146,7 @@ fn main() -> ExitCode {
                 }
             }
             other => {
-                eprintln!("granite: unknown benchmark `{other}`; available: mpm, dem, mpmxdem");
+                eprintln!("granite: unknown benchmark `{other}`; available: mpm, dem, mpmxdem, triaxial");
                 ExitCode::from(2)
             }
         },

@@ -129,7 +129,7 @@ fn coupled_run(rve: &DemSim, l: [f64; 3], dt: f64, steps: usize, inertial: f64) 
 /// deformation time of eqs. 4.1 and 4.5, computed here from the sample itself.
 fn pure_dem_path(rve: &DemSim, increment: [f64; 3], increments: usize, inertial: f64) -> Vec<(f64, f64)> {
     let mut dem = rve.clone();
-    dem.sequential = true;
+    dem.set_sequential(true);
     let s = &dem.spheres;
     let mass: f64 = s.mass.iter().sum();
     let rho = mass / dem.solid_volume();

@@ -17,12 +17,10 @@ pub struct PairList {
     pub params: Vec<f64>,
     pub history: Vec<f64>,
     pub touching: Vec<bool>,
-    /// Force on `a` (b gets the opposite), and the torques on `a` and `b` (lever arms included).
+    /// Force on `a` (b gets the opposite), and the torque on `a` (lever arm included); b's
+    /// torque follows from them and the branch vector (see `dem::step`).
     pub force: Vec<Vec3>,
     pub torque_a: Vec<Vec3>,
-    pub torque_b: Vec<Vec3>,
-    /// Overlap of touching pairs (negative gap otherwise), for measures.
-    pub overlap: Vec<f64>,
 }
 
 impl PairList {
@@ -58,8 +56,6 @@ impl PairList {
         self.touching = permute(&self.touching, &order);
         self.force = permute(&self.force, &order);
         self.torque_a = permute(&self.torque_a, &order);
-        self.torque_b = permute(&self.torque_b, &order);
-        self.overlap = permute(&self.overlap, &order);
         self.params = params;
         self.history = history;
     }
@@ -90,8 +86,6 @@ impl PairList {
             touching: Vec::with_capacity(n),
             force: vec![[0.0; 3]; n],
             torque_a: vec![[0.0; 3]; n],
-            torque_b: vec![[0.0; 3]; n],
-            overlap: vec![0.0; n],
         };
         let same_layout = self.param_stride == param_stride && self.history_stride == history_stride;
         let mut old = 0;

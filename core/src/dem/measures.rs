@@ -1,6 +1,7 @@
 //! Measures of a DEM state: energies, unbalanced force, coordination (thesis 5.14), Love-Weber
 //! stress (4.7), global stress with gravity (appendix A, eq. .14).
 
+use crate::dem::contacts::PairList;
 use crate::dem::sim::DemSim;
 use crate::math::{Vec3, Voigt};
 
@@ -28,6 +29,20 @@ pub struct DemDiagnostics {
 }
 
 impl DemSim {
+    /// Overlap of pair `k` of `list` in the current positions (zero when apart).
+    fn overlap_of(&self, list: &PairList, k: usize, wall: bool) -> f64 {
+        let s = &self.spheres;
+        let i = list.a[k] as usize;
+        let overlap = if wall {
+            self.walls[list.b[k] as usize].contact(s.x[i], s.radius[i], 0.0).map_or(0.0, |g| -g.gap)
+        } else {
+            let j = list.b[k] as usize;
+            let d = crate::dem::step::branch(&s.x, i, j, list.shift[k], self.cell.as_ref());
+            s.radius[i] + s.radius[j] - (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt()
+        };
+        overlap.max(0.0)
+    }
+
     /// Contacts per sphere (sphere-sphere and sphere-wall), in sphere order.
     pub fn contact_counts(&self) -> Vec<u32> {
         let mut count = vec![0u32; self.spheres.len()];
@@ -112,7 +127,7 @@ impl DemSim {
                 }
                 let law = &self.laws[list.law[k] as usize];
                 d.elastic_energy += law.elastic_energy(
-                    list.overlap[k],
+                    self.overlap_of(list, k, wall),
                     &list.params[k * ps..(k + 1) * ps],
                     &list.history[k * hs..(k + 1) * hs],
                 );

@@ -181,6 +181,16 @@ impl DemSim {
         Some((axial, (cell.volume() / h0.determinant().abs()).ln()))
     }
 
+    /// A new Verlet skin; the candidate lists are rebuilt with it at the next step.
+    pub fn set_skin(&mut self, skin: f64) -> Result<()> {
+        if !(skin >= 0.0) {
+            return Err(GraniteError::param("skin", skin, "must be >= 0"));
+        }
+        self.skin = skin;
+        self.needs_rebuild = true;
+        Ok(())
+    }
+
     /// Approximate memory held by this simulation's arrays, in bytes.
     pub fn memory_bytes(&self) -> usize {
         let s = &self.spheres;
@@ -191,7 +201,7 @@ impl DemSim {
             + std::mem::size_of::<u8>()
             + std::mem::size_of::<u32>();
         let pairs = |p: &PairList| {
-            p.a.capacity() * (2 * 4 + 12 + 2 + 1 + 3 * 24 + 8) + (p.params.capacity() + p.history.capacity()) * 8
+            p.a.capacity() * (2 * 4 + 12 + 2 + 1 + 2 * 24) + (p.params.capacity() + p.history.capacity()) * 8
         };
         s.x.capacity() * per_sphere
             + self.x_at_build.capacity() * 24

@@ -161,6 +161,12 @@ impl DemSim {
         sim.h_at_build = st.h_at_build;
         sim.needs_rebuild = st.needs_rebuild;
         sim.rebuilds = st.rebuilds;
+        // Reading grows arrays by doubling; copies hold just their contents (a loaded RVE is the
+        // template of every material point's copy, so its reported memory should be theirs).
+        sim.spheres = sim.spheres.clone();
+        sim.pairs = sim.pairs.clone();
+        sim.wall_pairs = sim.wall_pairs.clone();
+        sim.x_at_build = sim.x_at_build.clone();
         Ok(sim)
     }
 }

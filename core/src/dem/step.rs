@@ -89,9 +89,14 @@ impl DemSim {
             (ps, hs) => self.contacts(Stride::<0>(ps), Stride::<0>(hs), grain),
         }
         if self.sequential {
-            scatter(&mut self.spheres, &self.pairs, &self.wall_pairs);
+            scatter(&mut self.spheres, &self.pairs, &self.wall_pairs, self.cell.as_ref());
         } else {
-            gather(&mut self.spheres, &self.pairs, &self.adjacency, &self.wall_pairs, &self.wall_adjacency, grain.0);
+            if self.adjacency.start.len() != self.spheres.len() + 1 {
+                // Left unbuilt while the simulation ran sequentially (an RVE).
+                self.build_adjacency();
+            }
+            let lists = (&self.pairs, &self.adjacency, &self.wall_pairs, &self.wall_adjacency);
+            gather(&mut self.spheres, lists, self.cell.as_ref(), grain.0);
         }
         wall_forces(&mut self.walls, &self.wall_pairs);
         // The cell deforms over the step; particles follow its affine field on top of their own motion.
@@ -150,7 +155,7 @@ impl DemSim {
                     *s = shift_after_flip(&m, *s);
                 }
                 self.pairs.resort();
-                self.adjacency = Adjacency::build(self.spheres.len(), &self.pairs.a, Some(&self.pairs.b));
+                self.build_adjacency();
                 self.needs_rebuild = true;
             }
         }
@@ -160,6 +165,24 @@ impl DemSim {
             self.needs_rebuild = true;
         }
         Ok(())
+    }
+
+    /// Steps on the calling thread only (an RVE inside a parallel loop over material points),
+    /// dropping what only the parallel force gather needs.
+    pub fn set_sequential(&mut self, on: bool) {
+        self.sequential = on;
+        self.build_adjacency();
+    }
+
+    /// Per-sphere lists of pairs for the parallel gather; a sequential simulation (an RVE) sums
+    /// forces pair by pair instead and keeps none (less memory per RVE).
+    pub(crate) fn build_adjacency(&mut self) {
+        let n = self.spheres.len();
+        (self.adjacency, self.wall_adjacency) = if self.sequential {
+            (Adjacency::default(), Adjacency::default())
+        } else {
+            (Adjacency::build(n, &self.pairs.a, Some(&self.pairs.b)), Adjacency::build(n, &self.wall_pairs.a, None))
+        };
     }
 
     /// Sphere-sphere and sphere-wall contact forces of this step.
@@ -268,10 +291,9 @@ impl DemSim {
                 name(b)
             )));
         }
-        self.adjacency = Adjacency::build(s.len(), &pairs.a, Some(&pairs.b));
-        self.wall_adjacency = Adjacency::build(s.len(), &wall_list.a, None);
         self.pairs = pairs;
         self.wall_pairs = wall_list;
+        self.build_adjacency();
         self.x_at_build = self.spheres.x.clone();
         self.walls_at_build = self.walls.iter().map(|w| w.position).collect();
         self.h_at_build = self.cell.as_ref().map(|c| c.h);
@@ -326,7 +348,6 @@ struct Scratch {
     rel_velocity: [Vec3; CHUNK],
     rel_spin: [Vec3; CHUNK],
     arm_a: [Vec3; CHUNK],
-    arm_b: [Vec3; CHUNK],
     params: [f64; CHUNK * MAX_PARAMS],
     history: [f64; CHUNK * MAX_HISTORY],
     force: [Vec3; CHUNK],
@@ -344,7 +365,6 @@ impl Scratch {
             rel_velocity: [[0.0; 3]; CHUNK],
             rel_spin: [[0.0; 3]; CHUNK],
             arm_a: [[0.0; 3]; CHUNK],
-            arm_b: [[0.0; 3]; CHUNK],
             params: [0.0; CHUNK * MAX_PARAMS],
             history: [0.0; CHUNK * MAX_HISTORY],
             force: [[0.0; 3]; CHUNK],
@@ -419,8 +439,6 @@ struct PairChunk<'a> {
     touching: &'a mut [bool],
     force: &'a mut [Vec3],
     torque_a: &'a mut [Vec3],
-    torque_b: &'a mut [Vec3],
-    overlap: &'a mut [f64],
 }
 
 /// Runs `body` on chunks of a pair list in parallel, with a scratch buffer per worker.
@@ -433,7 +451,7 @@ fn for_each_chunk(
     if pairs.is_empty() {
         return;
     }
-    let PairList { a, b, shift, law, params, history, touching, force, torque_a, torque_b, overlap, .. } = pairs;
+    let PairList { a, b, shift, law, params, history, touching, force, torque_a, .. } = pairs;
     (
         (a.par_chunks(CHUNK), b.par_chunks(CHUNK), shift.par_chunks(CHUNK)),
         law.par_chunks(CHUNK),
@@ -442,30 +460,16 @@ fn for_each_chunk(
         touching.par_chunks_mut(CHUNK),
         force.par_chunks_mut(CHUNK),
         torque_a.par_chunks_mut(CHUNK),
-        torque_b.par_chunks_mut(CHUNK),
-        overlap.par_chunks_mut(CHUNK),
     )
         .into_par_iter()
         .with_min_len(min_chunks)
         .enumerate()
         .for_each_init(
             ScratchGuard::take,
-            |scratch, (j, ((a, b, shift), law, params, history, touching, force, torque_a, torque_b, overlap))| {
+            |scratch, (j, ((a, b, shift), law, params, history, touching, force, torque_a))| {
                 scratch.len = 0;
-                let chunk = PairChunk {
-                    first: j * CHUNK,
-                    a,
-                    b,
-                    shift,
-                    law,
-                    params,
-                    history,
-                    touching,
-                    force,
-                    torque_a,
-                    torque_b,
-                    overlap,
-                };
+                let chunk =
+                    PairChunk { first: j * CHUNK, a, b, shift, law, params, history, touching, force, torque_a };
                 body(chunk, scratch)
             },
         );
@@ -478,23 +482,19 @@ fn write_back<const HS: usize>(c: &mut PairChunk<'_>, s: &Scratch, hs: Stride<HS
         let (f, m) = (s.force[e], s.moment[e]);
         c.force[k] = f;
         c.torque_a[k] = add(cross(s.arm_a[e], f), m);
-        c.torque_b[k] = sub(cross(s.arm_b[e], [-f[0], -f[1], -f[2]]), m);
         c.history[hs.of(k)].copy_from_slice(&s.history[hs.of(e)]);
     }
 }
 
-/// Marks a pair apart. Its overlap is not kept (only touching pairs' overlaps are read), which
-/// saves a square root per candidate.
+/// Marks a pair apart.
 fn open_contact<const HS: usize>(c: &mut PairChunk<'_>, k: usize, hs: Stride<HS>) {
     // Pairs that were already apart are clean: skip the writes (most candidates, most steps).
     if !c.touching[k] {
         return;
     }
     c.touching[k] = false;
-    c.overlap[k] = 0.0;
     c.force[k] = [0.0; 3];
     c.torque_a[k] = [0.0; 3];
-    c.torque_b[k] = [0.0; 3];
     c.history[hs.of(k)].iter_mut().for_each(|h| *h = 0.0);
 }
 
@@ -514,11 +514,7 @@ fn sphere_contacts<const PS: usize, const HS: usize>(
     for_each_chunk(pairs, strides, grain.1, |mut c, s| {
         for k in 0..c.a.len() {
             let (i, j) = (c.a[k] as usize, c.b[k] as usize);
-            let image = match (cell, c.shift[k]) {
-                (Some(cell), n) if n != [0; 3] => cell.shift_vector(n),
-                _ => [0.0; 3],
-            };
-            let d = add(sub(sp.x[j], sp.x[i]), image);
+            let d = branch(&sp.x, i, j, c.shift[k], cell);
             let reach = sp.radius[i] + sp.radius[j];
             let dist2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
             if dist2 >= reach * reach {
@@ -539,7 +535,6 @@ fn sphere_contacts<const PS: usize, const HS: usize>(
                 vb = add(vb, [ld[0], ld[1], ld[2]]);
             }
             c.touching[k] = true;
-            c.overlap[k] = overlap;
             let e = s.len;
             s.pair[e] = c.first + k;
             s.law[e] = c.law[k];
@@ -548,7 +543,6 @@ fn sphere_contacts<const PS: usize, const HS: usize>(
             s.rel_velocity[e] = sub(vb, va);
             s.rel_spin[e] = sub(sp.w[j], sp.w[i]);
             s.arm_a[e] = arm_a;
-            s.arm_b[e] = arm_b;
             s.params[ps.of(e)].copy_from_slice(&c.params[ps.of(k)]);
             s.history[hs.of(e)].copy_from_slice(&c.history[hs.of(k)]);
             s.len += 1;
@@ -584,7 +578,6 @@ fn wall_contacts<const PS: usize, const HS: usize>(
             let arm_a = sub(geo.point, sp.x[i]);
             let va = add(sp.v[i], cross(sp.w[i], arm_a));
             c.touching[k] = true;
-            c.overlap[k] = overlap;
             let e = s.len;
             s.pair[e] = c.first + k;
             s.law[e] = c.law[k];
@@ -593,7 +586,6 @@ fn wall_contacts<const PS: usize, const HS: usize>(
             s.rel_velocity[e] = sub(wall.velocity, va);
             s.rel_spin[e] = [-sp.w[i][0], -sp.w[i][1], -sp.w[i][2]];
             s.arm_a[e] = arm_a;
-            s.arm_b[e] = [0.0; 3];
             s.params[ps.of(e)].copy_from_slice(&c.params[ps.of(k)]);
             s.history[hs.of(e)].copy_from_slice(&c.history[hs.of(k)]);
             s.len += 1;
@@ -603,27 +595,58 @@ fn wall_contacts<const PS: usize, const HS: usize>(
     });
 }
 
-/// Sums each sphere's contact forces and torques, pair by pair in increasing pair index.
-fn gather(sp: &mut Spheres, pairs: &PairList, adj: &Adjacency, walls: &PairList, wall_adj: &Adjacency, min_len: usize) {
-    (sp.force.par_iter_mut(), sp.torque.par_iter_mut()).into_par_iter().with_min_len(min_len).enumerate().for_each(
+/// Branch vector from sphere `i` to sphere `j` (or its periodic image `shift`).
+#[inline(always)]
+pub(crate) fn branch(x: &[Vec3], i: usize, j: usize, shift: [i32; 3], cell: Option<&PeriodicCell>) -> Vec3 {
+    let image = match (cell, shift) {
+        (Some(cell), n) if n != [0; 3] => cell.shift_vector(n),
+        _ => [0.0; 3],
+    };
+    add(sub(x[j], x[i]), image)
+}
+
+/// Torque on the second sphere of pair `k`. Only the first one's is stored: the two add up to
+/// `d x f` (d the branch vector, f the force on the first), whatever the contact moment.
+#[inline(always)]
+fn torque_on_b(x: &[Vec3], pairs: &PairList, k: usize, cell: Option<&PeriodicCell>) -> Vec3 {
+    let d = branch(x, pairs.a[k] as usize, pairs.b[k] as usize, pairs.shift[k], cell);
+    sub(cross(d, pairs.force[k]), pairs.torque_a[k])
+}
+
+/// Sums each sphere's contact forces and torques, pair by pair in increasing pair index (before
+/// the spheres move: torques on second spheres use the branch vectors of this step's contacts).
+fn gather(
+    sp: &mut Spheres,
+    (pairs, adj, walls, wall_adj): (&PairList, &Adjacency, &PairList, &Adjacency),
+    cell: Option<&PeriodicCell>,
+    min_len: usize,
+) {
+    let Spheres { x, force, torque, .. } = sp;
+    let x = &*x;
+    (force.par_iter_mut(), torque.par_iter_mut()).into_par_iter().with_min_len(min_len).enumerate().for_each(
         |(i, (f, t))| {
             let mut fs = [0.0; 3];
             let mut ts = [0.0; 3];
             for &e in adj.of(i) {
                 let k = (e >> 1) as usize;
+                if !pairs.touching[k] {
+                    continue;
+                }
                 let pf = pairs.force[k];
                 if e & 1 == 0 {
                     fs = add(fs, pf);
                     ts = add(ts, pairs.torque_a[k]);
                 } else {
                     fs = sub(fs, pf);
-                    ts = add(ts, pairs.torque_b[k]);
+                    ts = add(ts, torque_on_b(x, pairs, k, cell));
                 }
             }
             for &e in wall_adj.of(i) {
                 let k = (e >> 1) as usize;
-                fs = add(fs, walls.force[k]);
-                ts = add(ts, walls.torque_a[k]);
+                if walls.touching[k] {
+                    fs = add(fs, walls.force[k]);
+                    ts = add(ts, walls.torque_a[k]);
+                }
             }
             *f = fs;
             *t = ts;
@@ -632,12 +655,11 @@ fn gather(sp: &mut Spheres, pairs: &PairList, adj: &Adjacency, walls: &PairList,
 }
 
 /// The sequential form of `gather`: touching pairs add to both their spheres, in increasing pair
-/// index, sphere pairs before wall pairs, so each sphere sums the same terms in the same order
-/// (pairs apart contribute exact zeros to `gather` and nothing here).
-fn scatter(sp: &mut Spheres, pairs: &PairList, walls: &PairList) {
-    sp.force.iter_mut().for_each(|f| *f = [0.0; 3]);
-    sp.torque.iter_mut().for_each(|t| *t = [0.0; 3]);
-    let (force, torque) = (&mut sp.force, &mut sp.torque);
+/// index, sphere pairs before wall pairs, so each sphere sums the same terms in the same order.
+fn scatter(sp: &mut Spheres, pairs: &PairList, walls: &PairList, cell: Option<&PeriodicCell>) {
+    let Spheres { x, force, torque, .. } = sp;
+    force.iter_mut().for_each(|f| *f = [0.0; 3]);
+    torque.iter_mut().for_each(|t| *t = [0.0; 3]);
     for k in 0..pairs.len() {
         if !pairs.touching[k] {
             continue;
@@ -647,7 +669,7 @@ fn scatter(sp: &mut Spheres, pairs: &PairList, walls: &PairList) {
         force[i] = add(force[i], f);
         torque[i] = add(torque[i], pairs.torque_a[k]);
         force[j] = sub(force[j], f);
-        torque[j] = add(torque[j], pairs.torque_b[k]);
+        torque[j] = add(torque[j], torque_on_b(x, pairs, k, cell));
     }
     for k in 0..walls.len() {
         if walls.touching[k] {

@@ -591,6 +591,15 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
         Ok(s.lock().sim.dem.love_weber_stress(v).iter().map(|&c| Dynamic::from(c)).collect::<Array>())
     });
     engine.register_get("particles", |s: &mut DemHandle| s.lock().sim.dem.spheres.len() as i64);
+    engine.register_get("memory_bytes", |s: &mut DemHandle| s.lock().sim.dem.memory_bytes() as i64);
+    engine.register_fn("skin", |s: &mut DemHandle, skin: Dynamic| -> RhaiResult<()> {
+        let skin = number(&skin, "skin")?;
+        let mut st = s.lock();
+        st.sim.dem.set_skin(skin).or_rhai()?;
+        st.sim.auto_skin = false;
+        Ok(())
+    });
+    engine.register_get("skin", |s: &mut DemHandle| s.lock().sim.dem.skin);
     engine.register_get("clumps", |s: &mut DemHandle| s.lock().sim.dem.clumps.len() as i64);
     register_cell(engine);
     register_measures(engine);

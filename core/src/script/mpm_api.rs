@@ -588,6 +588,13 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
 
     engine.register_fn("material", |s: &mut SimHandle, law: &str, opts: Map| s.material(law, opts));
     engine.register_fn("set_material", |s: &mut SimHandle, m: MaterialHandle, opts: Map| s.set_material(&m, opts));
+    engine.register_fn("memory_per_point", |s: &mut SimHandle, m: MaterialHandle| -> RhaiResult<i64> {
+        let st = s.lock();
+        match st.sim.mpm.materials.get(m.index) {
+            Some(material) => Ok(material.law.bytes_per_point() as i64),
+            None => err(format!("material \"{}\" does not belong to this simulation", m.name)),
+        }
+    });
     engine.register_fn("save", |s: &mut SimHandle, file: &str| {
         let st = s.lock();
         let path = st.points_path(file);

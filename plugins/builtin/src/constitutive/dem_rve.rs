@@ -83,7 +83,7 @@ impl ConstitutiveLawFactory for DemRveFactory {
             let mut store = law.rves.write().map_err(|_| GraniteError::Other("RVE store poisoned".into()))?;
             for v in rves {
                 let mut sim = DemSim::from_json(v, registry)?;
-                sim.sequential = true;
+                sim.set_sequential(true);
                 store.push(Mutex::new(Rve { sim }));
             }
         }
@@ -139,7 +139,7 @@ impl DemRve {
         let fixed_steps =
             if params.is_set("dem_steps") { Some(params.positive("dem_steps")?.round().max(1.0) as u64) } else { None };
         let mut template = template;
-        template.sequential = true;
+        template.set_sequential(true);
         template.cell_control = None;
         template.gravity = [0.0; 3];
         Ok(DemRve {
@@ -208,8 +208,16 @@ impl DemRve {
     }
 }
 
-const STATE: &[&str] =
-    &["rve_mean_stress", "rve_deviatoric_stress", "void_ratio", "coordination", "rattlers", "dem_steps", "no_contacts"];
+const STATE: &[&str] = &[
+    "rve_mean_stress",
+    "rve_deviatoric_stress",
+    "void_ratio",
+    "coordination",
+    "rattlers",
+    "dem_steps",
+    "no_contacts",
+    "dem_sphere_steps",
+];
 
 impl ConstitutiveLaw for DemRve {
     fn name(&self) -> &str {
@@ -344,6 +352,8 @@ impl ConstitutiveLaw for DemRve {
             st[4] = d.rattlers as f64;
             st[5] = steps as f64;
             st[6] = if no_contacts { 1.0 } else { 0.0 };
+            // Work done by this point's RVE so far (throughput figures of benchmarks and runs).
+            st[7] += (steps as usize * sim.spheres.len()) as f64;
         }
         Ok(())
     }
