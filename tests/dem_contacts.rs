@@ -1,4 +1,5 @@
-//! Binary collisions against their analytic solutions (thesis 2.2.3, Schwager & Pöschel 2007).
+//! Binary collisions against their analytic solutions (thesis 2.2.3, Schwager & Pöschel 2007;
+//! Hertz's elastic impact).
 
 use granite_core::dem::walls::{Wall, WallShape};
 use granite_core::dem::DemSim;
@@ -131,4 +132,104 @@ fn elastic_frictionless_collision_conserves_energy() {
         assert!((o.contact_time - tc).abs() < 0.01 * tc);
         assert!((o.restitution - 1.0).abs() < 1e-3);
     }
+}
+
+/// Hertz's impact: `t_c = 2 I δ_max / v` with `δ_max = (15 m* v² / (16 E* sqrt(R*)))^(2/5)` and
+/// `I = ∫0^1 (1 − x^(5/2))^(-1/2) dx`, integrated here (x = 1 − s² removes the end singularity).
+fn hertz_contact_time(m_eff: f64, r_eff: f64, e_eff: f64, v: f64) -> f64 {
+    let f = |s: f64| {
+        let x = 1.0 - s * s;
+        let g = 1.0 - x.powf(2.5);
+        if s == 0.0 {
+            2.0 / 2.5f64.sqrt()
+        } else {
+            2.0 * s / g.sqrt()
+        }
+    };
+    let n = 20_000;
+    let h = 1.0 / n as f64;
+    let simpson: f64 = (0..=n)
+        .map(|k| {
+            let w = if k == 0 || k == n {
+                1.0
+            } else if k % 2 == 1 {
+                4.0
+            } else {
+                2.0
+            };
+            w * f(k as f64 * h)
+        })
+        .sum::<f64>()
+        * h
+        / 3.0;
+    let delta_max = (15.0 * m_eff * v * v / (16.0 * e_eff * r_eff.sqrt())).powf(0.4);
+    2.0 * simpson * delta_max / v
+}
+
+#[test]
+fn hertz_impact_is_elastic_and_lasts_the_analytic_time() {
+    let (young, poisson, r, rho, speed) = (1e9, 0.3, 0.01, 2500.0, 0.5);
+    let e_eff = young / (2.0 * (1.0 - poisson * poisson));
+    let m = rho * 4.0 / 3.0 * std::f64::consts::PI * r * r * r;
+    for wall in [false, true] {
+        let (o, _) = collide("hertz_mindlin", &[("young", young), ("poisson", poisson)], wall, speed, 2e-3);
+        let (m_eff, r_eff, v) = if wall { (m, r, speed) } else { (0.5 * m, 0.5 * r, 2.0 * speed) };
+        let tc = hertz_contact_time(m_eff, r_eff, e_eff, v);
+        assert!(
+            (o.contact_time - tc).abs() < 0.01 * tc,
+            "wall {wall}: contact lasted {} s, Hertz gives {tc} s",
+            o.contact_time
+        );
+        assert!((o.restitution - 1.0).abs() < 1e-3, "wall {wall}: e = {}", o.restitution);
+        let rel = (o.kinetic_after - o.kinetic_before).abs() / o.kinetic_before;
+        assert!(rel < 1e-4, "wall {wall}: kinetic energy changed by {rel}");
+    }
+}
+
+/// A sphere resting on a floor under gravity settles at Hertz's overlap
+/// `δ = (3 F_n / (4 E* sqrt(R)))^(2/3)`; tilting gravity then shifts it by `F_t / k_t` with
+/// Mindlin's `k_t = 8 G* sqrt(R δ)` (rotations blocked, friction far from sliding).
+#[test]
+fn hertz_overlap_and_mindlin_shear_stiffness_of_a_resting_sphere() {
+    use granite_core::dem::particles::dof;
+    let (young, poisson, r, rho, g) = (1e7, 0.3, 0.01, 2500.0, 9.81);
+    let reg = granite::registry();
+    let mut sim = DemSim::new();
+    let m = sim.add_material("grain", rho).unwrap();
+    let law =
+        reg.build_contact_law("hertz_mindlin", &params(&[("young", young), ("poisson", poisson), ("friction", 60.0)]));
+    sim.set_contact_law(law.unwrap(), None).unwrap();
+    sim.add_sphere(m, [0.0, 0.0, r], r, [0.0; 3]).unwrap();
+    sim.spheres.blocked[0] = dof::RX | dof::RY | dof::RZ;
+    sim.add_wall(Wall {
+        name: "floor".into(),
+        shape: WallShape::Plane { normal: [0.0, 0.0, 1.0] },
+        position: [0.0; 3],
+        velocity: [0.0; 3],
+        material: m,
+        force: [0.0; 3],
+    });
+    sim.skin = 0.1 * r;
+    sim.damping = 0.4;
+    sim.gravity = [0.0, 0.0, -g];
+    sim.set_dt(0.2 * sim.critical_dt().unwrap()).unwrap();
+    for _ in 0..20_000 {
+        sim.step().unwrap();
+    }
+    let mass = sim.spheres.mass[0];
+    let e_eff = young / (2.0 * (1.0 - poisson * poisson));
+    let g_eff = young / (2.0 * (1.0 + poisson)) / (2.0 * (2.0 - poisson));
+    let delta = (3.0 * mass * g / (4.0 * e_eff * r.sqrt())).powf(2.0 / 3.0);
+    let settled = sim.spheres.x[0];
+    assert!((r - settled[2] - delta).abs() < 0.01 * delta, "overlap {} m, Hertz gives {delta} m", r - settled[2]);
+
+    let tilt = 0.3;
+    sim.gravity = [tilt * g, 0.0, -g];
+    for _ in 0..20_000 {
+        sim.step().unwrap();
+    }
+    let kt = 8.0 * g_eff * (r * delta).sqrt();
+    let expected = tilt * mass * g / kt;
+    let shift = sim.spheres.x[0][0] - settled[0];
+    assert!((shift - expected).abs() < 0.01 * expected, "tangential shift {shift} m, Mindlin gives {expected} m");
 }

@@ -1,5 +1,6 @@
 //! Contact laws (YADE's Law2 functors; parameters per material pair, values per contact pair).
 
+pub mod hertz_mindlin;
 pub mod linear;
 pub mod restitution;
 pub mod rolling;
@@ -15,6 +16,7 @@ pub fn register(registry: &mut Registry) {
     registry.add_contact_law(Arc::new(linear::LinearFactory));
     registry.add_contact_law(Arc::new(visco_elastic::ViscoElasticFactory));
     registry.add_contact_law(Arc::new(rolling::RollingResistanceFactory));
+    registry.add_contact_law(Arc::new(hertz_mindlin::HertzMindlinFactory));
 }
 
 /// A parameter that may be drawn per contact pair: uniform in `[name, name_max]` when `name_max`
