@@ -97,8 +97,7 @@ fn measure(label: &str, threads: &[usize], steps: usize, build: &(dyn Fn() -> Re
             Ok((time_steps(&mut sim, steps)?, points))
         })?;
         let rate = points as f64 * steps as f64 / secs;
-        let speedup = base.map(|b: f64| rate / b).unwrap_or(1.0);
-        base.get_or_insert(rate);
+        let speedup = speedup_over(&mut base, rate);
         println!(
             "{label:<34} threads {n}  points {points:>7}  steps {steps:>4}  {:>8.3} s  {:>7.2} M point-updates/s  {:>6.2} M/s per thread  speed-up {speedup:.2}x",
             secs,
@@ -140,14 +139,7 @@ pub fn gravity_deposition(count: usize) -> Result<granite_core::dem::DemSim> {
         let mut n = [0.0; 3];
         n[a] = if upper { -1.0 } else { 1.0 };
         let position = if upper { [lx, lx, top] } else { [0.0; 3] };
-        sim.add_wall(Wall {
-            name: String::new(),
-            shape: WallShape::Plane { normal: n },
-            position,
-            velocity: [0.0; 3],
-            material: m,
-            force: [0.0; 3],
-        });
+        sim.add_wall(Wall::new("", WallShape::Plane { normal: n }, position, m));
     }
     for (x, radius) in lattice([0.0; 3], [lx, lx, lz], spacing, r, 0.05 * r, 1)? {
         sim.add_sphere(m, x, radius, [0.0; 3])?;
@@ -223,8 +215,7 @@ pub fn dem(counts: &[usize], steps: usize, threads: &[usize]) -> Result<()> {
                 Ok((t.elapsed().as_secs_f64(), sim.spheres.len(), sim.rebuilds - before, sim.pairs.touching_count()))
             })?;
             let rate = particles as f64 * steps as f64 / secs;
-            let speedup = base.map(|b: f64| rate / b).unwrap_or(1.0);
-            base.get_or_insert(rate);
+            let speedup = speedup_over(&mut base, rate);
             println!(
                 "N = {particles:>6}  threads {n}  {steps} steps  {secs:>7.3} s  {:>7.2} M particle-steps/s  {:>6.2} M/s per thread  speed-up {speedup:.2}x  ({rebuilds} list rebuilds, {contacts} contacts at the end)",
                 rate / 1e6,
@@ -250,8 +241,7 @@ pub fn dem(counts: &[usize], steps: usize, threads: &[usize]) -> Result<()> {
             Ok((t.elapsed().as_secs_f64(), sim.spheres.len(), sim.pairs.touching_count()))
         })?;
         let per_step = secs / steps as f64;
-        let speedup = base.map(|b: f64| b / per_step).unwrap_or(1.0);
-        base.get_or_insert(per_step);
+        let speedup = speedup_over(&mut base, 1.0 / per_step);
         println!(
             "N = {particles:>6}  threads {n}  {steps} steps  {:>7.4} ms per step  {:>6.2} M particle-steps/s  speed-up {speedup:.2}x  ({contacts} contacts)",
             per_step * 1e3,
@@ -302,8 +292,7 @@ pub fn mpmxdem(threads: &[usize]) -> Result<()> {
         })?;
         let sphere_steps = points as f64 * 125.0 * 51.0 * 200.0;
         let rate = sphere_steps / secs;
-        let speedup = base.map(|b: f64| rate / b).unwrap_or(1.0);
-        base.get_or_insert(rate);
+        let speedup = speedup_over(&mut base, rate);
         println!(
             "threads {n}  {points} RVEs  {secs:>7.3} s  {:>6.2} M sphere-steps/s  {:>6.2} M/s per thread  speed-up {speedup:.2}x  memory per RVE {:.3} MB",
             rate / 1e6,
@@ -373,8 +362,7 @@ pub fn triaxial(threads: &[usize], axial_strain: f64) -> Result<()> {
         let secs = t.elapsed().as_secs_f64();
         let number = |key: &str| report.summary.get(key).and_then(|v| v.as_f64()).unwrap_or(f64::NAN);
         let rate = number("dem_sphere_steps") / secs;
-        let speedup = base.map(|b: f64| rate / b).unwrap_or(1.0);
-        base.get_or_insert(rate);
+        let speedup = speedup_over(&mut base, rate);
         println!(
             "threads {n}  wall {secs:>8.1} s  {:>6.2} M sphere-steps/s  {:>6.2} M/s per thread  speed-up {speedup:.2}x  memory per {}-sphere RVE {:.3} MB  final q {:.4e} Pa",
             rate / 1e6,
@@ -385,4 +373,9 @@ pub fn triaxial(threads: &[usize], axial_strain: f64) -> Result<()> {
         );
     }
     Ok(())
+}
+
+/// `rate` over the first rate measured (which `base` keeps).
+fn speedup_over(base: &mut Option<f64>, rate: f64) -> f64 {
+    rate / *base.get_or_insert(rate)
 }

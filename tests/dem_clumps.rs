@@ -83,14 +83,7 @@ fn clump_settles_on_a_floor() {
     let (mut s, m) = sim("visco_elastic", &[("kn", 1e4), ("kt_ratio", 0.5), ("friction", 30.0), ("restitution", 0.3)]);
     let members = tetrahedral_members([0.0, 0.0, 0.02], 0.003101, 0.005).unwrap();
     s.add_clump(m, &members, [0.0; 3], 128).unwrap();
-    s.add_wall(Wall {
-        name: "floor".into(),
-        shape: WallShape::Plane { normal: [0.0, 0.0, 1.0] },
-        position: [0.0; 3],
-        velocity: [0.0; 3],
-        material: m,
-        force: [0.0; 3],
-    });
+    s.add_wall(Wall::new("floor", WallShape::Plane { normal: [0.0, 0.0, 1.0] }, [0.0; 3], m));
     s.gravity = [0.0, 0.0, -9.81];
     s.set_dt(1e-5).unwrap();
     for _ in 0..100_000 {

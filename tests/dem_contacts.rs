@@ -37,14 +37,7 @@ fn collide(law: &str, law_params: &[(&str, f64)], against_wall: bool, speed: f64
     let r = 0.01;
     sim.add_sphere(m, [0.0, 0.0, 0.0], r, [speed, 0.0, 0.0]).unwrap();
     if against_wall {
-        sim.add_wall(Wall {
-            name: "wall".into(),
-            shape: WallShape::Plane { normal: [-1.0, 0.0, 0.0] },
-            position: [r + 1e-4, 0.0, 0.0],
-            velocity: [0.0; 3],
-            material: m,
-            force: [0.0; 3],
-        });
+        sim.add_wall(Wall::new("wall", WallShape::Plane { normal: [-1.0, 0.0, 0.0] }, [r + 1e-4, 0.0, 0.0], m));
     } else {
         sim.add_sphere(m, [2.0 * r + 1e-4, 0.0, 0.0], r, [-speed, 0.0, 0.0]).unwrap();
     }
@@ -201,14 +194,7 @@ fn hertz_overlap_and_mindlin_shear_stiffness_of_a_resting_sphere() {
     sim.set_contact_law(law.unwrap(), None).unwrap();
     sim.add_sphere(m, [0.0, 0.0, r], r, [0.0; 3]).unwrap();
     sim.spheres.blocked[0] = dof::RX | dof::RY | dof::RZ;
-    sim.add_wall(Wall {
-        name: "floor".into(),
-        shape: WallShape::Plane { normal: [0.0, 0.0, 1.0] },
-        position: [0.0; 3],
-        velocity: [0.0; 3],
-        material: m,
-        force: [0.0; 3],
-    });
+    sim.add_wall(Wall::new("floor", WallShape::Plane { normal: [0.0, 0.0, 1.0] }, [0.0; 3], m));
     sim.skin = 0.1 * r;
     sim.damping = 0.4;
     sim.gravity = [0.0, 0.0, -g];

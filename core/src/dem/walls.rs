@@ -36,6 +36,11 @@ pub struct WallContact {
 }
 
 impl Wall {
+    /// A wall at rest, feeling no force yet.
+    pub fn new(name: &str, shape: WallShape, position: Vec3, material: u16) -> Wall {
+        Wall { name: name.to_string(), shape, position, velocity: [0.0; 3], material, force: [0.0; 3] }
+    }
+
     /// Geometry against a sphere, or None when the sphere is out of the wall's reach
     /// (beyond its extent, or farther than `reach` from it).
     pub fn contact(&self, x: Vec3, radius: f64, reach: f64) -> Option<WallContact> {

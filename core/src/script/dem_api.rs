@@ -298,7 +298,7 @@ impl Handle<DemScene> {
     }
 
     fn add_wall(&mut self, mat: &DemMaterialHandle, name: String, shape: WallShape, position: Vec3) -> i64 {
-        let wall = Wall { name, shape, position, velocity: [0.0; 3], material: mat.index, force: [0.0; 3] };
+        let wall = Wall::new(&name, shape, position, mat.index);
         self.lock().sim.dem.add_wall(wall) as i64
     }
 
