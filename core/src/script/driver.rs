@@ -415,7 +415,8 @@ impl<S: ScriptSim> Handle<S> {
             cv.notify_all();
             report
         });
-        ctx.add_background(thread);
+        let open_ended = if steps.is_none() { self.lock().background.as_ref().map(|b| b.stop.clone()) } else { None };
+        ctx.add_background(super::BackgroundThread { thread, open_ended });
         Ok(())
     }
 

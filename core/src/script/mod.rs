@@ -22,6 +22,12 @@ use serde_json::Value;
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 
+/// A background run's thread; `open_ended` holds the stop flag of a run with no end of its own.
+pub(crate) struct BackgroundThread {
+    pub thread: std::thread::JoinHandle<Option<String>>,
+    pub open_ended: Option<Arc<std::sync::atomic::AtomicBool>>,
+}
+
 /// How a script is run.
 #[derive(Debug, Clone, Default)]
 pub struct RunOptions {
@@ -59,8 +65,9 @@ pub struct ScriptContext {
     pauses: std::sync::atomic::AtomicU64,
     /// The engine running the script, for runs in background threads.
     engine: Mutex<std::sync::Weak<Engine>>,
-    /// Background run threads; each returns its error, if it failed.
-    background: Mutex<Vec<std::thread::JoinHandle<Option<String>>>>,
+    /// Background run threads (each returns its error, if it failed), with the stop flag of
+    /// those that run until paused.
+    background: Mutex<Vec<BackgroundThread>>,
 }
 
 impl ScriptContext {
@@ -92,22 +99,27 @@ impl ScriptContext {
         self.engine.lock().unwrap().upgrade()
     }
 
-    pub(crate) fn add_background(&self, thread: std::thread::JoinHandle<Option<String>>) {
+    pub(crate) fn add_background(&self, thread: BackgroundThread) {
         let mut threads = self.background.lock().unwrap();
-        threads.retain(|t| !t.is_finished());
+        threads.retain(|t| !t.thread.is_finished());
         threads.push(thread);
     }
 
-    /// Waits for every background run to end (pausing them first if asked); the errors of
-    /// those that failed.
+    /// Waits for every background run to end, pausing them first if asked; runs without an end
+    /// (`sim.run()`) are stopped in any case. The errors of those that failed.
     pub fn finish_background(&self, pause: bool) -> Vec<String> {
         if pause {
             self.request_pause();
         }
         let threads = std::mem::take(&mut *self.background.lock().unwrap());
+        for t in &threads {
+            if let Some(stop) = &t.open_ended {
+                stop.store(true, std::sync::atomic::Ordering::SeqCst);
+            }
+        }
         threads
             .into_iter()
-            .filter_map(|t| t.join().unwrap_or_else(|_| Some("a background run panicked".into())))
+            .filter_map(|t| t.thread.join().unwrap_or_else(|_| Some("a background run panicked".into())))
             .collect()
     }
 
