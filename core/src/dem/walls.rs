@@ -11,7 +11,8 @@ pub enum WallShape {
     Rect { u: Vec3, v: Vec3, half: [f64; 2] },
     /// Disk centred on `position` with unit `normal` and `radius`, touched from both sides.
     Disk { normal: Vec3, radius: f64 },
-    /// Inner surface of a cylinder: axis through `position` along unit `axis`, from 0 to `length`.
+    /// Cylindrical shell (both sides, rims included): axis through `position` along unit `axis`,
+    /// from 0 to `length`.
     Cylinder { axis: Vec3, radius: f64, length: f64 },
 }
 
@@ -91,18 +92,28 @@ impl Wall {
                 Some(WallContact { normal: [to[0] / dist, to[1] / dist, to[2] / dist], gap, point })
             }
             WallShape::Cylinder { axis, radius: big_r, length } => {
+                // Closest point of the finite shell (either side, rims included): a grain that
+                // flows over the rim of a lowered cylinder meets its edge, not its inner face.
                 let along = dot3(d, *axis);
-                if along < -radius || along > *length + radius {
-                    return None;
-                }
                 let radial = [d[0] - along * axis[0], d[1] - along * axis[1], d[2] - along * axis[2]];
                 let rho = dot3(radial, radial).sqrt();
-                let gap = (big_r - rho) - radius;
-                if gap > reach || rho == 0.0 {
+                if rho == 0.0 {
                     return None;
                 }
-                let n = [radial[0] / rho, radial[1] / rho, radial[2] / rho];
-                let point = [x[0] + n[0] * (big_r - rho), x[1] + n[1] * (big_r - rho), x[2] + n[2] * (big_r - rho)];
+                let on_axis = along.clamp(0.0, *length);
+                let out = big_r / rho;
+                let point = [
+                    self.position[0] + on_axis * axis[0] + radial[0] * out,
+                    self.position[1] + on_axis * axis[1] + radial[1] * out,
+                    self.position[2] + on_axis * axis[2] + radial[2] * out,
+                ];
+                let to = [point[0] - x[0], point[1] - x[1], point[2] - x[2]];
+                let dist = dot3(to, to).sqrt();
+                let gap = dist - radius;
+                if gap > reach || dist == 0.0 {
+                    return None;
+                }
+                let n = [to[0] / dist, to[1] / dist, to[2] / dist];
                 Some(WallContact { normal: n, gap, point })
             }
         }
@@ -137,5 +148,12 @@ mod tests {
         let c = cyl.contact([0.95, 0.0, 1.0], 0.1, 0.0).unwrap();
         assert!((c.gap + 0.05).abs() < 1e-12 && (c.normal[0] - 1.0).abs() < 1e-15);
         assert!(cyl.contact([0.95, 0.0, 3.0], 0.1, 0.0).is_none());
+        // Outside the shell the contact pushes outwards, and past the rim the rim edge is met
+        // (a grain flowing over a lowered cylinder is not pulled back through it).
+        let c = cyl.contact([1.05, 0.0, 1.0], 0.1, 0.0).unwrap();
+        assert!((c.gap + 0.05).abs() < 1e-12 && (c.normal[0] + 1.0).abs() < 1e-15);
+        let c = cyl.contact([1.05, 0.0, 2.05], 0.1, 0.0).unwrap();
+        assert!((c.gap - (0.05f64.hypot(0.05) - 0.1)).abs() < 1e-12);
+        assert!(c.normal[0] < 0.0 && c.normal[2] < 0.0, "towards the rim edge: {:?}", c.normal);
     }
 }
