@@ -219,3 +219,46 @@ fn hertz_overlap_and_mindlin_shear_stiffness_of_a_resting_sphere() {
     let shift = sim.spheres.x[0][0] - settled[0];
     assert!((shift - expected).abs() < 0.01 * expected, "tangential shift {shift} m, Mindlin gives {expected} m");
 }
+
+/// Two head-on collisions in one scene, each pair of materials with its own law (an elastic
+/// `linear` spring, and `visco_elastic` at e = 0.8): their contacts share a chunk, so each law runs
+/// on its compacted subset; each collision rebounds as its own law says.
+#[test]
+fn different_laws_in_one_chunk_keep_their_own_restitution() {
+    let reg = granite::registry();
+    let mut sim = DemSim::new();
+    let elastic = sim.add_material("elastic", 2500.0).unwrap();
+    let damped = sim.add_material("damped", 2500.0).unwrap();
+    let laws = [(elastic, "linear", 1.0), (damped, "visco_elastic", 0.8)];
+    for (m, law, e) in laws {
+        let mut p = params(&[("kn", 1e5)]);
+        if e < 1.0 {
+            p.insert("restitution".into(), e);
+        }
+        sim.set_contact_law(reg.build_contact_law(law, &p).unwrap(), Some((m, m))).unwrap();
+    }
+    let (r, speed) = (0.01, 0.5);
+    for (k, (m, _, _)) in laws.iter().enumerate() {
+        let y = 0.1 * k as f64;
+        sim.add_sphere(*m, [0.0, y, 0.0], r, [speed, 0.0, 0.0]).unwrap();
+        sim.add_sphere(*m, [2.0 * r + 1e-4, y, 0.0], r, [-speed, 0.0, 0.0]).unwrap();
+    }
+    sim.skin = 0.5 * r;
+    let m_eff = 0.5 * sim.spheres.mass[0];
+    sim.set_dt(2e-3 / (1e5 / m_eff).sqrt()).unwrap();
+    // Until both contacts have started and ended.
+    let mut touched = false;
+    for _ in 0..2_000_000 {
+        sim.step().unwrap();
+        let touching = sim.pairs.touching.iter().any(|&t| t);
+        touched |= touching;
+        if touched && !touching {
+            break;
+        }
+    }
+    let v = &sim.spheres.v;
+    for (k, (_, law, e)) in laws.iter().enumerate() {
+        let rebound = (v[2 * k + 1][0] - v[2 * k][0]) / (2.0 * speed);
+        assert!((rebound - e).abs() < 0.01 * e, "{law} pair: e = {rebound}, expected {e}");
+    }
+}

@@ -399,15 +399,22 @@ impl Scratch {
             self.call(laws[first as usize].as_ref(), n, dt, (ps, hs));
             return;
         }
-        // Mixed laws: run each on its own compacted subset.
-        let mut sub = Scratch::new();
+        // Mixed laws: run each on its own compacted subset (in a second scratch buffer from the
+        // thread's pool: no allocation per chunk).
+        let mut sub = ScratchGuard::take();
         let mut done = [false; CHUNK];
+        let mut members = [0usize; CHUNK];
         for k in 0..n {
             if done[k] {
                 continue;
             }
             let l = self.law[k];
-            let members: Vec<usize> = (k..n).filter(|&m| self.law[m] == l).collect();
+            let mut count = 0;
+            for m in (k..n).filter(|&m| self.law[m] == l) {
+                members[count] = m;
+                count += 1;
+            }
+            let members = &members[..count];
             for (s, &m) in members.iter().enumerate() {
                 sub.normal[s] = self.normal[m];
                 sub.overlap[s] = self.overlap[m];

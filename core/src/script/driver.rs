@@ -216,15 +216,13 @@ impl<S: ScriptSim> Handle<S> {
         Handle(Arc::new(Shared { state: Mutex::new(state), waiting: AtomicUsize::new(0) }))
     }
 
+    /// The state; while blocked here a thread counts as waiting, so a background run lets it in
+    /// before its next step (the run's own locks are released by then and count for nothing).
     pub fn lock(&self) -> MutexGuard<'_, State<S>> {
         self.0.waiting.fetch_add(1, Ordering::SeqCst);
-        let guard = self.lock_for_run();
+        let guard = self.0.state.lock().unwrap_or_else(|p| p.into_inner());
         self.0.waiting.fetch_sub(1, Ordering::SeqCst);
         guard
-    }
-
-    fn lock_for_run(&self) -> MutexGuard<'_, State<S>> {
-        self.0.state.lock().unwrap_or_else(|p| p.into_inner())
     }
 
     /// Registers a script function of time that sets boundary value `target` once per step.
@@ -239,13 +237,13 @@ impl<S: ScriptSim> Handle<S> {
     }
 
     fn write_series_with(&self, caller: &Caller) -> RhaiResult<()> {
-        let columns: Vec<FnPtr> = self.lock_for_run().columns.iter().map(|(_, f)| f.clone()).collect();
+        let columns: Vec<FnPtr> = self.lock().columns.iter().map(|(_, f)| f.clone()).collect();
         let mut extra = Vec::with_capacity(columns.len());
         for f in columns {
             let v = caller.call(&f, (self.clone(),))?;
             extra.push(number(&v, "series column value")?);
         }
-        self.lock_for_run().write_series_row(&extra).or_rhai()
+        self.lock().write_series_row(&extra).or_rhai()
     }
 
     /// Checks that no background run is going (collecting one that ended), then the set-up; writes
@@ -312,7 +310,7 @@ impl<S: ScriptSim> Handle<S> {
                 }
             }
             let (t, driven, paused) = {
-                let st = self.lock_for_run();
+                let st = self.lock();
                 let stopped = plan.stop.as_ref().is_some_and(|s| s.load(Ordering::SeqCst));
                 let interrupted = st.ctx.pause_requests() != plan.pauses_at_start;
                 if interrupted && !stopped {
@@ -331,7 +329,7 @@ impl<S: ScriptSim> Handle<S> {
                 values.push(number(&v, "boundary function value")?);
             }
             let (due, series_due): (Vec<FnPtr>, bool) = {
-                let mut guard = self.lock_for_run();
+                let mut guard = self.lock();
                 let st = &mut *guard;
                 for ((target, _), v) in driven.iter().zip(values) {
                     st.sim.set_driven(*target, v);
@@ -394,6 +392,8 @@ impl<S: ScriptSim> Handle<S> {
             return err("background runs need a script session (granite run or granite repl)");
         };
         let stop = Arc::new(AtomicBool::new(false));
+        // A run without an end of its own is stopped, not waited for, when the script ends.
+        let open_ended = steps.is_none().then(|| stop.clone());
         let plan = self.begin(steps, Some(stop.clone()))?;
         let done = Arc::new((Mutex::new(Ending::default()), Condvar::new()));
         self.lock().background = Some(Background { stop, done: done.clone() });
@@ -415,7 +415,6 @@ impl<S: ScriptSim> Handle<S> {
             cv.notify_all();
             report
         });
-        let open_ended = if steps.is_none() { self.lock().background.as_ref().map(|b| b.stop.clone()) } else { None };
         ctx.add_background(super::BackgroundThread { thread, open_ended });
         Ok(())
     }
