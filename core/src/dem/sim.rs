@@ -181,14 +181,17 @@ impl DemSim {
         Some((axial, (cell.volume() / h0.determinant().abs()).ln()))
     }
 
-    /// A new Verlet skin; the candidate lists are rebuilt with it at the next step.
+    /// A new Verlet skin. Candidate lists already built are rebuilt with it now (a state saved
+    /// next holds the new, shorter or longer, lists); otherwise the first step builds them.
     pub fn set_skin(&mut self, skin: f64) -> Result<()> {
         if !(skin >= 0.0) {
             return Err(GraniteError::param("skin", skin, "must be >= 0"));
         }
         self.skin = skin;
-        self.needs_rebuild = true;
-        Ok(())
+        if self.needs_rebuild {
+            return Ok(());
+        }
+        self.rebuild_candidates()
     }
 
     /// Approximate memory held by this simulation's arrays, in bytes.
