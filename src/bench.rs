@@ -259,7 +259,11 @@ pub fn mpmxdem(threads: &[usize]) -> Result<()> {
     use granite_core::mpm::Face;
     use std::sync::Arc;
     println!("granite bench mpmxdem: 16 points x 125-sphere RVEs, 200 MPM steps x 51 DEM steps, oedometric");
-    let rve = periodic_rve(125, 1e5)?;
+    let mut rve = periodic_rve(125, 1e5)?;
+    // The Verlet skin scripts/mpmxdem/prepare_rve.rhai gives an RVE by default (0.25 smallest
+    // radii): an RVE deforms slowly, so a thin skin means fewer candidate pairs and few rebuilds.
+    let r_min = rve.spheres.radius.iter().cloned().fold(f64::INFINITY, f64::min);
+    rve.set_skin(0.25 * r_min)?;
     let mut base = None;
     for &n in threads {
         let pool = pool(n)?;

@@ -14,6 +14,7 @@ pub mod ext;
 pub mod io;
 pub mod math;
 pub mod mpm;
+pub mod par;
 pub mod params;
 pub mod plugin;
 pub mod registry;

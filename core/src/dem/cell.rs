@@ -48,8 +48,8 @@ impl PeriodicCell {
     /// Image of a lattice shift: `h n`.
     #[inline]
     pub fn shift_vector(&self, n: [i32; 3]) -> Vec3 {
-        let v = self.h * Vector3::new(n[0] as f64, n[1] as f64, n[2] as f64);
-        [v[0], v[1], v[2]]
+        let (h, n) = (&self.h, n.map(f64::from));
+        [0, 1, 2].map(|r| h[(r, 0)] * n[0] + h[(r, 1)] * n[1] + h[(r, 2)] * n[2])
     }
 
     /// Reduced coordinates `h^-1 x`.

@@ -21,6 +21,10 @@ pub struct PairList {
     /// torque follows from them and the branch vector (see `dem::step`).
     pub force: Vec<Vec3>,
     pub torque_a: Vec<Vec3>,
+    /// Torque on `b`, kept only by simulations stepped in parallel (their force gather runs with
+    /// the integration, when neighbours' positions may already have moved); empty otherwise.
+    #[serde(skip)]
+    pub torque_b: Vec<Vec3>,
 }
 
 impl PairList {
@@ -56,8 +60,20 @@ impl PairList {
         self.touching = permute(&self.touching, &order);
         self.force = permute(&self.force, &order);
         self.torque_a = permute(&self.torque_a, &order);
+        if !self.torque_b.is_empty() {
+            self.torque_b = permute(&self.torque_b, &order);
+        }
         self.params = params;
         self.history = history;
+    }
+
+    /// Keeps (or drops) the torques on second particles (see `torque_b`).
+    pub fn keep_torque_b(&mut self, on: bool) {
+        if on {
+            self.torque_b.resize(self.len(), [0.0; 3]);
+        } else {
+            self.torque_b = Vec::new();
+        }
     }
 
     pub fn touching_count(&self) -> usize {
@@ -86,6 +102,7 @@ impl PairList {
             touching: Vec::with_capacity(n),
             force: vec![[0.0; 3]; n],
             torque_a: vec![[0.0; 3]; n],
+            torque_b: if self.torque_b.is_empty() { Vec::new() } else { vec![[0.0; 3]; n] },
         };
         let same_layout = self.param_stride == param_stride && self.history_stride == history_stride;
         let mut old = 0;

@@ -12,13 +12,12 @@ use crate::error::{GraniteError, Result};
 use crate::ext::{ContactBatch, ContactLaw};
 use crate::math::Vec3;
 use nalgebra::Matrix3;
-use rayon::prelude::*;
 use std::sync::Arc;
 
-/// Pairs per task and per law call.
+/// Pairs per law call.
 const CHUNK: usize = 128;
-const MIN_CHUNKS_PER_TASK: usize = 4;
-const MIN_PER_TASK: usize = 512;
+/// Fewest pairs or spheres worth a parallel part of their own.
+const MIN_PER_PIECE: usize = 512;
 /// Most per-pair parameters / history values a contact law may use.
 pub const MAX_PARAMS: usize = 16;
 pub const MAX_HISTORY: usize = 16;
@@ -80,23 +79,18 @@ impl DemSim {
             }
         }
         let strides = (self.pairs.param_stride, self.pairs.history_stride);
-        let grain = if self.sequential { (usize::MAX, usize::MAX) } else { (MIN_PER_TASK, MIN_CHUNKS_PER_TASK) };
+        let min_per_piece = if self.sequential { usize::MAX } else { MIN_PER_PIECE };
+        self.pairs.keep_torque_b(!self.sequential);
         // The usual laws' per-contact counts are compile-time constants in the contact loops.
         match strides {
-            (3, 3) => self.contacts(Stride::<3>(3), Stride::<3>(3), grain),
-            (4, 3) => self.contacts(Stride::<4>(4), Stride::<3>(3), grain),
-            (6, 7) => self.contacts(Stride::<6>(6), Stride::<7>(7), grain),
-            (ps, hs) => self.contacts(Stride::<0>(ps), Stride::<0>(hs), grain),
+            (3, 3) => self.contacts(Stride::<3>(3), Stride::<3>(3), min_per_piece),
+            (4, 3) => self.contacts(Stride::<4>(4), Stride::<3>(3), min_per_piece),
+            (6, 7) => self.contacts(Stride::<6>(6), Stride::<7>(7), min_per_piece),
+            (ps, hs) => self.contacts(Stride::<0>(ps), Stride::<0>(hs), min_per_piece),
         }
-        if self.sequential {
-            scatter(&mut self.spheres, &self.pairs, &self.wall_pairs, self.cell.as_ref());
-        } else {
-            if self.adjacency.start.len() != self.spheres.len() + 1 {
-                // Left unbuilt while the simulation ran sequentially (an RVE).
-                self.build_adjacency();
-            }
-            let lists = (&self.pairs, &self.adjacency, &self.wall_pairs, &self.wall_adjacency);
-            gather(&mut self.spheres, lists, self.cell.as_ref(), grain.0);
+        if !self.sequential && self.adjacency.start.len() != self.spheres.len() + 1 {
+            // Left unbuilt while the simulation ran sequentially (an RVE).
+            self.build_adjacency();
         }
         wall_forces(&mut self.walls, &self.wall_pairs);
         // The cell deforms over the step; particles follow its affine field on top of their own motion.
@@ -110,8 +104,13 @@ impl DemSim {
             }
             _ => (None, 0.0),
         };
-        let mut moved =
-            integrate(&mut self.spheres, &self.x_at_build, self.gravity, self.damping, self.dt, affine, grain.0);
+        let motion = Motion { gravity: self.gravity, damping: self.damping, dt: self.dt, affine };
+        let mut moved = if self.sequential {
+            integrate(&mut self.spheres, &self.x_at_build, &motion)
+        } else {
+            let lists = (&self.pairs, &self.adjacency, &self.wall_pairs, &self.wall_adjacency);
+            gather_and_integrate(&mut self.spheres, lists, &self.x_at_build, &motion)
+        };
         if !self.clumps.is_empty() {
             let clump_moved = integrate_clumps(
                 &mut self.clumps,
@@ -185,10 +184,36 @@ impl DemSim {
         };
     }
 
-    /// Sphere-sphere and sphere-wall contact forces of this step.
-    fn contacts<const PS: usize, const HS: usize>(&mut self, ps: Stride<PS>, hs: Stride<HS>, grain: (usize, usize)) {
-        sphere_contacts(&self.spheres, &mut self.pairs, &self.laws, self.dt, (ps, hs), self.cell.as_ref(), grain);
-        wall_contacts(&self.spheres, &self.walls, &mut self.wall_pairs, &self.laws, self.dt, (ps, hs), grain);
+    /// Sphere-sphere and sphere-wall contact forces of this step. In parallel, both lists are cut
+    /// into the same number of pieces, so one stage does them all; sequentially (an RVE), each
+    /// contact also adds its force and torques to its spheres as soon as it is computed.
+    fn contacts<const PS: usize, const HS: usize>(&mut self, ps: Stride<PS>, hs: Stride<HS>, min_per_piece: usize) {
+        let strides = (ps.get(), hs.get());
+        let Spheres { x, v, w, radius, force, torque, .. } = &mut self.spheres;
+        let sp = Motions { x, v, w, radius, cell: self.cell.as_ref() };
+        let (walls, laws, dt) = (&self.walls, &self.laws[..], self.dt);
+        if min_per_piece == usize::MAX {
+            force.iter_mut().for_each(|f| *f = [0.0; 3]);
+            torque.iter_mut().for_each(|t| *t = [0.0; 3]);
+            let mut sums = Some(Sums { force, torque });
+            let mut scratch = ScratchGuard::take();
+            let sphere_pairs = PairChunk::whole(&mut self.pairs, strides);
+            sphere_contacts(&sp, sphere_pairs, (laws, dt), (ps, hs), &mut scratch, &mut sums);
+            let wall_pairs = PairChunk::whole(&mut self.wall_pairs, strides);
+            wall_contacts(&sp, walls, wall_pairs, (laws, dt), (ps, hs), &mut scratch, &mut sums);
+            return;
+        }
+        let pieces = crate::par::piece_count(self.pairs.len() + self.wall_pairs.len(), min_per_piece);
+        let pieces: Vec<_> = PairChunk::whole(&mut self.pairs, strides)
+            .cut(pieces)
+            .into_iter()
+            .zip(PairChunk::whole(&mut self.wall_pairs, strides).cut(pieces))
+            .collect();
+        crate::par::run_pieces(pieces, |(sphere_pairs, wall_pairs)| {
+            let mut scratch = ScratchGuard::take();
+            sphere_contacts(&sp, sphere_pairs, (laws, dt), (ps, hs), &mut scratch, &mut None);
+            wall_contacts(&sp, walls, wall_pairs, (laws, dt), (ps, hs), &mut scratch, &mut None);
+        });
     }
 
     /// Brings periodic positions back into the cell and fixes the shifts of their pairs.
@@ -348,6 +373,8 @@ struct Scratch {
     rel_velocity: [Vec3; CHUNK],
     rel_spin: [Vec3; CHUNK],
     arm_a: [Vec3; CHUNK],
+    /// Branch vector of sphere pairs (for second torques).
+    branch: [Vec3; CHUNK],
     params: [f64; CHUNK * MAX_PARAMS],
     history: [f64; CHUNK * MAX_HISTORY],
     force: [Vec3; CHUNK],
@@ -365,6 +392,7 @@ impl Scratch {
             rel_velocity: [[0.0; 3]; CHUNK],
             rel_spin: [[0.0; 3]; CHUNK],
             arm_a: [[0.0; 3]; CHUNK],
+            branch: [[0.0; 3]; CHUNK],
             params: [0.0; CHUNK * MAX_PARAMS],
             history: [0.0; CHUNK * MAX_HISTORY],
             force: [[0.0; 3]; CHUNK],
@@ -434,9 +462,27 @@ impl Scratch {
     }
 }
 
-/// The per-pair arrays of one chunk of a pair list.
+/// What the contact stage reads of the spheres.
+struct Motions<'a> {
+    x: &'a [Vec3],
+    v: &'a [Vec3],
+    w: &'a [Vec3],
+    radius: &'a [f64],
+    /// The periodic cell: images and the affine velocity field across it.
+    cell: Option<&'a PeriodicCell>,
+}
+
+/// Per-sphere force and torque sums, filled pair by pair by a sequential contact stage.
+struct Sums<'a> {
+    force: &'a mut [Vec3],
+    torque: &'a mut [Vec3],
+}
+
+/// The per-pair arrays of a run of consecutive pairs of a pair list.
 struct PairChunk<'a> {
+    /// Index of the first pair in the whole list.
     first: usize,
+    strides: (usize, usize),
     a: &'a [u32],
     b: &'a [u32],
     shift: &'a [[i32; 3]],
@@ -446,49 +492,137 @@ struct PairChunk<'a> {
     touching: &'a mut [bool],
     force: &'a mut [Vec3],
     torque_a: &'a mut [Vec3],
+    /// Empty when the list keeps no second torques.
+    torque_b: &'a mut [Vec3],
 }
 
-/// Runs `body` on chunks of a pair list in parallel, with a scratch buffer per worker.
-fn for_each_chunk(
-    pairs: &mut PairList,
-    (ps, hs): (usize, usize),
-    min_chunks: usize,
-    body: impl Fn(PairChunk<'_>, &mut Scratch) + Sync,
-) {
-    if pairs.is_empty() {
-        return;
+impl<'a> PairChunk<'a> {
+    fn whole(p: &'a mut PairList, strides: (usize, usize)) -> PairChunk<'a> {
+        PairChunk {
+            first: 0,
+            strides,
+            a: &p.a,
+            b: &p.b,
+            shift: &p.shift,
+            law: &p.law,
+            params: &p.params,
+            history: &mut p.history,
+            touching: &mut p.touching,
+            force: &mut p.force,
+            torque_a: &mut p.torque_a,
+            torque_b: &mut p.torque_b,
+        }
     }
-    let PairList { a, b, shift, law, params, history, touching, force, torque_a, .. } = pairs;
-    (
-        (a.par_chunks(CHUNK), b.par_chunks(CHUNK), shift.par_chunks(CHUNK)),
-        law.par_chunks(CHUNK),
-        params.par_chunks(CHUNK * ps),
-        history.par_chunks_mut(CHUNK * hs),
-        touching.par_chunks_mut(CHUNK),
-        force.par_chunks_mut(CHUNK),
-        torque_a.par_chunks_mut(CHUNK),
-    )
-        .into_par_iter()
-        .with_min_len(min_chunks)
-        .enumerate()
-        .for_each_init(
-            ScratchGuard::take,
-            |scratch, (j, ((a, b, shift), law, params, history, touching, force, torque_a))| {
-                scratch.len = 0;
-                let chunk =
-                    PairChunk { first: j * CHUNK, a, b, shift, law, params, history, touching, force, torque_a };
-                body(chunk, scratch)
+
+    fn len(&self) -> usize {
+        self.a.len()
+    }
+
+    /// The first `mid` pairs and the rest.
+    fn split_at(self, mid: usize) -> (PairChunk<'a>, PairChunk<'a>) {
+        let (ps, hs) = self.strides;
+        let (a, a2) = self.a.split_at(mid);
+        let (b, b2) = self.b.split_at(mid);
+        let (shift, shift2) = self.shift.split_at(mid);
+        let (law, law2) = self.law.split_at(mid);
+        let (params, params2) = self.params.split_at(mid * ps);
+        let (history, history2) = self.history.split_at_mut(mid * hs);
+        let (touching, touching2) = self.touching.split_at_mut(mid);
+        let (force, force2) = self.force.split_at_mut(mid);
+        let (torque_a, torque_a2) = self.torque_a.split_at_mut(mid);
+        let (torque_b, torque_b2) = self.torque_b.split_at_mut(if self.torque_b.is_empty() { 0 } else { mid });
+        let strides = self.strides;
+        (
+            PairChunk {
+                first: self.first,
+                strides,
+                a,
+                b,
+                shift,
+                law,
+                params,
+                history,
+                touching,
+                force,
+                torque_a,
+                torque_b,
             },
-        );
+            PairChunk {
+                first: self.first + mid,
+                strides,
+                a: a2,
+                b: b2,
+                shift: shift2,
+                law: law2,
+                params: params2,
+                history: history2,
+                touching: touching2,
+                force: force2,
+                torque_a: torque_a2,
+                torque_b: torque_b2,
+            },
+        )
+    }
+
+    /// `parts` consecutive runs of whole law chunks (the last ones possibly empty).
+    fn cut(self, parts: usize) -> Vec<PairChunk<'a>> {
+        let per = self.len().div_ceil(CHUNK).div_ceil(parts.max(1)) * CHUNK;
+        let mut out = Vec::with_capacity(parts);
+        let mut rest = self;
+        for _ in 1..parts {
+            let mid = per.min(rest.len());
+            let (head, tail) = rest.split_at(mid);
+            out.push(head);
+            rest = tail;
+        }
+        out.push(rest);
+        out
+    }
+
+    /// Calls `body` on consecutive runs of at most `CHUNK` pairs, with the scratch emptied.
+    fn for_each_chunk(self, scratch: &mut Scratch, mut body: impl FnMut(&mut PairChunk<'_>, &mut Scratch)) {
+        let mut rest = self;
+        while rest.len() > 0 {
+            let mid = CHUNK.min(rest.len());
+            let (mut head, tail) = rest.split_at(mid);
+            scratch.len = 0;
+            body(&mut head, scratch);
+            rest = tail;
+        }
+    }
 }
 
-/// Writes the law results of a chunk back to its pairs, with lever-arm torques.
-fn write_back<const HS: usize>(c: &mut PairChunk<'_>, s: &Scratch, hs: Stride<HS>) {
+/// Writes the law results of a chunk back to its pairs, with lever-arm torques; with `sums`
+/// (sequential stepping), also adds them to the spheres, in pair order as the parallel gather
+/// does. Wall pairs have no second sphere (`second` false).
+fn write_back<const HS: usize>(
+    c: &mut PairChunk<'_>,
+    s: &Scratch,
+    hs: Stride<HS>,
+    sums: &mut Option<Sums<'_>>,
+    second: bool,
+) {
     for e in 0..s.len {
         let k = s.pair[e] - c.first;
         let (f, m) = (s.force[e], s.moment[e]);
         c.force[k] = f;
-        c.torque_a[k] = add(cross(s.arm_a[e], f), m);
+        let torque_a = add(cross(s.arm_a[e], f), m);
+        c.torque_a[k] = torque_a;
+        // Whatever the contact moment, the torques on the two spheres add up to d x f.
+        let torque_b = || sub(cross(s.branch[e], f), torque_a);
+        if !c.torque_b.is_empty() {
+            c.torque_b[k] = torque_b();
+        }
+        if let Some(sums) = sums {
+            let i = c.a[k] as usize;
+            sums.force[i] = add(sums.force[i], f);
+            sums.torque[i] = add(sums.torque[i], torque_a);
+            if second {
+                let j = c.b[k] as usize;
+                sums.force[j] = sub(sums.force[j], f);
+                sums.torque[j] = add(sums.torque[j], torque_b());
+            }
+        }
         c.history[hs.of(k)].copy_from_slice(&s.history[hs.of(e)]);
     }
 }
@@ -508,28 +642,29 @@ fn open_contact<const HS: usize>(c: &mut PairChunk<'_>, k: usize, hs: Stride<HS>
 /// Sphere-sphere geometry (`sphere_sphere`) and contact forces; in a periodic cell the second
 /// sphere may be an image, whose velocity includes the affine field across the cell.
 fn sphere_contacts<const PS: usize, const HS: usize>(
-    sp: &Spheres,
-    pairs: &mut PairList,
-    laws: &[Arc<dyn ContactLaw>],
-    dt: f64,
+    sp: &Motions<'_>,
+    pairs: PairChunk<'_>,
+    (laws, dt): (&[Arc<dyn ContactLaw>], f64),
     (ps, hs): (Stride<PS>, Stride<HS>),
-    cell: Option<&PeriodicCell>,
-    grain: (usize, usize),
+    scratch: &mut Scratch,
+    sums: &mut Option<Sums<'_>>,
 ) {
+    let cell = sp.cell;
     let strides = (ps.get(), hs.get());
     let l = cell.map(|c| c.velocity_gradient);
-    for_each_chunk(pairs, strides, grain.1, |mut c, s| {
+    pairs.for_each_chunk(scratch, |c, s| {
         for k in 0..c.a.len() {
             let (i, j) = (c.a[k] as usize, c.b[k] as usize);
-            let d = branch(&sp.x, i, j, c.shift[k], cell);
+            let d = branch(sp.x, i, j, c.shift[k], cell);
             let reach = sp.radius[i] + sp.radius[j];
             let dist2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
             if dist2 >= reach * reach {
-                open_contact(&mut c, k, hs);
+                open_contact(c, k, hs);
                 continue;
             }
             let dist = dist2.sqrt();
-            let n = [d[0] / dist, d[1] / dist, d[2] / dist];
+            let inv = 1.0 / dist;
+            let n = [d[0] * inv, d[1] * inv, d[2] * inv];
             let overlap = reach - dist;
             let la = sp.radius[i] - 0.5 * overlap;
             let arm_a = [n[0] * la, n[1] * la, n[2] * la];
@@ -538,8 +673,7 @@ fn sphere_contacts<const PS: usize, const HS: usize>(
             let mut vb = add(sp.v[j], cross(sp.w[j], arm_b));
             if let Some(l) = &l {
                 // Affine part of the relative velocity: L (x_b + h n - x_a).
-                let ld = l * nalgebra::Vector3::new(d[0], d[1], d[2]);
-                vb = add(vb, [ld[0], ld[1], ld[2]]);
+                vb = add(vb, mat_vec(l, d));
             }
             c.touching[k] = true;
             let e = s.len;
@@ -550,34 +684,35 @@ fn sphere_contacts<const PS: usize, const HS: usize>(
             s.rel_velocity[e] = sub(vb, va);
             s.rel_spin[e] = sub(sp.w[j], sp.w[i]);
             s.arm_a[e] = arm_a;
+            s.branch[e] = d;
             s.params[ps.of(e)].copy_from_slice(&c.params[ps.of(k)]);
             s.history[hs.of(e)].copy_from_slice(&c.history[hs.of(k)]);
             s.len += 1;
         }
         s.run_laws(laws, dt, strides);
-        write_back(&mut c, s, hs);
+        write_back(c, s, hs, sums, true);
     });
 }
 
 /// Sphere-wall geometry and contact forces (the wall is particle 2, infinitely heavy).
 fn wall_contacts<const PS: usize, const HS: usize>(
-    sp: &Spheres,
+    sp: &Motions<'_>,
     walls: &[Wall],
-    pairs: &mut PairList,
-    laws: &[Arc<dyn ContactLaw>],
-    dt: f64,
+    pairs: PairChunk<'_>,
+    (laws, dt): (&[Arc<dyn ContactLaw>], f64),
     (ps, hs): (Stride<PS>, Stride<HS>),
-    grain: (usize, usize),
+    scratch: &mut Scratch,
+    sums: &mut Option<Sums<'_>>,
 ) {
     let strides = (ps.get(), hs.get());
-    for_each_chunk(pairs, strides, grain.1, |mut c, s| {
+    pairs.for_each_chunk(scratch, |c, s| {
         for k in 0..c.a.len() {
             let (i, w) = (c.a[k] as usize, c.b[k] as usize);
             let wall = &walls[w];
             let geo = match wall.contact(sp.x[i], sp.radius[i], 0.0) {
                 Some(g) if g.gap < 0.0 => g,
                 _ => {
-                    open_contact(&mut c, k, hs);
+                    open_contact(c, k, hs);
                     continue;
                 }
             };
@@ -598,7 +733,7 @@ fn wall_contacts<const PS: usize, const HS: usize>(
             s.len += 1;
         }
         s.run_laws(laws, dt, strides);
-        write_back(&mut c, s, hs);
+        write_back(c, s, hs, sums, false);
     });
 }
 
@@ -612,79 +747,69 @@ pub(crate) fn branch(x: &[Vec3], i: usize, j: usize, shift: [i32; 3], cell: Opti
     add(sub(x[j], x[i]), image)
 }
 
-/// Torque on the second sphere of pair `k`. Only the first one's is stored: the two add up to
-/// `d x f` (d the branch vector, f the force on the first), whatever the contact moment.
-#[inline(always)]
-fn torque_on_b(x: &[Vec3], pairs: &PairList, k: usize, cell: Option<&PeriodicCell>) -> Vec3 {
-    let d = branch(x, pairs.a[k] as usize, pairs.b[k] as usize, pairs.shift[k], cell);
-    sub(cross(d, pairs.force[k]), pairs.torque_a[k])
-}
-
-/// Sums each sphere's contact forces and torques, pair by pair in increasing pair index (before
-/// the spheres move: torques on second spheres use the branch vectors of this step's contacts).
-fn gather(
+/// Sums each sphere's contact forces and torques, pair by pair in increasing pair index, and
+/// moves it, in parallel parts of consecutive spheres. A sphere reads only pair arrays and its
+/// own state (second torques are stored by the contact stage), so moving it while another part
+/// still sums is safe. Returns the largest squared displacement (see `integrate`).
+fn gather_and_integrate(
     sp: &mut Spheres,
     (pairs, adj, walls, wall_adj): (&PairList, &Adjacency, &PairList, &Adjacency),
-    cell: Option<&PeriodicCell>,
-    min_len: usize,
-) {
-    let Spheres { x, force, torque, .. } = sp;
-    let x = &*x;
-    (force.par_iter_mut(), torque.par_iter_mut()).into_par_iter().with_min_len(min_len).enumerate().for_each(
-        |(i, (f, t))| {
+    x_at_build: &[Vec3],
+    motion: &Motion,
+) -> f64 {
+    let Spheres { x, v, w, mass, inertia, force, torque, blocked, clump, .. } = sp;
+    if x.is_empty() {
+        return 0.0;
+    }
+    let parts = crate::par::piece_count(x.len(), MIN_PER_PIECE);
+    let per = x.len().div_ceil(parts);
+    let pieces: Vec<_> = x
+        .chunks_mut(per)
+        .zip(v.chunks_mut(per))
+        .zip(w.chunks_mut(per))
+        .zip(force.chunks_mut(per).zip(torque.chunks_mut(per)))
+        .enumerate()
+        .collect();
+    let worst = crate::par::run_pieces(pieces, |(part, (((x, v), w), (force, torque)))| {
+        let first = part * per;
+        let mut worst: f64 = 0.0;
+        for k in 0..x.len() {
+            let i = first + k;
             let mut fs = [0.0; 3];
             let mut ts = [0.0; 3];
             for &e in adj.of(i) {
-                let k = (e >> 1) as usize;
-                if !pairs.touching[k] {
+                let p = (e >> 1) as usize;
+                if !pairs.touching[p] {
                     continue;
                 }
-                let pf = pairs.force[k];
                 if e & 1 == 0 {
-                    fs = add(fs, pf);
-                    ts = add(ts, pairs.torque_a[k]);
+                    fs = add(fs, pairs.force[p]);
+                    ts = add(ts, pairs.torque_a[p]);
                 } else {
-                    fs = sub(fs, pf);
-                    ts = add(ts, torque_on_b(x, pairs, k, cell));
+                    fs = sub(fs, pairs.force[p]);
+                    ts = add(ts, pairs.torque_b[p]);
                 }
             }
             for &e in wall_adj.of(i) {
-                let k = (e >> 1) as usize;
-                if walls.touching[k] {
-                    fs = add(fs, walls.force[k]);
-                    ts = add(ts, walls.torque_a[k]);
+                let p = (e >> 1) as usize;
+                if walls.touching[p] {
+                    fs = add(fs, walls.force[p]);
+                    ts = add(ts, walls.torque_a[p]);
                 }
             }
-            *f = fs;
-            *t = ts;
-        },
-    );
-}
-
-/// The sequential form of `gather`: touching pairs add to both their spheres, in increasing pair
-/// index, sphere pairs before wall pairs, so each sphere sums the same terms in the same order.
-fn scatter(sp: &mut Spheres, pairs: &PairList, walls: &PairList, cell: Option<&PeriodicCell>) {
-    let Spheres { x, force, torque, .. } = sp;
-    force.iter_mut().for_each(|f| *f = [0.0; 3]);
-    torque.iter_mut().for_each(|t| *t = [0.0; 3]);
-    for k in 0..pairs.len() {
-        if !pairs.touching[k] {
-            continue;
+            force[k] = fs;
+            torque[k] = ts;
+            let d2 = motion.advance(
+                (&mut x[k], &mut v[k], &mut w[k]),
+                (mass[i], inertia[i], blocked[i], clump[i]),
+                (&fs, &ts),
+                &x_at_build[i],
+            );
+            worst = worst_of(worst, d2);
         }
-        let (i, j) = (pairs.a[k] as usize, pairs.b[k] as usize);
-        let f = pairs.force[k];
-        force[i] = add(force[i], f);
-        torque[i] = add(torque[i], pairs.torque_a[k]);
-        force[j] = sub(force[j], f);
-        torque[j] = add(torque[j], torque_on_b(x, pairs, k, cell));
-    }
-    for k in 0..walls.len() {
-        if walls.touching[k] {
-            let i = walls.a[k] as usize;
-            force[i] = add(force[i], walls.force[k]);
-            torque[i] = add(torque[i], walls.torque_a[k]);
-        }
-    }
+        worst
+    });
+    worst.into_iter().fold(0.0, worst_of).sqrt()
 }
 
 /// Force on each wall: the opposite of what it exerts on the spheres, summed in pair order.
@@ -698,54 +823,27 @@ fn wall_forces(walls: &mut [Wall], pairs: &PairList) {
     }
 }
 
-/// Leapfrog integration with gravity and Cundall damping. In a periodic cell (`affine` =
-/// `(L, F)`) velocities are fluctuations and positions also follow the affine field `L x`.
-/// Returns the largest displacement since the candidate lists were built, not counting the
-/// affine part `F x_build` (NaN if a sphere's state stopped being finite).
-fn integrate(
-    sp: &mut Spheres,
-    x_at_build: &[Vec3],
-    gravity: Vec3,
-    damping: f64,
-    dt: f64,
-    affine: Option<(Matrix3<f64>, Matrix3<f64>)>,
-    min_len: usize,
-) -> f64 {
-    let motion = Motion { gravity, damping, dt, affine };
+/// Leapfrog integration with gravity and Cundall damping, on the calling thread. In a periodic
+/// cell (`affine` = `(L, F)`) velocities are fluctuations and positions also follow the affine
+/// field `L x`. Returns the largest displacement since the candidate lists were built, not
+/// counting the affine part `F x_build` (NaN if a sphere's state stopped being finite).
+fn integrate(sp: &mut Spheres, x_at_build: &[Vec3], motion: &Motion) -> f64 {
     let Spheres { x, v, w, mass, inertia, force, torque, blocked, clump, .. } = sp;
-    let moved2 = if min_len == usize::MAX {
-        // One task: a plain loop, without the parallel iterator's per-item bookkeeping.
-        let mut worst: f64 = 0.0;
-        for i in 0..x.len() {
-            let d2 = motion.advance(
-                (&mut x[i], &mut v[i], &mut w[i]),
-                (mass[i], inertia[i], blocked[i], clump[i]),
-                (&force[i], &torque[i]),
-                &x_at_build[i],
-            );
-            worst = worst_of(worst, d2);
-        }
-        worst
-    } else {
-        (
-            x.par_iter_mut(),
-            v.par_iter_mut(),
-            w.par_iter_mut(),
-            mass.par_iter(),
-            inertia.par_iter(),
-            force.par_iter(),
-            torque.par_iter(),
-            (blocked.par_iter(), clump.par_iter()),
-            x_at_build.par_iter(),
-        )
-            .into_par_iter()
-            .with_min_len(min_len)
-            .map(|(x, v, w, &m, &inertia, f, t, (&blocked, &clump), x0)| {
-                motion.advance((x, v, w), (m, inertia, blocked, clump), (f, t), x0)
-            })
-            .reduce(|| 0.0, worst_of)
-    };
-    moved2.sqrt()
+    let n = x.len();
+    let (v, w, mass, inertia, force, torque) =
+        (&mut v[..n], &mut w[..n], &mass[..n], &inertia[..n], &force[..n], &torque[..n]);
+    let (blocked, clump, x_at_build) = (&blocked[..n], &clump[..n], &x_at_build[..n]);
+    let mut worst: f64 = 0.0;
+    for i in 0..n {
+        let d2 = motion.advance(
+            (&mut x[i], &mut v[i], &mut w[i]),
+            (mass[i], inertia[i], blocked[i], clump[i]),
+            (&force[i], &torque[i]),
+            &x_at_build[i],
+        );
+        worst = worst_of(worst, d2);
+    }
+    worst.sqrt()
 }
 
 /// The larger of two squared displacements, NaN winning.
@@ -782,42 +880,44 @@ impl Motion {
             // Clump members move with their clump (see integrate_clumps).
             return 0.0;
         }
-        let lx = match affine {
-            Some((l, _)) => {
-                let p = l * nalgebra::Vector3::new(x[0], x[1], x[2]);
-                [p[0], p[1], p[2]]
-            }
-            None => [0.0; 3],
+        let (lx, reference) = match affine {
+            Some((l, f)) => (mat_vec(l, *x), mat_vec(f, *x0)),
+            None => ([0.0; 3], *x0),
         };
-        for a in 0..3 {
-            if blocked & (dof::X << a) == 0 {
-                let mut acc = f[a] / m + gravity[a];
-                // YADE's Cundall damping: against the sign of the power at mid-step.
-                acc *= 1.0 - damping * (acc * (v[a] + 0.5 * dt * acc)).signum();
-                v[a] += acc * dt;
+        // YADE's Cundall damping: against the sign of the power at mid-step.
+        let damp = |acc: f64, vel: f64| acc * (1.0 - damping * (acc * (vel + 0.5 * dt * acc)).signum());
+        if blocked == 0 {
+            for a in 0..3 {
+                v[a] += damp(f[a] / m + gravity[a], v[a]) * dt;
+                x[a] += (v[a] + lx[a]) * dt;
+                w[a] += damp(t[a] / inertia, w[a]) * dt;
             }
-            x[a] += (v[a] + lx[a]) * dt;
-            if blocked & (dof::RX << a) == 0 {
-                let mut alpha = t[a] / inertia;
-                alpha *= 1.0 - damping * (alpha * (w[a] + 0.5 * dt * alpha)).signum();
-                w[a] += alpha * dt;
+        } else {
+            for a in 0..3 {
+                if blocked & (dof::X << a) == 0 {
+                    v[a] += damp(f[a] / m + gravity[a], v[a]) * dt;
+                }
+                x[a] += (v[a] + lx[a]) * dt;
+                if blocked & (dof::RX << a) == 0 {
+                    w[a] += damp(t[a] / inertia, w[a]) * dt;
+                }
             }
         }
-        let reference = match affine {
-            Some((_, f)) => {
-                let p = f * nalgebra::Vector3::new(x0[0], x0[1], x0[2]);
-                [p[0], p[1], p[2]]
-            }
-            None => *x0,
-        };
         let d = sub(*x, reference);
         let moved2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
-        if moved2.is_finite() && v.iter().all(|c| c.is_finite()) {
+        // One test for all: a sum is finite only if every term is (no finite state overflows it).
+        if (moved2 + v[0] + v[1] + v[2]).is_finite() {
             moved2
         } else {
             f64::NAN
         }
     }
+}
+
+/// `m x` for a 3x3 matrix.
+#[inline(always)]
+fn mat_vec(m: &Matrix3<f64>, x: Vec3) -> Vec3 {
+    [0, 1, 2].map(|r| m[(r, 0)] * x[0] + m[(r, 1)] * x[1] + m[(r, 2)] * x[2])
 }
 
 /// Rigid-body integration of the clumps (forces and torques gathered from their members), then

@@ -1,0 +1,68 @@
+//! Parallel loops over pieces of data, for stages run every time step.
+//!
+//! One stage is one `rayon::broadcast`. Worker `t` of the current pool owns the `t`-th run of
+//! consecutive pieces and claims them one by one from its run's counter; when its run is done it
+//! claims what is left of the others' runs. Balanced stages keep each piece on the same worker
+//! from one step to the next (its data stays in that core's cache); uneven ones, like the
+//! contacts at the bottom of a settling heap, still balance. On small DEM systems, where a stage
+//! lasts tens of microseconds, this costs less than rayon's recursive splitting of zipped
+//! iterators. Results never depend on which worker ran a piece: each piece is computed on its own
+//! and results come back in piece order.
+
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::Mutex;
+
+/// Into how many pieces to cut `len` items so each holds at least `min_per_piece` (one piece
+/// means: run on the calling thread; so does a pool of one thread).
+pub fn piece_count(len: usize, min_per_piece: usize) -> usize {
+    if rayon::current_num_threads() == 1 {
+        return 1;
+    }
+    (len / min_per_piece.max(1)).max(1)
+}
+
+/// Runs `work` on every piece, spread over the workers of the current pool, and returns the
+/// results in piece order. A single piece, or a pool of one thread, runs on the calling thread.
+pub fn run_pieces<T: Send, R: Send>(pieces: Vec<T>, work: impl Fn(T) -> R + Sync) -> Vec<R> {
+    if pieces.len() <= 1 || rayon::current_num_threads() == 1 {
+        return pieces.into_iter().map(work).collect();
+    }
+    let n = pieces.len();
+    let slots: Vec<Mutex<Option<T>>> = pieces.into_iter().map(|p| Mutex::new(Some(p))).collect();
+    let results: Vec<Mutex<Option<R>>> = (0..n).map(|_| Mutex::new(None)).collect();
+    let runs = rayon::current_num_threads().min(n);
+    let run_start = |r: usize| r * n / runs;
+    let claimed: Vec<AtomicUsize> = (0..runs).map(|r| AtomicUsize::new(run_start(r))).collect();
+    rayon::broadcast(|ctx| {
+        for r in (0..runs).map(|k| (ctx.index() + k) % runs) {
+            loop {
+                let t = claimed[r].fetch_add(1, Ordering::Relaxed);
+                if t >= run_start(r + 1) {
+                    break;
+                }
+                let piece = slots[t].lock().unwrap_or_else(|e| e.into_inner()).take();
+                if let Some(piece) = piece {
+                    let out = work(piece);
+                    *results[t].lock().unwrap_or_else(|e| e.into_inner()) = Some(out);
+                }
+            }
+        }
+    });
+    results.into_iter().map(|r| r.into_inner().unwrap_or_else(|e| e.into_inner()).expect("every piece ran")).collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_piece_runs_once_and_results_keep_piece_order() {
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(2).build().unwrap();
+        let out = pool.install(|| run_pieces((0..50).collect(), |p: usize| p * 10));
+        assert_eq!(out, (0..50).map(|p| p * 10).collect::<Vec<_>>());
+        assert_eq!(pool.install(|| piece_count(1000, 300)), 3);
+        assert_eq!(pool.install(|| piece_count(100, 300)), 1);
+        let single = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap();
+        assert_eq!(single.install(|| piece_count(1000, 300)), 1);
+    }
+}
