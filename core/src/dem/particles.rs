@@ -79,6 +79,25 @@ impl Spheres {
         retain_by(&mut self.clump, keep);
     }
 
+    /// Reorders the spheres: the `k`-th becomes the former `order[k]` (ids travel along).
+    pub fn permute(&mut self, order: &[usize]) {
+        fn pick<T: Copy>(v: &mut Vec<T>, order: &[usize]) {
+            *v = order.iter().map(|&k| v[k]).collect();
+        }
+        pick(&mut self.id, order);
+        pick(&mut self.x, order);
+        pick(&mut self.v, order);
+        pick(&mut self.w, order);
+        pick(&mut self.radius, order);
+        pick(&mut self.mass, order);
+        pick(&mut self.inertia, order);
+        pick(&mut self.material, order);
+        pick(&mut self.force, order);
+        pick(&mut self.torque, order);
+        pick(&mut self.blocked, order);
+        pick(&mut self.clump, order);
+    }
+
     pub fn volume(&self) -> f64 {
         self.radius.iter().map(|r| 4.0 / 3.0 * std::f64::consts::PI * r * r * r).sum()
     }

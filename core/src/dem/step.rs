@@ -262,6 +262,51 @@ impl DemSim {
         Ok(())
     }
 
+    /// Numbers the spheres slab by slab across the longest side of the domain (then row by row),
+    /// so that a parallel piece of spheres, and of the pairs sorted by their first sphere, is a
+    /// region of space: its neighbours' data is mostly the piece's own, and stays in that core's
+    /// cache. Done only before the first candidate lists exist (no pair to renumber), for systems
+    /// large enough to run in several pieces, without clumps. Ids stay with their spheres.
+    fn order_spheres_in_space(&mut self) {
+        let n = self.spheres.len();
+        if n < 2 * MIN_PER_PIECE || !self.clumps.is_empty() {
+            return;
+        }
+        let r_max = self.spheres.radius.iter().cloned().fold(0.0, f64::max);
+        let reach = (2.0 * r_max + self.skin).max(f64::MIN_POSITIVE);
+        // Fractional position in the domain on each axis, and the domain's size.
+        let (fraction, size): (Vec<Vec3>, Vec3) = match &self.cell {
+            Some(cell) => {
+                let inv = cell.inverse();
+                let s = self.spheres.x.iter().map(|x| cell.reduced(&inv, *x).map(|c| c.rem_euclid(1.0))).collect();
+                (s, cell.widths())
+            }
+            None => {
+                let mut lo = [f64::INFINITY; 3];
+                let mut hi = [f64::NEG_INFINITY; 3];
+                for x in &self.spheres.x {
+                    for a in 0..3 {
+                        lo[a] = lo[a].min(x[a]);
+                        hi[a] = hi[a].max(x[a]);
+                    }
+                }
+                let size = [0, 1, 2].map(|a| (hi[a] - lo[a]).max(f64::MIN_POSITIVE));
+                let s = self.spheres.x.iter().map(|x| [0, 1, 2].map(|a| (x[a] - lo[a]) / size[a])).collect();
+                (s, size)
+            }
+        };
+        if fraction.iter().flatten().any(|c| !c.is_finite()) {
+            return;
+        }
+        let mut axes = [0, 1, 2];
+        axes.sort_by(|&a, &b| size[b].total_cmp(&size[a]));
+        let cells = size.map(|l| ((l / reach) as u64).clamp(1, 1 << 20));
+        let key = |f: &Vec3| axes.map(|a| ((f[a] * cells[a] as f64) as u64).min(cells[a] - 1));
+        let mut order: Vec<usize> = (0..n).collect();
+        order.sort_by_key(|&i| key(&fraction[i]));
+        self.spheres.permute(&order);
+    }
+
     /// Rebuilds the candidate pair lists (keeping the history of pairs still present).
     pub fn rebuild_candidates(&mut self) -> Result<()> {
         let p_stride = self.laws.iter().map(|l| l.param_count()).max().unwrap_or(0).max(1);
@@ -272,6 +317,9 @@ impl DemSim {
             )));
         }
         self.wrap_into_cell()?;
+        if self.pairs.is_empty() && self.wall_pairs.is_empty() {
+            self.order_spheres_in_space();
+        }
         let s = &self.spheres;
         let mut candidates = match &self.cell {
             Some(cell) => periodic_sphere_pairs(&s.x, &s.radius, self.skin, cell),
@@ -995,4 +1043,39 @@ fn integrate_clumps(
         }
     }
     moved
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn first_build_numbers_spheres_slab_by_slab_along_the_longest_side() {
+        let mut sim = DemSim::new();
+        let m = sim.add_material("grains", 1000.0).unwrap();
+        let (r, spacing) = (0.01, 0.05);
+        // 8 x 40 x 4 spheres far apart (no contacts), added from the far end of y backwards.
+        let mut placed = Vec::new();
+        for j in (0..40).rev() {
+            for i in 0..8 {
+                for k in 0..4 {
+                    placed.push([i as f64 * spacing, j as f64 * spacing, k as f64 * spacing]);
+                }
+            }
+        }
+        for x in &placed {
+            sim.add_sphere(m, *x, r, [0.0; 3]).unwrap();
+        }
+        let before: std::collections::HashMap<u64, Vec3> =
+            sim.spheres.id.iter().copied().zip(sim.spheres.x.iter().copied()).collect();
+        sim.set_dt(1e-6).unwrap();
+        sim.step().unwrap();
+        assert_eq!(sim.spheres.len(), placed.len());
+        for (id, x) in sim.spheres.id.iter().zip(&sim.spheres.x) {
+            assert_eq!(before[id], *x, "sphere {id} lost its position");
+        }
+        let y = &sim.spheres.x;
+        assert!(y.windows(2).all(|w| w[0][1] <= w[1][1]), "not ordered along y, the longest side");
+        assert!(y[0][1] == 0.0 && y[y.len() - 1][1] == 39.0 * spacing);
+    }
 }
