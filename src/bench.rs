@@ -194,58 +194,135 @@ pub fn periodic_rve(count: usize, pressure: f64) -> Result<granite_core::dem::De
     Ok(sim)
 }
 
+/// One timed run per thread count, `repeat` rounds, rounds interleaved (a slow spell of a shared
+/// machine then hits every thread count alike); for each thread count, the fastest run (seconds
+/// and what it returned) and the slowest time.
+struct Timed<T> {
+    threads: usize,
+    best: f64,
+    worst: f64,
+    out: T,
+}
+
+fn best_of<T: Send>(
+    threads: &[usize],
+    repeat: usize,
+    run: impl Fn() -> Result<(f64, T)> + Sync,
+) -> Result<Vec<Timed<T>>> {
+    let pools = threads.iter().map(|&n| pool(n)).collect::<Result<Vec<_>>>()?;
+    let mut timed: Vec<Option<Timed<T>>> = threads.iter().map(|_| None).collect();
+    for _ in 0..repeat.max(1) {
+        for ((slot, pool), &n) in timed.iter_mut().zip(&pools).zip(threads) {
+            let (secs, out) = pool.install(&run)?;
+            *slot = Some(match slot.take() {
+                None => Timed { threads: n, best: secs, worst: secs, out },
+                Some(t) if secs < t.best => Timed { threads: n, best: secs, worst: t.worst.max(secs), out },
+                Some(t) => Timed { worst: t.worst.max(secs), ..t },
+            });
+        }
+    }
+    Ok(timed.into_iter().flatten().collect())
+}
+
+/// What two threads can gain on this machine at best: the same work on every thread, each on its
+/// own data (no communication), timed on 1 and on `threads` threads. `arithmetic` chains square
+/// roots on a small array; `cache-bound` reads and writes a 512 kB array in a scattered order, as
+/// a contact loop does. DEM stages cannot scale better than the second.
+pub fn machine_reference(threads: &[usize], repeat: usize) -> Result<()> {
+    fn arithmetic(data: &mut [f64]) {
+        for _ in 0..2000 {
+            for x in data.iter_mut() {
+                *x = (*x * 1.000_000_1 + 1e-9).sqrt();
+            }
+        }
+    }
+    fn cache_bound(data: &mut [f64]) {
+        let n = data.len();
+        for _ in 0..40 {
+            for i in 0..n {
+                let j = (i * 7919) % n;
+                data[i] = data[i] * 0.999_999 + data[j] * 1e-7;
+            }
+        }
+    }
+    println!("machine reference: the same work on every thread, each on its own data (ideal speed-up = threads)");
+    for (name, len, work) in [("arithmetic", 1000, arithmetic as fn(&mut [f64])), ("cache-bound", 65_536, cache_bound)]
+    {
+        let timed = best_of(threads, repeat, || -> Result<(f64, ())> {
+            let mut data = vec![vec![1.0f64; len]; rayon::current_num_threads()];
+            let t = Instant::now();
+            rayon::scope(|s| {
+                for d in data.iter_mut() {
+                    s.spawn(move |_| work(d));
+                }
+            });
+            Ok((t.elapsed().as_secs_f64(), ()))
+        })?;
+        let one = timed.iter().find(|t| t.threads == 1).map(|t| t.best);
+        for t in &timed {
+            // Work grows with the thread count: the speed-up is n t1 / tn.
+            let speedup = one.map(|one| t.threads as f64 * one / t.best).unwrap_or(f64::NAN);
+            println!("  {name:<11}  threads {}  {:>7.2} ms  speed-up {speedup:.2}x", t.threads, t.best * 1e3);
+        }
+    }
+    Ok(())
+}
+
 /// `granite bench dem`: particle-steps per second of gravity deposition (2000 timed steps after
-/// 200 of warm-up, as in the protocol) and time per step of a sheared periodic RVE.
-pub fn dem(counts: &[usize], steps: usize, threads: &[usize]) -> Result<()> {
-    println!("granite bench dem: gravity deposition (linear law, Cundall 0.4, skin 0.5 r)");
+/// 200 of warm-up, as in the protocol) and time per step of a sheared periodic RVE; each
+/// the fastest of `repeat` runs, with the slowest in brackets (this machine is shared).
+pub fn dem(counts: &[usize], steps: usize, threads: &[usize], repeat: usize) -> Result<()> {
+    machine_reference(threads, repeat)?;
+    println!("granite bench dem: gravity deposition (linear law, Cundall 0.4, skin 0.5 r), best of {repeat}");
     for &count in counts {
+        let timed = best_of(threads, repeat, || -> Result<(f64, (usize, u64, usize))> {
+            let mut sim = gravity_deposition(count)?;
+            for _ in 0..200 {
+                sim.step()?;
+            }
+            let before = sim.rebuilds;
+            let t = Instant::now();
+            for _ in 0..steps {
+                sim.step()?;
+            }
+            Ok((t.elapsed().as_secs_f64(), (sim.spheres.len(), sim.rebuilds - before, sim.pairs.touching_count())))
+        })?;
         let mut base = None;
-        for &n in threads {
-            let pool = pool(n)?;
-            let (secs, particles, rebuilds, contacts) = pool.install(|| -> Result<(f64, usize, u64, usize)> {
-                let mut sim = gravity_deposition(count)?;
-                for _ in 0..200 {
-                    sim.step()?;
-                }
-                let before = sim.rebuilds;
-                let t = Instant::now();
-                for _ in 0..steps {
-                    sim.step()?;
-                }
-                Ok((t.elapsed().as_secs_f64(), sim.spheres.len(), sim.rebuilds - before, sim.pairs.touching_count()))
-            })?;
-            let rate = particles as f64 * steps as f64 / secs;
+        for Timed { threads: n, best, worst, out: (particles, rebuilds, contacts) } in timed {
+            let rate = particles as f64 * steps as f64 / best;
             let speedup = speedup_over(&mut base, rate);
             println!(
-                "N = {particles:>6}  threads {n}  {steps} steps  {secs:>7.3} s  {:>7.2} M particle-steps/s  {:>6.2} M/s per thread  speed-up {speedup:.2}x  ({rebuilds} list rebuilds, {contacts} contacts at the end)",
+                "N = {particles:>6}  threads {n}  {steps} steps  {best:>7.3} s ({worst:.3})  {:>7.2} M particle-steps/s  {:>6.2} M/s per thread  speed-up {speedup:.2}x  ({rebuilds} list rebuilds, {contacts} contacts at the end)",
                 rate / 1e6,
                 rate / 1e6 / n as f64
             );
         }
     }
-    println!("granite bench dem: 1500-sphere periodic RVE at 100 kPa, constant-volume simple shear");
+    println!("granite bench dem: 1500-sphere periodic RVE at 100 kPa, constant-volume simple shear, best of {repeat}");
+    let mut rve = periodic_rve(1500, 1e5)?;
+    rve.cell_control = Some(granite_core::dem::cell::CellControl {
+        axes: [granite_core::dem::cell::AxisGoal::Rate(0.0); 3],
+        shear: vec![(0, 2, 1.0)],
+        relax_steps: 200.0,
+    });
+    let timed = best_of(threads, repeat, || -> Result<(f64, usize)> {
+        let mut sim = rve.clone();
+        let t = Instant::now();
+        for _ in 0..steps {
+            sim.step()?;
+        }
+        Ok((t.elapsed().as_secs_f64(), sim.pairs.touching_count()))
+    })?;
     let mut base = None;
-    for &n in threads {
-        let pool = pool(n)?;
-        let (secs, particles, contacts) = pool.install(|| -> Result<(f64, usize, usize)> {
-            let mut sim = periodic_rve(1500, 1e5)?;
-            sim.cell_control = Some(granite_core::dem::cell::CellControl {
-                axes: [granite_core::dem::cell::AxisGoal::Rate(0.0); 3],
-                shear: vec![(0, 2, 1.0)],
-                relax_steps: 200.0,
-            });
-            let t = Instant::now();
-            for _ in 0..steps {
-                sim.step()?;
-            }
-            Ok((t.elapsed().as_secs_f64(), sim.spheres.len(), sim.pairs.touching_count()))
-        })?;
-        let per_step = secs / steps as f64;
+    for Timed { threads: n, best, worst, out: contacts } in timed {
+        let per_step = best / steps as f64;
         let speedup = speedup_over(&mut base, 1.0 / per_step);
         println!(
-            "N = {particles:>6}  threads {n}  {steps} steps  {:>7.4} ms per step  {:>6.2} M particle-steps/s  speed-up {speedup:.2}x  ({contacts} contacts)",
+            "N = {:>6}  threads {n}  {steps} steps  {:>7.4} ms per step ({:.4})  {:>6.2} M particle-steps/s  speed-up {speedup:.2}x  ({contacts} contacts)",
+            rve.spheres.len(),
             per_step * 1e3,
-            particles as f64 / per_step / 1e6
+            worst / steps as f64 * 1e3,
+            rve.spheres.len() as f64 / per_step / 1e6
         );
     }
     Ok(())
@@ -253,7 +330,7 @@ pub fn dem(counts: &[usize], steps: usize, threads: &[usize]) -> Result<()> {
 
 /// `granite bench mpmxdem`: an oedometric scene of 16 material points, each with a 125-sphere
 /// periodic RVE, 200 MPM steps of 1e-5 s with 51 DEM steps each (the peer's protocol).
-pub fn mpmxdem(threads: &[usize]) -> Result<()> {
+pub fn mpmxdem(threads: &[usize], repeat: usize) -> Result<()> {
     use granite_core::mpm::boundary::{TimeFunction, VelocityConstraint};
     use granite_core::mpm::fill::{cell_points, Layout};
     use granite_core::mpm::Face;
@@ -264,49 +341,47 @@ pub fn mpmxdem(threads: &[usize]) -> Result<()> {
     // radii): an RVE deforms slowly, so a thin skin means fewer candidate pairs and few rebuilds.
     let r_min = rve.spheres.radius.iter().cloned().fold(f64::INFINITY, f64::min);
     rve.set_skin(0.25 * r_min)?;
+    let timed = best_of(threads, repeat, || -> Result<(f64, (usize, usize))> {
+        let reg = crate::registry();
+        let mesh = Mesh::new(2, [0.0; 3], [0.5, 0.5, 1.0], [2, 2, 1])?;
+        let mut sim = MpmSim::new(mesh.clone(), reg.build_velocity_update("PIC", &ParamMap::new())?);
+        let mut objects = granite_core::ext::constitutive::ObjectMap::new();
+        objects.insert("rve".into(), Arc::new(rve.clone()));
+        let law = reg.build_law_with("dem_rve", &params(&[("dem_steps", 51.0)]), &objects)?;
+        let bytes = law.bytes_per_point();
+        let m = sim.add_material("sand", 1700.0, law)?;
+        let (xs, vols) = cell_points(&mesh, Layout::Gauss, 2, |_| Ok(true))?;
+        let volume = rve.cell_volume().unwrap_or(1.0);
+        sim.add_points(m, &xs, &vols, [0.0; 3], rve.love_weber_stress(volume))?;
+        for (face, axis, v) in [("x-", 0, 0.0), ("x+", 0, 0.0), ("y-", 1, 0.0), ("y+", 1, -1e-2)] {
+            let f = Face::parse(face, 2)?;
+            sim.boundary.velocity.push(VelocityConstraint {
+                nodes: f.nodes(&mesh),
+                axis,
+                value: TimeFunction::Constant(v),
+            });
+        }
+        sim.set_dt(1e-5)?;
+        let t = Instant::now();
+        for _ in 0..200 {
+            sim.step()?;
+        }
+        Ok((t.elapsed().as_secs_f64(), (sim.points.len(), bytes)))
+    })?;
     let mut base = None;
-    for &n in threads {
-        let pool = pool(n)?;
-        let (secs, points, bytes) = pool.install(|| -> Result<(f64, usize, usize)> {
-            let reg = crate::registry();
-            let mesh = Mesh::new(2, [0.0; 3], [0.5, 0.5, 1.0], [2, 2, 1])?;
-            let mut sim = MpmSim::new(mesh.clone(), reg.build_velocity_update("PIC", &ParamMap::new())?);
-            let mut objects = granite_core::ext::constitutive::ObjectMap::new();
-            objects.insert("rve".into(), Arc::new(rve.clone()));
-            let law = reg.build_law_with("dem_rve", &params(&[("dem_steps", 51.0)]), &objects)?;
-            let bytes = law.bytes_per_point();
-            let m = sim.add_material("sand", 1700.0, law)?;
-            let (xs, vols) = cell_points(&mesh, Layout::Gauss, 2, |_| Ok(true))?;
-            let volume = rve.cell_volume().unwrap_or(1.0);
-            sim.add_points(m, &xs, &vols, [0.0; 3], rve.love_weber_stress(volume))?;
-            for (face, axis, v) in [("x-", 0, 0.0), ("x+", 0, 0.0), ("y-", 1, 0.0), ("y+", 1, -1e-2)] {
-                let f = Face::parse(face, 2)?;
-                sim.boundary.velocity.push(VelocityConstraint {
-                    nodes: f.nodes(&mesh),
-                    axis,
-                    value: TimeFunction::Constant(v),
-                });
-            }
-            sim.set_dt(1e-5)?;
-            let t = Instant::now();
-            for _ in 0..200 {
-                sim.step()?;
-            }
-            Ok((t.elapsed().as_secs_f64(), sim.points.len(), bytes))
-        })?;
+    for Timed { threads: n, best: secs, worst, out: (points, bytes) } in timed {
         let sphere_steps = points as f64 * 125.0 * 51.0 * 200.0;
         let rate = sphere_steps / secs;
         let speedup = speedup_over(&mut base, rate);
         println!(
-            "threads {n}  {points} RVEs  {secs:>7.3} s  {:>6.2} M sphere-steps/s  {:>6.2} M/s per thread  speed-up {speedup:.2}x  memory per RVE {:.3} MB",
+            "threads {n}  {points} RVEs  {secs:>7.3} s ({worst:.3})  {:>6.2} M sphere-steps/s  {:>6.2} M/s per thread  speed-up {speedup:.2}x  memory per RVE {:.3} MB",
             rate / 1e6,
             rate / 1e6 / n as f64,
             bytes as f64 / 1e6
         );
     }
     // The coupling's own cost: the same RVE stepped alone, same steps, one thread.
-    let pool = pool(1)?;
-    let standalone = pool.install(|| -> Result<f64> {
+    let standalone = best_of(&[1], repeat, || -> Result<(f64, ())> {
         let mut sim = rve.clone();
         sim.set_sequential(true);
         // The oedometric increment of one MPM step (1e-2 m/s over 1 m for 1e-5 s) in 51 DEM steps.
@@ -318,8 +393,9 @@ pub fn mpmxdem(threads: &[usize]) -> Result<()> {
         for _ in 0..16 * 51 * 200 / 4 {
             sim.step()?;
         }
-        Ok(sim.spheres.len() as f64 * (16 * 51 * 200 / 4) as f64 / t.elapsed().as_secs_f64())
+        Ok((t.elapsed().as_secs_f64(), ()))
     })?;
+    let standalone = rve.spheres.len() as f64 * (16 * 51 * 200 / 4) as f64 / standalone[0].best;
     println!("standalone DEM on the same RVE, 1 thread: {:.2} M sphere-steps/s", standalone / 1e6);
     let big = periodic_rve(1000, 1e5)?;
     println!("memory of a 1000-sphere RVE: {:.3} MB", big.memory_bytes() as f64 / 1e6);

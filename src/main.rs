@@ -71,6 +71,10 @@ enum Command {
         /// triaxial: axial strain to reach.
         #[arg(long, default_value_t = 0.1)]
         axial_strain: f64,
+        /// dem, mpmxdem: runs of each measurement; the fastest is reported (a shared machine's
+        /// slow spells only ever slow a run down).
+        #[arg(long, default_value_t = 3)]
+        repeat: usize,
     },
     /// List the registered plugins (constitutive laws, velocity updates) and their parameters.
     Plugins,
@@ -129,27 +133,29 @@ fn main() -> ExitCode {
                 }
             }
         }
-        Command::Bench { which, points, steps, particles, dem_steps, threads, axial_strain } => match which.as_str() {
-            "mpm" | "dem" | "mpmxdem" | "triaxial" => {
-                let result = match which.as_str() {
-                    "mpm" => granite::bench::mpm(points, steps, &threads),
-                    "dem" => granite::bench::dem(&particles, dem_steps, &threads),
-                    "triaxial" => granite::bench::triaxial(&threads, axial_strain),
-                    _ => granite::bench::mpmxdem(&threads),
-                };
-                match result {
-                    Ok(()) => ExitCode::SUCCESS,
-                    Err(e) => {
-                        eprintln!("granite: bench failed: {e}");
-                        ExitCode::FAILURE
+        Command::Bench { which, points, steps, particles, dem_steps, threads, axial_strain, repeat } => {
+            match which.as_str() {
+                "mpm" | "dem" | "mpmxdem" | "triaxial" => {
+                    let result = match which.as_str() {
+                        "mpm" => granite::bench::mpm(points, steps, &threads),
+                        "dem" => granite::bench::dem(&particles, dem_steps, &threads, repeat),
+                        "triaxial" => granite::bench::triaxial(&threads, axial_strain),
+                        _ => granite::bench::mpmxdem(&threads, repeat),
+                    };
+                    match result {
+                        Ok(()) => ExitCode::SUCCESS,
+                        Err(e) => {
+                            eprintln!("granite: bench failed: {e}");
+                            ExitCode::FAILURE
+                        }
                     }
                 }
+                other => {
+                    eprintln!("granite: unknown benchmark `{other}`; available: mpm, dem, mpmxdem, triaxial");
+                    ExitCode::from(2)
+                }
             }
-            other => {
-                eprintln!("granite: unknown benchmark `{other}`; available: mpm, dem, mpmxdem, triaxial");
-                ExitCode::from(2)
-            }
-        },
+        }
         Command::Batch { script, params, jobs, out, quiet } => {
             let out = out.unwrap_or_else(|| {
                 let stem = script.file_stem().map(|s| s.to_string_lossy().to_string()).unwrap_or_else(|| "run".into());

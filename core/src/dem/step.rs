@@ -16,8 +16,10 @@ use std::sync::Arc;
 
 /// Pairs per law call.
 const CHUNK: usize = 128;
-/// Fewest pairs or spheres worth a parallel part of their own.
-const MIN_PER_PIECE: usize = 512;
+/// Fewest spheres worth a parallel piece of their own (with their pairs), and fewest in a
+/// simulation renumbered in space before it first runs.
+const MIN_SPHERES_PER_PIECE: usize = 128;
+const MIN_SPHERES_TO_ORDER: usize = 1024;
 /// Most per-pair parameters / history values a contact law may use.
 pub const MAX_PARAMS: usize = 16;
 pub const MAX_HISTORY: usize = 16;
@@ -79,14 +81,13 @@ impl DemSim {
             }
         }
         let strides = (self.pairs.param_stride, self.pairs.history_stride);
-        let min_per_piece = if self.sequential { usize::MAX } else { MIN_PER_PIECE };
         self.pairs.keep_torque_b(!self.sequential);
         // The usual laws' per-contact counts are compile-time constants in the contact loops.
         match strides {
-            (3, 3) => self.contacts(Stride::<3>(3), Stride::<3>(3), min_per_piece),
-            (4, 3) => self.contacts(Stride::<4>(4), Stride::<3>(3), min_per_piece),
-            (6, 7) => self.contacts(Stride::<6>(6), Stride::<7>(7), min_per_piece),
-            (ps, hs) => self.contacts(Stride::<0>(ps), Stride::<0>(hs), min_per_piece),
+            (3, 3) => self.contacts(Stride::<3>(3), Stride::<3>(3)),
+            (4, 3) => self.contacts(Stride::<4>(4), Stride::<3>(3)),
+            (6, 7) => self.contacts(Stride::<6>(6), Stride::<7>(7)),
+            (ps, hs) => self.contacts(Stride::<0>(ps), Stride::<0>(hs)),
         }
         if !self.sequential && self.adjacency.start.len() != self.spheres.len() + 1 {
             // Left unbuilt while the simulation ran sequentially (an RVE).
@@ -187,12 +188,12 @@ impl DemSim {
     /// Sphere-sphere and sphere-wall contact forces of this step. In parallel, both lists are cut
     /// into the same number of pieces, so one stage does them all; sequentially (an RVE), each
     /// contact also adds its force and torques to its spheres as soon as it is computed.
-    fn contacts<const PS: usize, const HS: usize>(&mut self, ps: Stride<PS>, hs: Stride<HS>, min_per_piece: usize) {
+    fn contacts<const PS: usize, const HS: usize>(&mut self, ps: Stride<PS>, hs: Stride<HS>) {
         let strides = (ps.get(), hs.get());
         let Spheres { x, v, w, radius, force, torque, .. } = &mut self.spheres;
         let sp = Motions { x, v, w, radius, cell: self.cell.as_ref() };
         let (walls, laws, dt) = (&self.walls, &self.laws[..], self.dt);
-        if min_per_piece == usize::MAX {
+        if self.sequential {
             force.iter_mut().for_each(|f| *f = [0.0; 3]);
             torque.iter_mut().for_each(|t| *t = [0.0; 3]);
             let mut sums = Some(Sums { force, torque });
@@ -203,11 +204,17 @@ impl DemSim {
             wall_contacts(&sp, walls, wall_pairs, (laws, dt), (ps, hs), &mut scratch, &mut sums);
             return;
         }
-        let pieces = crate::par::piece_count(self.pairs.len() + self.wall_pairs.len(), min_per_piece);
+        // Pieces follow the spheres' pieces of the force gather (pairs are sorted by their first
+        // sphere): a worker then mostly sums forces it computed itself, from its own cache.
+        let per = sphere_piece_size(x.len());
+        let pair_bounds = |list: &PairList| -> Vec<usize> {
+            (per..x.len()).step_by(per.max(1)).map(|s| list.a.partition_point(|&a| (a as usize) < s)).collect()
+        };
+        let (sphere_bounds, wall_bounds) = (pair_bounds(&self.pairs), pair_bounds(&self.wall_pairs));
         let pieces: Vec<_> = PairChunk::whole(&mut self.pairs, strides)
-            .cut(pieces)
+            .cut_at(&sphere_bounds)
             .into_iter()
-            .zip(PairChunk::whole(&mut self.wall_pairs, strides).cut(pieces))
+            .zip(PairChunk::whole(&mut self.wall_pairs, strides).cut_at(&wall_bounds))
             .collect();
         crate::par::run_pieces(pieces, |(sphere_pairs, wall_pairs)| {
             let mut scratch = ScratchGuard::take();
@@ -269,7 +276,7 @@ impl DemSim {
     /// large enough to run in several pieces, without clumps. Ids stay with their spheres.
     fn order_spheres_in_space(&mut self) {
         let n = self.spheres.len();
-        if n < 2 * MIN_PER_PIECE || !self.clumps.is_empty() {
+        if n < MIN_SPHERES_TO_ORDER || !self.clumps.is_empty() {
             return;
         }
         let r_max = self.spheres.radius.iter().cloned().fold(0.0, f64::max);
@@ -612,13 +619,12 @@ impl<'a> PairChunk<'a> {
         )
     }
 
-    /// `parts` consecutive runs of whole law chunks (the last ones possibly empty).
-    fn cut(self, parts: usize) -> Vec<PairChunk<'a>> {
-        let per = self.len().div_ceil(CHUNK).div_ceil(parts.max(1)) * CHUNK;
-        let mut out = Vec::with_capacity(parts);
+    /// Consecutive runs ending at the increasing pair indices `bounds`, and the rest.
+    fn cut_at(self, bounds: &[usize]) -> Vec<PairChunk<'a>> {
+        let mut out = Vec::with_capacity(bounds.len() + 1);
         let mut rest = self;
-        for _ in 1..parts {
-            let mid = per.min(rest.len());
+        for &b in bounds {
+            let mid = b.saturating_sub(rest.first).min(rest.len());
             let (head, tail) = rest.split_at(mid);
             out.push(head);
             rest = tail;
@@ -795,6 +801,12 @@ pub(crate) fn branch(x: &[Vec3], i: usize, j: usize, shift: [i32; 3], cell: Opti
     add(sub(x[j], x[i]), image)
 }
 
+/// Spheres per parallel piece of `n`: small enough for idle workers to find pieces to take over,
+/// large enough that claiming one costs little next to its work.
+fn sphere_piece_size(n: usize) -> usize {
+    n.div_ceil(crate::par::piece_count(n, MIN_SPHERES_PER_PIECE)).max(1)
+}
+
 /// Sums each sphere's contact forces and torques, pair by pair in increasing pair index, and
 /// moves it, in parallel parts of consecutive spheres. A sphere reads only pair arrays and its
 /// own state (second torques are stored by the contact stage), so moving it while another part
@@ -809,8 +821,7 @@ fn gather_and_integrate(
     if x.is_empty() {
         return 0.0;
     }
-    let parts = crate::par::piece_count(x.len(), MIN_PER_PIECE);
-    let per = x.len().div_ceil(parts);
+    let per = sphere_piece_size(x.len());
     let pieces: Vec<_> = x
         .chunks_mut(per)
         .zip(v.chunks_mut(per))
