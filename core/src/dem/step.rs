@@ -471,19 +471,24 @@ impl Scratch {
         });
     }
 
-    /// Calls each law present on its contacts (one call when the chunk has a single law).
+    /// Calls each law present on its contacts: one call on the chunk when it has a single law
+    /// using as many values per contact as the pair list holds; otherwise each law on its own
+    /// compacted subset, laid out with its own counts (the list's are the largest of all laws).
     fn run_laws(&mut self, laws: &[Arc<dyn ContactLaw>], dt: f64, (ps, hs): (usize, usize)) {
         let n = self.len;
         if n == 0 {
             return;
         }
         let first = self.law[0];
-        if self.law[..n].iter().all(|&l| l == first) {
+        let own_counts = |l: u16| {
+            let law = &laws[l as usize];
+            (law.param_count(), law.history_count())
+        };
+        if own_counts(first) == (ps, hs) && self.law[..n].iter().all(|&l| l == first) {
             self.call(laws[first as usize].as_ref(), n, dt, (ps, hs));
             return;
         }
-        // Mixed laws: run each on its own compacted subset (in a second scratch buffer from the
-        // thread's pool: no allocation per chunk).
+        // A second scratch buffer from the thread's pool: no allocation per chunk.
         let mut sub = ScratchGuard::take();
         let mut done = [false; CHUNK];
         let mut members = [0usize; CHUNK];
@@ -492,6 +497,7 @@ impl Scratch {
                 continue;
             }
             let l = self.law[k];
+            let (lp, lh) = own_counts(l);
             let mut count = 0;
             for m in (k..n).filter(|&m| self.law[m] == l) {
                 members[count] = m;
@@ -503,14 +509,14 @@ impl Scratch {
                 sub.overlap[s] = self.overlap[m];
                 sub.rel_velocity[s] = self.rel_velocity[m];
                 sub.rel_spin[s] = self.rel_spin[m];
-                sub.params[s * ps..(s + 1) * ps].copy_from_slice(&self.params[m * ps..(m + 1) * ps]);
-                sub.history[s * hs..(s + 1) * hs].copy_from_slice(&self.history[m * hs..(m + 1) * hs]);
+                sub.params[s * lp..(s + 1) * lp].copy_from_slice(&self.params[m * ps..m * ps + lp]);
+                sub.history[s * lh..(s + 1) * lh].copy_from_slice(&self.history[m * hs..m * hs + lh]);
             }
-            sub.call(laws[l as usize].as_ref(), members.len(), dt, (ps, hs));
+            sub.call(laws[l as usize].as_ref(), members.len(), dt, (lp, lh));
             for (s, &m) in members.iter().enumerate() {
                 self.force[m] = sub.force[s];
                 self.moment[m] = sub.moment[s];
-                self.history[m * hs..(m + 1) * hs].copy_from_slice(&sub.history[s * hs..(s + 1) * hs]);
+                self.history[m * hs..m * hs + lh].copy_from_slice(&sub.history[s * lh..(s + 1) * lh]);
                 done[m] = true;
             }
         }
