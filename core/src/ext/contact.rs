@@ -70,12 +70,50 @@ pub struct ContactBatch<'a> {
     pub dt: f64,
 }
 
+/// One contact of a batch, as [`ContactBatch::for_each`] hands it to a law: `P` parameters and
+/// `H` history values of its own.
+pub struct Contact<'b, const P: usize, const H: usize> {
+    pub normal: Vec3,
+    pub overlap: f64,
+    pub rel_velocity: Vec3,
+    pub rel_spin: Vec3,
+    pub params: &'b [f64; P],
+    pub history: &'b mut [f64; H],
+}
+
 impl ContactBatch<'_> {
     pub fn len(&self) -> usize {
         self.overlap.len()
     }
     pub fn is_empty(&self) -> bool {
         self.overlap.is_empty()
+    }
+
+    /// Runs `law` on every contact (a law with `P` parameters and `H` history values per contact)
+    /// and stores the force and extra moment on particle 1 it returns. Walking the arrays
+    /// together spares the per-contact index checks of a loop over indices.
+    #[inline(always)]
+    pub fn for_each<const P: usize, const H: usize>(self, mut law: impl FnMut(Contact<'_, P, H>) -> (Vec3, Vec3)) {
+        let n = self.len();
+        assert!(self.params.len() == n * P && self.history.len() == n * H, "batch laid out for another law");
+        let contacts = self.normal.iter().zip(self.overlap).zip(self.rel_velocity).zip(self.rel_spin);
+        let state = self.params.chunks_exact(P).zip(self.history.chunks_exact_mut(H));
+        let out = self.force.iter_mut().zip(self.moment.iter_mut());
+        for (((((normal, overlap), rel_velocity), rel_spin), (params, history)), (force, moment)) in
+            contacts.zip(state).zip(out)
+        {
+            let (Ok(params), Ok(history)) = (params.try_into(), history.try_into()) else {
+                unreachable!("chunks of exactly P and H values")
+            };
+            (*force, *moment) = law(Contact {
+                normal: *normal,
+                overlap: *overlap,
+                rel_velocity: *rel_velocity,
+                rel_spin: *rel_spin,
+                params,
+                history,
+            });
+        }
     }
 }
 

@@ -12,6 +12,7 @@
 
 use super::tangential::{dot, rotate_into_plane};
 use super::Ranged;
+use granite_core::ext::contact::Contact;
 use granite_core::ext::{ContactBatch, ContactLaw, ContactLawFactory, PairInfo};
 use granite_core::params::{ParamSpec, Params};
 use granite_core::Result;
@@ -100,33 +101,29 @@ impl ContactLaw for HertzMindlin {
         2.0 * self.e_star * r * REFERENCE_OVERLAP.sqrt()
     }
     fn compute(&self, b: ContactBatch<'_>) {
-        let (ps, hs) = (4, 3);
-        for c in 0..b.len() {
-            let p = &b.params[c * ps..c * ps + ps];
-            let (e_star, g_star, r_star, mu) = (p[0], p[1], p[2], p[3]);
-            let n = b.normal[c];
-            let overlap = b.overlap[c];
+        let dt = b.dt;
+        b.for_each(|c: Contact<'_, 4, 3>| {
+            let [e_star, g_star, r_star, mu] = *c.params;
+            let (n, overlap) = (c.normal, c.overlap);
             let a = (r_star * overlap).sqrt();
             let fn_ = 4.0 / 3.0 * e_star * a * overlap;
             let kt = 8.0 * g_star * a;
-            let h = &mut b.history[c * hs..c * hs + hs];
             // Incremental tangential force: the stiffness changes with the overlap, so the force
             // (not a displacement) is what carries over between steps.
-            let f_old = rotate_into_plane([h[0], h[1], h[2]], n);
-            let v = b.rel_velocity[c];
+            let f_old = rotate_into_plane(*c.history, n);
+            let v = c.rel_velocity;
             let vn = dot(v, n);
             let vt = [v[0] - vn * n[0], v[1] - vn * n[1], v[2] - vn * n[2]];
-            let mut ft = [f_old[0] + kt * vt[0] * b.dt, f_old[1] + kt * vt[1] * b.dt, f_old[2] + kt * vt[2] * b.dt];
+            let mut ft = [f_old[0] + kt * vt[0] * dt, f_old[1] + kt * vt[1] * dt, f_old[2] + kt * vt[2] * dt];
             let limit = mu * fn_;
             let norm = dot(ft, ft).sqrt();
             if norm > limit {
                 let scale = if norm > 0.0 { limit / norm } else { 0.0 };
                 ft = [ft[0] * scale, ft[1] * scale, ft[2] * scale];
             }
-            h.copy_from_slice(&ft);
-            b.force[c] = [ft[0] - fn_ * n[0], ft[1] - fn_ * n[1], ft[2] - fn_ * n[2]];
-            b.moment[c] = [0.0; 3];
-        }
+            *c.history = ft;
+            ([ft[0] - fn_ * n[0], ft[1] - fn_ * n[1], ft[2] - fn_ * n[2]], [0.0; 3])
+        });
     }
     fn normal_stiffness(&self, params: &[f64]) -> f64 {
         2.0 * params[0] * params[2] * REFERENCE_OVERLAP.sqrt()

@@ -5,6 +5,7 @@
 
 use super::tangential::{dot, spring_slider};
 use super::Ranged;
+use granite_core::ext::contact::Contact;
 use granite_core::ext::{ContactBatch, ContactLaw, ContactLawFactory, PairInfo};
 use granite_core::params::{ParamSpec, Params};
 use granite_core::{GraniteError, Result};
@@ -125,19 +126,14 @@ impl ContactLaw for Linear {
         self.springs.of(info).0
     }
     fn compute(&self, b: ContactBatch<'_>) {
-        let (ps, hs) = (3, 3);
-        for c in 0..b.len() {
-            let p = &b.params[c * ps..c * ps + ps];
-            let (kn, kt, mu) = (p[0], p[1], p[2]);
-            let n = b.normal[c];
-            let fn_ = kn * b.overlap[c];
-            let h = &mut b.history[c * hs..c * hs + hs];
-            let mut u = [h[0], h[1], h[2]];
-            let ft = spring_slider(&mut u, n, b.rel_velocity[c], b.dt, kt, mu, fn_);
-            h.copy_from_slice(&u);
-            b.force[c] = [ft[0] - fn_ * n[0], ft[1] - fn_ * n[1], ft[2] - fn_ * n[2]];
-            b.moment[c] = [0.0; 3];
-        }
+        let dt = b.dt;
+        b.for_each(|c: Contact<'_, 3, 3>| {
+            let [kn, kt, mu] = *c.params;
+            let n = c.normal;
+            let fn_ = kn * c.overlap;
+            let ft = spring_slider(c.history, n, c.rel_velocity, dt, kt, mu, fn_);
+            ([ft[0] - fn_ * n[0], ft[1] - fn_ * n[1], ft[2] - fn_ * n[2]], [0.0; 3])
+        });
     }
     fn normal_stiffness(&self, params: &[f64]) -> f64 {
         params[0]

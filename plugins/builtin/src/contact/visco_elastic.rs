@@ -7,6 +7,7 @@ use super::linear::{read_friction, Springs, STIFFNESS_SPECS};
 use super::restitution::damping_ratio;
 use super::tangential::{dot, spring_slider};
 use super::Ranged;
+use granite_core::ext::contact::Contact;
 use granite_core::ext::{ContactBatch, ContactLaw, ContactLawFactory, PairInfo};
 use granite_core::params::{ParamSpec, Params};
 use granite_core::Result;
@@ -77,21 +78,16 @@ impl ContactLaw for ViscoElastic {
         self.springs.of(info).0
     }
     fn compute(&self, b: ContactBatch<'_>) {
-        let (ps, hs) = (4, 3);
-        for c in 0..b.len() {
-            let p = &b.params[c * ps..c * ps + ps];
-            let (kn, kt, mu, cn) = (p[0], p[1], p[2], p[3]);
-            let n = b.normal[c];
+        let dt = b.dt;
+        b.for_each(|c: Contact<'_, 4, 3>| {
+            let [kn, kt, mu, cn] = *c.params;
+            let n = c.normal;
             // Overlap rate: particle 2 approaching particle 1 means a negative normal velocity.
-            let rate = -dot(b.rel_velocity[c], n);
-            let fn_ = (kn * b.overlap[c] + cn * rate).max(0.0);
-            let h = &mut b.history[c * hs..c * hs + hs];
-            let mut u = [h[0], h[1], h[2]];
-            let ft = spring_slider(&mut u, n, b.rel_velocity[c], b.dt, kt, mu, fn_);
-            h.copy_from_slice(&u);
-            b.force[c] = [ft[0] - fn_ * n[0], ft[1] - fn_ * n[1], ft[2] - fn_ * n[2]];
-            b.moment[c] = [0.0; 3];
-        }
+            let rate = -dot(c.rel_velocity, n);
+            let fn_ = (kn * c.overlap + cn * rate).max(0.0);
+            let ft = spring_slider(c.history, n, c.rel_velocity, dt, kt, mu, fn_);
+            ([ft[0] - fn_ * n[0], ft[1] - fn_ * n[1], ft[2] - fn_ * n[2]], [0.0; 3])
+        });
     }
     fn normal_stiffness(&self, params: &[f64]) -> f64 {
         params[0]
