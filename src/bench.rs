@@ -397,7 +397,9 @@ pub fn mpmxdem(threads: &[usize], repeat: usize) -> Result<()> {
     })?;
     let standalone = rve.spheres.len() as f64 * (16 * 51 * 200 / 4) as f64 / standalone[0].best;
     println!("standalone DEM on the same RVE, 1 thread: {:.2} M sphere-steps/s", standalone / 1e6);
-    let big = periodic_rve(1000, 1e5)?;
+    let mut big = periodic_rve(1000, 1e5)?;
+    // As the dem_rve law holds its RVEs: stepped sequentially, without the parallel gather's lists.
+    big.set_sequential(true);
     println!("memory of a 1000-sphere RVE: {:.3} MB", big.memory_bytes() as f64 / 1e6);
     Ok(())
 }

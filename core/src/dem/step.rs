@@ -171,6 +171,7 @@ impl DemSim {
     /// dropping what only the parallel force gather needs.
     pub fn set_sequential(&mut self, on: bool) {
         self.sequential = on;
+        self.pairs.keep_torque_b(!on);
         self.build_adjacency();
     }
 
