@@ -6,7 +6,8 @@ use crate::dem::walls::Wall;
 use crate::math::Vec3;
 use rayon::prelude::*;
 
-const MIN_PER_TASK: usize = 2048;
+/// Particles per parallel block of the search.
+const BLOCK: usize = 256;
 
 /// Counting sort of items by cell: `items[start[c]..start[c + 1]]` are the items of cell `c`,
 /// in increasing index.
@@ -29,6 +30,33 @@ fn bucket(cells: &[usize], ncells: usize) -> (Vec<u32>, Vec<u32>) {
 
 /// A candidate pair: `(a, b, shift of b's image)`.
 pub type Candidate = (u32, u32, [i32; 3]);
+
+/// The candidates of every particle, particle by particle: `search(i, out)` appends those of
+/// particle `i` (in any order; each particle's are then sorted and deduplicated). Blocks of
+/// particles run in parallel, each filling one list, joined in order.
+fn candidates_by_particle(n: usize, search: impl Fn(usize, &mut Vec<Candidate>) + Sync) -> Vec<Candidate> {
+    let blocks: Vec<Vec<Candidate>> = (0..n.div_ceil(BLOCK))
+        .into_par_iter()
+        .map(|b| {
+            let mut found = Vec::new();
+            for i in b * BLOCK..((b + 1) * BLOCK).min(n) {
+                let first = found.len();
+                search(i, &mut found);
+                found[first..].sort_unstable();
+                let mut kept = first;
+                for k in first..found.len() {
+                    if k == first || found[k] != found[kept - 1] {
+                        found[kept] = found[k];
+                        kept += 1;
+                    }
+                }
+                found.truncate(kept);
+            }
+            found
+        })
+        .collect();
+    blocks.concat()
+}
 
 /// Candidate pairs `(a, b)`, `a < b`, whose gap is below `skin`; sorted by `(a, b)`.
 pub fn sphere_pairs(x: &[Vec3], radius: &[f64], skin: f64) -> Vec<Candidate> {
@@ -69,39 +97,30 @@ pub fn sphere_pairs(x: &[Vec3], radius: &[f64], skin: f64) -> Vec<Candidate> {
     let index = |c: [usize; 3]| c[0] + dims[0] * (c[1] + dims[1] * c[2]);
     let cells: Vec<usize> = x.iter().map(|p| index(cell_of(p))).collect();
     let (start, items) = bucket(&cells, dims[0] * dims[1] * dims[2]);
-    let per_particle: Vec<Vec<Candidate>> = (0..n)
-        .into_par_iter()
-        .with_min_len(MIN_PER_TASK)
-        .map(|i| {
-            let c = cell_of(&x[i]);
-            let mut found = Vec::new();
-            for dz in -1i64..=1 {
-                for dy in -1i64..=1 {
-                    for dx in -1i64..=1 {
-                        let q = [c[0] as i64 + dx, c[1] as i64 + dy, c[2] as i64 + dz];
-                        if (0..3).any(|a| q[a] < 0 || q[a] >= dims[a] as i64) {
+    candidates_by_particle(n, |i, found| {
+        let c = cell_of(&x[i]);
+        for dz in -1i64..=1 {
+            for dy in -1i64..=1 {
+                for dx in -1i64..=1 {
+                    let q = [c[0] as i64 + dx, c[1] as i64 + dy, c[2] as i64 + dz];
+                    if (0..3).any(|a| q[a] < 0 || q[a] >= dims[a] as i64) {
+                        continue;
+                    }
+                    let k = index([q[0] as usize, q[1] as usize, q[2] as usize]);
+                    for &j in &items[start[k] as usize..start[k + 1] as usize] {
+                        if (j as usize) <= i {
                             continue;
                         }
-                        let k = index([q[0] as usize, q[1] as usize, q[2] as usize]);
-                        for &j in &items[start[k] as usize..start[k + 1] as usize] {
-                            if (j as usize) <= i {
-                                continue;
-                            }
-                            let d =
-                                [x[j as usize][0] - x[i][0], x[j as usize][1] - x[i][1], x[j as usize][2] - x[i][2]];
-                            let reach = radius[i] + radius[j as usize] + skin;
-                            if d[0] * d[0] + d[1] * d[1] + d[2] * d[2] < reach * reach {
-                                found.push((i as u32, j, [0; 3]));
-                            }
+                        let d = [x[j as usize][0] - x[i][0], x[j as usize][1] - x[i][1], x[j as usize][2] - x[i][2]];
+                        let reach = radius[i] + radius[j as usize] + skin;
+                        if d[0] * d[0] + d[1] * d[1] + d[2] * d[2] < reach * reach {
+                            found.push((i as u32, j, [0; 3]));
                         }
                     }
                 }
             }
-            found.sort_unstable();
-            found
-        })
-        .collect();
-    per_particle.into_iter().flatten().collect()
+        }
+    })
 }
 
 /// Candidate pairs in a periodic cell. Positions must lie in the cell (reduced coordinates in
@@ -132,51 +151,39 @@ pub fn periodic_sphere_pairs(x: &[Vec3], radius: &[f64], skin: f64, cell: &Perio
     let index = |c: [usize; 3]| c[0] + dims[0] * (c[1] + dims[1] * c[2]);
     let cells: Vec<usize> = reduced.iter().map(|s| index(cell_of(s))).collect();
     let (start, items) = bucket(&cells, dims[0] * dims[1] * dims[2]);
-    let per_particle: Vec<Vec<Candidate>> = (0..n)
-        .into_par_iter()
-        .with_min_len(MIN_PER_TASK)
-        .map(|i| {
-            let c = cell_of(&reduced[i]);
-            let mut found = Vec::new();
-            for dz in -1i64..=1 {
-                for dy in -1i64..=1 {
-                    for dx in -1i64..=1 {
-                        let d = [dx, dy, dz];
-                        let mut q = [0usize; 3];
-                        let mut w = [0i32; 3];
-                        for a in 0..3 {
-                            let raw = c[a] as i64 + d[a];
-                            w[a] = raw.div_euclid(dims[a] as i64) as i32;
-                            q[a] = raw.rem_euclid(dims[a] as i64) as usize;
+    candidates_by_particle(n, |i, found| {
+        let c = cell_of(&reduced[i]);
+        for dz in -1i64..=1 {
+            for dy in -1i64..=1 {
+                for dx in -1i64..=1 {
+                    let d = [dx, dy, dz];
+                    let mut q = [0usize; 3];
+                    let mut w = [0i32; 3];
+                    for a in 0..3 {
+                        let raw = c[a] as i64 + d[a];
+                        w[a] = raw.div_euclid(dims[a] as i64) as i32;
+                        q[a] = raw.rem_euclid(dims[a] as i64) as usize;
+                    }
+                    // Dims of 1 or 2 reach the same cell through several offsets: each
+                    // offset is then a different image, and each is checked once.
+                    let k = index(q);
+                    let image = cell.shift_vector(w);
+                    for &j in &items[start[k] as usize..start[k + 1] as usize] {
+                        let j = j as usize;
+                        if j < i || (j == i && w == [0; 3]) {
+                            continue;
                         }
-                        // Dims of 1 or 2 reach the same cell through several offsets: each
-                        // offset is then a different image, and each is checked once.
-                        let k = index(q);
-                        let image = cell.shift_vector(w);
-                        for &j in &items[start[k] as usize..start[k + 1] as usize] {
-                            let j = j as usize;
-                            if j < i || (j == i && w == [0; 3]) {
-                                continue;
-                            }
-                            let dv = [
-                                x[j][0] + image[0] - x[i][0],
-                                x[j][1] + image[1] - x[i][1],
-                                x[j][2] + image[2] - x[i][2],
-                            ];
-                            let r = radius[i] + radius[j] + skin;
-                            if dv[0] * dv[0] + dv[1] * dv[1] + dv[2] * dv[2] < r * r && j != i {
-                                found.push((i as u32, j as u32, w));
-                            }
+                        let dv =
+                            [x[j][0] + image[0] - x[i][0], x[j][1] + image[1] - x[i][1], x[j][2] + image[2] - x[i][2]];
+                        let r = radius[i] + radius[j] + skin;
+                        if dv[0] * dv[0] + dv[1] * dv[1] + dv[2] * dv[2] < r * r && j != i {
+                            found.push((i as u32, j as u32, w));
                         }
                     }
                 }
             }
-            found.sort_unstable();
-            found.dedup();
-            found
-        })
-        .collect();
-    per_particle.into_iter().flatten().collect()
+        }
+    })
 }
 
 /// Candidate sphere-wall pairs `(sphere, wall)` within `skin`, sorted by sphere then wall.
@@ -184,19 +191,13 @@ pub fn wall_pairs(x: &[Vec3], radius: &[f64], walls: &[Wall], skin: f64) -> Vec<
     if walls.is_empty() {
         return Vec::new();
     }
-    let per_particle: Vec<Vec<Candidate>> = (0..x.len())
-        .into_par_iter()
-        .with_min_len(MIN_PER_TASK)
-        .map(|i| {
-            walls
-                .iter()
-                .enumerate()
-                .filter(|(_, w)| w.contact(x[i], radius[i], skin).is_some())
-                .map(|(k, _)| (i as u32, k as u32, [0; 3]))
-                .collect()
-        })
-        .collect();
-    per_particle.into_iter().flatten().collect()
+    candidates_by_particle(x.len(), |i, found| {
+        for (k, w) in walls.iter().enumerate() {
+            if w.contact(x[i], radius[i], skin).is_some() {
+                found.push((i as u32, k as u32, [0; 3]));
+            }
+        }
+    })
 }
 
 #[cfg(test)]

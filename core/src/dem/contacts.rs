@@ -81,29 +81,41 @@ impl PairList {
     }
 
     /// Replaces the candidates by `pairs` (sorted), keeping parameters and history of pairs present
-    /// in both, and calling `init(a, b, law_out, params_out)` for new ones.
+    /// in both, and calling `init(a, b, law_out, params_out)` for new ones. The new list is built
+    /// in `spare`'s storage, which gets the old list's (a simulation that rebuilds often then
+    /// reuses memory instead of faulting in fresh pages every time).
     pub fn merge(
         &mut self,
+        spare: &mut PairList,
         pairs: &[(u32, u32, [i32; 3])],
-        param_stride: usize,
-        history_stride: usize,
+        (param_stride, history_stride): (usize, usize),
         mut init: impl FnMut(u32, u32, &mut u16, &mut [f64]),
     ) {
         let n = pairs.len();
-        let mut next = PairList {
-            a: Vec::with_capacity(n),
-            b: Vec::with_capacity(n),
-            shift: Vec::with_capacity(n),
-            law: Vec::with_capacity(n),
-            param_stride,
-            history_stride,
-            params: Vec::with_capacity(n * param_stride),
-            history: Vec::with_capacity(n * history_stride),
-            touching: Vec::with_capacity(n),
-            force: vec![[0.0; 3]; n],
-            torque_a: vec![[0.0; 3]; n],
-            torque_b: if self.torque_b.is_empty() { Vec::new() } else { vec![[0.0; 3]; n] },
-        };
+        let next = spare;
+        for v in [&mut next.a, &mut next.b] {
+            v.clear();
+            v.reserve(n);
+        }
+        next.shift.clear();
+        next.shift.reserve(n);
+        next.law.clear();
+        next.law.reserve(n);
+        (next.param_stride, next.history_stride) = (param_stride, history_stride);
+        next.params.clear();
+        next.params.reserve(n * param_stride);
+        next.history.clear();
+        next.history.reserve(n * history_stride);
+        next.touching.clear();
+        next.touching.reserve(n);
+        for v in [&mut next.force, &mut next.torque_a] {
+            v.clear();
+            v.resize(n, [0.0; 3]);
+        }
+        next.torque_b.clear();
+        if !self.torque_b.is_empty() {
+            next.torque_b.resize(n, [0.0; 3]);
+        }
         let same_layout = self.param_stride == param_stride && self.history_stride == history_stride;
         let mut old = 0;
         let mut scratch = vec![0.0; param_stride];
@@ -129,7 +141,7 @@ impl PairList {
                 next.touching.push(false);
             }
         }
-        *self = next;
+        std::mem::swap(self, next);
     }
 }
 

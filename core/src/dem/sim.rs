@@ -47,6 +47,8 @@ pub struct DemSim {
     pub sequential: bool,
     pub pairs: PairList,
     pub wall_pairs: PairList,
+    /// Storage the next rebuild of `pairs` fills (the previous list's; see `PairList::merge`).
+    pub(crate) spare_pairs: PairList,
     pub(crate) adjacency: Adjacency,
     pub(crate) wall_adjacency: Adjacency,
     /// Positions (spheres) and wall positions when the candidate lists were built.
@@ -95,6 +97,7 @@ impl DemSim {
             x_at_build: Vec::new(),
             walls_at_build: Vec::new(),
             h_at_build: None,
+            spare_pairs: PairList::default(),
             needs_rebuild: true,
             rebuilds: 0,
             events: Vec::new(),
@@ -211,6 +214,7 @@ impl DemSim {
         s.x.capacity() * per_sphere
             + self.x_at_build.capacity() * 24
             + pairs(&self.pairs)
+            + pairs(&self.spare_pairs)
             + pairs(&self.wall_pairs)
             + (self.adjacency.entries.capacity() + self.adjacency.start.capacity()) * 4
             + self.clumps.len() * 200

@@ -172,6 +172,9 @@ impl DemSim {
     pub fn set_sequential(&mut self, on: bool) {
         self.sequential = on;
         self.pairs.keep_torque_b(!on);
+        if on {
+            self.spare_pairs = PairList::default();
+        }
         self.build_adjacency();
     }
 
@@ -343,7 +346,9 @@ impl DemSim {
         let wall_candidates = wall_pairs(&s.x, &s.radius, &self.walls, self.skin);
         let mut missing = None;
         let mut pairs = std::mem::take(&mut self.pairs);
-        pairs.merge(&candidates, p_stride, h_stride, |a, b, law, params| {
+        // An RVE (sequential) rebuilds rarely and is copied into every material point: no spare.
+        let mut spare = if self.sequential { PairList::default() } else { std::mem::take(&mut self.spare_pairs) };
+        pairs.merge(&mut spare, &candidates, (p_stride, h_stride), |a, b, law, params| {
             let (a, b) = (a as usize, b as usize);
             match self.law_for(s.material[a], s.material[b]) {
                 Some(l) => {
@@ -354,7 +359,7 @@ impl DemSim {
             }
         });
         let mut wall_list = std::mem::take(&mut self.wall_pairs);
-        wall_list.merge(&wall_candidates, p_stride, h_stride, |a, w, law, params| {
+        wall_list.merge(&mut PairList::default(), &wall_candidates, (p_stride, h_stride), |a, w, law, params| {
             let (a, w) = (a as usize, w as usize);
             match self.law_for(s.material[a], self.walls[w].material) {
                 Some(l) => {
@@ -373,6 +378,9 @@ impl DemSim {
             )));
         }
         self.pairs = pairs;
+        if !self.sequential {
+            self.spare_pairs = spare;
+        }
         self.wall_pairs = wall_list;
         self.build_adjacency();
         self.x_at_build = self.spheres.x.clone();
