@@ -1,15 +1,15 @@
 //! Parallel loops over pieces of data, for stages run every time step.
 //!
 //! One stage is one `rayon::broadcast`. Worker `t` of the current pool owns the `t`-th run of
-//! consecutive pieces and claims them one by one from its run's counter; when its run is done it
-//! claims what is left of the others' runs. Balanced stages keep each piece on the same worker
+//! consecutive pieces and claims them one by one from its front; when its run is done it claims
+//! what is left of the others' runs from their back. Balanced stages keep each piece on the same worker
 //! from one step to the next (its data stays in that core's cache); uneven ones, like the
 //! contacts at the bottom of a settling heap, still balance. On small DEM systems, where a stage
 //! lasts tens of microseconds, this costs less than rayon's recursive splitting of zipped
 //! iterators. Results never depend on which worker ran a piece: each piece is computed on its own
 //! and results come back in piece order.
 
-use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Mutex;
 
 /// Into how many pieces to cut `len` items so each holds at least `min_per_piece` (one piece
@@ -32,14 +32,13 @@ pub fn run_pieces<T: Send, R: Send>(pieces: Vec<T>, work: impl Fn(T) -> R + Sync
     let results: Vec<Mutex<Option<R>>> = (0..n).map(|_| Mutex::new(None)).collect();
     let runs = rayon::current_num_threads().min(n);
     let run_start = |r: usize| r * n / runs;
-    let claimed: Vec<AtomicUsize> = (0..runs).map(|r| AtomicUsize::new(run_start(r))).collect();
+    // What is left of each run: its owner takes from the front, helpers from the back, so the
+    // owner's pieces stay its own from one step to the next wherever the two meet.
+    let left: Vec<AtomicU64> = (0..runs).map(|r| AtomicU64::new(pack(run_start(r), run_start(r + 1)))).collect();
     rayon::broadcast(|ctx| {
-        for r in (0..runs).map(|k| (ctx.index() + k) % runs) {
-            loop {
-                let t = claimed[r].fetch_add(1, Ordering::Relaxed);
-                if t >= run_start(r + 1) {
-                    break;
-                }
+        for (k, r) in (0..runs).map(|k| (k, (ctx.index() + k) % runs)) {
+            let own = k == 0;
+            while let Some(t) = claim(&left[r], own) {
                 let piece = slots[t].lock().unwrap_or_else(|e| e.into_inner()).take();
                 if let Some(piece) = piece {
                     let out = work(piece);
@@ -49,6 +48,27 @@ pub fn run_pieces<T: Send, R: Send>(pieces: Vec<T>, work: impl Fn(T) -> R + Sync
         }
     });
     results.into_iter().map(|r| r.into_inner().unwrap_or_else(|e| e.into_inner()).expect("every piece ran")).collect()
+}
+
+/// A range `[front, back)` of piece indices in one word.
+fn pack(front: usize, back: usize) -> u64 {
+    ((back as u64) << 32) | front as u64
+}
+
+/// Takes one piece index off the front (`own`) or the back of a range, or None when it is empty.
+fn claim(range: &AtomicU64, own: bool) -> Option<usize> {
+    let mut current = range.load(Ordering::Relaxed);
+    loop {
+        let (front, back) = ((current & 0xffff_ffff) as usize, (current >> 32) as usize);
+        if front >= back {
+            return None;
+        }
+        let (taken, next) = if own { (front, pack(front + 1, back)) } else { (back - 1, pack(front, back - 1)) };
+        match range.compare_exchange_weak(current, next, Ordering::AcqRel, Ordering::Relaxed) {
+            Ok(_) => return Some(taken),
+            Err(seen) => current = seen,
+        }
+    }
 }
 
 #[cfg(test)]
