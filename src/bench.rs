@@ -258,10 +258,7 @@ pub fn machine_reference(threads: &[usize], repeat: usize) -> Result<()> {
             });
             Ok((t.elapsed().as_secs_f64(), ()))
         })?;
-        let one = timed.iter().find(|t| t.threads == 1).map(|t| t.best);
-        for t in &timed {
-            // Work grows with the thread count: the speed-up is n t1 / tn.
-            let speedup = one.map(|one| t.threads as f64 * one / t.best).unwrap_or(f64::NAN);
+        for (t, speedup) in timed.iter().zip(same_work_per_thread_speedups(&timed)) {
             println!("  {name:<11}  threads {}  {:>7.2} ms  speed-up {speedup:.2}x", t.threads, t.best * 1e3);
         }
     }
@@ -341,9 +338,7 @@ pub fn dem(counts: &[usize], steps: usize, threads: &[usize], repeat: usize) -> 
         .collect::<Result<Vec<()>>>()?;
         Ok((t.elapsed().as_secs_f64(), ()))
     })?;
-    let one = timed.iter().find(|t| t.threads == 1).map(|t| t.best);
-    for t in &timed {
-        let speedup = one.map(|one| t.threads as f64 * one / t.best).unwrap_or(f64::NAN);
+    for (t, speedup) in timed.iter().zip(same_work_per_thread_speedups(&timed)) {
         println!(
             "the same RVE, one copy per thread (nothing shared)  threads {}  {:>7.4} ms per step  speed-up {speedup:.2}x",
             t.threads,
@@ -480,6 +475,12 @@ pub fn triaxial(threads: &[usize], axial_strain: f64) -> Result<()> {
         );
     }
     Ok(())
+}
+
+/// Speed-ups of runs giving every thread the same work: n t1 / tn (NaN without a 1-thread run).
+fn same_work_per_thread_speedups<T>(timed: &[Timed<T>]) -> Vec<f64> {
+    let one = timed.iter().find(|t| t.threads == 1).map(|t| t.best);
+    timed.iter().map(|t| one.map_or(f64::NAN, |one| t.threads as f64 * one / t.best)).collect()
 }
 
 /// `rate` over the first rate measured (which `base` keeps).

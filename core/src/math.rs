@@ -37,6 +37,19 @@ pub fn norm3(a: Vec3) -> f64 {
     dot3(a, a).sqrt()
 }
 
+/// Axis-aligned bounds `(lo, hi)` of points (infinite, lo > hi, when there are none).
+pub fn point_bounds(points: &[Vec3]) -> (Vec3, Vec3) {
+    let mut lo = [f64::INFINITY; 3];
+    let mut hi = [f64::NEG_INFINITY; 3];
+    for p in points {
+        for a in 0..3 {
+            lo[a] = lo[a].min(p[a]);
+            hi[a] = hi[a].max(p[a]);
+        }
+    }
+    (lo, hi)
+}
+
 /// Velocity gradient `L_ij = d v_i / d x_j` (row-major) to the Voigt strain rate with engineering shear
 /// (thesis eq. 3.36: the off-diagonal terms are `gamma_ij = L_ij + L_ji`).
 #[inline]

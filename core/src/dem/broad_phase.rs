@@ -65,14 +65,7 @@ pub fn sphere_pairs(x: &[Vec3], radius: &[f64], skin: f64) -> Vec<Candidate> {
         return Vec::new();
     }
     let r_max = radius.iter().cloned().fold(0.0, f64::max);
-    let mut lo = [f64::INFINITY; 3];
-    let mut hi = [f64::NEG_INFINITY; 3];
-    for p in x {
-        for a in 0..3 {
-            lo[a] = lo[a].min(p[a]);
-            hi[a] = hi[a].max(p[a]);
-        }
-    }
+    let (lo, hi) = crate::math::point_bounds(x);
     // Cells at least as large as the longest possible interaction, and not more than ~2 per sphere.
     let mut size = (2.0 * r_max + skin).max(f64::MIN_POSITIVE);
     let cells_for = |size: f64| -> [usize; 3] {

@@ -93,28 +93,24 @@ impl PairList {
     ) {
         let n = pairs.len();
         let next = spare;
-        for v in [&mut next.a, &mut next.b] {
+        /// Empties `v` for `len` values, keeping its storage.
+        fn reuse<T>(v: &mut Vec<T>, len: usize) {
             v.clear();
-            v.reserve(n);
+            v.reserve(len);
         }
-        next.shift.clear();
-        next.shift.reserve(n);
-        next.law.clear();
-        next.law.reserve(n);
+        reuse(&mut next.a, n);
+        reuse(&mut next.b, n);
+        reuse(&mut next.shift, n);
+        reuse(&mut next.law, n);
+        reuse(&mut next.params, n * param_stride);
+        reuse(&mut next.history, n * history_stride);
+        reuse(&mut next.touching, n);
         (next.param_stride, next.history_stride) = (param_stride, history_stride);
-        next.params.clear();
-        next.params.reserve(n * param_stride);
-        next.history.clear();
-        next.history.reserve(n * history_stride);
-        next.touching.clear();
-        next.touching.reserve(n);
-        for v in [&mut next.force, &mut next.torque_a] {
+        // Forces are recomputed every step; second torques only where the list keeps them.
+        let torque_b_len = if self.torque_b.is_empty() { 0 } else { n };
+        for (v, len) in [(&mut next.force, n), (&mut next.torque_a, n), (&mut next.torque_b, torque_b_len)] {
             v.clear();
-            v.resize(n, [0.0; 3]);
-        }
-        next.torque_b.clear();
-        if !self.torque_b.is_empty() {
-            next.torque_b.resize(n, [0.0; 3]);
+            v.resize(len, [0.0; 3]);
         }
         let same_layout = self.param_stride == param_stride && self.history_stride == history_stride;
         let mut old = 0;

@@ -147,14 +147,7 @@ pub fn tetrahedralize(points: &[Vec3]) -> Vec<[usize; 4]> {
     if n < 4 {
         return Vec::new();
     }
-    let mut lo = [f64::INFINITY; 3];
-    let mut hi = [f64::NEG_INFINITY; 3];
-    for p in points {
-        for a in 0..3 {
-            lo[a] = lo[a].min(p[a]);
-            hi[a] = hi[a].max(p[a]);
-        }
-    }
+    let (lo, hi) = crate::math::point_bounds(points);
     let size = (0..3).map(|a| hi[a] - lo[a]).fold(0.0, f64::max).max(f64::MIN_POSITIVE);
     let centre = [0, 1, 2].map(|a| 0.5 * (lo[a] + hi[a]));
     // Deterministic tiny jitter against co-spherical degeneracies.

@@ -293,14 +293,7 @@ impl DemSim {
                 (s, cell.widths())
             }
             None => {
-                let mut lo = [f64::INFINITY; 3];
-                let mut hi = [f64::NEG_INFINITY; 3];
-                for x in &self.spheres.x {
-                    for a in 0..3 {
-                        lo[a] = lo[a].min(x[a]);
-                        hi[a] = hi[a].max(x[a]);
-                    }
-                }
+                let (lo, hi) = crate::math::point_bounds(&self.spheres.x);
                 let size = [0, 1, 2].map(|a| (hi[a] - lo[a]).max(f64::MIN_POSITIVE));
                 let s = self.spheres.x.iter().map(|x| [0, 1, 2].map(|a| (x[a] - lo[a]) / size[a])).collect();
                 (s, size)
