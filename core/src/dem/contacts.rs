@@ -17,12 +17,14 @@ pub struct PairList {
     pub params: Vec<f64>,
     pub history: Vec<f64>,
     pub touching: Vec<bool>,
-    /// Force on `a` (b gets the opposite), and the torque on `a` (lever arm included); b's
-    /// torque follows from them and the branch vector (see `dem::step`).
+    /// Force on `a` (b gets the opposite).
     pub force: Vec<Vec3>,
+    /// Torques on `a` and on `b` (lever arms and contact moments included), kept only by
+    /// simulations stepped in parallel, whose force gather reads them later (with the
+    /// integration, when neighbours' positions may already have moved); empty otherwise, and
+    /// `torque_b` also empty for wall pairs. Recomputed every step, so never saved.
+    #[serde(skip)]
     pub torque_a: Vec<Vec3>,
-    /// Torque on `b`, kept only by simulations stepped in parallel (their force gather runs with
-    /// the integration, when neighbours' positions may already have moved); empty otherwise.
     #[serde(skip)]
     pub torque_b: Vec<Vec3>,
 }
@@ -59,20 +61,25 @@ impl PairList {
         self.law = permute(&self.law, &order);
         self.touching = permute(&self.touching, &order);
         self.force = permute(&self.force, &order);
-        self.torque_a = permute(&self.torque_a, &order);
-        if !self.torque_b.is_empty() {
-            self.torque_b = permute(&self.torque_b, &order);
+        for torques in [&mut self.torque_a, &mut self.torque_b] {
+            if !torques.is_empty() {
+                *torques = permute(torques, &order);
+            }
         }
         self.params = params;
         self.history = history;
     }
 
-    /// Keeps (or drops) the torques on second particles (see `torque_b`).
-    pub fn keep_torque_b(&mut self, on: bool) {
-        if on {
-            self.torque_b.resize(self.len(), [0.0; 3]);
-        } else {
-            self.torque_b = Vec::new();
+    /// Keeps (or drops) the per-pair torques, those on second particles only if `second` (see
+    /// `torque_a`).
+    pub fn keep_torques(&mut self, on: bool, second: bool) {
+        let n = self.len();
+        for (torques, keep) in [(&mut self.torque_a, on), (&mut self.torque_b, on && second)] {
+            if keep {
+                torques.resize(n, [0.0; 3]);
+            } else {
+                *torques = Vec::new();
+            }
         }
     }
 
@@ -106,9 +113,10 @@ impl PairList {
         reuse(&mut next.history, n * history_stride);
         reuse(&mut next.touching, n);
         (next.param_stride, next.history_stride) = (param_stride, history_stride);
-        // Forces are recomputed every step; second torques only where the list keeps them.
-        let torque_b_len = if self.torque_b.is_empty() { 0 } else { n };
-        for (v, len) in [(&mut next.force, n), (&mut next.torque_a, n), (&mut next.torque_b, torque_b_len)] {
+        // Forces are recomputed every step; torques only where the list keeps them.
+        let kept = |torques: &Vec<Vec3>| if torques.is_empty() { 0 } else { n };
+        let (torque_a_len, torque_b_len) = (kept(&self.torque_a), kept(&self.torque_b));
+        for (v, len) in [(&mut next.force, n), (&mut next.torque_a, torque_a_len), (&mut next.torque_b, torque_b_len)] {
             v.clear();
             v.resize(len, [0.0; 3]);
         }

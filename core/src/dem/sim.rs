@@ -207,8 +207,8 @@ impl DemSim {
             + std::mem::size_of::<u8>()
             + std::mem::size_of::<u32>();
         let pairs = |p: &PairList| {
-            p.a.capacity() * (2 * 4 + 12 + 2 + 1 + 2 * 24)
-                + p.torque_b.capacity() * 24
+            p.a.capacity() * (2 * 4 + 12 + 2 + 1 + 24)
+                + (p.torque_a.capacity() + p.torque_b.capacity()) * 24
                 + (p.params.capacity() + p.history.capacity()) * 8
         };
         s.x.capacity() * per_sphere

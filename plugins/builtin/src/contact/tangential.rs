@@ -36,11 +36,14 @@ pub fn spring_slider(u: &mut Vec3, n: Vec3, rel_velocity: Vec3, dt: f64, kt: f64
     let mut s = [r[0] + vt[0] * dt, r[1] + vt[1] * dt, r[2] + vt[2] * dt];
     let mut f = [kt * s[0], kt * s[1], kt * s[2]];
     let limit = mu * fn_;
-    let norm = dot(f, f).sqrt();
-    if norm > limit {
+    // Most contacts stick: compare squares, and take the root only for those that slide.
+    let norm2 = dot(f, f);
+    if norm2 > limit * limit {
+        let norm = norm2.sqrt();
         let scale = if norm > 0.0 { limit / norm } else { 0.0 };
         f = [f[0] * scale, f[1] * scale, f[2] * scale];
-        s = if kt > 0.0 { [f[0] / kt, f[1] / kt, f[2] / kt] } else { [0.0; 3] };
+        // The spring shortened by the same factor keeps f = kt s (no division by kt).
+        s = [s[0] * scale, s[1] * scale, s[2] * scale];
     }
     *u = s;
     f
@@ -52,11 +55,12 @@ pub fn spring_slider(u: &mut Vec3, n: Vec3, rel_velocity: Vec3, dt: f64, kt: f64
 pub fn rotational_spring(theta: &mut Vec3, omega: Vec3, dt: f64, k: f64, limit: f64) -> Vec3 {
     let mut t = [theta[0] + omega[0] * dt, theta[1] + omega[1] * dt, theta[2] + omega[2] * dt];
     let mut m = [k * t[0], k * t[1], k * t[2]];
-    let norm = dot(m, m).sqrt();
-    if norm > limit {
+    let norm2 = dot(m, m);
+    if norm2 > limit * limit {
+        let norm = norm2.sqrt();
         let scale = if norm > 0.0 { limit / norm } else { 0.0 };
         m = [m[0] * scale, m[1] * scale, m[2] * scale];
-        t = if k > 0.0 { [m[0] / k, m[1] / k, m[2] / k] } else { [0.0; 3] };
+        t = [t[0] * scale, t[1] * scale, t[2] * scale];
     }
     *theta = t;
     m
