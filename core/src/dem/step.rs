@@ -80,15 +80,13 @@ impl DemSim {
                 cell.velocity_gradient = l;
             }
         }
-        let strides = (self.pairs.param_stride, self.pairs.history_stride);
         self.pairs.keep_torques(!self.sequential, true);
         self.wall_pairs.keep_torques(!self.sequential, false);
-        // The usual laws' per-contact counts are compile-time constants in the contact loops.
-        match strides {
-            (3, 3) => self.contacts(Stride::<3>(3), Stride::<3>(3)),
-            (4, 3) => self.contacts(Stride::<4>(4), Stride::<3>(3)),
-            (6, 7) => self.contacts(Stride::<6>(6), Stride::<7>(7)),
-            (ps, hs) => self.contacts(Stride::<0>(ps), Stride::<0>(hs)),
+        // The usual laws' history counts are compile-time constants in the contact loops.
+        match (self.pairs.param_stride, self.pairs.history_stride) {
+            (_, 3) => self.contacts(Stride::<3>(3)),
+            (_, 7) => self.contacts(Stride::<7>(7)),
+            (_, hs) => self.contacts(Stride::<0>(hs)),
         }
         if !self.sequential && self.adjacency.start.len() != self.spheres.len() + 1 {
             // Left unbuilt while the simulation ran sequentially (an RVE).
@@ -194,8 +192,8 @@ impl DemSim {
     /// Sphere-sphere and sphere-wall contact forces of this step. In parallel, both lists are cut
     /// into the same number of pieces, so one stage does them all; sequentially (an RVE), each
     /// contact also adds its force and torques to its spheres as soon as it is computed.
-    fn contacts<const PS: usize, const HS: usize>(&mut self, ps: Stride<PS>, hs: Stride<HS>) {
-        let strides = (ps.get(), hs.get());
+    fn contacts<const HS: usize>(&mut self, hs: Stride<HS>) {
+        let strides = (self.pairs.param_stride, hs.get());
         let Spheres { x, v, w, radius, force, torque, .. } = &mut self.spheres;
         let sp = Motions { x, v, w, radius, cell: self.cell.as_ref() };
         let (walls, laws, dt) = (&self.walls, &self.laws[..], self.dt);
@@ -205,9 +203,9 @@ impl DemSim {
             let mut sums = Some(Sums { force, torque });
             let mut scratch = ScratchGuard::take();
             let sphere_pairs = PairChunk::whole(&mut self.pairs, strides);
-            sphere_contacts(&sp, sphere_pairs, (laws, dt), (ps, hs), &mut scratch, &mut sums);
+            sphere_contacts(&sp, sphere_pairs, (laws, dt), hs, &mut scratch, &mut sums);
             let wall_pairs = PairChunk::whole(&mut self.wall_pairs, strides);
-            wall_contacts(&sp, walls, wall_pairs, (laws, dt), (ps, hs), &mut scratch, &mut sums);
+            wall_contacts(&sp, walls, wall_pairs, (laws, dt), hs, &mut scratch, &mut sums);
             return;
         }
         // Pieces follow the spheres' pieces of the force gather (pairs are sorted by their first
@@ -224,8 +222,8 @@ impl DemSim {
             .collect();
         crate::par::run_pieces(pieces, |(sphere_pairs, wall_pairs)| {
             let mut scratch = ScratchGuard::take();
-            sphere_contacts(&sp, sphere_pairs, (laws, dt), (ps, hs), &mut scratch, &mut None);
-            wall_contacts(&sp, walls, wall_pairs, (laws, dt), (ps, hs), &mut scratch, &mut None);
+            sphere_contacts(&sp, sphere_pairs, (laws, dt), hs, &mut scratch, &mut None);
+            wall_contacts(&sp, walls, wall_pairs, (laws, dt), hs, &mut scratch, &mut None);
         });
     }
 
@@ -425,35 +423,38 @@ impl Drop for ScratchGuard {
 
 /// Touching contacts of one chunk, compacted for the law call.
 struct Scratch {
-    pair: [usize; CHUNK],
+    /// Pair of each contact in its chunk.
+    slot: [u32; CHUNK],
     law: [u16; CHUNK],
     normal: [Vec3; CHUNK],
     overlap: [f64; CHUNK],
     rel_velocity: [Vec3; CHUNK],
     rel_spin: [Vec3; CHUNK],
-    arm_a: [Vec3; CHUNK],
-    /// Branch vector of sphere pairs (for second torques).
-    branch: [Vec3; CHUNK],
-    params: [f64; CHUNK * MAX_PARAMS],
-    history: [f64; CHUNK * MAX_HISTORY],
+    /// Distances from the two centres to the contact point along the normal (the lever arms
+    /// of the force; the second is 0 for walls).
+    lever: [[f64; 2]; CHUNK],
     force: [Vec3; CHUNK],
     moment: [Vec3; CHUNK],
     len: usize,
 }
 
+/// The per-pair parameters and history of a chunk, and values per pair.
+struct PairState<'c> {
+    params: &'c [f64],
+    history: &'c mut [f64],
+    strides: (usize, usize),
+}
+
 impl Scratch {
     fn new() -> Box<Scratch> {
         Box::new(Scratch {
-            pair: [0; CHUNK],
+            slot: [0; CHUNK],
             law: [0; CHUNK],
             normal: [[0.0; 3]; CHUNK],
             overlap: [0.0; CHUNK],
             rel_velocity: [[0.0; 3]; CHUNK],
             rel_spin: [[0.0; 3]; CHUNK],
-            arm_a: [[0.0; 3]; CHUNK],
-            branch: [[0.0; 3]; CHUNK],
-            params: [0.0; CHUNK * MAX_PARAMS],
-            history: [0.0; CHUNK * MAX_HISTORY],
+            lever: [[0.0; 2]; CHUNK],
             force: [[0.0; 3]; CHUNK],
             moment: [[0.0; 3]; CHUNK],
             len: 0,
@@ -461,35 +462,32 @@ impl Scratch {
     }
 
     /// One law call on the first `n` contacts.
-    fn call(&mut self, law: &dyn ContactLaw, n: usize, dt: f64, (ps, hs): (usize, usize)) {
+    fn call(&mut self, law: &dyn ContactLaw, n: usize, dt: f64, state: &mut PairState<'_>) {
         law.compute(ContactBatch {
             normal: &self.normal[..n],
             overlap: &self.overlap[..n],
             rel_velocity: &self.rel_velocity[..n],
             rel_spin: &self.rel_spin[..n],
-            params: &self.params[..n * ps],
-            history: &mut self.history[..n * hs],
+            slot: &self.slot[..n],
+            strides: state.strides,
+            params: state.params,
+            history: state.history,
             force: &mut self.force[..n],
             moment: &mut self.moment[..n],
             dt,
         });
     }
 
-    /// Calls each law present on its contacts: one call on the chunk when it has a single law
-    /// using as many values per contact as the pair list holds; otherwise each law on its own
-    /// compacted subset, laid out with its own counts (the list's are the largest of all laws).
-    fn run_laws(&mut self, laws: &[Arc<dyn ContactLaw>], dt: f64, (ps, hs): (usize, usize)) {
+    /// Calls each law present on its contacts: one call on the chunk when it has a single law,
+    /// otherwise each law on its own compacted subset. Laws update their pairs' history in place.
+    fn run_laws(&mut self, laws: &[Arc<dyn ContactLaw>], dt: f64, mut state: PairState<'_>) {
         let n = self.len;
         if n == 0 {
             return;
         }
         let first = self.law[0];
-        let own_counts = |l: u16| {
-            let law = &laws[l as usize];
-            (law.param_count(), law.history_count())
-        };
-        if own_counts(first) == (ps, hs) && self.law[..n].iter().all(|&l| l == first) {
-            self.call(laws[first as usize].as_ref(), n, dt, (ps, hs));
+        if self.law[..n].iter().all(|&l| l == first) {
+            self.call(laws[first as usize].as_ref(), n, dt, &mut state);
             return;
         }
         // A second scratch buffer from the thread's pool: no allocation per chunk.
@@ -501,7 +499,6 @@ impl Scratch {
                 continue;
             }
             let l = self.law[k];
-            let (lp, lh) = own_counts(l);
             let mut count = 0;
             for m in (k..n).filter(|&m| self.law[m] == l) {
                 members[count] = m;
@@ -509,18 +506,16 @@ impl Scratch {
             }
             let members = &members[..count];
             for (s, &m) in members.iter().enumerate() {
+                sub.slot[s] = self.slot[m];
                 sub.normal[s] = self.normal[m];
                 sub.overlap[s] = self.overlap[m];
                 sub.rel_velocity[s] = self.rel_velocity[m];
                 sub.rel_spin[s] = self.rel_spin[m];
-                sub.params[s * lp..(s + 1) * lp].copy_from_slice(&self.params[m * ps..m * ps + lp]);
-                sub.history[s * lh..(s + 1) * lh].copy_from_slice(&self.history[m * hs..m * hs + lh]);
             }
-            sub.call(laws[l as usize].as_ref(), members.len(), dt, (lp, lh));
+            sub.call(laws[l as usize].as_ref(), members.len(), dt, &mut state);
             for (s, &m) in members.iter().enumerate() {
                 self.force[m] = sub.force[s];
                 self.moment[m] = sub.moment[s];
-                self.history[m * hs..m * hs + lh].copy_from_slice(&sub.history[s * lh..(s + 1) * lh]);
                 done[m] = true;
             }
         }
@@ -581,6 +576,10 @@ impl<'a> PairChunk<'a> {
 
     fn len(&self) -> usize {
         self.a.len()
+    }
+
+    fn state(&mut self) -> PairState<'_> {
+        PairState { params: self.params, history: self.history, strides: self.strides }
     }
 
     /// The first `mid` pairs and the rest.
@@ -660,20 +659,16 @@ impl<'a> PairChunk<'a> {
 /// Writes the law results of a chunk back to its pairs, with lever-arm torques; with `sums`
 /// (sequential stepping), also adds them to the spheres, in pair order as the parallel gather
 /// does. Wall pairs have no second sphere (`second` false).
-fn write_back<const HS: usize>(
-    c: &mut PairChunk<'_>,
-    s: &Scratch,
-    hs: Stride<HS>,
-    sums: &mut Option<Sums<'_>>,
-    second: bool,
-) {
+fn write_back(c: &mut PairChunk<'_>, s: &Scratch, sums: &mut Option<Sums<'_>>, second: bool) {
     for e in 0..s.len {
-        let k = s.pair[e] - c.first;
+        let k = s.slot[e] as usize;
         let (f, m) = (s.force[e], s.moment[e]);
         c.force[k] = f;
-        let torque_a = add(cross(s.arm_a[e], f), m);
-        // Whatever the contact moment, the torques on the two spheres add up to d x f.
-        let torque_b = || sub(cross(s.branch[e], f), torque_a);
+        // The force acts at la n from the first centre and -lb n from the second.
+        let [la, lb] = s.lever[e];
+        let nf = cross(s.normal[e], f);
+        let torque_a = [la * nf[0] + m[0], la * nf[1] + m[1], la * nf[2] + m[2]];
+        let torque_b = || [lb * nf[0] - m[0], lb * nf[1] - m[1], lb * nf[2] - m[2]];
         if !c.torque_a.is_empty() {
             c.torque_a[k] = torque_a;
             if second {
@@ -690,7 +685,6 @@ fn write_back<const HS: usize>(
                 sums.torque[j] = add(sums.torque[j], torque_b());
             }
         }
-        c.history[hs.of(k)].copy_from_slice(&s.history[hs.of(e)]);
     }
 }
 
@@ -710,16 +704,15 @@ fn open_contact<const HS: usize>(c: &mut PairChunk<'_>, k: usize, hs: Stride<HS>
 
 /// Sphere-sphere geometry (`sphere_sphere`) and contact forces; in a periodic cell the second
 /// sphere may be an image, whose velocity includes the affine field across the cell.
-fn sphere_contacts<const PS: usize, const HS: usize>(
+fn sphere_contacts<const HS: usize>(
     sp: &Motions<'_>,
     pairs: PairChunk<'_>,
     (laws, dt): (&[Arc<dyn ContactLaw>], f64),
-    (ps, hs): (Stride<PS>, Stride<HS>),
+    hs: Stride<HS>,
     scratch: &mut Scratch,
     sums: &mut Option<Sums<'_>>,
 ) {
     let cell = sp.cell;
-    let strides = (ps.get(), hs.get());
     let l = cell.map(|c| c.velocity_gradient);
     pairs.for_each_chunk(scratch, |c, s| {
         for k in 0..c.a.len() {
@@ -731,49 +724,53 @@ fn sphere_contacts<const PS: usize, const HS: usize>(
                 open_contact(c, k, hs);
                 continue;
             }
+            // 1/dist as dist/dist2: the root and the division run side by side, not one after
+            // the other.
+            let inv2 = 1.0 / dist2;
             let dist = dist2.sqrt();
-            let inv = 1.0 / dist;
+            let inv = dist * inv2;
             let n = [d[0] * inv, d[1] * inv, d[2] * inv];
             let overlap = reach - dist;
             let la = sp.radius[i] - 0.5 * overlap;
-            let arm_a = [n[0] * la, n[1] * la, n[2] * la];
-            let arm_b = sub(arm_a, d);
-            let va = add(sp.v[i], cross(sp.w[i], arm_a));
-            let mut vb = add(sp.v[j], cross(sp.w[j], arm_b));
+            // Contact point velocities v_a + w_a x (la n) and v_b + w_b x (-lb n), lb = dist - la:
+            // one cross product for both spins.
+            let lb = dist - la;
+            let spins = [
+                la * sp.w[i][0] + lb * sp.w[j][0],
+                la * sp.w[i][1] + lb * sp.w[j][1],
+                la * sp.w[i][2] + lb * sp.w[j][2],
+            ];
+            let mut rel_velocity = sub(sub(sp.v[j], sp.v[i]), cross(spins, n));
             if let Some(l) = &l {
                 // Affine part of the relative velocity: L (x_b + h n - x_a).
-                vb = add(vb, mat_vec(l, d));
+                rel_velocity = add(rel_velocity, mat_vec(l, d));
             }
             c.touching[k] = true;
             let e = s.len;
-            s.pair[e] = c.first + k;
+            s.slot[e] = k as u32;
             s.law[e] = c.law[k];
             s.normal[e] = n;
             s.overlap[e] = overlap;
-            s.rel_velocity[e] = sub(vb, va);
+            s.rel_velocity[e] = rel_velocity;
             s.rel_spin[e] = sub(sp.w[j], sp.w[i]);
-            s.arm_a[e] = arm_a;
-            s.branch[e] = d;
-            s.params[ps.of(e)].copy_from_slice(&c.params[ps.of(k)]);
-            s.history[hs.of(e)].copy_from_slice(&c.history[hs.of(k)]);
+            s.lever[e] = [la, lb];
             s.len += 1;
         }
-        s.run_laws(laws, dt, strides);
-        write_back(c, s, hs, sums, true);
+        s.run_laws(laws, dt, c.state());
+        write_back(c, s, sums, true);
     });
 }
 
 /// Sphere-wall geometry and contact forces (the wall is particle 2, infinitely heavy).
-fn wall_contacts<const PS: usize, const HS: usize>(
+fn wall_contacts<const HS: usize>(
     sp: &Motions<'_>,
     walls: &[Wall],
     pairs: PairChunk<'_>,
     (laws, dt): (&[Arc<dyn ContactLaw>], f64),
-    (ps, hs): (Stride<PS>, Stride<HS>),
+    hs: Stride<HS>,
     scratch: &mut Scratch,
     sums: &mut Option<Sums<'_>>,
 ) {
-    let strides = (ps.get(), hs.get());
     pairs.for_each_chunk(scratch, |c, s| {
         for k in 0..c.a.len() {
             let (i, w) = (c.a[k] as usize, c.b[k] as usize);
@@ -790,19 +787,17 @@ fn wall_contacts<const PS: usize, const HS: usize>(
             let va = add(sp.v[i], cross(sp.w[i], arm_a));
             c.touching[k] = true;
             let e = s.len;
-            s.pair[e] = c.first + k;
+            s.slot[e] = k as u32;
             s.law[e] = c.law[k];
             s.normal[e] = geo.normal;
             s.overlap[e] = overlap;
             s.rel_velocity[e] = sub(wall.velocity, va);
             s.rel_spin[e] = [-sp.w[i][0], -sp.w[i][1], -sp.w[i][2]];
-            s.arm_a[e] = arm_a;
-            s.params[ps.of(e)].copy_from_slice(&c.params[ps.of(k)]);
-            s.history[hs.of(e)].copy_from_slice(&c.history[hs.of(k)]);
+            s.lever[e] = [crate::math::dot3(arm_a, geo.normal), 0.0];
             s.len += 1;
         }
-        s.run_laws(laws, dt, strides);
-        write_back(c, s, hs, sums, false);
+        s.run_laws(laws, dt, c.state());
+        write_back(c, s, sums, false);
     });
 }
 

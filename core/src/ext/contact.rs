@@ -52,8 +52,10 @@ impl PairInfo {
     }
 }
 
-/// A batch of touching contacts. Every slice has one entry per contact, except `params` and
-/// `history`, which hold `param_count()` and `history_count()` values per contact.
+/// A batch of touching contacts. `normal` ... `moment` have one entry per contact; `params` and
+/// `history` are those of the pair list the contacts come from, `strides` values per pair, and
+/// `slot[e]` is the pair of contact `e` in them (increasing): a law reads and updates them in
+/// place, through [`ContactBatch::for_each`].
 pub struct ContactBatch<'a> {
     pub normal: &'a [Vec3],
     pub overlap: &'a [f64],
@@ -61,6 +63,10 @@ pub struct ContactBatch<'a> {
     pub rel_velocity: &'a [Vec3],
     /// Angular velocity of particle 2 minus that of particle 1.
     pub rel_spin: &'a [Vec3],
+    pub slot: &'a [u32],
+    /// Values per pair in `params` and `history`: at least the law's own counts (a pair list
+    /// shared by several laws is laid out for the largest).
+    pub strides: (usize, usize),
     pub params: &'a [f64],
     pub history: &'a mut [f64],
     /// Output: force on particle 1.
@@ -90,20 +96,28 @@ impl ContactBatch<'_> {
     }
 
     /// Runs `law` on every contact (a law with `P` parameters and `H` history values per contact)
-    /// and stores the force and extra moment on particle 1 it returns. Walking the arrays
-    /// together spares the per-contact index checks of a loop over indices.
+    /// and stores the force and extra moment on particle 1 it returns.
     #[inline(always)]
     pub fn for_each<const P: usize, const H: usize>(self, mut law: impl FnMut(Contact<'_, P, H>) -> (Vec3, Vec3)) {
-        let n = self.len();
-        assert!(self.params.len() == n * P && self.history.len() == n * H, "batch laid out for another law");
+        let (ps, hs) = self.strides;
+        assert!(P <= ps && H <= hs, "batch laid out for another law");
         let contacts = self.normal.iter().zip(self.overlap).zip(self.rel_velocity).zip(self.rel_spin);
-        let state = self.params.chunks_exact(P).zip(self.history.chunks_exact_mut(H));
         let out = self.force.iter_mut().zip(self.moment.iter_mut());
-        for (((((normal, overlap), rel_velocity), rel_spin), (params, history)), (force, moment)) in
-            contacts.zip(state).zip(out)
+        // The history after the last contact's pair: slots increase, so each contact splits its
+        // own values off the front of what is left.
+        let mut rest = self.history;
+        let mut rest_from = 0usize;
+        for ((((normal, overlap), rel_velocity), rel_spin), (&slot, (force, moment))) in
+            contacts.zip(self.slot.iter().zip(out))
         {
-            let (Ok(params), Ok(history)) = (params.try_into(), history.try_into()) else {
-                unreachable!("chunks of exactly P and H values")
+            let slot = slot as usize;
+            let skip = slot.checked_sub(rest_from).expect("contact slots increase") * hs;
+            let (own, tail) = std::mem::take(&mut rest)[skip..].split_at_mut(hs);
+            (rest, rest_from) = (tail, slot + 1);
+            let (Ok(params), Ok(history)) =
+                (self.params[slot * ps..slot * ps + P].try_into(), (&mut own[..H]).try_into())
+            else {
+                unreachable!("slices of exactly P and H values")
             };
             (*force, *moment) = law(Contact {
                 normal: *normal,
