@@ -83,6 +83,20 @@ impl PairList {
         }
     }
 
+    /// Gives back storage beyond the pairs held (rebuilds grow it by doubling).
+    pub fn shrink_to_fit(&mut self) {
+        self.a.shrink_to_fit();
+        self.b.shrink_to_fit();
+        self.shift.shrink_to_fit();
+        self.law.shrink_to_fit();
+        self.params.shrink_to_fit();
+        self.history.shrink_to_fit();
+        self.touching.shrink_to_fit();
+        self.force.shrink_to_fit();
+        self.torque_a.shrink_to_fit();
+        self.torque_b.shrink_to_fit();
+    }
+
     pub fn touching_count(&self) -> usize {
         self.touching.iter().filter(|t| **t).count()
     }

@@ -167,13 +167,16 @@ impl DemSim {
     }
 
     /// Steps on the calling thread only (an RVE inside a parallel loop over material points),
-    /// dropping what only the parallel force gather needs.
+    /// dropping what only the parallel force gather needs, and storage beyond what is held (an
+    /// RVE is copied to every material point).
     pub fn set_sequential(&mut self, on: bool) {
         self.sequential = on;
         self.pairs.keep_torques(!on, true);
         self.wall_pairs.keep_torques(!on, false);
         if on {
             self.spare_pairs = PairList::default();
+            self.pairs.shrink_to_fit();
+            self.wall_pairs.shrink_to_fit();
         }
         self.build_adjacency();
     }
@@ -195,7 +198,8 @@ impl DemSim {
     fn contacts<const HS: usize>(&mut self, hs: Stride<HS>) {
         let strides = (self.pairs.param_stride, hs.get());
         let Spheres { x, v, w, radius, force, torque, .. } = &mut self.spheres;
-        let sp = Motions { x, v, w, radius, cell: self.cell.as_ref() };
+        let rotation = self.laws.iter().any(|l| l.resists_rotation());
+        let sp = Motions { x, v, w, radius, cell: self.cell.as_ref(), rotation };
         let (walls, laws, dt) = (&self.walls, &self.laws[..], self.dt);
         if self.sequential {
             force.iter_mut().for_each(|f| *f = [0.0; 3]);
@@ -436,6 +440,8 @@ struct Scratch {
     force: [Vec3; CHUNK],
     moment: [Vec3; CHUNK],
     len: usize,
+    /// Whether relative spins and contact moments are computed (see `Motions::rotation`).
+    rotation: bool,
 }
 
 /// The per-pair parameters and history of a chunk, and values per pair.
@@ -458,6 +464,7 @@ impl Scratch {
             force: [[0.0; 3]; CHUNK],
             moment: [[0.0; 3]; CHUNK],
             len: 0,
+            rotation: true,
         })
     }
 
@@ -467,13 +474,13 @@ impl Scratch {
             normal: &self.normal[..n],
             overlap: &self.overlap[..n],
             rel_velocity: &self.rel_velocity[..n],
-            rel_spin: &self.rel_spin[..n],
+            rel_spin: &self.rel_spin[..if self.rotation { n } else { 0 }],
             slot: &self.slot[..n],
             strides: state.strides,
             params: state.params,
             history: state.history,
             force: &mut self.force[..n],
-            moment: &mut self.moment[..n],
+            moment: &mut self.moment[..if self.rotation { n } else { 0 }],
             dt,
         });
     }
@@ -492,6 +499,7 @@ impl Scratch {
         }
         // A second scratch buffer from the thread's pool: no allocation per chunk.
         let mut sub = ScratchGuard::take();
+        sub.rotation = self.rotation;
         let mut done = [false; CHUNK];
         let mut members = [0usize; CHUNK];
         for k in 0..n {
@@ -530,6 +538,8 @@ struct Motions<'a> {
     radius: &'a [f64],
     /// The periodic cell: images and the affine velocity field across it.
     cell: Option<&'a PeriodicCell>,
+    /// Whether some contact law resists relative rotation (else spins and moments are skipped).
+    rotation: bool,
 }
 
 /// Per-sphere force and torque sums, filled pair by pair by a sequential contact stage.
@@ -662,7 +672,7 @@ impl<'a> PairChunk<'a> {
 fn write_back(c: &mut PairChunk<'_>, s: &Scratch, sums: &mut Option<Sums<'_>>, second: bool) {
     for e in 0..s.len {
         let k = s.slot[e] as usize;
-        let (f, m) = (s.force[e], s.moment[e]);
+        let (f, m) = (s.force[e], if s.rotation { s.moment[e] } else { [0.0; 3] });
         c.force[k] = f;
         // The force acts at la n from the first centre and -lb n from the second.
         let [la, lb] = s.lever[e];
@@ -715,6 +725,7 @@ fn sphere_contacts<const HS: usize>(
     let cell = sp.cell;
     let l = cell.map(|c| c.velocity_gradient);
     pairs.for_each_chunk(scratch, |c, s| {
+        s.rotation = sp.rotation;
         for k in 0..c.a.len() {
             let (i, j) = (c.a[k] as usize, c.b[k] as usize);
             let d = branch(sp.x, i, j, c.shift[k], cell);
@@ -752,7 +763,9 @@ fn sphere_contacts<const HS: usize>(
             s.normal[e] = n;
             s.overlap[e] = overlap;
             s.rel_velocity[e] = rel_velocity;
-            s.rel_spin[e] = sub(sp.w[j], sp.w[i]);
+            if sp.rotation {
+                s.rel_spin[e] = sub(sp.w[j], sp.w[i]);
+            }
             s.lever[e] = [la, lb];
             s.len += 1;
         }
@@ -772,6 +785,7 @@ fn wall_contacts<const HS: usize>(
     sums: &mut Option<Sums<'_>>,
 ) {
     pairs.for_each_chunk(scratch, |c, s| {
+        s.rotation = sp.rotation;
         for k in 0..c.a.len() {
             let (i, w) = (c.a[k] as usize, c.b[k] as usize);
             let wall = &walls[w];
@@ -792,7 +806,9 @@ fn wall_contacts<const HS: usize>(
             s.normal[e] = geo.normal;
             s.overlap[e] = overlap;
             s.rel_velocity[e] = sub(wall.velocity, va);
-            s.rel_spin[e] = [-sp.w[i][0], -sp.w[i][1], -sp.w[i][2]];
+            if sp.rotation {
+                s.rel_spin[e] = [-sp.w[i][0], -sp.w[i][1], -sp.w[i][2]];
+            }
             s.lever[e] = [crate::math::dot3(arm_a, geo.normal), 0.0];
             s.len += 1;
         }

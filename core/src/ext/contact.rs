@@ -61,7 +61,8 @@ pub struct ContactBatch<'a> {
     pub overlap: &'a [f64],
     /// Velocity of particle 2 relative to particle 1 at the contact point.
     pub rel_velocity: &'a [Vec3],
-    /// Angular velocity of particle 2 minus that of particle 1.
+    /// Angular velocity of particle 2 minus that of particle 1; empty when no law of the
+    /// simulation resists rotation (see [`ContactLaw::resists_rotation`]), and then zero.
     pub rel_spin: &'a [Vec3],
     pub slot: &'a [u32],
     /// Values per pair in `params` and `history`: at least the law's own counts (a pair list
@@ -71,7 +72,8 @@ pub struct ContactBatch<'a> {
     pub history: &'a mut [f64],
     /// Output: force on particle 1.
     pub force: &'a mut [Vec3],
-    /// Output: extra moment on particle 1 (not the lever-arm torque of `force`).
+    /// Output: extra moment on particle 1 (not the lever-arm torque of `force`); empty, and the
+    /// law's moments dropped, when no law of the simulation resists rotation.
     pub moment: &'a mut [Vec3],
     pub dt: f64,
 }
@@ -101,16 +103,16 @@ impl ContactBatch<'_> {
     pub fn for_each<const P: usize, const H: usize>(self, mut law: impl FnMut(Contact<'_, P, H>) -> (Vec3, Vec3)) {
         let (ps, hs) = self.strides;
         assert!(P <= ps && H <= hs, "batch laid out for another law");
-        let contacts = self.normal.iter().zip(self.overlap).zip(self.rel_velocity).zip(self.rel_spin);
-        let out = self.force.iter_mut().zip(self.moment.iter_mut());
+        let n = self.len();
+        let (normal, rel_velocity, slots) = (&self.normal[..n], &self.rel_velocity[..n], &self.slot[..n]);
+        let (force, moment) = (&mut self.force[..n], self.moment);
+        let (spin, moments) = (!self.rel_spin.is_empty(), !moment.is_empty());
         // The history after the last contact's pair: slots increase, so each contact splits its
         // own values off the front of what is left.
         let mut rest = self.history;
         let mut rest_from = 0usize;
-        for ((((normal, overlap), rel_velocity), rel_spin), (&slot, (force, moment))) in
-            contacts.zip(self.slot.iter().zip(out))
-        {
-            let slot = slot as usize;
+        for e in 0..n {
+            let slot = slots[e] as usize;
             let skip = slot.checked_sub(rest_from).expect("contact slots increase") * hs;
             let (own, tail) = std::mem::take(&mut rest)[skip..].split_at_mut(hs);
             (rest, rest_from) = (tail, slot + 1);
@@ -119,14 +121,18 @@ impl ContactBatch<'_> {
             else {
                 unreachable!("slices of exactly P and H values")
             };
-            (*force, *moment) = law(Contact {
-                normal: *normal,
-                overlap: *overlap,
-                rel_velocity: *rel_velocity,
-                rel_spin: *rel_spin,
+            let (f, m) = law(Contact {
+                normal: normal[e],
+                overlap: self.overlap[e],
+                rel_velocity: rel_velocity[e],
+                rel_spin: if spin { self.rel_spin[e] } else { [0.0; 3] },
                 params,
                 history,
             });
+            force[e] = f;
+            if moments {
+                moment[e] = m;
+            }
         }
     }
 }
@@ -142,6 +148,11 @@ pub trait ContactLaw: Send + Sync {
     fn init_pair(&self, info: &PairInfo, params: &mut [f64]);
     /// Forces of a batch of touching contacts.
     fn compute(&self, batch: ContactBatch<'_>);
+    /// Whether the law reads relative spins or returns moments (rolling/twisting resistance).
+    /// When no law of a simulation does, the engine computes neither.
+    fn resists_rotation(&self) -> bool {
+        true
+    }
     /// Largest normal stiffness a pair can get (for the critical time step), given its info.
     fn max_normal_stiffness(&self, info: &PairInfo) -> f64;
     /// Normal stiffness of a pair from its parameters (NaN when the law has none).

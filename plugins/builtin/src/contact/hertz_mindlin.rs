@@ -100,6 +100,9 @@ impl ContactLaw for HertzMindlin {
         let r = effective_radius(info);
         2.0 * self.e_star * r * REFERENCE_OVERLAP.sqrt()
     }
+    fn resists_rotation(&self) -> bool {
+        false
+    }
     fn compute(&self, b: ContactBatch<'_>) {
         let dt = b.dt;
         b.for_each(|c: Contact<'_, 4, 3>| {

@@ -125,6 +125,9 @@ impl ContactLaw for Linear {
     fn max_normal_stiffness(&self, info: &PairInfo) -> f64 {
         self.springs.of(info).0
     }
+    fn resists_rotation(&self) -> bool {
+        false
+    }
     fn compute(&self, b: ContactBatch<'_>) {
         let dt = b.dt;
         b.for_each(|c: Contact<'_, 3, 3>| {
