@@ -148,17 +148,7 @@ fn pure_dem_path(rve: &DemSim, increments: &[[f64; 6]], inertial: f64) -> Vec<(f
     let mut out = Vec::new();
     let mut axial = 0.0;
     for de in increments {
-        let strain = nalgebra::Matrix3::new(
-            de[0],
-            0.5 * de[3],
-            0.5 * de[5],
-            0.5 * de[3],
-            de[1],
-            0.5 * de[4],
-            0.5 * de[5],
-            0.5 * de[4],
-            de[2],
-        );
+        let strain = granite_core::math::strain_matrix(de);
         let max = nalgebra::SymmetricEigen::new(strain).eigenvalues.amax();
         let cell = dem.cell.as_ref().unwrap();
         let st = dem.love_weber_stress(cell.volume());

@@ -28,6 +28,19 @@ pub struct DemDiagnostics {
     pub max_height: f64,
 }
 
+/// Contacts and coordination of a DEM state (thesis eq. 5.14).
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Coordination {
+    /// Touching sphere-sphere contacts.
+    pub contacts: usize,
+    /// 2 contacts / particles, every particle counted.
+    pub coordination: f64,
+    /// Eq. 5.14: without rattlers (one contact) and floaters (none).
+    pub coordination_no_rattlers: f64,
+    pub rattlers: usize,
+    pub floaters: usize,
+}
+
 impl DemSim {
     /// Overlap of pair `k` of `list` in the current positions (zero when apart).
     fn overlap_of(&self, list: &PairList, k: usize, wall: bool) -> f64 {
@@ -138,17 +151,30 @@ impl DemSim {
         } else {
             f64::NAN
         };
+        let c = self.coordination();
+        (d.coordination, d.coordination_no_rattlers, d.rattlers, d.floaters) =
+            (c.coordination, c.coordination_no_rattlers, c.rattlers, c.floaters);
+        d
+    }
+
+    /// Contact counts and coordination numbers alone (what an RVE reports after every call),
+    /// without the energies and forces of [`DemSim::diagnostics`].
+    pub fn coordination(&self) -> Coordination {
+        let n = self.spheres.len();
         let counts = self.contact_counts();
-        d.rattlers = counts.iter().filter(|&&c| c == 1).count();
-        d.floaters = counts.iter().filter(|&&c| c == 0).count();
-        let total_contacts = d.contacts + d.wall_contacts;
-        d.coordination = if n > 0 { 2.0 * d.contacts as f64 / n as f64 } else { 0.0 };
+        let contacts = self.pairs.touching_count();
+        let rattlers = counts.iter().filter(|&&c| c == 1).count();
+        let floaters = counts.iter().filter(|&&c| c == 0).count();
         // Eq. 5.14 with N_contacts counted per particle end: each contact has two ends.
         let ends: u64 = counts.iter().map(|&c| c as u64).sum();
-        let kept = n.saturating_sub(d.rattlers + d.floaters);
-        d.coordination_no_rattlers = if kept > 0 { (ends - d.rattlers as u64) as f64 / kept as f64 } else { 0.0 };
-        let _ = total_contacts;
-        d
+        let kept = n.saturating_sub(rattlers + floaters);
+        Coordination {
+            contacts,
+            coordination: if n > 0 { 2.0 * contacts as f64 / n as f64 } else { 0.0 },
+            coordination_no_rattlers: if kept > 0 { (ends - rattlers as u64) as f64 / kept as f64 } else { 0.0 },
+            rattlers,
+            floaters,
+        }
     }
 
     /// Love-Weber stress of the sphere-sphere contacts over a volume (eq. 4.7):

@@ -31,6 +31,9 @@ pub const SPECS: &[ParamSpec] = &[
 /// What one point's RVE carries between calls.
 struct Rve {
     sim: DemSim,
+    /// Love-Weber stress of `sim` as the last call left it: the next call's P (eq. 4.3) without
+    /// a second pass over the contacts. None until computed (a new or reloaded RVE).
+    stress: Option<Voigt>,
 }
 
 pub struct DemRve {
@@ -84,7 +87,7 @@ impl ConstitutiveLawFactory for DemRveFactory {
             for v in rves {
                 let mut sim = DemSim::from_json(v, registry)?;
                 sim.set_sequential(true);
-                store.push(Mutex::new(Rve { sim }));
+                store.push(Mutex::new(Rve { sim, stress: None }));
             }
         }
         Ok(Box::new(law))
@@ -232,7 +235,7 @@ impl ConstitutiveLaw for DemRve {
     fn points_added(&self, count: usize) -> Result<()> {
         let mut rves = self.rves.write().map_err(|_| GraniteError::Other("RVE store poisoned".into()))?;
         for _ in 0..count {
-            rves.push(Mutex::new(Rve { sim: self.template.clone() }));
+            rves.push(Mutex::new(Rve { sim: self.template.clone(), stress: None }));
         }
         Ok(())
     }
@@ -296,22 +299,14 @@ impl ConstitutiveLaw for DemRve {
                 .ok_or_else(|| GraniteError::Other(format!("no RVE for material point {index}")))?
                 .lock()
                 .map_err(|_| GraniteError::Other(format!("RVE {index} poisoned")))?;
-            let sim = &mut rve.sim;
+            let Rve { sim, stress: last_stress } = &mut *rve;
             let de = batch.dstrain[k];
-            let e = Matrix3::new(
-                de[0],
-                0.5 * de[3],
-                0.5 * de[5],
-                0.5 * de[3],
-                de[1],
-                0.5 * de[4],
-                0.5 * de[5],
-                0.5 * de[4],
-                de[2],
-            );
+            let e = granite_core::math::strain_matrix(&de);
             let max_strain = SymmetricEigen::new(e).eigenvalues.amax();
-            let volume = sim.cell_volume().unwrap_or(1.0);
-            let before = sim.love_weber_stress(volume);
+            let before = match *last_stress {
+                Some(stress) => stress,
+                None => sim.love_weber_stress(sim.cell_volume().unwrap_or(1.0)),
+            };
             let p = ((before[0] + before[1] + before[2]).abs() / 3.0).max(self.p_min(sim));
             let dt = sim.dt;
             let plan = self.plan(max_strain, p, dt);
@@ -326,6 +321,7 @@ impl ConstitutiveLaw for DemRve {
             if let Some(cell) = sim.cell.as_mut() {
                 cell.velocity_gradient = if max_strain > 0.0 { e / plan.duration } else { Matrix3::zeros() };
             }
+            *last_stress = None;
             for _ in 0..plan.full_steps {
                 sim.step()?;
             }
@@ -340,7 +336,8 @@ impl ConstitutiveLaw for DemRve {
             }
             let volume = sim.cell_volume().unwrap_or(1.0);
             let stress: Voigt = sim.love_weber_stress(volume);
-            let d = sim.diagnostics();
+            *last_stress = Some(stress);
+            let d = sim.coordination();
             let no_contacts = d.contacts == 0;
             batch.stress[k] = if no_contacts { [0.0; 6] } else { stress };
             let (mean, q) = granite_core::math::p_q(&batch.stress[k]);
