@@ -19,6 +19,7 @@ pub mod params;
 pub mod plugin;
 pub mod registry;
 pub mod script;
+pub mod simd;
 
 pub use error::{GraniteError, Result};
 pub use registry::{Plugin, Registry};

@@ -24,28 +24,6 @@ const MIN_SPHERES_TO_ORDER: usize = 1024;
 pub const MAX_PARAMS: usize = 16;
 pub const MAX_HISTORY: usize = 16;
 
-/// Values per contact in a pair list: `N` when fixed at compile time (N > 0), else the field.
-#[derive(Clone, Copy)]
-struct Stride<const N: usize>(usize);
-
-impl<const N: usize> Stride<N> {
-    #[inline(always)]
-    fn get(self) -> usize {
-        if N > 0 {
-            N
-        } else {
-            self.0
-        }
-    }
-
-    /// The values of contact `k`.
-    #[inline(always)]
-    fn of(self, k: usize) -> std::ops::Range<usize> {
-        let n = self.get();
-        k * n..k * n + n
-    }
-}
-
 #[inline(always)]
 fn cross(a: Vec3, b: Vec3) -> Vec3 {
     [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
@@ -82,12 +60,7 @@ impl DemSim {
         }
         self.pairs.keep_torques(!self.sequential, true);
         self.wall_pairs.keep_torques(!self.sequential, false);
-        // The usual laws' history counts are compile-time constants in the contact loops.
-        match (self.pairs.param_stride, self.pairs.history_stride) {
-            (_, 3) => self.contacts(Stride::<3>(3)),
-            (_, 7) => self.contacts(Stride::<7>(7)),
-            (_, hs) => self.contacts(Stride::<0>(hs)),
-        }
+        self.contacts();
         if !self.sequential && self.adjacency.start.len() != self.spheres.len() + 1 {
             // Left unbuilt while the simulation ran sequentially (an RVE).
             self.build_adjacency();
@@ -106,7 +79,7 @@ impl DemSim {
         };
         let motion = Motion { gravity: self.gravity, damping: self.damping, dt: self.dt, affine };
         let mut moved = if self.sequential {
-            integrate(&mut self.spheres, &self.x_at_build, &motion)
+            integrate_wide((&mut self.spheres, &self.x_at_build, &motion))
         } else {
             let lists = (&self.pairs, &self.adjacency, &self.wall_pairs, &self.wall_adjacency);
             gather_and_integrate(&mut self.spheres, lists, &self.x_at_build, &motion)
@@ -195,8 +168,8 @@ impl DemSim {
     /// Sphere-sphere and sphere-wall contact forces of this step. In parallel, both lists are cut
     /// into the same number of pieces, so one stage does them all; sequentially (an RVE), each
     /// contact also adds its force and torques to its spheres as soon as it is computed.
-    fn contacts<const HS: usize>(&mut self, hs: Stride<HS>) {
-        let strides = (self.pairs.param_stride, hs.get());
+    fn contacts(&mut self) {
+        let strides = (self.pairs.param_stride, self.pairs.history_stride);
         let Spheres { x, v, w, radius, force, torque, .. } = &mut self.spheres;
         let rotation = self.laws.iter().any(|l| l.resists_rotation());
         let sp = Motions { x, v, w, radius, cell: self.cell.as_ref(), rotation };
@@ -204,12 +177,17 @@ impl DemSim {
         if self.sequential {
             force.iter_mut().for_each(|f| *f = [0.0; 3]);
             torque.iter_mut().for_each(|t| *t = [0.0; 3]);
-            let mut sums = Some(Sums { force, torque });
             let mut scratch = ScratchGuard::take();
-            let sphere_pairs = PairChunk::whole(&mut self.pairs, strides);
-            sphere_contacts(&sp, sphere_pairs, (laws, dt), hs, &mut scratch, &mut sums);
-            let wall_pairs = PairChunk::whole(&mut self.wall_pairs, strides);
-            wall_contacts(&sp, walls, wall_pairs, (laws, dt), hs, &mut scratch, &mut sums);
+            contact_job_wide(ContactJob {
+                sp: &sp,
+                walls,
+                sphere_pairs: PairChunk::whole(&mut self.pairs, strides),
+                wall_pairs: PairChunk::whole(&mut self.wall_pairs, strides),
+                laws,
+                dt,
+                scratch: &mut scratch,
+                sums: Some(Sums { force, torque }),
+            });
             return;
         }
         // Pieces follow the spheres' pieces of the force gather (pairs are sorted by their first
@@ -226,8 +204,8 @@ impl DemSim {
             .collect();
         crate::par::run_pieces(pieces, |(sphere_pairs, wall_pairs)| {
             let mut scratch = ScratchGuard::take();
-            sphere_contacts(&sp, sphere_pairs, (laws, dt), hs, &mut scratch, &mut None);
-            wall_contacts(&sp, walls, wall_pairs, (laws, dt), hs, &mut scratch, &mut None);
+            let scratch = &mut *scratch;
+            contact_job_wide(ContactJob { sp: &sp, walls, sphere_pairs, wall_pairs, laws, dt, scratch, sums: None });
         });
     }
 
@@ -653,19 +631,21 @@ impl<'a> PairChunk<'a> {
         out
     }
 
-    /// Calls `body` on consecutive runs of at most `CHUNK` pairs, with the scratch emptied.
-    fn for_each_chunk(self, scratch: &mut Scratch, mut body: impl FnMut(&mut PairChunk<'_>, &mut Scratch)) {
-        let mut rest = self;
-        while rest.len() > 0 {
-            let mid = CHUNK.min(rest.len());
-            let (mut head, tail) = rest.split_at(mid);
-            scratch.len = 0;
-            body(&mut head, scratch);
-            rest = tail;
+    /// Takes the next run of at most `CHUNK` pairs off the front of `rest` (None when empty).
+    #[inline(always)]
+    fn next_chunk(rest: &mut Option<PairChunk<'a>>) -> Option<PairChunk<'a>> {
+        let all = rest.take()?;
+        if all.len() == 0 {
+            return None;
         }
+        let mid = CHUNK.min(all.len());
+        let (head, tail) = all.split_at(mid);
+        *rest = Some(tail);
+        Some(head)
     }
 }
 
+#[inline(always)]
 /// Writes the law results of a chunk back to its pairs, with lever-arm torques; with `sums`
 /// (sequential stepping), also adds them to the spheres, in pair order as the parallel gather
 /// does. Wall pairs have no second sphere (`second` false).
@@ -699,7 +679,8 @@ fn write_back(c: &mut PairChunk<'_>, s: &Scratch, sums: &mut Option<Sums<'_>>, s
 }
 
 /// Marks a pair apart.
-fn open_contact<const HS: usize>(c: &mut PairChunk<'_>, k: usize, hs: Stride<HS>) {
+#[inline(always)]
+fn open_contact(c: &mut PairChunk<'_>, k: usize) {
     // Pairs that were already apart are clean: skip the writes (most candidates, most steps).
     if !c.touching[k] {
         return;
@@ -709,22 +690,49 @@ fn open_contact<const HS: usize>(c: &mut PairChunk<'_>, k: usize, hs: Stride<HS>
     if let Some(t) = c.torque_a.get_mut(k) {
         *t = [0.0; 3];
     }
-    c.history[hs.of(k)].iter_mut().for_each(|h| *h = 0.0);
+    let hs = c.strides.1;
+    c.history[k * hs..(k + 1) * hs].iter_mut().for_each(|h| *h = 0.0);
 }
+
+/// The contact stage on a run of pairs: all of them (sequential stepping, forces summed into
+/// `sums` as they come), or one parallel piece.
+struct ContactJob<'j> {
+    sp: &'j Motions<'j>,
+    walls: &'j [Wall],
+    sphere_pairs: PairChunk<'j>,
+    wall_pairs: PairChunk<'j>,
+    laws: &'j [Arc<dyn ContactLaw>],
+    dt: f64,
+    scratch: &'j mut Scratch,
+    sums: Option<Sums<'j>>,
+}
+
+#[inline(always)]
+fn contact_job(job: ContactJob<'_>) {
+    let ContactJob { sp, walls, sphere_pairs, wall_pairs, laws, dt, scratch, mut sums } = job;
+    sphere_contacts(sp, sphere_pairs, (laws, dt), scratch, &mut sums);
+    wall_contacts(sp, walls, wall_pairs, (laws, dt), scratch, &mut sums);
+}
+
+crate::wide_kernel!(fn contact_job_wide(job: ContactJob<'_>) => contact_job);
 
 /// Sphere-sphere geometry (`sphere_sphere`) and contact forces; in a periodic cell the second
 /// sphere may be an image, whose velocity includes the affine field across the cell.
-fn sphere_contacts<const HS: usize>(
+#[inline(always)]
+fn sphere_contacts(
     sp: &Motions<'_>,
     pairs: PairChunk<'_>,
     (laws, dt): (&[Arc<dyn ContactLaw>], f64),
-    hs: Stride<HS>,
     scratch: &mut Scratch,
     sums: &mut Option<Sums<'_>>,
 ) {
     let cell = sp.cell;
     let l = cell.map(|c| c.velocity_gradient);
-    pairs.for_each_chunk(scratch, |c, s| {
+    // Plain loops, no closures: all of this must inline into `simd::wide`'s caller.
+    let mut rest = Some(pairs);
+    while let Some(mut chunk) = PairChunk::next_chunk(&mut rest) {
+        let (c, s) = (&mut chunk, &mut *scratch);
+        s.len = 0;
         s.rotation = sp.rotation;
         for k in 0..c.a.len() {
             let (i, j) = (c.a[k] as usize, c.b[k] as usize);
@@ -732,7 +740,7 @@ fn sphere_contacts<const HS: usize>(
             let reach = sp.radius[i] + sp.radius[j];
             let dist2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
             if dist2 >= reach * reach {
-                open_contact(c, k, hs);
+                open_contact(c, k);
                 continue;
             }
             // 1/dist as dist/dist2: the root and the division run side by side, not one after
@@ -771,20 +779,24 @@ fn sphere_contacts<const HS: usize>(
         }
         s.run_laws(laws, dt, c.state());
         write_back(c, s, sums, true);
-    });
+    }
 }
 
 /// Sphere-wall geometry and contact forces (the wall is particle 2, infinitely heavy).
-fn wall_contacts<const HS: usize>(
+#[inline(always)]
+fn wall_contacts(
     sp: &Motions<'_>,
     walls: &[Wall],
     pairs: PairChunk<'_>,
     (laws, dt): (&[Arc<dyn ContactLaw>], f64),
-    hs: Stride<HS>,
     scratch: &mut Scratch,
     sums: &mut Option<Sums<'_>>,
 ) {
-    pairs.for_each_chunk(scratch, |c, s| {
+    // Plain loops, no closures: all of this must inline into `simd::wide`'s caller.
+    let mut rest = Some(pairs);
+    while let Some(mut chunk) = PairChunk::next_chunk(&mut rest) {
+        let (c, s) = (&mut chunk, &mut *scratch);
+        s.len = 0;
         s.rotation = sp.rotation;
         for k in 0..c.a.len() {
             let (i, w) = (c.a[k] as usize, c.b[k] as usize);
@@ -792,7 +804,7 @@ fn wall_contacts<const HS: usize>(
             let geo = match wall.contact(sp.x[i], sp.radius[i], 0.0) {
                 Some(g) if g.gap < 0.0 => g,
                 _ => {
-                    open_contact(c, k, hs);
+                    open_contact(c, k);
                     continue;
                 }
             };
@@ -814,7 +826,7 @@ fn wall_contacts<const HS: usize>(
         }
         s.run_laws(laws, dt, c.state());
         write_back(c, s, sums, false);
-    });
+    }
 }
 
 /// Branch vector from sphere `i` to sphere `j` (or its periodic image `shift`).
@@ -855,47 +867,88 @@ fn gather_and_integrate(
         .zip(force.chunks_mut(per).zip(torque.chunks_mut(per)))
         .enumerate()
         .collect();
+    let (mass, inertia, blocked, clump) = (&mass[..], &inertia[..], &blocked[..], &clump[..]);
     let travel = crate::par::run_pieces(pieces, |(part, (((x, v), w), (force, torque)))| {
-        let first = part * per;
-        let mut travel = Travel::default();
-        for k in 0..x.len() {
-            let i = first + k;
-            let mut fs = [0.0; 3];
-            let mut ts = [0.0; 3];
-            for &e in adj.of(i) {
-                let p = (e >> 1) as usize;
-                if !pairs.touching[p] {
-                    continue;
-                }
-                if e & 1 == 0 {
-                    fs = add(fs, pairs.force[p]);
-                    ts = add(ts, pairs.torque_a[p]);
-                } else {
-                    fs = sub(fs, pairs.force[p]);
-                    ts = add(ts, pairs.torque_b[p]);
-                }
-            }
-            for &e in wall_adj.of(i) {
-                let p = (e >> 1) as usize;
-                if walls.touching[p] {
-                    fs = add(fs, walls.force[p]);
-                    ts = add(ts, walls.torque_a[p]);
-                }
-            }
-            force[k] = fs;
-            torque[k] = ts;
-            motion.advance(
-                (&mut x[k], &mut v[k], &mut w[k]),
-                (mass[i], inertia[i], blocked[i], clump[i]),
-                (&fs, &ts),
-                &x_at_build[i],
-                &mut travel,
-            );
-        }
-        travel
+        let moving = PieceState { x, v, w, force, torque };
+        let fixed = SphereConstants { mass, inertia, blocked, clump, x_at_build };
+        gather_piece_wide(GatherJob { first: part * per, moving, fixed, lists: (pairs, adj, walls, wall_adj), motion })
     });
     travel.into_iter().fold(Travel::default(), Travel::merge).largest()
 }
+
+/// One parallel piece of the force gather with the integration: consecutive spheres from
+/// `first`, their state (`moving`), what stays fixed over the step and the pair lists.
+struct GatherJob<'j> {
+    first: usize,
+    moving: PieceState<'j>,
+    fixed: SphereConstants<'j>,
+    lists: (&'j PairList, &'j Adjacency, &'j PairList, &'j Adjacency),
+    motion: &'j Motion,
+}
+
+/// The state a piece's spheres change in a step (their run of each array).
+struct PieceState<'j> {
+    x: &'j mut [Vec3],
+    v: &'j mut [Vec3],
+    w: &'j mut [Vec3],
+    force: &'j mut [Vec3],
+    torque: &'j mut [Vec3],
+}
+
+/// What a step reads of every sphere and leaves as it is.
+struct SphereConstants<'j> {
+    mass: &'j [f64],
+    inertia: &'j [f64],
+    blocked: &'j [u8],
+    clump: &'j [u32],
+    x_at_build: &'j [Vec3],
+}
+
+#[inline(always)]
+fn gather_piece(job: GatherJob<'_>) -> Travel {
+    let GatherJob { first, moving, fixed, lists, motion } = job;
+    let PieceState { x, v, w, force, torque } = moving;
+    let SphereConstants { mass, inertia, blocked, clump, x_at_build } = fixed;
+    let (pairs, adj, walls, wall_adj) = lists;
+    let mut travel = Travel::default();
+    for k in 0..x.len() {
+        let i = first + k;
+        let mut fs = [0.0; 3];
+        let mut ts = [0.0; 3];
+        for &e in adj.of(i) {
+            let p = (e >> 1) as usize;
+            if !pairs.touching[p] {
+                continue;
+            }
+            if e & 1 == 0 {
+                fs = add(fs, pairs.force[p]);
+                ts = add(ts, pairs.torque_a[p]);
+            } else {
+                fs = sub(fs, pairs.force[p]);
+                ts = add(ts, pairs.torque_b[p]);
+            }
+        }
+        for &e in wall_adj.of(i) {
+            let p = (e >> 1) as usize;
+            if walls.touching[p] {
+                fs = add(fs, walls.force[p]);
+                ts = add(ts, walls.torque_a[p]);
+            }
+        }
+        force[k] = fs;
+        torque[k] = ts;
+        motion.advance(
+            (&mut x[k], &mut v[k], &mut w[k]),
+            (mass[i], inertia[i], blocked[i], clump[i]),
+            (&fs, &ts),
+            &x_at_build[i],
+            &mut travel,
+        );
+    }
+    travel
+}
+
+crate::wide_kernel!(fn gather_piece_wide(job: GatherJob<'_>) -> Travel => gather_piece);
 
 /// Force on each wall: the opposite of what it exerts on the spheres, summed in pair order.
 fn wall_forces(walls: &mut [Wall], pairs: &PairList) {
@@ -912,7 +965,8 @@ fn wall_forces(walls: &mut [Wall], pairs: &PairList) {
 /// cell (`affine` = `(L, F)`) velocities are fluctuations and positions also follow the affine
 /// field `L x`. Returns the largest displacement since the candidate lists were built, not
 /// counting the affine part `F x_build` (NaN if a sphere's state stopped being finite).
-fn integrate(sp: &mut Spheres, x_at_build: &[Vec3], motion: &Motion) -> f64 {
+#[inline(always)]
+fn integrate((sp, x_at_build, motion): (&mut Spheres, &[Vec3], &Motion)) -> f64 {
     let Spheres { x, v, w, mass, inertia, force, torque, blocked, clump, .. } = sp;
     let n = x.len();
     let (v, w, mass, inertia, force, torque) =
@@ -930,6 +984,8 @@ fn integrate(sp: &mut Spheres, x_at_build: &[Vec3], motion: &Motion) -> f64 {
     }
     travel.largest()
 }
+
+crate::wide_kernel!(fn integrate_wide(job: (&mut Spheres, &[Vec3], &Motion)) -> f64 => integrate);
 
 /// What moves every free sphere in one step.
 struct Motion {

@@ -87,6 +87,8 @@ pub struct Contact<'b, const P: usize, const H: usize> {
     pub rel_spin: Vec3,
     pub params: &'b [f64; P],
     pub history: &'b mut [f64; H],
+    /// The time step.
+    pub dt: f64,
 }
 
 impl ContactBatch<'_> {
@@ -98,9 +100,12 @@ impl ContactBatch<'_> {
     }
 
     /// Runs `law` on every contact (a law with `P` parameters and `H` history values per contact)
-    /// and stores the force and extra moment on particle 1 it returns.
+    /// and stores the force and extra moment on particle 1 it returns. `law.contact` should be
+    /// `#[inline(always)]`: it is then inlined into this loop for certain, also where the loop is
+    /// compiled for AVX2 (`granite_core::wide_kernel!`), where a closure could stay a separate,
+    /// plainly compiled function called per contact.
     #[inline(always)]
-    pub fn for_each<const P: usize, const H: usize>(self, mut law: impl FnMut(Contact<'_, P, H>) -> (Vec3, Vec3)) {
+    pub fn for_each<const P: usize, const H: usize, L: ContactPhysics<P, H>>(self, law: &mut L) {
         let (ps, hs) = self.strides;
         assert!(P <= ps && H <= hs, "batch laid out for another law");
         let n = self.len();
@@ -121,13 +126,14 @@ impl ContactBatch<'_> {
             else {
                 unreachable!("slices of exactly P and H values")
             };
-            let (f, m) = law(Contact {
+            let (f, m) = law.contact(Contact {
                 normal: normal[e],
                 overlap: self.overlap[e],
                 rel_velocity: rel_velocity[e],
                 rel_spin: if spin { self.rel_spin[e] } else { [0.0; 3] },
                 params,
                 history,
+                dt: self.dt,
             });
             force[e] = f;
             if moments {
@@ -135,6 +141,11 @@ impl ContactBatch<'_> {
             }
         }
     }
+}
+
+/// The physics of one contact: force and extra moment on particle 1 (see [`ContactBatch`]).
+pub trait ContactPhysics<const P: usize, const H: usize> {
+    fn contact(&mut self, c: Contact<'_, P, H>) -> (Vec3, Vec3);
 }
 
 pub trait ContactLaw: Send + Sync {

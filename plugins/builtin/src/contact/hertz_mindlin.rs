@@ -12,8 +12,9 @@
 
 use super::tangential::{dot, rotate_into_plane};
 use super::Ranged;
-use granite_core::ext::contact::Contact;
+use granite_core::ext::contact::{Contact, ContactPhysics};
 use granite_core::ext::{ContactBatch, ContactLaw, ContactLawFactory, PairInfo};
+use granite_core::math::Vec3;
 use granite_core::params::{ParamSpec, Params};
 use granite_core::Result;
 
@@ -104,29 +105,7 @@ impl ContactLaw for HertzMindlin {
         false
     }
     fn compute(&self, b: ContactBatch<'_>) {
-        let dt = b.dt;
-        b.for_each(|c: Contact<'_, 4, 3>| {
-            let [e_star, g_star, r_star, mu] = *c.params;
-            let (n, overlap) = (c.normal, c.overlap);
-            let a = (r_star * overlap).sqrt();
-            let fn_ = 4.0 / 3.0 * e_star * a * overlap;
-            let kt = 8.0 * g_star * a;
-            // Incremental tangential force: the stiffness changes with the overlap, so the force
-            // (not a displacement) is what carries over between steps.
-            let f_old = rotate_into_plane(*c.history, n);
-            let v = c.rel_velocity;
-            let vn = dot(v, n);
-            let vt = [v[0] - vn * n[0], v[1] - vn * n[1], v[2] - vn * n[2]];
-            let mut ft = [f_old[0] + kt * vt[0] * dt, f_old[1] + kt * vt[1] * dt, f_old[2] + kt * vt[2] * dt];
-            let limit = mu * fn_;
-            let norm = dot(ft, ft).sqrt();
-            if norm > limit {
-                let scale = if norm > 0.0 { limit / norm } else { 0.0 };
-                ft = [ft[0] * scale, ft[1] * scale, ft[2] * scale];
-            }
-            *c.history = ft;
-            ([ft[0] - fn_ * n[0], ft[1] - fn_ * n[1], ft[2] - fn_ * n[2]], [0.0; 3])
-        });
+        batch_wide(b);
     }
     fn normal_stiffness(&self, params: &[f64]) -> f64 {
         2.0 * params[0] * params[2] * REFERENCE_OVERLAP.sqrt()
@@ -138,5 +117,44 @@ impl ContactLaw for HertzMindlin {
         let kt = 8.0 * g_star * a;
         let ft2 = h[0] * h[0] + h[1] * h[1] + h[2] * h[2];
         normal + if kt > 0.0 { 0.5 * ft2 / kt } else { 0.0 }
+    }
+}
+
+// The batch loop compiled for AVX2 where the CPU has it (see granite_core::simd).
+granite_core::wide_kernel!(fn batch_wide(b: ContactBatch<'_>) => batch);
+
+/// The law on every contact of a batch.
+#[inline(always)]
+fn batch(b: ContactBatch<'_>) {
+    b.for_each(&mut Physics);
+}
+
+/// Hertz-Mindlin on one contact.
+struct Physics;
+
+impl ContactPhysics<4, 3> for Physics {
+    #[inline(always)]
+    fn contact(&mut self, c: Contact<'_, 4, 3>) -> (Vec3, Vec3) {
+        let dt = c.dt;
+        let [e_star, g_star, r_star, mu] = *c.params;
+        let (n, overlap) = (c.normal, c.overlap);
+        let a = (r_star * overlap).sqrt();
+        let fn_ = 4.0 / 3.0 * e_star * a * overlap;
+        let kt = 8.0 * g_star * a;
+        // Incremental tangential force: the stiffness changes with the overlap, so the force
+        // (not a displacement) is what carries over between steps.
+        let f_old = rotate_into_plane(*c.history, n);
+        let v = c.rel_velocity;
+        let vn = dot(v, n);
+        let vt = [v[0] - vn * n[0], v[1] - vn * n[1], v[2] - vn * n[2]];
+        let mut ft = [f_old[0] + kt * vt[0] * dt, f_old[1] + kt * vt[1] * dt, f_old[2] + kt * vt[2] * dt];
+        let limit = mu * fn_;
+        let norm = dot(ft, ft).sqrt();
+        if norm > limit {
+            let scale = if norm > 0.0 { limit / norm } else { 0.0 };
+            ft = [ft[0] * scale, ft[1] * scale, ft[2] * scale];
+        }
+        *c.history = ft;
+        ([ft[0] - fn_ * n[0], ft[1] - fn_ * n[1], ft[2] - fn_ * n[2]], [0.0; 3])
     }
 }

@@ -5,8 +5,9 @@
 
 use super::tangential::{dot, spring_slider};
 use super::Ranged;
-use granite_core::ext::contact::Contact;
+use granite_core::ext::contact::{Contact, ContactPhysics};
 use granite_core::ext::{ContactBatch, ContactLaw, ContactLawFactory, PairInfo};
+use granite_core::math::Vec3;
 use granite_core::params::{ParamSpec, Params};
 use granite_core::{GraniteError, Result};
 
@@ -129,14 +130,7 @@ impl ContactLaw for Linear {
         false
     }
     fn compute(&self, b: ContactBatch<'_>) {
-        let dt = b.dt;
-        b.for_each(|c: Contact<'_, 3, 3>| {
-            let [kn, kt, mu] = *c.params;
-            let n = c.normal;
-            let fn_ = kn * c.overlap;
-            let ft = spring_slider(c.history, n, c.rel_velocity, dt, kt, mu, fn_);
-            ([ft[0] - fn_ * n[0], ft[1] - fn_ * n[1], ft[2] - fn_ * n[2]], [0.0; 3])
-        });
+        batch_wide(b);
     }
     fn normal_stiffness(&self, params: &[f64]) -> f64 {
         params[0]
@@ -144,5 +138,28 @@ impl ContactLaw for Linear {
     fn elastic_energy(&self, overlap: f64, p: &[f64], h: &[f64]) -> f64 {
         let u = [h[0], h[1], h[2]];
         0.5 * p[0] * overlap * overlap + 0.5 * p[1] * dot(u, u)
+    }
+}
+
+// The batch loop compiled for AVX2 where the CPU has it (see granite_core::simd).
+granite_core::wide_kernel!(fn batch_wide(b: ContactBatch<'_>) => batch);
+
+/// The law on every contact of a batch.
+#[inline(always)]
+fn batch(b: ContactBatch<'_>) {
+    b.for_each(&mut Physics);
+}
+
+/// Eqs. 1.1-1.2 on one contact.
+struct Physics;
+
+impl ContactPhysics<3, 3> for Physics {
+    #[inline(always)]
+    fn contact(&mut self, c: Contact<'_, 3, 3>) -> (Vec3, Vec3) {
+        let [kn, kt, mu] = *c.params;
+        let n = c.normal;
+        let fn_ = kn * c.overlap;
+        let ft = spring_slider(c.history, n, c.rel_velocity, c.dt, kt, mu, fn_);
+        ([ft[0] - fn_ * n[0], ft[1] - fn_ * n[1], ft[2] - fn_ * n[2]], [0.0; 3])
     }
 }

@@ -8,8 +8,9 @@
 use super::linear::read_friction;
 use super::tangential::{dot, rotate_into_plane, rotational_spring, spring_slider};
 use super::Ranged;
-use granite_core::ext::contact::Contact;
+use granite_core::ext::contact::{Contact, ContactPhysics};
 use granite_core::ext::{ContactBatch, ContactLaw, ContactLawFactory, PairInfo};
+use granite_core::math::Vec3;
 use granite_core::params::{ParamSpec, Params};
 use granite_core::Result;
 
@@ -97,30 +98,7 @@ impl ContactLaw for RollingResistance {
         2.0 * self.young * r1 * r2 / (r1 + r2)
     }
     fn compute(&self, b: ContactBatch<'_>) {
-        let dt = b.dt;
-        b.for_each(|c: Contact<'_, PARAMS, HISTORY>| {
-            let [kn, kt, mu, kr, ktw, arm] = *c.params;
-            let n = c.normal;
-            let fn_ = kn * c.overlap;
-            let h = c.history;
-            let mut u = [h[0], h[1], h[2]];
-            let ft = spring_slider(&mut u, n, c.rel_velocity, dt, kt, mu, fn_);
-            let spin = c.rel_spin;
-            let s_n = dot(spin, n);
-            let roll = [spin[0] - s_n * n[0], spin[1] - s_n * n[1], spin[2] - s_n * n[2]];
-            let limit = arm * fn_;
-            let mut theta_r = rotate_into_plane([h[3], h[4], h[5]], n);
-            let m_roll = rotational_spring(&mut theta_r, roll, dt, kr, limit);
-            let mut theta_t = [h[6], 0.0, 0.0];
-            let m_twist = rotational_spring(&mut theta_t, [s_n, 0.0, 0.0], dt, ktw, limit)[0];
-            h[..3].copy_from_slice(&u);
-            h[3..6].copy_from_slice(&theta_r);
-            h[6] = theta_t[0];
-            let force = [ft[0] - fn_ * n[0], ft[1] - fn_ * n[1], ft[2] - fn_ * n[2]];
-            // Particle 1 is pulled along the relative rotation of 2 (and 2 held back).
-            let moment = [m_roll[0] + m_twist * n[0], m_roll[1] + m_twist * n[1], m_roll[2] + m_twist * n[2]];
-            (force, moment)
-        });
+        batch_wide(b);
     }
     fn normal_stiffness(&self, params: &[f64]) -> f64 {
         params[0]
@@ -129,5 +107,45 @@ impl ContactLaw for RollingResistance {
         let u = [h[0], h[1], h[2]];
         let tr = [h[3], h[4], h[5]];
         0.5 * p[0] * overlap * overlap + 0.5 * p[1] * dot(u, u) + 0.5 * p[3] * dot(tr, tr) + 0.5 * p[4] * h[6] * h[6]
+    }
+}
+
+// The batch loop compiled for AVX2 where the CPU has it (see granite_core::simd).
+granite_core::wide_kernel!(fn batch_wide(b: ContactBatch<'_>) => batch);
+
+/// The law on every contact of a batch.
+#[inline(always)]
+fn batch(b: ContactBatch<'_>) {
+    b.for_each(&mut Physics);
+}
+
+/// Spring-slider with rolling and twisting resistance on one contact.
+struct Physics;
+
+impl ContactPhysics<PARAMS, HISTORY> for Physics {
+    #[inline(always)]
+    fn contact(&mut self, c: Contact<'_, PARAMS, HISTORY>) -> (Vec3, Vec3) {
+        let dt = c.dt;
+        let [kn, kt, mu, kr, ktw, arm] = *c.params;
+        let n = c.normal;
+        let fn_ = kn * c.overlap;
+        let h = c.history;
+        let mut u = [h[0], h[1], h[2]];
+        let ft = spring_slider(&mut u, n, c.rel_velocity, dt, kt, mu, fn_);
+        let spin = c.rel_spin;
+        let s_n = dot(spin, n);
+        let roll = [spin[0] - s_n * n[0], spin[1] - s_n * n[1], spin[2] - s_n * n[2]];
+        let limit = arm * fn_;
+        let mut theta_r = rotate_into_plane([h[3], h[4], h[5]], n);
+        let m_roll = rotational_spring(&mut theta_r, roll, dt, kr, limit);
+        let mut theta_t = [h[6], 0.0, 0.0];
+        let m_twist = rotational_spring(&mut theta_t, [s_n, 0.0, 0.0], dt, ktw, limit)[0];
+        h[..3].copy_from_slice(&u);
+        h[3..6].copy_from_slice(&theta_r);
+        h[6] = theta_t[0];
+        let force = [ft[0] - fn_ * n[0], ft[1] - fn_ * n[1], ft[2] - fn_ * n[2]];
+        // Particle 1 is pulled along the relative rotation of 2 (and 2 held back).
+        let moment = [m_roll[0] + m_twist * n[0], m_roll[1] + m_twist * n[1], m_roll[2] + m_twist * n[2]];
+        (force, moment)
     }
 }

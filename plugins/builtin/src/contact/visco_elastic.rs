@@ -7,8 +7,9 @@ use super::linear::{read_friction, Springs, STIFFNESS_SPECS};
 use super::restitution::damping_ratio;
 use super::tangential::{dot, spring_slider};
 use super::Ranged;
-use granite_core::ext::contact::Contact;
+use granite_core::ext::contact::{Contact, ContactPhysics};
 use granite_core::ext::{ContactBatch, ContactLaw, ContactLawFactory, PairInfo};
+use granite_core::math::Vec3;
 use granite_core::params::{ParamSpec, Params};
 use granite_core::Result;
 
@@ -81,16 +82,7 @@ impl ContactLaw for ViscoElastic {
         false
     }
     fn compute(&self, b: ContactBatch<'_>) {
-        let dt = b.dt;
-        b.for_each(|c: Contact<'_, 4, 3>| {
-            let [kn, kt, mu, cn] = *c.params;
-            let n = c.normal;
-            // Overlap rate: particle 2 approaching particle 1 means a negative normal velocity.
-            let rate = -dot(c.rel_velocity, n);
-            let fn_ = (kn * c.overlap + cn * rate).max(0.0);
-            let ft = spring_slider(c.history, n, c.rel_velocity, dt, kt, mu, fn_);
-            ([ft[0] - fn_ * n[0], ft[1] - fn_ * n[1], ft[2] - fn_ * n[2]], [0.0; 3])
-        });
+        batch_wide(b);
     }
     fn normal_stiffness(&self, params: &[f64]) -> f64 {
         params[0]
@@ -98,5 +90,31 @@ impl ContactLaw for ViscoElastic {
     fn elastic_energy(&self, overlap: f64, p: &[f64], h: &[f64]) -> f64 {
         let u = [h[0], h[1], h[2]];
         0.5 * p[0] * overlap * overlap + 0.5 * p[1] * dot(u, u)
+    }
+}
+
+// The batch loop compiled for AVX2 where the CPU has it (see granite_core::simd).
+granite_core::wide_kernel!(fn batch_wide(b: ContactBatch<'_>) => batch);
+
+/// The law on every contact of a batch.
+#[inline(always)]
+fn batch(b: ContactBatch<'_>) {
+    b.for_each(&mut Physics);
+}
+
+/// Eqs. 2.2-2.3 and 2.40-2.41 on one contact.
+struct Physics;
+
+impl ContactPhysics<4, 3> for Physics {
+    #[inline(always)]
+    fn contact(&mut self, c: Contact<'_, 4, 3>) -> (Vec3, Vec3) {
+        let dt = c.dt;
+        let [kn, kt, mu, cn] = *c.params;
+        let n = c.normal;
+        // Overlap rate: particle 2 approaching particle 1 means a negative normal velocity.
+        let rate = -dot(c.rel_velocity, n);
+        let fn_ = (kn * c.overlap + cn * rate).max(0.0);
+        let ft = spring_slider(c.history, n, c.rel_velocity, dt, kt, mu, fn_);
+        ([ft[0] - fn_ * n[0], ft[1] - fn_ * n[1], ft[2] - fn_ * n[2]], [0.0; 3])
     }
 }
