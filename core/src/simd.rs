@@ -34,6 +34,23 @@ macro_rules! wide_kernel {
     };
 }
 
+/// Defines `fn $name(batch: ContactBatch)` that runs `batch.for_each(&mut $physics)` (a
+/// [`ContactPhysics`](crate::ext::contact::ContactPhysics) whose `contact` is `#[inline(always)]`)
+/// with an AVX2 twin: the batch loop of a contact law.
+#[macro_export]
+macro_rules! contact_kernel {
+    ($vis:vis fn $name:ident => $physics:expr) => {
+        $vis fn $name(batch: $crate::ext::ContactBatch<'_>) {
+            #[inline(always)]
+            fn each(batch: $crate::ext::ContactBatch<'_>) {
+                batch.for_each(&mut $physics)
+            }
+            $crate::wide_kernel!(fn wide(batch: $crate::ext::ContactBatch<'_>) => each);
+            wide(batch)
+        }
+    };
+}
+
 /// Whether the kernels use their AVX2 twins in this process.
 pub fn avx2() -> bool {
     #[cfg(target_arch = "x86_64")]

@@ -120,14 +120,8 @@ impl ContactLaw for HertzMindlin {
     }
 }
 
-// The batch loop compiled for AVX2 where the CPU has it (see granite_core::simd).
-granite_core::wide_kernel!(fn batch_wide(b: ContactBatch<'_>) => batch);
-
-/// The law on every contact of a batch.
-#[inline(always)]
-fn batch(b: ContactBatch<'_>) {
-    b.for_each(&mut Physics);
-}
+// The law on every contact of a batch, compiled for AVX2 where the CPU has it.
+granite_core::contact_kernel!(fn batch_wide => Physics);
 
 /// Hertz-Mindlin on one contact.
 struct Physics;

@@ -93,14 +93,8 @@ impl ContactLaw for ViscoElastic {
     }
 }
 
-// The batch loop compiled for AVX2 where the CPU has it (see granite_core::simd).
-granite_core::wide_kernel!(fn batch_wide(b: ContactBatch<'_>) => batch);
-
-/// The law on every contact of a batch.
-#[inline(always)]
-fn batch(b: ContactBatch<'_>) {
-    b.for_each(&mut Physics);
-}
+// The law on every contact of a batch, compiled for AVX2 where the CPU has it.
+granite_core::contact_kernel!(fn batch_wide => Physics);
 
 /// Eqs. 2.2-2.3 and 2.40-2.41 on one contact.
 struct Physics;
