@@ -134,25 +134,21 @@ fn main() -> ExitCode {
             }
         }
         Command::Bench { which, points, steps, particles, dem_steps, threads, axial_strain, repeat } => {
-            match which.as_str() {
-                "mpm" | "dem" | "mpmxdem" | "triaxial" => {
-                    let result = match which.as_str() {
-                        "mpm" => granite::bench::mpm(points, steps, &threads),
-                        "dem" => granite::bench::dem(&particles, dem_steps, &threads, repeat),
-                        "triaxial" => granite::bench::triaxial(&threads, axial_strain),
-                        _ => granite::bench::mpmxdem(&threads, repeat),
-                    };
-                    match result {
-                        Ok(()) => ExitCode::SUCCESS,
-                        Err(e) => {
-                            eprintln!("granite: bench failed: {e}");
-                            ExitCode::FAILURE
-                        }
-                    }
-                }
+            let result = match which.as_str() {
+                "mpm" => granite::bench::mpm(points, steps, &threads),
+                "dem" => granite::bench::dem(&particles, dem_steps, &threads, repeat),
+                "mpmxdem" => granite::bench::mpmxdem(&threads, repeat),
+                "triaxial" => granite::bench::triaxial(&threads, axial_strain),
                 other => {
                     eprintln!("granite: unknown benchmark `{other}`; available: mpm, dem, mpmxdem, triaxial");
-                    ExitCode::from(2)
+                    return ExitCode::from(2);
+                }
+            };
+            match result {
+                Ok(()) => ExitCode::SUCCESS,
+                Err(e) => {
+                    eprintln!("granite: bench failed: {e}");
+                    ExitCode::FAILURE
                 }
             }
         }

@@ -37,6 +37,12 @@ pub fn norm3(a: Vec3) -> f64 {
     dot3(a, a).sqrt()
 }
 
+/// `m x` for a 3x3 matrix (the affine field and the image shifts of a periodic cell).
+#[inline(always)]
+pub fn mat_vec(m: &nalgebra::Matrix3<f64>, x: Vec3) -> Vec3 {
+    [0, 1, 2].map(|r| m[(r, 0)] * x[0] + m[(r, 1)] * x[1] + m[(r, 2)] * x[2])
+}
+
 /// Axis-aligned bounds `(lo, hi)` of points (infinite, lo > hi, when there are none).
 pub fn point_bounds(points: &[Vec3]) -> (Vec3, Vec3) {
     let mut lo = [f64::INFINITY; 3];

@@ -48,8 +48,7 @@ impl PeriodicCell {
     /// Image of a lattice shift: `h n`.
     #[inline]
     pub fn shift_vector(&self, n: [i32; 3]) -> Vec3 {
-        let (h, n) = (&self.h, n.map(f64::from));
-        [0, 1, 2].map(|r| h[(r, 0)] * n[0] + h[(r, 1)] * n[1] + h[(r, 2)] * n[2])
+        crate::math::mat_vec(&self.h, n.map(f64::from))
     }
 
     /// Reduced coordinates `h^-1 x`.

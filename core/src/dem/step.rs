@@ -10,7 +10,7 @@ use crate::dem::sim::DemSim;
 use crate::dem::walls::Wall;
 use crate::error::{GraniteError, Result};
 use crate::ext::{ContactBatch, ContactLaw};
-use crate::math::Vec3;
+use crate::math::{mat_vec, Vec3};
 use nalgebra::Matrix3;
 use std::sync::Arc;
 
@@ -645,10 +645,10 @@ impl<'a> PairChunk<'a> {
     }
 }
 
-#[inline(always)]
 /// Writes the law results of a chunk back to its pairs, with lever-arm torques; with `sums`
 /// (sequential stepping), also adds them to the spheres, in pair order as the parallel gather
 /// does. Wall pairs have no second sphere (`second` false).
+#[inline(always)]
 fn write_back(c: &mut PairChunk<'_>, s: &Scratch, sums: &mut Option<Sums<'_>>, second: bool) {
     for e in 0..s.len {
         let k = s.slot[e] as usize;
@@ -728,7 +728,7 @@ fn sphere_contacts(
 ) {
     let cell = sp.cell;
     let l = cell.map(|c| c.velocity_gradient);
-    // Plain loops, no closures: all of this must inline into `simd::wide`'s caller.
+    // Plain loops, no closures: all of this must inline into `contact_job_wide`'s AVX2 twin.
     let mut rest = Some(pairs);
     while let Some(mut chunk) = PairChunk::next_chunk(&mut rest) {
         let (c, s) = (&mut chunk, &mut *scratch);
@@ -792,7 +792,7 @@ fn wall_contacts(
     scratch: &mut Scratch,
     sums: &mut Option<Sums<'_>>,
 ) {
-    // Plain loops, no closures: all of this must inline into `simd::wide`'s caller.
+    // Plain loops, no closures: all of this must inline into `contact_job_wide`'s AVX2 twin.
     let mut rest = Some(pairs);
     while let Some(mut chunk) = PairChunk::next_chunk(&mut rest) {
         let (c, s) = (&mut chunk, &mut *scratch);
@@ -1016,9 +1016,7 @@ impl Motion {
             Some((l, f)) => (mat_vec(l, *x), mat_vec(f, *x0)),
             None => ([0.0; 3], *x0),
         };
-        // YADE's Cundall damping: against the sign of the power at mid-step (damping >= 0, so
-        // copysign is damping times its sign).
-        let damp = |acc: f64, vel: f64| acc * (1.0 - damping.copysign(acc * (vel + 0.5 * dt * acc)));
+        let damp = |acc: f64, vel: f64| cundall(acc, vel, damping, dt);
         // Two divisions instead of six: the divider is the slowest unit this loop uses.
         let (inv_m, inv_i) = (1.0 / m, 1.0 / inertia);
         if blocked == 0 {
@@ -1041,6 +1039,13 @@ impl Motion {
         let d = sub(*x, reference);
         travel.record(d[0] * d[0] + d[1] * d[1] + d[2] * d[2], *v, *w);
     }
+}
+
+/// YADE's Cundall damping of an acceleration: reduced by `damping` against the sign of the
+/// power at mid-step (`damping` >= 0, so copysign is damping times that sign).
+#[inline(always)]
+fn cundall(acc: f64, vel: f64, damping: f64, dt: f64) -> f64 {
+    acc * (1.0 - damping.copysign(acc * (vel + 0.5 * dt * acc)))
 }
 
 /// How far the spheres of a run went since the candidate lists were built, and whether all
@@ -1074,12 +1079,6 @@ impl Travel {
     }
 }
 
-/// `m x` for a 3x3 matrix.
-#[inline(always)]
-fn mat_vec(m: &Matrix3<f64>, x: Vec3) -> Vec3 {
-    [0, 1, 2].map(|r| m[(r, 0)] * x[0] + m[(r, 1)] * x[1] + m[(r, 2)] * x[2])
-}
-
 /// Rigid-body integration of the clumps (forces and torques gathered from their members), then
 /// members placed and given the clump's velocity field. Returns the largest member displacement
 /// since the candidate lists were built (affine part excluded).
@@ -1093,7 +1092,7 @@ fn integrate_clumps(
     affine: Option<(Matrix3<f64>, Matrix3<f64>)>,
 ) -> f64 {
     use nalgebra::{UnitQuaternion, Vector3};
-    let damp = |acc: f64, vel: f64| acc * (1.0 - damping * (acc * (vel + 0.5 * dt * acc)).signum());
+    let damp = |acc: f64, vel: f64| cundall(acc, vel, damping, dt);
     let mut moved: f64 = 0.0;
     for c in 0..cl.len() {
         let xc = cl.x[c];

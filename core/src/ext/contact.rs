@@ -102,7 +102,7 @@ impl ContactBatch<'_> {
     /// Runs `law` on every contact (a law with `P` parameters and `H` history values per contact)
     /// and stores the force and extra moment on particle 1 it returns. `law.contact` should be
     /// `#[inline(always)]`: it is then inlined into this loop for certain, also where the loop is
-    /// compiled for AVX2 (`granite_core::wide_kernel!`), where a closure could stay a separate,
+    /// compiled for AVX2 (`granite_core::contact_kernel!`), where a closure could stay a separate,
     /// plainly compiled function called per contact.
     #[inline(always)]
     pub fn for_each<const P: usize, const H: usize, L: ContactPhysics<P, H>>(self, law: &mut L) {

@@ -10,7 +10,7 @@
 //!
 //! No viscous damping: energy leaves by friction, or by the simulation's Cundall damping.
 
-use super::tangential::{dot, rotate_into_plane};
+use super::tangential::{beyond_limit, dot, rotate_into_plane, scaled};
 use super::Ranged;
 use granite_core::ext::contact::{Contact, ContactPhysics};
 use granite_core::ext::{ContactBatch, ContactLaw, ContactLawFactory, PairInfo};
@@ -142,11 +142,8 @@ impl ContactPhysics<4, 3> for Physics {
         let vn = dot(v, n);
         let vt = [v[0] - vn * n[0], v[1] - vn * n[1], v[2] - vn * n[2]];
         let mut ft = [f_old[0] + kt * vt[0] * dt, f_old[1] + kt * vt[1] * dt, f_old[2] + kt * vt[2] * dt];
-        let limit = mu * fn_;
-        let norm = dot(ft, ft).sqrt();
-        if norm > limit {
-            let scale = if norm > 0.0 { limit / norm } else { 0.0 };
-            ft = [ft[0] * scale, ft[1] * scale, ft[2] * scale];
+        if let Some(scale) = beyond_limit(ft, mu * fn_) {
+            ft = scaled(ft, scale);
         }
         *c.history = ft;
         ([ft[0] - fn_ * n[0], ft[1] - fn_ * n[1], ft[2] - fn_ * n[2]], [0.0; 3])

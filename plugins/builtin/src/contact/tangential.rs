@@ -35,18 +35,31 @@ pub fn spring_slider(u: &mut Vec3, n: Vec3, rel_velocity: Vec3, dt: f64, kt: f64
     let vt = [rel_velocity[0] - vn * n[0], rel_velocity[1] - vn * n[1], rel_velocity[2] - vn * n[2]];
     let mut s = [r[0] + vt[0] * dt, r[1] + vt[1] * dt, r[2] + vt[2] * dt];
     let mut f = [kt * s[0], kt * s[1], kt * s[2]];
-    let limit = mu * fn_;
-    // Most contacts stick: compare squares, and take the root only for those that slide.
-    let norm2 = dot(f, f);
-    if norm2 > limit * limit {
-        let norm = norm2.sqrt();
-        let scale = if norm > 0.0 { limit / norm } else { 0.0 };
-        f = [f[0] * scale, f[1] * scale, f[2] * scale];
+    if let Some(scale) = beyond_limit(f, mu * fn_) {
+        f = scaled(f, scale);
         // The spring shortened by the same factor keeps f = kt s (no division by kt).
-        s = [s[0] * scale, s[1] * scale, s[2] * scale];
+        s = scaled(s, scale);
     }
     *u = s;
     f
+}
+
+/// The factor that brings `v` back to length `limit` when it is longer (a slider slips), None
+/// otherwise. Most contacts stick: the test compares squares, the root is taken only on slip.
+#[inline(always)]
+pub fn beyond_limit(v: Vec3, limit: f64) -> Option<f64> {
+    let norm2 = dot(v, v);
+    if norm2 > limit * limit {
+        let norm = norm2.sqrt();
+        Some(if norm > 0.0 { limit / norm } else { 0.0 })
+    } else {
+        None
+    }
+}
+
+#[inline(always)]
+pub fn scaled(v: Vec3, s: f64) -> Vec3 {
+    [v[0] * s, v[1] * s, v[2] * s]
 }
 
 /// Elastic-perfectly plastic resistance to a relative rotation: the rotation `theta` grows with
@@ -55,12 +68,9 @@ pub fn spring_slider(u: &mut Vec3, n: Vec3, rel_velocity: Vec3, dt: f64, kt: f64
 pub fn rotational_spring(theta: &mut Vec3, omega: Vec3, dt: f64, k: f64, limit: f64) -> Vec3 {
     let mut t = [theta[0] + omega[0] * dt, theta[1] + omega[1] * dt, theta[2] + omega[2] * dt];
     let mut m = [k * t[0], k * t[1], k * t[2]];
-    let norm2 = dot(m, m);
-    if norm2 > limit * limit {
-        let norm = norm2.sqrt();
-        let scale = if norm > 0.0 { limit / norm } else { 0.0 };
-        m = [m[0] * scale, m[1] * scale, m[2] * scale];
-        t = [t[0] * scale, t[1] * scale, t[2] * scale];
+    if let Some(scale) = beyond_limit(m, limit) {
+        m = scaled(m, scale);
+        t = scaled(t, scale);
     }
     *theta = t;
     m
