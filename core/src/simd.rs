@@ -63,3 +63,52 @@ pub fn avx2() -> bool {
         false
     }
 }
+
+/// A 3-vector in the first three of four lanes (the fourth is zero): one 256-bit register in
+/// the AVX2 twins, two 128-bit ones otherwise. Each lane does what the scalar code does to its
+/// component, in the same order, so results are bitwise the same as component-wise code.
+pub type Lanes = [f64; 4];
+
+/// `v` in lanes, the fourth zero.
+#[inline(always)]
+pub fn widen(v: [f64; 3]) -> Lanes {
+    [v[0], v[1], v[2], 0.0]
+}
+
+/// The first three lanes.
+#[inline(always)]
+pub fn narrow(l: Lanes) -> [f64; 3] {
+    [l[0], l[1], l[2]]
+}
+
+#[inline(always)]
+pub fn add4(a: Lanes, b: Lanes) -> Lanes {
+    [a[0] + b[0], a[1] + b[1], a[2] + b[2], a[3] + b[3]]
+}
+
+#[inline(always)]
+pub fn sub4(a: Lanes, b: Lanes) -> Lanes {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2], a[3] - b[3]]
+}
+
+#[inline(always)]
+pub fn mul4(a: Lanes, b: Lanes) -> Lanes {
+    [a[0] * b[0], a[1] * b[1], a[2] * b[2], a[3] * b[3]]
+}
+
+#[inline(always)]
+pub fn scale4(a: Lanes, s: f64) -> Lanes {
+    mul4(a, [s; 4])
+}
+
+/// The columns of a 3x3 matrix as lanes, for [`mat_vec4`].
+pub fn columns(m: &nalgebra::Matrix3<f64>) -> [Lanes; 3] {
+    [0, 1, 2].map(|c| [m[(0, c)], m[(1, c)], m[(2, c)], 0.0])
+}
+
+/// `m x` from the columns of `m`: each lane sums `m[(r, 0)] x0 + m[(r, 1)] x1 + m[(r, 2)] x2`
+/// in that order, as [`crate::math::mat_vec`] does.
+#[inline(always)]
+pub fn mat_vec4(columns: &[Lanes; 3], x: Lanes) -> Lanes {
+    add4(add4(scale4(columns[0], x[0]), scale4(columns[1], x[1])), scale4(columns[2], x[2]))
+}

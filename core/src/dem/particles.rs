@@ -42,6 +42,11 @@ impl Spheres {
         self.x.len()
     }
 
+    /// The largest radius (0 without spheres).
+    pub fn largest_radius(&self) -> f64 {
+        self.radius.iter().cloned().fold(0.0, f64::max)
+    }
+
     pub fn is_empty(&self) -> bool {
         self.x.is_empty()
     }

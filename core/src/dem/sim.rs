@@ -56,6 +56,9 @@ pub struct DemSim {
     pub(crate) walls_at_build: Vec<Vec3>,
     /// Cell matrix when the candidate lists were built.
     pub(crate) h_at_build: Option<nalgebra::Matrix3<f64>>,
+    /// Largest sphere radius when the candidate lists were built (radii change only through
+    /// calls that ask for a rebuild).
+    pub(crate) radius_max_at_build: f64,
     pub(crate) needs_rebuild: bool,
     /// Number of candidate-list rebuilds so far.
     pub rebuilds: u64,
@@ -95,6 +98,7 @@ impl DemSim {
             adjacency: Adjacency::default(),
             wall_adjacency: Adjacency::default(),
             x_at_build: Vec::new(),
+            radius_max_at_build: 0.0,
             walls_at_build: Vec::new(),
             h_at_build: None,
             spare_pairs: PairList::default(),

@@ -159,6 +159,7 @@ impl DemSim {
         sim.x_at_build = st.x_at_build;
         sim.walls_at_build = st.walls_at_build;
         sim.h_at_build = st.h_at_build;
+        sim.radius_max_at_build = sim.spheres.largest_radius();
         sim.needs_rebuild = st.needs_rebuild;
         sim.rebuilds = st.rebuilds;
         // Reading grows arrays by doubling; copies hold just their contents (a loaded RVE is the

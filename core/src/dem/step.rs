@@ -11,6 +11,7 @@ use crate::dem::walls::Wall;
 use crate::error::{GraniteError, Result};
 use crate::ext::{ContactBatch, ContactLaw};
 use crate::math::{mat_vec, Vec3};
+use crate::simd::{self, add4, mat_vec4, mul4, narrow, scale4, sub4, widen, Lanes};
 use nalgebra::Matrix3;
 use std::sync::Arc;
 
@@ -77,7 +78,7 @@ impl DemSim {
             }
             _ => (None, 0.0),
         };
-        let motion = Motion { gravity: self.gravity, damping: self.damping, dt: self.dt, affine };
+        let motion = Motion::new(self.gravity, self.damping, self.dt, affine);
         let mut moved = if self.sequential {
             integrate_wide((&mut self.spheres, &self.x_at_build, &motion))
         } else {
@@ -131,8 +132,7 @@ impl DemSim {
                 self.needs_rebuild = true;
             }
         }
-        let r_max = self.spheres.radius.iter().cloned().fold(0.0, f64::max);
-        let affine_growth = strain_since_build * (2.0 * r_max + self.skin);
+        let affine_growth = strain_since_build * (2.0 * self.radius_max_at_build + self.skin);
         if 2.0 * moved + affine_growth > self.skin || moved + wall_moved > self.skin {
             self.needs_rebuild = true;
         }
@@ -212,8 +212,7 @@ impl DemSim {
     /// Brings periodic positions back into the cell and fixes the shifts of their pairs.
     fn wrap_into_cell(&mut self) -> Result<()> {
         let Some(cell) = &self.cell else { return Ok(()) };
-        let r_max = self.spheres.radius.iter().cloned().fold(0.0, f64::max);
-        let reach = 2.0 * r_max + self.skin;
+        let reach = 2.0 * self.spheres.largest_radius() + self.skin;
         let widths = cell.widths();
         if widths.iter().any(|&w| w < 2.0 * reach) {
             return Err(GraniteError::Setup(format!(
@@ -265,8 +264,7 @@ impl DemSim {
         if n < MIN_SPHERES_TO_ORDER || !self.clumps.is_empty() {
             return;
         }
-        let r_max = self.spheres.radius.iter().cloned().fold(0.0, f64::max);
-        let reach = (2.0 * r_max + self.skin).max(f64::MIN_POSITIVE);
+        let reach = (2.0 * self.spheres.largest_radius() + self.skin).max(f64::MIN_POSITIVE);
         // Fractional position in the domain on each axis, and the domain's size.
         let (fraction, size): (Vec<Vec3>, Vec3) = match &self.cell {
             Some(cell) => {
@@ -361,6 +359,7 @@ impl DemSim {
         self.x_at_build = self.spheres.x.clone();
         self.walls_at_build = self.walls.iter().map(|w| w.position).collect();
         self.h_at_build = self.cell.as_ref().map(|c| c.h);
+        self.radius_max_at_build = self.spheres.largest_radius();
         self.needs_rebuild = false;
         self.rebuilds += 1;
         Ok(())
@@ -650,30 +649,86 @@ impl<'a> PairChunk<'a> {
 /// does. Wall pairs have no second sphere (`second` false).
 #[inline(always)]
 fn write_back(c: &mut PairChunk<'_>, s: &Scratch, sums: &mut Option<Sums<'_>>, second: bool) {
+    if s.rotation {
+        write_back_as::<true>(c, s, sums, second);
+    } else {
+        write_back_as::<false>(c, s, sums, second);
+    }
+}
+
+/// [`write_back`], with or without contact moments (without, the laws left them unset: adding
+/// zeros would only cost).
+#[inline(always)]
+fn write_back_as<const MOMENTS: bool>(c: &mut PairChunk<'_>, s: &Scratch, sums: &mut Option<Sums<'_>>, second: bool) {
+    let mut run = Run::NONE;
     for e in 0..s.len {
         let k = s.slot[e] as usize;
-        let (f, m) = (s.force[e], if s.rotation { s.moment[e] } else { [0.0; 3] });
+        let f = s.force[e];
         c.force[k] = f;
         // The force acts at la n from the first centre and -lb n from the second.
         let [la, lb] = s.lever[e];
         let nf = cross(s.normal[e], f);
-        let torque_a = [la * nf[0] + m[0], la * nf[1] + m[1], la * nf[2] + m[2]];
-        let torque_b = || [lb * nf[0] - m[0], lb * nf[1] - m[1], lb * nf[2] - m[2]];
+        let (mut torque_a, mut torque_b) = ([la * nf[0], la * nf[1], la * nf[2]], [lb * nf[0], lb * nf[1], lb * nf[2]]);
+        if MOMENTS {
+            let m = s.moment[e];
+            (torque_a, torque_b) = (add(torque_a, m), sub(torque_b, m));
+        }
         if !c.torque_a.is_empty() {
             c.torque_a[k] = torque_a;
             if second {
-                c.torque_b[k] = torque_b();
+                c.torque_b[k] = torque_b;
             }
         }
         if let Some(sums) = sums {
             let i = c.a[k] as usize;
-            sums.force[i] = add(sums.force[i], f);
-            sums.torque[i] = add(sums.torque[i], torque_a);
+            if i != run.sphere {
+                run.store(sums);
+                run = Run::load(sums, i);
+            }
+            run.force = add(run.force, f);
+            run.torque = add(run.torque, torque_a);
             if second {
                 let j = c.b[k] as usize;
-                sums.force[j] = sub(sums.force[j], f);
-                sums.torque[j] = add(sums.torque[j], torque_b());
+                if j == i {
+                    // A sphere against its own periodic image.
+                    run.force = sub(run.force, f);
+                    run.torque = add(run.torque, torque_b);
+                } else {
+                    sums.force[j] = sub(sums.force[j], f);
+                    sums.torque[j] = add(sums.torque[j], torque_b);
+                }
             }
+        }
+    }
+    if let Some(sums) = sums {
+        run.store(sums);
+    }
+}
+
+/// The sums of the sphere whose pairs come one after another (pairs are sorted by their first
+/// sphere), kept in registers over its run: adding each force to memory would make every
+/// contact wait for the previous one's store. The same additions in the same order as adding
+/// to memory.
+struct Run {
+    sphere: usize,
+    force: Vec3,
+    torque: Vec3,
+}
+
+impl Run {
+    /// No sphere yet.
+    const NONE: Run = Run { sphere: usize::MAX, force: [0.0; 3], torque: [0.0; 3] };
+
+    #[inline(always)]
+    fn load(sums: &Sums<'_>, sphere: usize) -> Run {
+        Run { sphere, force: sums.force[sphere], torque: sums.torque[sphere] }
+    }
+
+    #[inline(always)]
+    fn store(&self, sums: &mut Sums<'_>) {
+        if self.sphere != usize::MAX {
+            sums.force[self.sphere] = self.force;
+            sums.torque[self.sphere] = self.torque;
         }
     }
 }
@@ -993,9 +1048,17 @@ struct Motion {
     damping: f64,
     dt: f64,
     affine: Option<(Matrix3<f64>, Matrix3<f64>)>,
+    /// `gravity` and the columns of `affine`'s `(L, F)` as lanes.
+    gravity_lanes: Lanes,
+    affine_columns: Option<([Lanes; 3], [Lanes; 3])>,
 }
 
 impl Motion {
+    fn new(gravity: Vec3, damping: f64, dt: f64, affine: Option<(Matrix3<f64>, Matrix3<f64>)>) -> Motion {
+        let affine_columns = affine.as_ref().map(|(l, f)| (simd::columns(l), simd::columns(f)));
+        Motion { gravity, damping, dt, affine, gravity_lanes: simd::widen(gravity), affine_columns }
+    }
+
     /// Moves one sphere and records how far it went since the build in `travel`.
     #[inline(always)]
     fn advance(
@@ -1006,38 +1069,62 @@ impl Motion {
         x0: &Vec3,
         travel: &mut Travel,
     ) {
-        let Motion { gravity, damping, dt, affine } = self;
-        let (damping, dt) = (*damping, *dt);
         if clump != FREE {
             // Clump members move with their clump (see integrate_clumps).
             return;
         }
+        if blocked != 0 {
+            self.advance_blocked((x, v, w), (m, inertia, blocked), (f, t), x0, travel);
+            return;
+        }
+        let (damping, dt) = (self.damping, self.dt);
+        // The three components side by side in lanes: one vector instruction where the
+        // component-wise form took three.
+        let (x4, v4, w4) = (widen(*x), widen(*v), widen(*w));
+        let (lx, reference) = match &self.affine_columns {
+            Some((l, f)) => (mat_vec4(l, x4), mat_vec4(f, widen(*x0))),
+            None => ([0.0; 4], widen(*x0)),
+        };
+        // Two divisions instead of six: the divider is the slowest unit this loop uses.
+        let (inv_m, inv_i) = (1.0 / m, 1.0 / inertia);
+        let acc = add4(scale4(widen(*f), inv_m), self.gravity_lanes);
+        let v4 = add4(v4, scale4(cundall4(acc, v4, damping, dt), dt));
+        let x4 = add4(x4, scale4(add4(v4, lx), dt));
+        let w4 = add4(w4, scale4(cundall4(scale4(widen(*t), inv_i), w4, damping, dt), dt));
+        (*x, *v, *w) = (narrow(x4), narrow(v4), narrow(w4));
+        let d2 = mul4(sub4(x4, reference), sub4(x4, reference));
+        travel.record(d2[0] + d2[1] + d2[2], add4(d2, add4(v4, w4)));
+    }
+
+    /// [`Motion::advance`] of a sphere with blocked degrees of freedom, component by component.
+    fn advance_blocked(
+        &self,
+        (x, v, w): (&mut Vec3, &mut Vec3, &mut Vec3),
+        (m, inertia, blocked): (f64, f64, u8),
+        (f, t): (&Vec3, &Vec3),
+        x0: &Vec3,
+        travel: &mut Travel,
+    ) {
+        let Motion { gravity, damping, dt, affine, .. } = self;
+        let (damping, dt) = (*damping, *dt);
         let (lx, reference) = match affine {
             Some((l, f)) => (mat_vec(l, *x), mat_vec(f, *x0)),
             None => ([0.0; 3], *x0),
         };
         let damp = |acc: f64, vel: f64| cundall(acc, vel, damping, dt);
-        // Two divisions instead of six: the divider is the slowest unit this loop uses.
         let (inv_m, inv_i) = (1.0 / m, 1.0 / inertia);
-        if blocked == 0 {
-            for a in 0..3 {
+        for a in 0..3 {
+            if blocked & (dof::X << a) == 0 {
                 v[a] += damp(f[a] * inv_m + gravity[a], v[a]) * dt;
-                x[a] += (v[a] + lx[a]) * dt;
-                w[a] += damp(t[a] * inv_i, w[a]) * dt;
             }
-        } else {
-            for a in 0..3 {
-                if blocked & (dof::X << a) == 0 {
-                    v[a] += damp(f[a] * inv_m + gravity[a], v[a]) * dt;
-                }
-                x[a] += (v[a] + lx[a]) * dt;
-                if blocked & (dof::RX << a) == 0 {
-                    w[a] += damp(t[a] * inv_i, w[a]) * dt;
-                }
+            x[a] += (v[a] + lx[a]) * dt;
+            if blocked & (dof::RX << a) == 0 {
+                w[a] += damp(t[a] * inv_i, w[a]) * dt;
             }
         }
         let d = sub(*x, reference);
-        travel.record(d[0] * d[0] + d[1] * d[1] + d[2] * d[2], *v, *w);
+        let d2 = [d[0] * d[0], d[1] * d[1], d[2] * d[2]];
+        travel.record(d2[0] + d2[1] + d2[2], add4(widen(d2), add4(widen(*v), widen(*w))));
     }
 }
 
@@ -1048,30 +1135,45 @@ fn cundall(acc: f64, vel: f64, damping: f64, dt: f64) -> f64 {
     acc * (1.0 - damping.copysign(acc * (vel + 0.5 * dt * acc)))
 }
 
+/// [`cundall`] on each lane.
+#[inline(always)]
+fn cundall4(acc: Lanes, vel: Lanes, damping: f64, dt: f64) -> Lanes {
+    // Spelled out: `array::map` is not inlined for certain, and this must be.
+    [
+        cundall(acc[0], vel[0], damping, dt),
+        cundall(acc[1], vel[1], damping, dt),
+        cundall(acc[2], vel[2], damping, dt),
+        cundall(acc[3], vel[3], damping, dt),
+    ]
+}
+
 /// How far the spheres of a run went since the candidate lists were built, and whether all
 /// their states stayed finite.
 #[derive(Clone, Copy, Default)]
 struct Travel {
     worst2: f64,
-    /// A sum of every displacement and velocity: finite only if every term is (no finite state
-    /// is large enough to overflow it), so one test at the end replaces one per sphere.
-    check: f64,
+    /// Sums of every displacement and velocity, lane by lane: finite only if every term is (no
+    /// finite state is large enough to overflow them), so one test at the end replaces one per
+    /// sphere.
+    check: Lanes,
 }
 
 impl Travel {
+    /// A sphere that moved `moved2` squared; `state` holds its squared displacements plus its
+    /// velocities (only finiteness matters).
     #[inline(always)]
-    fn record(&mut self, moved2: f64, v: Vec3, w: Vec3) {
+    fn record(&mut self, moved2: f64, state: Lanes) {
         self.worst2 = self.worst2.max(moved2);
-        self.check += moved2 + (v[0] + v[1] + v[2]) + (w[0] + w[1] + w[2]);
+        self.check = add4(self.check, state);
     }
 
     fn merge(self, other: Travel) -> Travel {
-        Travel { worst2: self.worst2.max(other.worst2), check: self.check + other.check }
+        Travel { worst2: self.worst2.max(other.worst2), check: add4(self.check, other.check) }
     }
 
     /// The largest displacement, NaN if some state stopped being finite.
     fn largest(self) -> f64 {
-        if self.check.is_finite() {
+        if self.check.iter().all(|c| c.is_finite()) {
             self.worst2.sqrt()
         } else {
             f64::NAN
