@@ -1163,7 +1163,11 @@ impl Travel {
     /// velocities (only finiteness matters).
     #[inline(always)]
     fn record(&mut self, moved2: f64, state: Lanes) {
-        self.worst2 = self.worst2.max(moved2);
+        // Not f64::max: its NaN handling lengthens the chain from one sphere to the next, and a
+        // NaN shows in `check` anyway.
+        if moved2 > self.worst2 {
+            self.worst2 = moved2;
+        }
         self.check = add4(self.check, state);
     }
 
