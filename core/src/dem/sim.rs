@@ -51,6 +51,8 @@ pub struct DemSim {
     pub(crate) spare_pairs: PairList,
     pub(crate) adjacency: Adjacency,
     pub(crate) wall_adjacency: Adjacency,
+    /// Where the parallel contact stage cuts the pair lists (found again after a rebuild).
+    pub(crate) piece_bounds: crate::dem::step::PieceBounds,
     /// Positions (spheres) and wall positions when the candidate lists were built.
     pub(crate) x_at_build: Vec<Vec3>,
     pub(crate) walls_at_build: Vec<Vec3>,
@@ -99,6 +101,7 @@ impl DemSim {
             wall_adjacency: Adjacency::default(),
             x_at_build: Vec::new(),
             radius_max_at_build: 0.0,
+            piece_bounds: Default::default(),
             walls_at_build: Vec::new(),
             h_at_build: None,
             spare_pairs: PairList::default(),

@@ -169,6 +169,9 @@ impl DemSim {
     /// into the same number of pieces, so one stage does them all; sequentially (an RVE), each
     /// contact also adds its force and torques to its spheres as soon as it is computed.
     fn contacts(&mut self) {
+        if !self.sequential {
+            self.piece_bounds.refresh(self.spheres.len(), self.rebuilds, &self.pairs, &self.wall_pairs);
+        }
         let strides = (self.pairs.param_stride, self.pairs.history_stride);
         let Spheres { x, v, w, radius, force, torque, .. } = &mut self.spheres;
         let rotation = self.laws.iter().any(|l| l.resists_rotation());
@@ -190,17 +193,11 @@ impl DemSim {
             });
             return;
         }
-        // Pieces follow the spheres' pieces of the force gather (pairs are sorted by their first
-        // sphere): a worker then mostly sums forces it computed itself, from its own cache.
-        let per = sphere_piece_size(x.len());
-        let pair_bounds = |list: &PairList| -> Vec<usize> {
-            (per..x.len()).step_by(per.max(1)).map(|s| list.a.partition_point(|&a| (a as usize) < s)).collect()
-        };
-        let (sphere_bounds, wall_bounds) = (pair_bounds(&self.pairs), pair_bounds(&self.wall_pairs));
+        let bounds = &self.piece_bounds;
         let pieces: Vec<_> = PairChunk::whole(&mut self.pairs, strides)
-            .cut_at(&sphere_bounds)
+            .cut_at(&bounds.sphere_pairs)
             .into_iter()
-            .zip(PairChunk::whole(&mut self.wall_pairs, strides).cut_at(&wall_bounds))
+            .zip(PairChunk::whole(&mut self.wall_pairs, strides).cut_at(&bounds.wall_pairs))
             .collect();
         crate::par::run_pieces(pieces, |(sphere_pairs, wall_pairs)| {
             let mut scratch = ScratchGuard::take();
@@ -892,6 +889,33 @@ pub(crate) fn branch(x: &[Vec3], i: usize, j: usize, shift: [i32; 3], cell: Opti
         _ => [0.0; 3],
     };
     add(sub(x[j], x[i]), image)
+}
+
+/// Where the parallel contact stage cuts the pair lists: its pieces follow the spheres' pieces
+/// of the force gather (pairs are sorted by their first sphere), so a worker mostly sums forces
+/// it computed itself, from its own cache. The cuts move only when the lists are rebuilt, so
+/// they are searched for then, not every step. Any cuts give the same forces (each pair's force
+/// is its own); these only decide which worker computes which pairs.
+#[derive(Debug, Clone, Default)]
+pub(crate) struct PieceBounds {
+    /// Sphere count, spheres per piece, rebuild count and list lengths the cuts were found for.
+    key: (usize, usize, u64, usize, usize),
+    sphere_pairs: Vec<usize>,
+    wall_pairs: Vec<usize>,
+}
+
+impl PieceBounds {
+    fn refresh(&mut self, spheres: usize, rebuilds: u64, pairs: &PairList, walls: &PairList) {
+        let per = sphere_piece_size(spheres);
+        let key = (spheres, per, rebuilds, pairs.len(), walls.len());
+        if key == self.key {
+            return;
+        }
+        let cuts = |list: &PairList| -> Vec<usize> {
+            (per..spheres).step_by(per).map(|s| list.a.partition_point(|&a| (a as usize) < s)).collect()
+        };
+        *self = PieceBounds { key, sphere_pairs: cuts(pairs), wall_pairs: cuts(walls) };
+    }
 }
 
 /// Spheres per parallel piece of `n`: small enough for idle workers to find pieces to take over,
