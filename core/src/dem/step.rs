@@ -780,16 +780,21 @@ fn sphere_contacts(
 ) {
     let cell = sp.cell;
     let l = cell.map(|c| c.velocity_gradient);
+    // Sliced to one length: checking a sphere index against one array then covers the others.
+    let spheres = sp.x.len();
+    let (x, v, w, radius) = (&sp.x[..spheres], &sp.v[..spheres], &sp.w[..spheres], &sp.radius[..spheres]);
     // Plain loops, no closures: all of this must inline into `contact_job_wide`'s AVX2 twin.
     let mut rest = Some(pairs);
     while let Some(mut chunk) = PairChunk::next_chunk(&mut rest) {
         let (c, s) = (&mut chunk, &mut *scratch);
         s.len = 0;
         s.rotation = sp.rotation;
-        for k in 0..c.a.len() {
-            let (i, j) = (c.a[k] as usize, c.b[k] as usize);
-            let d = branch(sp.x, i, j, c.shift[k], cell);
-            let reach = sp.radius[i] + sp.radius[j];
+        let m = c.a.len();
+        let (a, b, shift, law) = (&c.a[..m], &c.b[..m], &c.shift[..m], &c.law[..m]);
+        for k in 0..m {
+            let (i, j) = (a[k] as usize, b[k] as usize);
+            let d = branch(x, i, j, shift[k], cell);
+            let reach = radius[i] + radius[j];
             let dist2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
             if dist2 >= reach * reach {
                 open_contact(c, k);
@@ -802,16 +807,12 @@ fn sphere_contacts(
             let inv = dist * inv2;
             let n = [d[0] * inv, d[1] * inv, d[2] * inv];
             let overlap = reach - dist;
-            let la = sp.radius[i] - 0.5 * overlap;
+            let la = radius[i] - 0.5 * overlap;
             // Contact point velocities v_a + w_a x (la n) and v_b + w_b x (-lb n), lb = dist - la:
             // one cross product for both spins.
             let lb = dist - la;
-            let spins = [
-                la * sp.w[i][0] + lb * sp.w[j][0],
-                la * sp.w[i][1] + lb * sp.w[j][1],
-                la * sp.w[i][2] + lb * sp.w[j][2],
-            ];
-            let mut rel_velocity = sub(sub(sp.v[j], sp.v[i]), cross(spins, n));
+            let spins = [la * w[i][0] + lb * w[j][0], la * w[i][1] + lb * w[j][1], la * w[i][2] + lb * w[j][2]];
+            let mut rel_velocity = sub(sub(v[j], v[i]), cross(spins, n));
             if let Some(l) = &l {
                 // Affine part of the relative velocity: L (x_b + h n - x_a).
                 rel_velocity = add(rel_velocity, mat_vec(l, d));
@@ -819,12 +820,12 @@ fn sphere_contacts(
             c.touching[k] = true;
             let e = s.len;
             s.slot[e] = k as u32;
-            s.law[e] = c.law[k];
+            s.law[e] = law[k];
             s.normal[e] = n;
             s.overlap[e] = overlap;
             s.rel_velocity[e] = rel_velocity;
             if sp.rotation {
-                s.rel_spin[e] = sub(sp.w[j], sp.w[i]);
+                s.rel_spin[e] = sub(w[j], w[i]);
             }
             s.lever[e] = [la, lb];
             s.len += 1;
