@@ -355,6 +355,8 @@ pub fn mpmxdem(threads: &[usize], repeat: usize) -> Result<()> {
     use granite_core::mpm::fill::{cell_points, Layout};
     use granite_core::mpm::Face;
     use std::sync::Arc;
+    // What a second core can give right now: the 2-thread figure below is read against it.
+    machine_reference(threads, repeat)?;
     println!("granite bench mpmxdem: 16 points x 125-sphere RVEs, 200 MPM steps x 51 DEM steps, oedometric");
     let mut rve = periodic_rve(125, 1e5)?;
     // The Verlet skin scripts/mpmxdem/prepare_rve.rhai gives an RVE by default (0.25 smallest
