@@ -186,7 +186,7 @@ pub fn wall_pairs(x: &[Vec3], radius: &[f64], walls: &[Wall], skin: f64) -> Vec<
     }
     candidates_by_particle(x.len(), |i, found| {
         for (k, w) in walls.iter().enumerate() {
-            if w.contact(x[i], radius[i], skin).is_some() {
+            if w.within(x[i], radius[i], skin) {
                 found.push((i as u32, k as u32, [0; 3]));
             }
         }
