@@ -88,27 +88,25 @@ pub fn sphere_pairs(x: &[Vec3], radius: &[f64], skin: f64) -> Vec<Candidate> {
         c
     };
     let index = |c: [usize; 3]| c[0] + dims[0] * (c[1] + dims[1] * c[2]);
-    let cells: Vec<usize> = x.iter().map(|p| index(cell_of(p))).collect();
+    let coords: Vec<[usize; 3]> = x.iter().map(cell_of).collect();
+    let cells: Vec<usize> = coords.iter().map(|&c| index(c)).collect();
     let (start, items) = bucket(&cells, dims[0] * dims[1] * dims[2]);
     candidates_by_particle(n, |i, found| {
-        let c = cell_of(&x[i]);
-        for dz in -1i64..=1 {
-            for dy in -1i64..=1 {
-                for dx in -1i64..=1 {
-                    let q = [c[0] as i64 + dx, c[1] as i64 + dy, c[2] as i64 + dz];
-                    if (0..3).any(|a| q[a] < 0 || q[a] >= dims[a] as i64) {
+        let c = coords[i];
+        // The up to three neighbour cells along x of one (y, z) row are consecutive cells, so
+        // their particles are one run of `items`: nine runs instead of 27 cells.
+        let (x_lo, x_hi) = (c[0].saturating_sub(1), (c[0] + 1).min(dims[0] - 1));
+        for qz in c[2].saturating_sub(1)..=(c[2] + 1).min(dims[2] - 1) {
+            for qy in c[1].saturating_sub(1)..=(c[1] + 1).min(dims[1] - 1) {
+                let (first, last) = (index([x_lo, qy, qz]), index([x_hi, qy, qz]));
+                for &j in &items[start[first] as usize..start[last + 1] as usize] {
+                    if (j as usize) <= i {
                         continue;
                     }
-                    let k = index([q[0] as usize, q[1] as usize, q[2] as usize]);
-                    for &j in &items[start[k] as usize..start[k + 1] as usize] {
-                        if (j as usize) <= i {
-                            continue;
-                        }
-                        let d = [x[j as usize][0] - x[i][0], x[j as usize][1] - x[i][1], x[j as usize][2] - x[i][2]];
-                        let reach = radius[i] + radius[j as usize] + skin;
-                        if d[0] * d[0] + d[1] * d[1] + d[2] * d[2] < reach * reach {
-                            found.push((i as u32, j, [0; 3]));
-                        }
+                    let d = [x[j as usize][0] - x[i][0], x[j as usize][1] - x[i][1], x[j as usize][2] - x[i][2]];
+                    let reach = radius[i] + radius[j as usize] + skin;
+                    if d[0] * d[0] + d[1] * d[1] + d[2] * d[2] < reach * reach {
+                        found.push((i as u32, j, [0; 3]));
                     }
                 }
             }
