@@ -186,12 +186,14 @@ fn coupled_triaxial_reproduces_pure_dem() {
     // whose paths differ by round-off drift apart by several percent of q within a few percent of
     // strain, which would hide what this test is after (the coupling adding nothing of its own).
     let reference = pure_dem_path(&rve, &increments, inertial);
-    let (peak_at, peak) = coupled.iter().cloned().fold((0.0, f64::NEG_INFINITY), |b, c| if c.1 > b.1 { c } else { b });
+    let peak = coupled.iter().map(|c| c.1).fold(f64::NEG_INFINITY, f64::max);
     assert!(peak > 5e4, "the sample should develop a deviatoric stress (peak {peak} Pa)");
-    for (&(e, q), &(e_ref, q_ref)) in coupled.iter().zip(&reference).filter(|(c, _)| c.0 <= peak_at) {
+    // Both runs take the same DEM steps under the same velocity gradients (eqs. 4.1-4.5), so the
+    // whole curve agrees to round-off, far inside the 3 % of the peak up to the peak.
+    for (&(e, q), &(e_ref, q_ref)) in coupled.iter().zip(&reference) {
         assert!((e - e_ref).abs() < 1e-12);
         assert!(
-            (q - q_ref).abs() < 0.03 * peak,
+            (q - q_ref).abs() <= 1e-9 * peak,
             "at axial strain {e:.4}: coupled q = {q:.0} Pa, pure DEM {q_ref:.0} Pa"
         );
     }

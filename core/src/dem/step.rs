@@ -364,7 +364,7 @@ impl DemSim {
 }
 
 thread_local! {
-    /// Scratch buffers are large (tens of kB): keep one per thread across steps instead of
+    /// Scratch buffers are large (about 20 kB): keep one per thread across steps instead of
     /// allocating and zeroing one per step (that dominated small RVEs).
     static SCRATCH: std::cell::RefCell<Vec<Box<Scratch>>> = const { std::cell::RefCell::new(Vec::new()) };
 }
@@ -1237,10 +1237,7 @@ fn integrate_clumps(
         cl.torque[c] = t;
         let mass = cl.mass[c];
         let lx = match &affine {
-            Some((l, _)) => {
-                let p = l * Vector3::new(xc[0], xc[1], xc[2]);
-                [p[0], p[1], p[2]]
-            }
+            Some((l, _)) => mat_vec(l, xc),
             None => [0.0; 3],
         };
         for a in 0..3 {
@@ -1270,10 +1267,7 @@ fn integrate_clumps(
             sp.v[i] = add(cl.v[c], cross(cl.w[c], arm));
             sp.w[i] = cl.w[c];
             let reference = match &affine {
-                Some((_, fm)) => {
-                    let p = fm * Vector3::new(x_at_build[i][0], x_at_build[i][1], x_at_build[i][2]);
-                    [p[0], p[1], p[2]]
-                }
+                Some((_, fm)) => mat_vec(fm, x_at_build[i]),
                 None => x_at_build[i],
             };
             let d = sub(sp.x[i], reference);

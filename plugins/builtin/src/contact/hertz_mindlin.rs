@@ -10,7 +10,7 @@
 //!
 //! No viscous damping: energy leaves by friction, or by the simulation's Cundall damping.
 
-use super::tangential::{beyond_limit, dot, rotate_into_plane, scaled};
+use super::tangential::{beyond_limit, dot, minus_along, rotate_into_plane, scaled};
 use super::Ranged;
 use granite_core::ext::contact::{Contact, ContactPhysics};
 use granite_core::ext::{ContactBatch, ContactLaw, ContactLawFactory, PairInfo};
@@ -140,12 +140,12 @@ impl ContactPhysics<4, 3> for Physics {
         let f_old = rotate_into_plane(*c.history, n);
         let v = c.rel_velocity;
         let vn = dot(v, n);
-        let vt = [v[0] - vn * n[0], v[1] - vn * n[1], v[2] - vn * n[2]];
+        let vt = minus_along(v, vn, n);
         let mut ft = [f_old[0] + kt * vt[0] * dt, f_old[1] + kt * vt[1] * dt, f_old[2] + kt * vt[2] * dt];
         if let Some(scale) = beyond_limit(ft, mu * fn_) {
             ft = scaled(ft, scale);
         }
         *c.history = ft;
-        ([ft[0] - fn_ * n[0], ft[1] - fn_ * n[1], ft[2] - fn_ * n[2]], [0.0; 3])
+        (minus_along(ft, fn_, n), [0.0; 3])
     }
 }

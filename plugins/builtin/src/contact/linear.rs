@@ -3,7 +3,7 @@
 //! contact modulus as YADE does (`young`: `kn = 2 E r1 r2 / (r1 + r2)`; a wall counts as a sphere
 //! of the particle's own radius, so `kn = E r` against a wall).
 
-use super::tangential::{dot, spring_slider};
+use super::tangential::{dot, minus_along, spring_slider};
 use super::Ranged;
 use granite_core::ext::contact::{Contact, ContactPhysics};
 use granite_core::ext::{ContactBatch, ContactLaw, ContactLawFactory, PairInfo};
@@ -154,6 +154,6 @@ impl ContactPhysics<3, 3> for Physics {
         let n = c.normal;
         let fn_ = kn * c.overlap;
         let ft = spring_slider(c.history, n, c.rel_velocity, c.dt, kt, mu, fn_);
-        ([ft[0] - fn_ * n[0], ft[1] - fn_ * n[1], ft[2] - fn_ * n[2]], [0.0; 3])
+        (minus_along(ft, fn_, n), [0.0; 3])
     }
 }

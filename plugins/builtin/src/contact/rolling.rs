@@ -6,7 +6,7 @@
 //! sphere of the particle's own radius.
 
 use super::linear::read_friction;
-use super::tangential::{dot, rotate_into_plane, rotational_spring, spring_slider};
+use super::tangential::{dot, minus_along, rotate_into_plane, rotational_spring, spring_slider};
 use super::Ranged;
 use granite_core::ext::contact::{Contact, ContactPhysics};
 use granite_core::ext::{ContactBatch, ContactLaw, ContactLawFactory, PairInfo};
@@ -128,7 +128,7 @@ impl ContactPhysics<PARAMS, HISTORY> for Physics {
         let ft = spring_slider(&mut u, n, c.rel_velocity, dt, kt, mu, fn_);
         let spin = c.rel_spin;
         let s_n = dot(spin, n);
-        let roll = [spin[0] - s_n * n[0], spin[1] - s_n * n[1], spin[2] - s_n * n[2]];
+        let roll = minus_along(spin, s_n, n);
         let limit = arm * fn_;
         let mut theta_r = rotate_into_plane([h[3], h[4], h[5]], n);
         let m_roll = rotational_spring(&mut theta_r, roll, dt, kr, limit);
@@ -137,7 +137,7 @@ impl ContactPhysics<PARAMS, HISTORY> for Physics {
         h[..3].copy_from_slice(&u);
         h[3..6].copy_from_slice(&theta_r);
         h[6] = theta_t[0];
-        let force = [ft[0] - fn_ * n[0], ft[1] - fn_ * n[1], ft[2] - fn_ * n[2]];
+        let force = minus_along(ft, fn_, n);
         // Particle 1 is pulled along the relative rotation of 2 (and 2 held back).
         let moment = [m_roll[0] + m_twist * n[0], m_roll[1] + m_twist * n[1], m_roll[2] + m_twist * n[2]];
         (force, moment)

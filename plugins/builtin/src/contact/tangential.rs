@@ -16,7 +16,7 @@ pub fn rotate_into_plane(u: Vec3, n: Vec3) -> Vec3 {
         return u;
     }
     let un = dot(u, n);
-    let t = [u[0] - un * n[0], u[1] - un * n[1], u[2] - un * n[2]];
+    let t = minus_along(u, un, n);
     let t2 = dot(t, t);
     if t2 == 0.0 {
         return [0.0; 3];
@@ -32,7 +32,7 @@ pub fn rotate_into_plane(u: Vec3, n: Vec3) -> Vec3 {
 pub fn spring_slider(u: &mut Vec3, n: Vec3, rel_velocity: Vec3, dt: f64, kt: f64, mu: f64, fn_: f64) -> Vec3 {
     let r = rotate_into_plane(*u, n);
     let vn = dot(rel_velocity, n);
-    let vt = [rel_velocity[0] - vn * n[0], rel_velocity[1] - vn * n[1], rel_velocity[2] - vn * n[2]];
+    let vt = minus_along(rel_velocity, vn, n);
     let mut s = [r[0] + vt[0] * dt, r[1] + vt[1] * dt, r[2] + vt[2] * dt];
     let mut f = [kt * s[0], kt * s[1], kt * s[2]];
     if let Some(scale) = beyond_limit(f, mu * fn_) {
@@ -55,6 +55,13 @@ pub fn beyond_limit(v: Vec3, limit: f64) -> Option<f64> {
     } else {
         None
     }
+}
+
+/// `a - s n`: `a` less `s` along the unit normal `n` (its tangential part when `s` is its normal
+/// component; the force on particle 1 from the tangential force and the normal one).
+#[inline(always)]
+pub fn minus_along(a: Vec3, s: f64, n: Vec3) -> Vec3 {
+    [a[0] - s * n[0], a[1] - s * n[1], a[2] - s * n[2]]
 }
 
 #[inline(always)]

@@ -5,7 +5,7 @@
 
 use super::linear::{read_friction, Springs, STIFFNESS_SPECS};
 use super::restitution::damping_ratio;
-use super::tangential::{dot, spring_slider};
+use super::tangential::{dot, minus_along, spring_slider};
 use super::Ranged;
 use granite_core::ext::contact::{Contact, ContactPhysics};
 use granite_core::ext::{ContactBatch, ContactLaw, ContactLawFactory, PairInfo};
@@ -109,6 +109,6 @@ impl ContactPhysics<4, 3> for Physics {
         let rate = -dot(c.rel_velocity, n);
         let fn_ = (kn * c.overlap + cn * rate).max(0.0);
         let ft = spring_slider(c.history, n, c.rel_velocity, dt, kt, mu, fn_);
-        ([ft[0] - fn_ * n[0], ft[1] - fn_ * n[1], ft[2] - fn_ * n[2]], [0.0; 3])
+        (minus_along(ft, fn_, n), [0.0; 3])
     }
 }
