@@ -359,10 +359,10 @@ pub fn mpmxdem(threads: &[usize], repeat: usize) -> Result<()> {
     machine_reference(threads, repeat)?;
     println!("granite bench mpmxdem: 16 points x 125-sphere RVEs, 200 MPM steps x 51 DEM steps, oedometric");
     let mut rve = periodic_rve(125, 1e5)?;
-    // The Verlet skin scripts/mpmxdem/prepare_rve.rhai gives an RVE by default (0.25 smallest
+    // The Verlet skin scripts/mpmxdem/prepare_rve.rhai gives an RVE by default (0.05 smallest
     // radii): an RVE deforms slowly, so a thin skin means fewer candidate pairs and few rebuilds.
     let r_min = rve.spheres.radius.iter().cloned().fold(f64::INFINITY, f64::min);
-    rve.set_skin(0.25 * r_min)?;
+    rve.set_skin(0.05 * r_min)?;
     let timed = best_of(threads, repeat, || -> Result<(f64, (usize, usize))> {
         let reg = crate::registry();
         let mesh = Mesh::new(2, [0.0; 3], [0.5, 0.5, 1.0], [2, 2, 1])?;
