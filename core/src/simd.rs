@@ -112,3 +112,24 @@ pub fn columns(m: &nalgebra::Matrix3<f64>) -> [Lanes; 3] {
 pub fn mat_vec4(columns: &[Lanes; 3], x: Lanes) -> Lanes {
     add4(add4(scale4(columns[0], x[0]), scale4(columns[1], x[1])), scale4(columns[2], x[2]))
 }
+
+/// `(1 / a, 1 / b)` from one packed division: the divider is the slowest unit the integration
+/// uses, and a packed division takes it as long as a scalar one. Each lane is the correctly
+/// rounded quotient, as the scalar division gives.
+#[inline(always)]
+pub fn reciprocals(a: f64, b: f64) -> (f64, f64) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        use std::arch::x86_64::{_mm_cvtsd_f64, _mm_div_pd, _mm_set1_pd, _mm_set_pd, _mm_unpackhi_pd};
+        // SSE2 is part of every x86-64 CPU, so these are always available.
+        #[allow(unused_unsafe)]
+        unsafe {
+            let q = _mm_div_pd(_mm_set1_pd(1.0), _mm_set_pd(b, a));
+            (_mm_cvtsd_f64(q), _mm_cvtsd_f64(_mm_unpackhi_pd(q, q)))
+        }
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        (1.0 / a, 1.0 / b)
+    }
+}

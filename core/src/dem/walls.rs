@@ -57,12 +57,13 @@ impl Wall {
     }
 
     /// Geometry against a sphere, or None when the sphere is out of the wall's reach
-    /// (beyond its extent, or farther than `reach` from it).
-    #[inline]
+    /// (beyond its extent, or farther than `reach` from it). Planes, the common container
+    /// walls, are worked out in line in the contact loop; other shapes in a call.
+    #[inline(always)]
     pub fn contact(&self, x: Vec3, radius: f64, reach: f64) -> Option<WallContact> {
-        let d = [x[0] - self.position[0], x[1] - self.position[1], x[2] - self.position[2]];
         match &self.shape {
             WallShape::Plane { normal } => {
+                let d = [x[0] - self.position[0], x[1] - self.position[1], x[2] - self.position[2]];
                 let dist = dot3(d, *normal);
                 let gap = dist - radius;
                 if gap > reach {
@@ -72,6 +73,15 @@ impl Wall {
                 let point = [x[0] - normal[0] * dist, x[1] - normal[1] * dist, x[2] - normal[2] * dist];
                 Some(WallContact { normal: n, gap, point })
             }
+            _ => self.bounded_contact(x, radius, reach),
+        }
+    }
+
+    /// [`Wall::contact`] of the shapes with edges or curvature.
+    fn bounded_contact(&self, x: Vec3, radius: f64, reach: f64) -> Option<WallContact> {
+        let d = [x[0] - self.position[0], x[1] - self.position[1], x[2] - self.position[2]];
+        match &self.shape {
+            WallShape::Plane { .. } => self.contact(x, radius, reach),
             WallShape::Rect { u, v, half } => {
                 let su = dot3(d, *u).clamp(-half[0], half[0]);
                 let sv = dot3(d, *v).clamp(-half[1], half[1]);
