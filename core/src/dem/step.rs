@@ -787,7 +787,9 @@ fn sphere_contacts(
     let mut rest = Some(pairs);
     while let Some(mut chunk) = PairChunk::next_chunk(&mut rest) {
         let (c, s) = (&mut chunk, &mut *scratch);
-        s.len = 0;
+        // The count of touching contacts stays in a register: in `s.len` every contact would wait
+        // for the previous one to store it.
+        let mut len = 0;
         s.rotation = sp.rotation;
         let m = c.a.len();
         let (a, b, shift, law) = (&c.a[..m], &c.b[..m], &c.shift[..m], &c.law[..m]);
@@ -818,7 +820,7 @@ fn sphere_contacts(
                 rel_velocity = add(rel_velocity, mat_vec(l, d));
             }
             c.touching[k] = true;
-            let e = s.len;
+            let e = len;
             s.slot[e] = k as u32;
             s.law[e] = law[k];
             s.normal[e] = n;
@@ -828,8 +830,9 @@ fn sphere_contacts(
                 s.rel_spin[e] = sub(w[j], w[i]);
             }
             s.lever[e] = [la, lb];
-            s.len += 1;
+            len += 1;
         }
+        s.len = len;
         s.run_laws(laws, dt, c.state());
         write_back(c, s, sums, true);
     }
@@ -849,7 +852,7 @@ fn wall_contacts(
     let mut rest = Some(pairs);
     while let Some(mut chunk) = PairChunk::next_chunk(&mut rest) {
         let (c, s) = (&mut chunk, &mut *scratch);
-        s.len = 0;
+        let mut len = 0;
         s.rotation = sp.rotation;
         for k in 0..c.a.len() {
             let (i, w) = (c.a[k] as usize, c.b[k] as usize);
@@ -865,7 +868,7 @@ fn wall_contacts(
             let arm_a = sub(geo.point, sp.x[i]);
             let va = add(sp.v[i], cross(sp.w[i], arm_a));
             c.touching[k] = true;
-            let e = s.len;
+            let e = len;
             s.slot[e] = k as u32;
             s.law[e] = c.law[k];
             s.normal[e] = geo.normal;
@@ -875,8 +878,9 @@ fn wall_contacts(
                 s.rel_spin[e] = [-sp.w[i][0], -sp.w[i][1], -sp.w[i][2]];
             }
             s.lever[e] = [crate::math::dot3(arm_a, geo.normal), 0.0];
-            s.len += 1;
+            len += 1;
         }
+        s.len = len;
         s.run_laws(laws, dt, c.state());
         write_back(c, s, sums, false);
     }
