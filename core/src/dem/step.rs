@@ -990,6 +990,24 @@ struct SphereConstants<'j> {
 
 #[inline(always)]
 fn gather_piece(job: GatherJob<'_>) -> Travel {
+    let range = job.first..job.first + job.moving.x.len();
+    if all_free(&job.fixed.blocked[range.clone()], &job.fixed.clump[range]) {
+        gather_piece_as::<true>(job)
+    } else {
+        gather_piece_as::<false>(job)
+    }
+}
+
+/// Whether none of these spheres has a blocked degree of freedom or belongs to a clump: their
+/// integration then needs no per-sphere test (most scenes; one pass over two small arrays).
+#[inline(always)]
+fn all_free(blocked: &[u8], clump: &[u32]) -> bool {
+    blocked.iter().fold(0, |any, &b| any | b) == 0 && clump.iter().all(|&c| c == FREE)
+}
+
+/// [`gather_piece`], for spheres known to be `ALL_FREE` or not.
+#[inline(always)]
+fn gather_piece_as<const ALL_FREE: bool>(job: GatherJob<'_>) -> Travel {
     let GatherJob { first, moving, fixed, lists, motion } = job;
     let PieceState { x, v, w, force, torque } = moving;
     let SphereConstants { mass, inertia, blocked, clump, x_at_build } = fixed;
@@ -1021,12 +1039,13 @@ fn gather_piece(job: GatherJob<'_>) -> Travel {
         }
         force[k] = fs;
         torque[k] = ts;
-        let (moved2, state) = motion.advance(
-            (&mut x[k], &mut v[k], &mut w[k]),
-            (mass[i], inertia[i], blocked[i], clump[i]),
-            (widen(fs), widen(ts)),
-            &x_at_build[i],
-        );
+        let sphere = (&mut x[k], &mut v[k], &mut w[k]);
+        let loads = (widen(fs), widen(ts));
+        let (moved2, state) = if ALL_FREE {
+            motion.advance_free(sphere, (mass[i], inertia[i]), loads, &x_at_build[i])
+        } else {
+            motion.advance(sphere, (mass[i], inertia[i], blocked[i], clump[i]), loads, &x_at_build[i])
+        };
         travel.record(moved2, state);
     }
     travel
@@ -1050,7 +1069,17 @@ fn wall_forces(walls: &mut [Wall], pairs: &PairList) {
 /// field `L x`. Returns the largest displacement since the candidate lists were built, not
 /// counting the affine part `F x_build` (NaN if a sphere's state stopped being finite).
 #[inline(always)]
-fn integrate((sp, x_at_build, motion): (&mut Spheres, &[Vec3], &Motion)) -> f64 {
+fn integrate(job: (&mut Spheres, &[Vec3], &Motion)) -> f64 {
+    if all_free(&job.0.blocked, &job.0.clump) {
+        integrate_as::<true>(job)
+    } else {
+        integrate_as::<false>(job)
+    }
+}
+
+/// [`integrate`], for spheres known to be `ALL_FREE` or not.
+#[inline(always)]
+fn integrate_as<const ALL_FREE: bool>((sp, x_at_build, motion): (&mut Spheres, &[Vec3], &Motion)) -> f64 {
     let Spheres { x, v, w, mass, inertia, force, torque, blocked, clump, .. } = sp;
     let n = x.len();
     let (x, v, w, mass, inertia, force, torque) =
@@ -1058,12 +1087,13 @@ fn integrate((sp, x_at_build, motion): (&mut Spheres, &[Vec3], &Motion)) -> f64 
     let (blocked, clump, x_at_build) = (&blocked[..n], &clump[..n], &x_at_build[..n]);
     let mut travel = Travel::default();
     for i in 0..n {
-        let (moved2, state) = motion.advance(
-            (&mut x[i], &mut v[i], &mut w[i]),
-            (mass[i], inertia[i], blocked[i], clump[i]),
-            (widen(force[i]), widen(torque[i])),
-            &x_at_build[i],
-        );
+        let sphere = (&mut x[i], &mut v[i], &mut w[i]);
+        let loads = (widen(force[i]), widen(torque[i]));
+        let (moved2, state) = if ALL_FREE {
+            motion.advance_free(sphere, (mass[i], inertia[i]), loads, &x_at_build[i])
+        } else {
+            motion.advance(sphere, (mass[i], inertia[i], blocked[i], clump[i]), loads, &x_at_build[i])
+        };
         travel.record(moved2, state);
     }
     travel.largest()
@@ -1106,6 +1136,18 @@ impl Motion {
         if blocked != 0 {
             return self.advance_blocked((x, v, w), (m, inertia, blocked), (f, t), x0);
         }
+        self.advance_free((x, v, w), (m, inertia), (f, t), x0)
+    }
+
+    /// [`Motion::advance`] of a sphere with every degree of freedom free, outside any clump.
+    #[inline(always)]
+    fn advance_free(
+        &self,
+        (x, v, w): (&mut Vec3, &mut Vec3, &mut Vec3),
+        (m, inertia): (f64, f64),
+        (f, t): (Lanes, Lanes),
+        x0: &Vec3,
+    ) -> (f64, Lanes) {
         let (damping, dt) = (self.damping, self.dt);
         // The three components side by side in lanes: one vector instruction where the
         // component-wise form took three.
