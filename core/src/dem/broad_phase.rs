@@ -100,12 +100,11 @@ pub fn sphere_pairs(x: &[Vec3], radius: &[f64], skin: f64) -> Vec<Candidate> {
             for qy in c[1].saturating_sub(1)..=(c[1] + 1).min(dims[1] - 1) {
                 let (first, last) = (index([x_lo, qy, qz]), index([x_hi, qy, qz]));
                 for &j in &items[start[first] as usize..start[last + 1] as usize] {
-                    if (j as usize) <= i {
-                        continue;
-                    }
                     let d = [x[j as usize][0] - x[i][0], x[j as usize][1] - x[i][1], x[j as usize][2] - x[i][2]];
                     let reach = radius[i] + radius[j as usize] + skin;
-                    if d[0] * d[0] + d[1] * d[1] + d[2] * d[2] < reach * reach {
+                    // One branch, rarely taken (`&`, not `&&`): a test of `j > i` first would
+                    // be mispredicted about every other particle.
+                    if (d[0] * d[0] + d[1] * d[1] + d[2] * d[2] < reach * reach) & (j as usize > i) {
                         found.push((i as u32, j, [0; 3]));
                     }
                 }
@@ -135,15 +134,30 @@ pub fn periodic_sphere_pairs(x: &[Vec3], radius: &[f64], skin: f64, cell: &Perio
         dims[a] = (dims[a] / 2).max(1);
     }
     let inv = cell.inverse();
-    let reduced: Vec<Vec3> = x.iter().map(|p| cell.reduced(&inv, *p)).collect();
-    let cell_of = |s: &Vec3| -> [usize; 3] {
-        [0, 1, 2].map(|a| ((s[a].rem_euclid(1.0) * dims[a] as f64) as usize).min(dims[a] - 1))
-    };
+    // Cell coordinates of every particle, once (`rem_euclid` is a library call).
+    let coords: Vec<[usize; 3]> = x
+        .iter()
+        .map(|p| {
+            let s = cell.reduced(&inv, *p);
+            [0, 1, 2].map(|a| ((s[a].rem_euclid(1.0) * dims[a] as f64) as usize).min(dims[a] - 1))
+        })
+        .collect();
     let index = |c: [usize; 3]| c[0] + dims[0] * (c[1] + dims[1] * c[2]);
-    let cells: Vec<usize> = reduced.iter().map(|s| index(cell_of(s))).collect();
+    let cells: Vec<usize> = coords.iter().map(|&c| index(c)).collect();
     let (start, items) = bucket(&cells, dims[0] * dims[1] * dims[2]);
+    // A neighbour coordinate `c + d` (d in -1..=1) lies in -1..=dims: wrapped by a comparison,
+    // not by a division (27 neighbour cells of 3 axes per particle).
+    let wrap = |raw: i64, dim: usize| -> (usize, i32) {
+        if raw < 0 {
+            (dim - 1, -1)
+        } else if raw as usize >= dim {
+            (raw as usize - dim, 1)
+        } else {
+            (raw as usize, 0)
+        }
+    };
     candidates_by_particle(n, |i, found| {
-        let c = cell_of(&reduced[i]);
+        let c = coords[i];
         for dz in -1i64..=1 {
             for dy in -1i64..=1 {
                 for dx in -1i64..=1 {
@@ -151,9 +165,7 @@ pub fn periodic_sphere_pairs(x: &[Vec3], radius: &[f64], skin: f64, cell: &Perio
                     let mut q = [0usize; 3];
                     let mut w = [0i32; 3];
                     for a in 0..3 {
-                        let raw = c[a] as i64 + d[a];
-                        w[a] = raw.div_euclid(dims[a] as i64) as i32;
-                        q[a] = raw.rem_euclid(dims[a] as i64) as usize;
+                        (q[a], w[a]) = wrap(c[a] as i64 + d[a], dims[a]);
                     }
                     // Dims of 1 or 2 reach the same cell through several offsets: each
                     // offset is then a different image, and each is checked once.
@@ -161,13 +173,13 @@ pub fn periodic_sphere_pairs(x: &[Vec3], radius: &[f64], skin: f64, cell: &Perio
                     let image = cell.shift_vector(w);
                     for &j in &items[start[k] as usize..start[k + 1] as usize] {
                         let j = j as usize;
-                        if j < i || (j == i && w == [0; 3]) {
-                            continue;
-                        }
                         let dv =
                             [x[j][0] + image[0] - x[i][0], x[j][1] + image[1] - x[i][1], x[j][2] + image[2] - x[i][2]];
                         let r = radius[i] + radius[j] + skin;
-                        if dv[0] * dv[0] + dv[1] * dv[1] + dv[2] * dv[2] < r * r && j != i {
+                        // One branch, rarely taken (`&`, not `&&`; see `sphere_pairs`). A
+                        // particle never pairs with its own image: the cell is wider than twice
+                        // the reach.
+                        if (dv[0] * dv[0] + dv[1] * dv[1] + dv[2] * dv[2] < r * r) & (j > i) {
                             found.push((i as u32, j as u32, w));
                         }
                     }
