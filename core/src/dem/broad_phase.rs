@@ -145,6 +145,9 @@ pub fn periodic_sphere_pairs(x: &[Vec3], radius: &[f64], skin: f64, cell: &Perio
     let index = |c: [usize; 3]| c[0] + dims[0] * (c[1] + dims[1] * c[2]);
     let cells: Vec<usize> = coords.iter().map(|&c| index(c)).collect();
     let (start, items) = bucket(&cells, dims[0] * dims[1] * dims[2]);
+    // Positions and radii in bucket order: a cell's particles are then read one after another,
+    // not each from wherever its index points.
+    let by_cell: Vec<(Vec3, f64)> = items.iter().map(|&j| (x[j as usize], radius[j as usize])).collect();
     // A neighbour coordinate `c + d` (d in -1..=1) lies in -1..=dims: wrapped by a comparison,
     // not by a division (27 neighbour cells of 3 axes per particle).
     let wrap = |raw: i64, dim: usize| -> (usize, i32) {
@@ -156,6 +159,9 @@ pub fn periodic_sphere_pairs(x: &[Vec3], radius: &[f64], skin: f64, cell: &Perio
             (raw as usize, 0)
         }
     };
+    // The 27 images a neighbour cell can hold (shifts of -1, 0 or 1 cell on each axis).
+    let images: [Vec3; 27] =
+        std::array::from_fn(|k| cell.shift_vector([k % 3, k / 3 % 3, k / 9].map(|s| s as i32 - 1)));
     candidates_by_particle(n, |i, found| {
         let c = coords[i];
         for dz in -1i64..=1 {
@@ -170,12 +176,12 @@ pub fn periodic_sphere_pairs(x: &[Vec3], radius: &[f64], skin: f64, cell: &Perio
                     // Dims of 1 or 2 reach the same cell through several offsets: each
                     // offset is then a different image, and each is checked once.
                     let k = index(q);
-                    let image = cell.shift_vector(w);
-                    for &j in &items[start[k] as usize..start[k + 1] as usize] {
+                    let image = images[(w[0] + 1 + 3 * (w[1] + 1) + 9 * (w[2] + 1)) as usize];
+                    let run = start[k] as usize..start[k + 1] as usize;
+                    for (&j, &(xj, rj)) in items[run.clone()].iter().zip(&by_cell[run]) {
                         let j = j as usize;
-                        let dv =
-                            [x[j][0] + image[0] - x[i][0], x[j][1] + image[1] - x[i][1], x[j][2] + image[2] - x[i][2]];
-                        let r = radius[i] + radius[j] + skin;
+                        let dv = [xj[0] + image[0] - x[i][0], xj[1] + image[1] - x[i][1], xj[2] + image[2] - x[i][2]];
+                        let r = radius[i] + rj + skin;
                         // One branch, rarely taken (`&`, not `&&`; see `sphere_pairs`). A
                         // particle never pairs with its own image: the cell is wider than twice
                         // the reach.
