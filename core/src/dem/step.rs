@@ -1039,13 +1039,12 @@ fn gather_piece_as<const ALL_FREE: bool>(job: GatherJob<'_>) -> Travel {
         }
         force[k] = fs;
         torque[k] = ts;
-        let sphere = (&mut x[k], &mut v[k], &mut w[k]);
-        let loads = (widen(fs), widen(ts));
-        let (moved2, state) = if ALL_FREE {
-            motion.advance_free(sphere, (mass[i], inertia[i]), loads, &x_at_build[i])
-        } else {
-            motion.advance(sphere, (mass[i], inertia[i], blocked[i], clump[i]), loads, &x_at_build[i])
-        };
+        let (moved2, state) = motion.advance_as::<ALL_FREE>(
+            (&mut x[k], &mut v[k], &mut w[k]),
+            (mass[i], inertia[i], blocked[i], clump[i]),
+            (widen(fs), widen(ts)),
+            &x_at_build[i],
+        );
         travel.record(moved2, state);
     }
     travel
@@ -1087,13 +1086,12 @@ fn integrate_as<const ALL_FREE: bool>((sp, x_at_build, motion): (&mut Spheres, &
     let (blocked, clump, x_at_build) = (&blocked[..n], &clump[..n], &x_at_build[..n]);
     let mut travel = Travel::default();
     for i in 0..n {
-        let sphere = (&mut x[i], &mut v[i], &mut w[i]);
-        let loads = (widen(force[i]), widen(torque[i]));
-        let (moved2, state) = if ALL_FREE {
-            motion.advance_free(sphere, (mass[i], inertia[i]), loads, &x_at_build[i])
-        } else {
-            motion.advance(sphere, (mass[i], inertia[i], blocked[i], clump[i]), loads, &x_at_build[i])
-        };
+        let (moved2, state) = motion.advance_as::<ALL_FREE>(
+            (&mut x[i], &mut v[i], &mut w[i]),
+            (mass[i], inertia[i], blocked[i], clump[i]),
+            (widen(force[i]), widen(torque[i])),
+            &x_at_build[i],
+        );
         travel.record(moved2, state);
     }
     travel.largest()
@@ -1116,6 +1114,23 @@ impl Motion {
     fn new(gravity: Vec3, damping: f64, dt: f64, affine: Option<(Matrix3<f64>, Matrix3<f64>)>) -> Motion {
         let affine_columns = affine.as_ref().map(|(l, f)| (simd::columns(l), simd::columns(f)));
         Motion { gravity, damping, dt, affine, gravity_lanes: simd::widen(gravity), affine_columns }
+    }
+
+    /// [`Motion::advance`], or [`Motion::advance_free`] when the caller knows `ALL_FREE` spheres
+    /// (not blocked, not clumped).
+    #[inline(always)]
+    fn advance_as<const ALL_FREE: bool>(
+        &self,
+        sphere: (&mut Vec3, &mut Vec3, &mut Vec3),
+        (m, inertia, blocked, clump): (f64, f64, u8, u32),
+        loads: (Lanes, Lanes),
+        x0: &Vec3,
+    ) -> (f64, Lanes) {
+        if ALL_FREE {
+            self.advance_free(sphere, (m, inertia), loads, x0)
+        } else {
+            self.advance(sphere, (m, inertia, blocked, clump), loads, x0)
+        }
     }
 
     /// Moves one sphere. Returns what [`Travel::record`] takes: its squared displacement since
