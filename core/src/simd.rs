@@ -133,3 +133,19 @@ pub fn reciprocals(a: f64, b: f64) -> (f64, f64) {
         (1.0 / a, 1.0 / b)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn packed_reciprocals_are_the_scalar_ones_bit_for_bit() {
+        let values = [2.6e-3, 7.0, 1.0 / 3.0, 1e-300, 5e-324, 1e300, -4.2e-9, 0.0, f64::INFINITY];
+        for &a in &values {
+            for &b in &values {
+                let (ra, rb) = reciprocals(a, b);
+                assert_eq!((ra.to_bits(), rb.to_bits()), ((1.0 / a).to_bits(), (1.0 / b).to_bits()), "{a}, {b}");
+            }
+        }
+    }
+}
