@@ -76,27 +76,35 @@ pub type Candidate = (u32, u32, [i32; 3]);
 /// particle `i` (in any order; each particle's are then sorted and deduplicated). Blocks of
 /// particles run in parallel, each filling one list, joined in order.
 fn candidates_by_particle(n: usize, search: impl Fn(usize, &mut Vec<Candidate>) + Sync) -> Vec<Candidate> {
-    let blocks: Vec<Vec<Candidate>> = (0..n.div_ceil(BLOCK))
+    by_blocks(n, |i, found| {
+        let first = found.len();
+        search(i, found);
+        found[first..].sort_unstable();
+        let mut kept = first;
+        for k in first..found.len() {
+            if k == first || found[k] != found[kept - 1] {
+                found[kept] = found[k];
+                kept += 1;
+            }
+        }
+        found.truncate(kept);
+    })
+    .concat()
+}
+
+/// `search(i, out)` for every particle, blocks of particles in parallel, one list per block (in
+/// block order).
+fn by_blocks(n: usize, search: impl Fn(usize, &mut Vec<Candidate>) + Sync) -> Vec<Vec<Candidate>> {
+    (0..n.div_ceil(BLOCK))
         .into_par_iter()
         .map(|b| {
             let mut found = Vec::new();
             for i in b * BLOCK..((b + 1) * BLOCK).min(n) {
-                let first = found.len();
                 search(i, &mut found);
-                found[first..].sort_unstable();
-                let mut kept = first;
-                for k in first..found.len() {
-                    if k == first || found[k] != found[kept - 1] {
-                        found[kept] = found[k];
-                        kept += 1;
-                    }
-                }
-                found.truncate(kept);
             }
             found
         })
-        .collect();
-    blocks.concat()
+        .collect()
 }
 
 /// Candidate pairs `(a, b)`, `a < b`, whose gap is below `skin`; sorted by `(a, b)`.
@@ -214,47 +222,39 @@ fn periodic_pairs(x: &[Vec3], radius: &[f64], (skin, cell): (f64, &PeriodicCell)
         // Three cells or more on every axis: neighbour cells are distinct, so each pair is met
         // once from the cell that comes first in the stencil order (half of the 26 neighbours),
         // and checked as the whole-stencil search checks it, from its first particle.
-        let blocks: Vec<Vec<Candidate>> = (0..n.div_ceil(BLOCK))
-            .into_par_iter()
-            .map(|b| {
-                let mut found = Vec::new();
-                for i in b * BLOCK..((b + 1) * BLOCK).min(n) {
-                    let c = coords[i];
-                    let own = start[index(c)] as usize..start[index(c) + 1] as usize;
-                    for (&j, &(xj, rj)) in items[own.clone()].iter().zip(&by_cell[own]) {
-                        let j = j as usize;
-                        let dv = [xj[0] - x[i][0], xj[1] - x[i][1], xj[2] - x[i][2]];
-                        let r = radius[i] + rj + skin;
-                        if (dv[0] * dv[0] + dv[1] * dv[1] + dv[2] * dv[2] < r * r) & (j > i) {
-                            found.push((i as u32, j as u32, [0; 3]));
-                        }
-                    }
-                    for d in FORWARD {
-                        let mut q = [0usize; 3];
-                        let mut w = [0i32; 3];
-                        for a in 0..3 {
-                            (q[a], w[a]) = wrap(c[a] as i64 + d[a], dims[a]);
-                        }
-                        let back = [-w[0], -w[1], -w[2]];
-                        let (ahead, behind) = (image_of(w), image_of(back));
-                        let run = start[index(q)] as usize..start[index(q) + 1] as usize;
-                        for (&j, &(xj, rj)) in items[run.clone()].iter().zip(&by_cell[run]) {
-                            let j = j as usize;
-                            // From the first particle: j's image w seen from i, or i's image -w
-                            // seen from j.
-                            let (from, to, image) = if j > i { (x[i], xj, ahead) } else { (xj, x[i], behind) };
-                            let dv =
-                                [to[0] + image[0] - from[0], to[1] + image[1] - from[1], to[2] + image[2] - from[2]];
-                            let r = radius[i] + rj + skin;
-                            if dv[0] * dv[0] + dv[1] * dv[1] + dv[2] * dv[2] < r * r {
-                                found.push(if j > i { (i as u32, j as u32, w) } else { (j as u32, i as u32, back) });
-                            }
-                        }
+        let blocks = by_blocks(n, |i, found| {
+            let c = coords[i];
+            let own = start[index(c)] as usize..start[index(c) + 1] as usize;
+            for (&j, &(xj, rj)) in items[own.clone()].iter().zip(&by_cell[own]) {
+                let j = j as usize;
+                let dv = [xj[0] - x[i][0], xj[1] - x[i][1], xj[2] - x[i][2]];
+                let r = radius[i] + rj + skin;
+                if (dv[0] * dv[0] + dv[1] * dv[1] + dv[2] * dv[2] < r * r) & (j > i) {
+                    found.push((i as u32, j as u32, [0; 3]));
+                }
+            }
+            for d in FORWARD {
+                let mut q = [0usize; 3];
+                let mut w = [0i32; 3];
+                for a in 0..3 {
+                    (q[a], w[a]) = wrap(c[a] as i64 + d[a], dims[a]);
+                }
+                let back = [-w[0], -w[1], -w[2]];
+                let (ahead, behind) = (image_of(w), image_of(back));
+                let run = start[index(q)] as usize..start[index(q) + 1] as usize;
+                for (&j, &(xj, rj)) in items[run.clone()].iter().zip(&by_cell[run]) {
+                    let j = j as usize;
+                    // From the first particle: j's image w seen from i, or i's image -w
+                    // seen from j.
+                    let (from, to, image) = if j > i { (x[i], xj, ahead) } else { (xj, x[i], behind) };
+                    let dv = [to[0] + image[0] - from[0], to[1] + image[1] - from[1], to[2] + image[2] - from[2]];
+                    let r = radius[i] + rj + skin;
+                    if dv[0] * dv[0] + dv[1] * dv[1] + dv[2] * dv[2] < r * r {
+                        found.push(if j > i { (i as u32, j as u32, w) } else { (j as u32, i as u32, back) });
                     }
                 }
-                found
-            })
-            .collect();
+            }
+        });
         return sorted_by_first(n, blocks);
     }
     candidates_by_particle(n, |i, found| {
@@ -297,7 +297,7 @@ pub fn wall_pairs(x: &[Vec3], radius: &[f64], walls: &[Wall], skin: f64) -> Vec<
     }
     candidates_by_particle(x.len(), |i, found| {
         for (k, w) in walls.iter().enumerate() {
-            if w.within(x[i], radius[i], skin) {
+            if w.contact(x[i], radius[i], skin).is_some() {
                 found.push((i as u32, k as u32, [0; 3]));
             }
         }

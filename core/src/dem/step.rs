@@ -1197,7 +1197,7 @@ impl Motion {
             None => ([0.0; 3], *x0),
         };
         let damp = |acc: f64, vel: f64| cundall(acc, vel, damping, dt);
-        let (inv_m, inv_i) = (1.0 / m, 1.0 / inertia);
+        let (inv_m, inv_i) = simd::reciprocals(m, inertia);
         for a in 0..3 {
             if blocked & (dof::X << a) == 0 {
                 v[a] += damp(f[a] * inv_m + gravity[a], v[a]) * dt;

@@ -42,23 +42,10 @@ impl Wall {
         Wall { name: name.to_string(), shape, position, velocity: [0.0; 3], material, force: [0.0; 3] }
     }
 
-    /// Whether a sphere is within the wall's reach (`contact(..).is_some()`), without building
-    /// the contact geometry: the candidate search asks this of every sphere and wall.
-    #[inline]
-    pub fn within(&self, x: Vec3, radius: f64, reach: f64) -> bool {
-        match &self.shape {
-            WallShape::Plane { normal } => {
-                let d = [x[0] - self.position[0], x[1] - self.position[1], x[2] - self.position[2]];
-                // As `contact` decides it (a NaN gap counts as within).
-                !(dot3(d, *normal) - radius > reach)
-            }
-            _ => self.contact(x, radius, reach).is_some(),
-        }
-    }
-
     /// Geometry against a sphere, or None when the sphere is out of the wall's reach
     /// (beyond its extent, or farther than `reach` from it). Planes, the common container
-    /// walls, are worked out in line in the contact loop; other shapes in a call.
+    /// walls, are worked out in line (in the contact loop, and in the candidate search, where
+    /// only `is_some` is used and the geometry is never built); other shapes in a call.
     #[inline(always)]
     pub fn contact(&self, x: Vec3, radius: f64, reach: f64) -> Option<WallContact> {
         match &self.shape {
@@ -180,35 +167,5 @@ mod tests {
         let c = cyl.contact([1.05, 0.0, 2.05], 0.1, 0.0).unwrap();
         assert!((c.gap - (0.05f64.hypot(0.05) - 0.1)).abs() < 1e-12);
         assert!(c.normal[0] < 0.0 && c.normal[2] < 0.0, "towards the rim edge: {:?}", c.normal);
-    }
-
-    #[test]
-    fn within_decides_as_contact_does() {
-        let shapes = [
-            WallShape::Plane { normal: [0.0, 0.6, 0.8] },
-            WallShape::Rect { u: [1.0, 0.0, 0.0], v: [0.0, 1.0, 0.0], half: [0.5, 0.3] },
-            WallShape::Disk { normal: [0.0, 0.0, 1.0], radius: 0.4 },
-            WallShape::Cylinder { axis: [0.0, 0.0, 1.0], radius: 0.5, length: 1.0 },
-        ];
-        let mut s = 7u64;
-        let mut next = || {
-            s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-            (s >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
-        };
-        for shape in shapes {
-            let wall = Wall::new("w", shape, [0.1, -0.2, 0.3], 0);
-            let (mut near, mut far) = (0, 0);
-            for _ in 0..2000 {
-                let (x, r, reach) = ([next(), next(), next() + 0.5], 0.05 + 0.05 * next().abs(), 0.1 * next().abs());
-                let expected = wall.contact(x, r, reach).is_some();
-                assert_eq!(wall.within(x, r, reach), expected, "{:?} at {x:?}", wall.shape);
-                if expected {
-                    near += 1;
-                } else {
-                    far += 1;
-                }
-            }
-            assert!(near > 50 && far > 50, "{:?}: both cases drawn ({near} near, {far} far)", wall.shape);
-        }
     }
 }
