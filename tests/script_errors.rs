@@ -71,6 +71,24 @@ fn unknown_override_lists_the_declared_parameters() {
 }
 
 #[test]
+fn overrides_outside_the_declared_limits_are_refused_at_the_declaration() {
+    let src = "// a script with limits\nlet dt = param(\"dt\", 1e-3, #{ above: 0.0 });\n\
+               let phi = param(\"friction\", 30.0, #{ min: 0.0, max: 90.0 });\n\
+               let s = param(\"scheme\", \"USF\", #{ one_of: [\"USF\", \"USL\"] });\n";
+    let e = run_err("limit_dt", src, &[("dt", "-1e-3")]);
+    assert!(e.contains("line 2") && e.contains("`dt`") && e.contains("must be > 0"), "{e}");
+    let e = run_err("limit_nan", src, &[("dt", "NaN")]);
+    assert!(e.contains("line 2") && e.contains("finite number"), "{e}");
+    let e = run_err("limit_friction", src, &[("friction", "95")]);
+    assert!(e.contains("line 3") && e.contains(">= 0 and <= 90"), "{e}");
+    let e = run_err("limit_scheme", src, &[("scheme", "usf")]);
+    assert!(e.contains("line 4") && e.contains("one of \"USF\", \"USL\""), "{e}");
+    // A default outside its own limits is the script's own mistake, reported as such.
+    let e = run_err("limit_default", "let n = param(\"count\", 0, #{ min: 1 });\n", &[]);
+    assert!(e.contains("line 1") && e.contains("default 0") && e.contains(">= 1"), "{e}");
+}
+
+#[test]
 fn unknown_law_lists_the_registered_ones() {
     let e = run_err("typo_law", &format!("{HEAD}let m = sim.material(\"mohr_colomb\", #{{ density: 1e3 }});"), &[]);
     assert!(e.contains("mohr_colomb") && e.contains("linear_elastic, mohr_coulomb"), "{e}");

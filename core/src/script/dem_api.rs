@@ -328,7 +328,15 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
     });
     let c = ctx.clone();
     engine.register_fn("dem_load", move |file: &str| {
-        let dem = DemSim::load(std::path::Path::new(file), &c.registry()).or_rhai()?;
+        let path = std::path::Path::new(file);
+        if !path.is_file() {
+            return err(format!(
+                "dem_load: no saved DEM state at `{file}`; `sim.save(file)` writes one into a run's output \
+                 folder (a prepared RVE: `granite run scripts/mpmxdem/prepare_rve.rhai` writes \
+                 out/prepare_rve/rve.json)"
+            ));
+        }
+        let dem = DemSim::load(path, &c.registry()).or_rhai()?;
         Ok::<_, Box<rhai::EvalAltResult>>(Handle::new(
             DemScene { dem, driven: Vec::new(), auto_skin: false },
             c.clone(),

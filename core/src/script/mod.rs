@@ -6,6 +6,7 @@
 pub mod convert;
 mod dem_api;
 pub mod driver;
+mod limits;
 mod mpm_api;
 mod output;
 pub mod repl;
@@ -17,6 +18,7 @@ use crate::error::{GraniteError, Result};
 use crate::registry::Registry;
 use convert::{err, RhaiResult};
 use indexmap::IndexMap;
+use limits::Limits;
 use rhai::{Dynamic, Engine, EvalAltResult};
 use serde_json::Value;
 use std::path::{Path, PathBuf};
@@ -136,12 +138,31 @@ impl ScriptContext {
         Ok((name, version))
     }
 
-    /// `param(name, default)`: the override if one was given, parsed like the default.
-    fn param(&self, name: &str, default: Dynamic) -> RhaiResult<Dynamic> {
+    /// `param(name, default)` or `param(name, default, limits)`: the override if one was given,
+    /// parsed like the default; with limits, the default and the override must meet them.
+    fn param(&self, name: &str, default: Dynamic, limits: Option<&rhai::Map>) -> RhaiResult<Dynamic> {
+        let limits = limits.map(|l| Limits::parse(l, name)).transpose()?;
+        if let Some(l) = &limits {
+            if !l.admits(&default) {
+                return err(format!(
+                    "param(\"{name}\"): the default {default} is outside its own limits: must be {}",
+                    l.describe()
+                ));
+            }
+        }
         let given = self.options.overrides.iter().rev().find(|(k, _)| k == name).map(|(_, v)| v.clone());
         let value = match given {
             None => default.clone(),
-            Some(text) => parse_like(&text, &default, name)?,
+            Some(text) => {
+                let value = parse_like(&text, &default, name)?;
+                if let Some(l) = limits.as_ref().filter(|l| !l.admits(&value)) {
+                    return err(format!(
+                        "--set {name}={text}: `{name}` must be {} (the default is {default})",
+                        l.describe()
+                    ));
+                }
+                value
+            }
         };
         self.declared.lock().unwrap().insert(name.to_string(), value.clone());
         Ok(value)
@@ -179,7 +200,10 @@ fn parse_like(text: &str, default: &Dynamic, name: &str) -> RhaiResult<Dynamic> 
     if default.is_int() {
         text.trim().parse::<i64>().map(Dynamic::from).or_else(|_| bad("an integer"))
     } else if default.is_float() {
-        text.trim().parse::<f64>().map(Dynamic::from).or_else(|_| bad("a number"))
+        match text.trim().parse::<f64>() {
+            Ok(x) if x.is_finite() => Ok(Dynamic::from(x)),
+            _ => bad("a finite number"),
+        }
     } else if default.is_bool() {
         text.trim().parse::<bool>().map(Dynamic::from).or_else(|_| bad("true or false"))
     } else {
@@ -204,15 +228,21 @@ fn to_json(d: &Dynamic) -> Value {
 fn build_engine(ctx: &Arc<ScriptContext>) -> Engine {
     let mut engine = Engine::new();
     engine.set_max_expr_depths(128, 64);
-    for kind in 0..4 {
-        let c = ctx.clone();
-        match kind {
-            0 => engine.register_fn("param", move |name: &str, d: f64| c.param(name, Dynamic::from(d))),
-            1 => engine.register_fn("param", move |name: &str, d: i64| c.param(name, Dynamic::from(d))),
-            2 => engine.register_fn("param", move |name: &str, d: &str| c.param(name, Dynamic::from(d.to_string()))),
-            _ => engine.register_fn("param", move |name: &str, d: bool| c.param(name, Dynamic::from(d))),
+    // param(name, default) and param(name, default, limits), for each kind of default.
+    macro_rules! register_param {
+        ($kind:ty, $to_dynamic:expr) => {
+            let c = ctx.clone();
+            engine.register_fn("param", move |name: &str, d: $kind| c.param(name, $to_dynamic(d), None));
+            let c = ctx.clone();
+            engine.register_fn("param", move |name: &str, d: $kind, limits: rhai::Map| {
+                c.param(name, $to_dynamic(d), Some(&limits))
+            });
         };
     }
+    register_param!(f64, Dynamic::from);
+    register_param!(i64, Dynamic::from);
+    register_param!(&str, |d: &str| Dynamic::from(d.to_string()));
+    register_param!(bool, Dynamic::from);
     let c = ctx.clone();
     engine.register_fn("summary", move |name: &str, value: Dynamic| c.set_summary(name, to_json(&value)));
     let c = ctx.clone();
