@@ -48,7 +48,45 @@ pub fn run_with_plugins(
     }
     let pool = pool.build().map_err(|e| granite_core::GraniteError::Other(format!("thread pool: {e}")))?;
     let program = format!("granite {} ({})", env!("CARGO_PKG_VERSION"), env!("GRANITE_GIT_COMMIT"));
-    pool.install(|| run_script(script, registry(), RunOptions { program, out_dir, overrides, quiet, plugins }))
+    let options = RunOptions { program, out_dir, overrides, quiet, plugins, list_params: false };
+    pool.install(|| run_script(script, registry(), options))
+}
+
+/// `granite run SCRIPT --list-params`: the parameters the script declares before its first
+/// simulation, one line each: name, value (and default when `--set` changed it), what its
+/// limits allow, and the comment of its line. Values given with `--set` are checked as a run
+/// checks them.
+pub fn describe_params(script: &Path, overrides: Vec<(String, String)>, plugins: Vec<PathBuf>) -> Result<String> {
+    let options = RunOptions { overrides: overrides.clone(), plugins, quiet: true, ..Default::default() };
+    let declared = granite_core::script::list_params(script, registry(), options)?;
+    let shown = |d: &granite_core::script::Declared| {
+        let (value, default) = (d.value.to_string(), d.default.to_string());
+        if value == default {
+            value
+        } else {
+            format!("{value} (default {default})")
+        }
+    };
+    let rows: Vec<[String; 4]> =
+        declared.iter().map(|d| [d.name.clone(), shown(d), d.allowed.clone(), d.comment.clone()]).collect();
+    let width = |c: usize| rows.iter().map(|r| r[c].chars().count()).max().unwrap_or(0);
+    let (w0, w1, w2) = (width(0), width(1), width(2));
+    let mut out = format!(
+        "{}: {} parameter(s) declared before the first simulation; change one with --set NAME=VALUE\n",
+        script.display(),
+        rows.len()
+    );
+    for [name, value, allowed, comment] in &rows {
+        let line = format!("  {name:<w0$}  {value:<w1$}  {allowed:<w2$}  {comment}");
+        out.push_str(line.trim_end());
+        out.push('\n');
+    }
+    for (name, _) in overrides.iter().filter(|(k, _)| !declared.iter().any(|d| &d.name == k)) {
+        out.push_str(&format!(
+            "--set {name}: not among these (a run refuses it unless the script declares it later)\n"
+        ));
+    }
+    Ok(out)
 }
 
 /// Parses `NAME=VALUE`.

@@ -31,6 +31,9 @@ enum Command {
         /// Load a native constitutive-law plugin (a granite-plugin-abi cdylib) first; repeatable.
         #[arg(long = "plugin", value_name = "LIBRARY")]
         plugins: Vec<PathBuf>,
+        /// List the script's parameters (value, limits, comment) instead of running it.
+        #[arg(long)]
+        list_params: bool,
     },
     /// Interactive session: the script API one input at a time; Ctrl-C pauses a run.
     Repl {
@@ -112,7 +115,19 @@ enum Command {
 fn main() -> ExitCode {
     let cli = Cli::parse();
     match cli.command {
-        Command::Run { script, set, out, threads, quiet, plugins } => {
+        Command::Run { script, set, list_params: true, plugins, .. } => {
+            match granite::describe_params(&script, set, plugins) {
+                Ok(table) => {
+                    print!("{table}");
+                    ExitCode::SUCCESS
+                }
+                Err(e) => {
+                    eprintln!("granite: error: {e}");
+                    ExitCode::FAILURE
+                }
+            }
+        }
+        Command::Run { script, set, out, threads, quiet, plugins, .. } => {
             if threads == Some(0) {
                 eprintln!("granite: --threads must be >= 1");
                 return ExitCode::from(2);
@@ -198,7 +213,14 @@ fn main() -> ExitCode {
         Command::Repl { script, out, set, plugins, quiet } => {
             let program = format!("granite {} ({})", env!("CARGO_PKG_VERSION"), env!("GRANITE_GIT_COMMIT"));
             let out_dir = out.unwrap_or_else(|| PathBuf::from("out").join("repl"));
-            let options = granite_core::script::RunOptions { program, out_dir, overrides: set, quiet, plugins };
+            let options = granite_core::script::RunOptions {
+                program,
+                out_dir,
+                overrides: set,
+                quiet,
+                plugins,
+                list_params: false,
+            };
             match granite::repl::run(script.as_deref(), options) {
                 Ok(0) => ExitCode::SUCCESS,
                 Ok(failed) => {

@@ -62,6 +62,34 @@ fn unknown_parameter_fails_with_the_declared_list() {
 }
 
 #[test]
+fn params_lists_values_limits_and_comments_without_running() {
+    let list = |sets: &[&str]| {
+        let mut cmd = granite();
+        cmd.args(["run", "scripts/dem/triaxial_periodic.rhai", "--list-params"]).current_dir(common::root());
+        for s in sets {
+            cmd.args(["--set", s]);
+        }
+        cmd.output().unwrap()
+    };
+    let out = list(&["friction=20"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let text = String::from_utf8_lossy(&out.stdout);
+    let line = text.lines().find(|l| l.trim_start().starts_with("friction ")).expect("a friction line");
+    assert!(
+        line.contains("20.0 (default 30.0)") && line.contains(">= 0 and < 90") && line.contains("inter-particle"),
+        "{line}"
+    );
+    assert!(text.contains("confining") && text.contains("> 0") && text.contains("P_c, Pa"), "{text}");
+    // The listing stops before the first simulation: no compaction, no run.
+    assert!(!text.contains("compacted") && !text.contains("granite: done"), "{text}");
+    // Values are checked as a run checks them.
+    let out = list(&["friction=95"]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("line 7") && err.contains("`friction` must be >= 0 and < 90"), "{err}");
+}
+
+#[test]
 fn plot_writes_an_svg() {
     let dir = common::out_dir("cli_plot");
     std::fs::create_dir_all(&dir).unwrap();

@@ -317,9 +317,15 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
     register_common::<DemScene>(engine);
     engine.register_get("name", |m: &mut DemMaterialHandle| m.name.clone());
     let c = ctx.clone();
-    engine.register_fn("dem", move |opts: Map| DemHandle::create(c.clone(), opts));
+    engine.register_fn("dem", move |opts: Map| {
+        c.before_simulation()?;
+        DemHandle::create(c.clone(), opts)
+    });
     let c = ctx.clone();
-    engine.register_fn("dem", move || DemHandle::create(c.clone(), Map::new()));
+    engine.register_fn("dem", move || {
+        c.before_simulation()?;
+        DemHandle::create(c.clone(), Map::new())
+    });
     engine.register_fn("material", |s: &mut DemHandle, opts: Map| s.material(opts));
     engine.register_fn("save", |s: &mut DemHandle, file: &str| {
         let st = s.lock();
@@ -328,6 +334,7 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
     });
     let c = ctx.clone();
     engine.register_fn("dem_load", move |file: &str| {
+        c.before_simulation()?;
         let path = std::path::Path::new(file);
         if !path.is_file() {
             return err(format!(

@@ -19,7 +19,7 @@ use crate::registry::Registry;
 use convert::{err, RhaiResult};
 use indexmap::IndexMap;
 use limits::Limits;
-use rhai::{Dynamic, Engine, EvalAltResult};
+use rhai::{Dynamic, Engine, EvalAltResult, NativeCallContext};
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
@@ -43,6 +43,23 @@ pub struct RunOptions {
     pub quiet: bool,
     /// Native plugin libraries to load before the script runs (`--plugin`).
     pub plugins: Vec<std::path::PathBuf>,
+    /// Only list the parameters (`granite run --list-params`): the script stops where it makes its
+    /// first simulation, and nothing is written.
+    pub list_params: bool,
+}
+
+/// A parameter as the script declared it, for `granite run --list-params`.
+#[derive(Debug, Clone)]
+pub struct Declared {
+    pub name: String,
+    /// The value this run takes (the `--set` value if given, else the default).
+    pub value: Dynamic,
+    pub default: Dynamic,
+    /// What the declared limits allow ("> 0 and <= 90"), empty without limits.
+    pub allowed: String,
+    /// Line of the declaration, and the comment that ends it, if any.
+    pub line: usize,
+    pub comment: String,
 }
 
 /// What a finished script leaves behind.
@@ -58,7 +75,7 @@ pub struct ScriptContext {
     /// Native plugins loaded by this script: (library, law, version).
     plugins: Mutex<Vec<(String, String, String)>>,
     pub options: RunOptions,
-    declared: Mutex<IndexMap<String, Dynamic>>,
+    declared: Mutex<IndexMap<String, Declared>>,
     summary: Mutex<IndexMap<String, Value>>,
     sims: Mutex<usize>,
     /// The compiled script, for laws written as script functions.
@@ -70,6 +87,8 @@ pub struct ScriptContext {
     /// Background run threads (each returns its error, if it failed), with the stop flag of
     /// those that run until paused.
     background: Mutex<Vec<BackgroundThread>>,
+    /// Set when a parameter listing stopped the script at its first simulation.
+    listing_done: std::sync::atomic::AtomicBool,
 }
 
 impl ScriptContext {
@@ -85,6 +104,7 @@ impl ScriptContext {
             pauses: std::sync::atomic::AtomicU64::new(0),
             engine: Mutex::new(std::sync::Weak::new()),
             background: Mutex::new(Vec::new()),
+            listing_done: std::sync::atomic::AtomicBool::new(false),
         }
     }
 
@@ -138,9 +158,9 @@ impl ScriptContext {
         Ok((name, version))
     }
 
-    /// `param(name, default)` or `param(name, default, limits)`: the override if one was given,
-    /// parsed like the default; with limits, the default and the override must meet them.
-    fn param(&self, name: &str, default: Dynamic, limits: Option<&rhai::Map>) -> RhaiResult<Dynamic> {
+    /// `param(name, default)` or `param(name, default, limits)` at `line`: the override if one
+    /// was given, parsed like the default; with limits, the default and the override must meet them.
+    fn param(&self, name: &str, default: Dynamic, limits: Option<&rhai::Map>, line: usize) -> RhaiResult<Dynamic> {
         let limits = limits.map(|l| Limits::parse(l, name)).transpose()?;
         if let Some(l) = &limits {
             if !l.admits(&default) {
@@ -164,8 +184,20 @@ impl ScriptContext {
                 value
             }
         };
-        self.declared.lock().unwrap().insert(name.to_string(), value.clone());
+        let allowed = limits.map(|l| l.describe()).unwrap_or_default();
+        let declared =
+            Declared { name: name.to_string(), value: value.clone(), default, allowed, line, comment: String::new() };
+        self.declared.lock().unwrap().insert(name.to_string(), declared);
         Ok(value)
+    }
+
+    /// Called where a script makes a simulation: when only listing parameters, stops it there.
+    pub(crate) fn before_simulation(&self) -> RhaiResult<()> {
+        if self.options.list_params {
+            self.listing_done.store(true, std::sync::atomic::Ordering::SeqCst);
+            return err("stopped at the first simulation: listing the parameters only");
+        }
+        Ok(())
     }
 
     /// Every `--set` name must be declared by the script.
@@ -232,10 +264,12 @@ fn build_engine(ctx: &Arc<ScriptContext>) -> Engine {
     macro_rules! register_param {
         ($kind:ty, $to_dynamic:expr) => {
             let c = ctx.clone();
-            engine.register_fn("param", move |name: &str, d: $kind| c.param(name, $to_dynamic(d), None));
+            engine.register_fn("param", move |call: NativeCallContext, name: &str, d: $kind| {
+                c.param(name, $to_dynamic(d), None, call.call_position().line().unwrap_or(0))
+            });
             let c = ctx.clone();
-            engine.register_fn("param", move |name: &str, d: $kind, limits: rhai::Map| {
-                c.param(name, $to_dynamic(d), Some(&limits))
+            engine.register_fn("param", move |call: NativeCallContext, name: &str, d: $kind, limits: rhai::Map| {
+                c.param(name, $to_dynamic(d), Some(&limits), call.call_position().line().unwrap_or(0))
             });
         };
     }
@@ -269,7 +303,9 @@ fn build_engine(ctx: &Arc<ScriptContext>) -> Engine {
 /// The output folder, the context with `--plugin` libraries loaded, and an engine on it.
 pub(crate) fn prepare(registry: Registry, options: RunOptions) -> Result<(Arc<ScriptContext>, Arc<Engine>)> {
     let out_dir = options.out_dir.clone();
-    std::fs::create_dir_all(&out_dir).map_err(|e| GraniteError::io(&out_dir, e))?;
+    if !options.list_params {
+        std::fs::create_dir_all(&out_dir).map_err(|e| GraniteError::io(&out_dir, e))?;
+    }
     let plugins = options.plugins.clone();
     let ctx = Arc::new(ScriptContext::new(registry, options));
     for p in &plugins {
@@ -278,6 +314,28 @@ pub(crate) fn prepare(registry: Registry, options: RunOptions) -> Result<(Arc<Sc
     let engine = Arc::new(build_engine(&ctx));
     *ctx.engine.lock().unwrap() = Arc::downgrade(&engine);
     Ok((ctx, engine))
+}
+
+/// The parameters a script declares before it makes its first simulation, with the values
+/// `options.overrides` give them (checked as a run would check them), their limits and the
+/// comment ending each declaration's line. Nothing is run or written.
+pub fn list_params(path: &Path, registry: Registry, options: RunOptions) -> Result<Vec<Declared>> {
+    let source = std::fs::read_to_string(path).map_err(|e| GraniteError::io(path, e))?;
+    let name = path.file_name().map(|n| n.to_string_lossy().to_string()).unwrap_or_default();
+    let (ctx, engine) = prepare(registry, RunOptions { list_params: true, ..options })?;
+    let ast = engine.compile(&source).map_err(|e| GraniteError::Other(format!("{name}: syntax error: {e}")))?;
+    if let Err(e) = engine.run_ast(&ast) {
+        if !ctx.listing_done.load(std::sync::atomic::Ordering::SeqCst) {
+            return Err(GraniteError::Other(format!("{name}: {}", describe(&e))));
+        }
+    }
+    let lines: Vec<&str> = source.lines().collect();
+    let mut declared: Vec<Declared> = ctx.declared.lock().unwrap().values().cloned().collect();
+    for d in &mut declared {
+        let text = d.line.checked_sub(1).and_then(|i| lines.get(i)).copied().unwrap_or("");
+        d.comment = text.split_once("//").map(|(_, c)| c.trim().to_string()).unwrap_or_default();
+    }
+    Ok(declared)
 }
 
 /// Runs a script file. The output folder gets `summary.json` whatever happens; a failed run
@@ -359,7 +417,7 @@ fn write_provenance(
     status: Option<&Value>,
 ) -> Result<()> {
     let params: IndexMap<String, Value> =
-        ctx.declared.lock().unwrap().iter().map(|(k, v)| (k.clone(), to_json(v))).collect();
+        ctx.declared.lock().unwrap().iter().map(|(k, d)| (k.clone(), to_json(&d.value))).collect();
     let plugins = serde_json::json!({
         "constitutive_laws": ctx.registry().law_names(),
         "velocity_updates": ctx.registry().velocity_update_names(),

@@ -584,7 +584,10 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
     register_common::<MpmScene>(engine);
     engine.register_get("name", |m: &mut MaterialHandle| m.name.clone());
     let c = ctx.clone();
-    engine.register_fn("mpm", move |opts: Map| SimHandle::create(c.clone(), opts));
+    engine.register_fn("mpm", move |opts: Map| {
+        c.before_simulation()?;
+        SimHandle::create(c.clone(), opts)
+    });
 
     engine.register_fn("material", |s: &mut SimHandle, law: &str, opts: Map| s.material(law, opts));
     engine.register_fn("set_material", |s: &mut SimHandle, m: MaterialHandle, opts: Map| s.set_material(&m, opts));
@@ -602,6 +605,7 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
     });
     let c = ctx.clone();
     engine.register_fn("mpm_load", move |file: &str| {
+        c.before_simulation()?;
         let mpm = MpmSim::load(std::path::Path::new(file), &c.registry()).or_rhai()?;
         Ok::<_, Box<rhai::EvalAltResult>>(Handle::new(MpmScene { mpm, runout: None, driven: Vec::new() }, c.clone()))
     });
