@@ -64,44 +64,40 @@ impl Wall {
         }
     }
 
-    /// [`Wall::contact`] of the shapes with edges or curvature.
+    /// [`Wall::contact`] of the shapes with edges or curvature: the wall's point closest to the
+    /// sphere's centre, whose distance gives the gap and whose direction the normal.
     fn bounded_contact(&self, x: Vec3, radius: f64, reach: f64) -> Option<WallContact> {
+        let point = self.closest_point(x)?;
+        let to = [point[0] - x[0], point[1] - x[1], point[2] - x[2]];
+        let dist = dot3(to, to).sqrt();
+        let gap = dist - radius;
+        if gap > reach || dist == 0.0 {
+            return None;
+        }
+        Some(WallContact { normal: [to[0] / dist, to[1] / dist, to[2] / dist], gap, point })
+    }
+
+    /// The point of the wall closest to `x` (None on a cylinder's axis, where every direction
+    /// is as close).
+    fn closest_point(&self, x: Vec3) -> Option<Vec3> {
         let d = [x[0] - self.position[0], x[1] - self.position[1], x[2] - self.position[2]];
+        let p = self.position;
         match &self.shape {
-            WallShape::Plane { .. } => self.contact(x, radius, reach),
+            WallShape::Plane { normal } => {
+                let dist = dot3(d, *normal);
+                Some([x[0] - normal[0] * dist, x[1] - normal[1] * dist, x[2] - normal[2] * dist])
+            }
             WallShape::Rect { u, v, half } => {
                 let su = dot3(d, *u).clamp(-half[0], half[0]);
                 let sv = dot3(d, *v).clamp(-half[1], half[1]);
-                let point = [
-                    self.position[0] + su * u[0] + sv * v[0],
-                    self.position[1] + su * u[1] + sv * v[1],
-                    self.position[2] + su * u[2] + sv * v[2],
-                ];
-                let to = [point[0] - x[0], point[1] - x[1], point[2] - x[2]];
-                let dist = dot3(to, to).sqrt();
-                let gap = dist - radius;
-                if gap > reach || dist == 0.0 {
-                    return None;
-                }
-                Some(WallContact { normal: [to[0] / dist, to[1] / dist, to[2] / dist], gap, point })
+                Some([p[0] + su * u[0] + sv * v[0], p[1] + su * u[1] + sv * v[1], p[2] + su * u[2] + sv * v[2]])
             }
             WallShape::Disk { normal, radius: big_r } => {
                 let h = dot3(d, *normal);
                 let inplane = [d[0] - h * normal[0], d[1] - h * normal[1], d[2] - h * normal[2]];
                 let rho = dot3(inplane, inplane).sqrt();
                 let scale = if rho > *big_r { big_r / rho } else { 1.0 };
-                let point = [
-                    self.position[0] + inplane[0] * scale,
-                    self.position[1] + inplane[1] * scale,
-                    self.position[2] + inplane[2] * scale,
-                ];
-                let to = [point[0] - x[0], point[1] - x[1], point[2] - x[2]];
-                let dist = dot3(to, to).sqrt();
-                let gap = dist - radius;
-                if gap > reach || dist == 0.0 {
-                    return None;
-                }
-                Some(WallContact { normal: [to[0] / dist, to[1] / dist, to[2] / dist], gap, point })
+                Some([p[0] + inplane[0] * scale, p[1] + inplane[1] * scale, p[2] + inplane[2] * scale])
             }
             WallShape::Cylinder { axis, radius: big_r, length } => {
                 // Closest point of the finite shell (either side, rims included): a grain that
@@ -114,19 +110,11 @@ impl Wall {
                 }
                 let on_axis = along.clamp(0.0, *length);
                 let out = big_r / rho;
-                let point = [
-                    self.position[0] + on_axis * axis[0] + radial[0] * out,
-                    self.position[1] + on_axis * axis[1] + radial[1] * out,
-                    self.position[2] + on_axis * axis[2] + radial[2] * out,
-                ];
-                let to = [point[0] - x[0], point[1] - x[1], point[2] - x[2]];
-                let dist = dot3(to, to).sqrt();
-                let gap = dist - radius;
-                if gap > reach || dist == 0.0 {
-                    return None;
-                }
-                let n = [to[0] / dist, to[1] / dist, to[2] / dist];
-                Some(WallContact { normal: n, gap, point })
+                Some([
+                    p[0] + on_axis * axis[0] + radial[0] * out,
+                    p[1] + on_axis * axis[1] + radial[1] * out,
+                    p[2] + on_axis * axis[2] + radial[2] * out,
+                ])
             }
         }
     }
