@@ -3,6 +3,24 @@
 use crate::error::{GraniteError, Result};
 use indexmap::IndexMap;
 
+/// A time step as a user gives it: finite and > 0.
+pub fn time_step(dt: f64) -> Result<f64> {
+    if dt > 0.0 && dt.is_finite() {
+        Ok(dt)
+    } else {
+        Err(GraniteError::param("dt", dt, "must be > 0"))
+    }
+}
+
+/// The time step a run needs: none set yet (zero) is an error that says what to call.
+pub fn require_time_step(dt: f64) -> Result<()> {
+    if dt > 0.0 {
+        Ok(())
+    } else {
+        Err(GraniteError::Setup("no time step: call dt(...) before running".into()))
+    }
+}
+
 /// A parameter a plugin accepts: its name, a default (None = required) and a line of documentation.
 #[derive(Debug, Clone, Copy)]
 pub struct ParamSpec {

@@ -408,17 +408,12 @@ impl DemSim {
     }
 
     pub fn set_dt(&mut self, dt: f64) -> Result<()> {
-        if !(dt > 0.0 && dt.is_finite()) {
-            return Err(GraniteError::param("dt", dt, "must be > 0"));
-        }
-        self.dt = dt;
+        self.dt = crate::params::time_step(dt)?;
         Ok(())
     }
 
     pub fn validate(&self) -> Result<()> {
-        if self.dt <= 0.0 {
-            return Err(GraniteError::Setup("no time step: call dt(...) before running".into()));
-        }
+        crate::params::require_time_step(self.dt)?;
         if !self.spheres.is_empty() && self.laws.is_empty() {
             return Err(GraniteError::Setup("no contact law: call contact_law(...) before running".into()));
         }

@@ -222,18 +222,13 @@ impl MpmSim {
     }
 
     pub fn set_dt(&mut self, dt: f64) -> Result<()> {
-        if !(dt > 0.0 && dt.is_finite()) {
-            return Err(GraniteError::param("dt", dt, "must be > 0"));
-        }
-        self.dt = dt;
+        self.dt = crate::params::time_step(dt)?;
         Ok(())
     }
 
     /// Checks everything a run needs; called before stepping.
     pub fn validate(&self) -> Result<()> {
-        if self.dt <= 0.0 {
-            return Err(GraniteError::Setup("no time step: call dt(...) before running".into()));
-        }
+        crate::params::require_time_step(self.dt)?;
         if let Some(crit) = self.critical_dt() {
             if self.dt > crit {
                 return Err(GraniteError::param(
