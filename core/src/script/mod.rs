@@ -333,9 +333,26 @@ pub fn list_params(path: &Path, registry: Registry, options: RunOptions) -> Resu
     let mut declared: Vec<Declared> = ctx.declared.lock().unwrap().values().cloned().collect();
     for d in &mut declared {
         let text = d.line.checked_sub(1).and_then(|i| lines.get(i)).copied().unwrap_or("");
-        d.comment = text.split_once("//").map(|(_, c)| c.trim().to_string()).unwrap_or_default();
+        d.comment = line_comment(text).unwrap_or_default().trim().to_string();
     }
     Ok(declared)
+}
+
+/// The `//` comment ending a line of Rhai, if any (a `//` inside a string literal is text).
+fn line_comment(line: &str) -> Option<&str> {
+    let mut quote: Option<char> = None;
+    let mut escaped = false;
+    for (i, c) in line.char_indices() {
+        match (quote, c) {
+            (Some(_), _) if escaped => escaped = false,
+            (Some(_), '\\') => escaped = true,
+            (Some(q), c) if c == q => quote = None,
+            (None, '"' | '`') => quote = Some(c),
+            (None, '/') if line[i + 1..].starts_with('/') => return Some(&line[i + 2..]),
+            _ => {}
+        }
+    }
+    None
 }
 
 /// Runs a script file. The output folder gets `summary.json` whatever happens; a failed run
@@ -466,5 +483,17 @@ pub(crate) fn describe(e: &EvalAltResult) -> String {
     match p.line() {
         Some(line) => format!("line {line}: {msg}"),
         None => msg,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::line_comment;
+
+    #[test]
+    fn line_comments_skip_slashes_inside_strings() {
+        assert_eq!(line_comment(r#"let v = param("w", 0.0); // m/s; 0: default"#), Some(" m/s; 0: default"));
+        assert_eq!(line_comment(r#"let u = param("url", "http://x\"//y"); // where"#), Some(" where"));
+        assert_eq!(line_comment("let s = `a // b`;"), None);
     }
 }
