@@ -14,6 +14,7 @@ const HELP: &str = "granite repl: the script API one input at a time (variables 
   sim.diagnostics(), sim.time, sim.step   inspect (between two steps, also while running)
   sim.gravity([..]), sim.damping(d), sim.vtk_every(n) ...   change (between two steps, also while running)
   a line ending inside { ( [ continues on the next line; an empty line ends it
+  :api [text] the API's functions (those whose signature holds text), e.g. :api wall
   :help this text, :quit or Ctrl-D leaves";
 
 /// Runs the session; returns the number of inputs that failed.
@@ -51,6 +52,17 @@ pub fn run(script: Option<&Path>, options: RunOptions) -> Result<usize> {
                 ":quit" | ":q" | "exit" | "quit" => break,
                 ":help" | "help" => {
                     println!("{HELP}");
+                    continue;
+                }
+                _ if trimmed == ":api" || trimmed.starts_with(":api ") => {
+                    let filter = trimmed[":api".len()..].trim();
+                    let found = session.api(filter);
+                    if found.is_empty() {
+                        println!("no function of the API matches `{filter}`");
+                    }
+                    for signature in found {
+                        println!("  {signature}");
+                    }
                     continue;
                 }
                 _ => {}

@@ -61,6 +61,16 @@ impl ReplSession {
     }
 
     /// Makes every run, in the background or not, pause at its next step, keeping the state (Ctrl-C).
+    /// The script API's functions whose signature contains `filter` (all for an empty one),
+    /// sorted: what `:api` prints.
+    pub fn api(&self, filter: &str) -> Vec<String> {
+        let mut found: Vec<String> =
+            self.engine.gen_fn_signatures(false).iter().map(|s| readable(s)).filter(|s| s.contains(filter)).collect();
+        found.sort();
+        found.dedup();
+        found
+    }
+
     pub fn pause_handle(&self) -> impl Fn() + Send + 'static {
         let ctx = self.ctx.clone();
         move || ctx.request_pause()
@@ -82,5 +92,62 @@ fn stops_at_end(e: &rhai::ParseError, input: &str) -> bool {
     match e.position().line() {
         None => true,
         Some(line) => line > last_line,
+    }
+}
+
+/// A signature as Rhai's metadata writes it (Rust paths, `Result` wrappers, the receiver as a
+/// first parameter) in the script's terms: `DemSim.cloud(DemMaterial, value, value, map) -> int`,
+/// `DemSim.time` for a property.
+fn readable(signature: &str) -> String {
+    const TERMS: [(&str, &str); 10] = [
+        ("core::result::Result<", ""),
+        (",alloc::boxed::Box<rhai::types::error::EvalAltResult>>", ""),
+        ("alloc::vec::Vec<rhai::types::dynamic::Dynamic>", "array"),
+        ("alloc::collections::btree::map::BTreeMap<smartstring::SmartString<smartstring::config::LazyCompact>,rhai::types::dynamic::Dynamic>", "map"),
+        ("rhai::types::dynamic::Dynamic", "value"),
+        ("types::dynamic::Dynamic", "value"),
+        ("alloc::string::String", "string"),
+        ("granite_core::script::driver::Handle<granite_core::script::dem_api::DemScene>", "DemSim"),
+        ("granite_core::script::driver::Handle<granite_core::script::mpm_api::MpmScene>", "MpmSim"),
+        ("granite_core::script::", ""),
+    ];
+    let mut s = signature.replace("_: ", "");
+    for (from, to) in TERMS {
+        s = s.replace(from, to);
+    }
+    s = s.replace("mpm_api::MaterialHandle", "Material").replace("dem_api::DemMaterialHandle", "DemMaterial");
+    s = s.replace("i64", "int").replace("f64", "float");
+    let s = s.strip_suffix(" -> ()").unwrap_or(&s).to_string();
+    // `name(&mut Receiver, rest) -> out` as `Receiver.name(rest) -> out`; getters as properties.
+    let Some((name, rest)) = s.split_once('(') else { return s };
+    let Some(after) = rest.strip_prefix("&mut ") else { return s };
+    let (receiver, rest) = match after.split_once(", ") {
+        Some((receiver, rest)) => (receiver, rest.to_string()),
+        None => {
+            let (receiver, tail) = after.split_once(')').unwrap_or((after, ""));
+            (receiver, format!("){tail}"))
+        }
+    };
+    match name.strip_prefix("get$") {
+        Some(property) => format!("{receiver}.{property}{}", rest.trim_start_matches(')')),
+        None => format!("{receiver}.{name}({rest}"),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::readable;
+
+    #[test]
+    fn signatures_read_in_the_scripts_terms() {
+        let raw = "cloud(_: &mut DemSim, _: DemMaterial, _: types::dynamic::Dynamic, _: map) -> \
+                   core::result::Result<i64,alloc::boxed::Box<rhai::types::error::EvalAltResult>>";
+        assert_eq!(readable(raw), "DemSim.cloud(DemMaterial, value, map) -> int");
+        assert_eq!(readable("get$dt(_: &mut MpmSim) -> f64"), "MpmSim.dt -> float");
+        assert_eq!(
+            readable("pause(_: &mut DemSim) -> core::result::Result<(),alloc::boxed::Box<rhai::types::error::EvalAltResult>>"),
+            "DemSim.pause()"
+        );
+        assert_eq!(readable("param(_: &str, _: f64) -> value"), "param(&str, float) -> value");
     }
 }
