@@ -48,7 +48,7 @@ pub fn run_with_plugins(
     }
     let pool = pool.build().map_err(|e| granite_core::GraniteError::Other(format!("thread pool: {e}")))?;
     let program = format!("granite {} ({})", env!("CARGO_PKG_VERSION"), env!("GRANITE_GIT_COMMIT"));
-    let options = RunOptions { program, out_dir, overrides, quiet, plugins, list_params: false };
+    let options = RunOptions { program, out_dir, overrides, quiet, plugins, ..Default::default() };
     pool.install(|| run_script(script, registry(), options))
 }
 

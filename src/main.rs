@@ -219,7 +219,7 @@ fn main() -> ExitCode {
                 overrides: set,
                 quiet,
                 plugins,
-                list_params: false,
+                ..Default::default()
             };
             match granite::repl::run(script.as_deref(), options) {
                 Ok(0) => ExitCode::SUCCESS,

@@ -86,7 +86,9 @@ fn params_lists_values_limits_and_comments_without_running() {
     let out = list(&["friction=95"]);
     assert!(!out.status.success());
     let err = String::from_utf8_lossy(&out.stderr);
-    assert!(err.contains("line 7") && err.contains("`friction` must be >= 0 and < 90"), "{err}");
+    let source = std::fs::read_to_string(common::root().join("scripts/dem/triaxial_periodic.rhai")).unwrap();
+    let line = 1 + source.lines().position(|l| l.contains("param(\"friction\"")).expect("a friction parameter");
+    assert!(err.contains(&format!("line {line}:")) && err.contains("`friction` must be >= 0 and < 90"), "{err}");
 }
 
 #[test]

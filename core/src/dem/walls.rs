@@ -77,16 +77,14 @@ impl Wall {
         Some(WallContact { normal: [to[0] / dist, to[1] / dist, to[2] / dist], gap, point })
     }
 
-    /// The point of the wall closest to `x` (None on a cylinder's axis, where every direction
-    /// is as close).
+    /// The point of a bounded wall closest to `x`. None on a cylinder's axis, where every
+    /// direction is as close, and for a plane: its contact is one-sided (a sphere behind it
+    /// overlaps it), which [`Wall::contact`] works out itself.
     fn closest_point(&self, x: Vec3) -> Option<Vec3> {
         let d = [x[0] - self.position[0], x[1] - self.position[1], x[2] - self.position[2]];
         let p = self.position;
         match &self.shape {
-            WallShape::Plane { normal } => {
-                let dist = dot3(d, *normal);
-                Some([x[0] - normal[0] * dist, x[1] - normal[1] * dist, x[2] - normal[2] * dist])
-            }
+            WallShape::Plane { .. } => None,
             WallShape::Rect { u, v, half } => {
                 let su = dot3(d, *u).clamp(-half[0], half[0]);
                 let sv = dot3(d, *v).clamp(-half[1], half[1]);

@@ -252,6 +252,7 @@ fn psd_from(opts: &Map) -> RhaiResult<Psd> {
 
 impl Handle<DemScene> {
     fn create(ctx: Arc<ScriptContext>, opts: Map) -> RhaiResult<DemHandle> {
+        ctx.before_simulation()?;
         only_keys(&opts, &["seed", "skin"], "dem options")?;
         let mut dem = DemSim::new();
         if let Some(s) = get(&opts, "seed") {
@@ -317,15 +318,9 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
     register_common::<DemScene>(engine);
     engine.register_get("name", |m: &mut DemMaterialHandle| m.name.clone());
     let c = ctx.clone();
-    engine.register_fn("dem", move |opts: Map| {
-        c.before_simulation()?;
-        DemHandle::create(c.clone(), opts)
-    });
+    engine.register_fn("dem", move |opts: Map| DemHandle::create(c.clone(), opts));
     let c = ctx.clone();
-    engine.register_fn("dem", move || {
-        c.before_simulation()?;
-        DemHandle::create(c.clone(), Map::new())
-    });
+    engine.register_fn("dem", move || DemHandle::create(c.clone(), Map::new()));
     engine.register_fn("material", |s: &mut DemHandle, opts: Map| s.material(opts));
     engine.register_fn("save", |s: &mut DemHandle, file: &str| {
         let st = s.lock();

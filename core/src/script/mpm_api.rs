@@ -314,6 +314,7 @@ enum Region {
 
 impl Handle<MpmScene> {
     fn create(ctx: Arc<ScriptContext>, opts: Map) -> RhaiResult<SimHandle> {
+        ctx.before_simulation()?;
         let mut opts = opts;
         let update = opts.remove("velocity_update").map(|d| string(&d, "velocity_update")).transpose()?;
         let mesh = parse_mesh(&opts, None)?;
@@ -584,10 +585,7 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
     register_common::<MpmScene>(engine);
     engine.register_get("name", |m: &mut MaterialHandle| m.name.clone());
     let c = ctx.clone();
-    engine.register_fn("mpm", move |opts: Map| {
-        c.before_simulation()?;
-        SimHandle::create(c.clone(), opts)
-    });
+    engine.register_fn("mpm", move |opts: Map| SimHandle::create(c.clone(), opts));
 
     engine.register_fn("material", |s: &mut SimHandle, law: &str, opts: Map| s.material(law, opts));
     engine.register_fn("set_material", |s: &mut SimHandle, m: MaterialHandle, opts: Map| s.set_material(&m, opts));

@@ -60,7 +60,6 @@ impl ReplSession {
         }
     }
 
-    /// Makes every run, in the background or not, pause at its next step, keeping the state (Ctrl-C).
     /// The script API's functions whose signature contains `filter` (all for an empty one),
     /// sorted: what `:api` prints.
     pub fn api(&self, filter: &str) -> Vec<String> {
@@ -71,6 +70,7 @@ impl ReplSession {
         found
     }
 
+    /// Makes every run, in the background or not, pause at its next step, keeping the state (Ctrl-C).
     pub fn pause_handle(&self) -> impl Fn() + Send + 'static {
         let ctx = self.ctx.clone();
         move || ctx.request_pause()
