@@ -348,6 +348,35 @@ pub fn dem(counts: &[usize], steps: usize, threads: &[usize], repeat: usize) -> 
     Ok(())
 }
 
+/// Benchmark (b) of the coupling issue: MPM steps, their time step, DEM steps per MPM step, and
+/// the oedometric loading: the top of a mesh of 2 x 2 cells of `CELL` pushed down at `TOP_SPEED`.
+const MPM_STEPS: usize = 200;
+const MPM_DT: f64 = 1e-5;
+const DEM_STEPS: usize = 51;
+const TOP_SPEED: f64 = 1e-2;
+const CELL: f64 = 0.5;
+
+/// Seconds to step `copies` copies of `rve` as the coupled run of [`mpmxdem`] steps its RVEs, in
+/// the current pool: per MPM step, each copy takes its DEM steps at the oedometric strain rate
+/// (one copy per task, in parallel over copies), with nothing else around.
+fn rves_alone(rve: &granite_core::dem::DemSim, copies: usize) -> Result<f64> {
+    use rayon::prelude::*;
+    let mut sims: Vec<_> = (0..copies).map(|_| rve.clone()).collect();
+    for sim in sims.iter_mut() {
+        sim.set_sequential(true);
+        // One MPM step's strain increment spread over its DEM steps, as the dem_rve law does.
+        let rate = TOP_SPEED / (2.0 * CELL) * MPM_DT / (DEM_STEPS as f64 * sim.dt);
+        if let Some(c) = sim.cell.as_mut() {
+            c.velocity_gradient[(1, 1)] = -rate;
+        }
+    }
+    let t = Instant::now();
+    for _ in 0..MPM_STEPS {
+        sims.par_iter_mut().try_for_each(|sim| (0..DEM_STEPS).try_for_each(|_| sim.step()))?;
+    }
+    Ok(t.elapsed().as_secs_f64())
+}
+
 /// `granite bench mpmxdem`: an oedometric scene of 16 material points, each with a 125-sphere
 /// periodic RVE, 200 MPM steps of 1e-5 s with 51 DEM steps each (the peer's protocol).
 pub fn mpmxdem(threads: &[usize], repeat: usize) -> Result<()> {
@@ -357,25 +386,30 @@ pub fn mpmxdem(threads: &[usize], repeat: usize) -> Result<()> {
     use std::sync::Arc;
     // What a second core can give right now: the 2-thread figure below is read against it.
     machine_reference(threads, repeat)?;
-    println!("granite bench mpmxdem: 16 points x 125-sphere RVEs, 200 MPM steps x 51 DEM steps, oedometric");
+    println!(
+        "granite bench mpmxdem: 16 points x 125-sphere RVEs, {MPM_STEPS} MPM steps x {DEM_STEPS} DEM steps, oedometric"
+    );
     let mut rve = periodic_rve(125, 1e5)?;
     // The Verlet skin scripts/mpmxdem/prepare_rve.rhai gives an RVE by default (0.05 smallest
     // radii): an RVE deforms slowly, so a thin skin means fewer candidate pairs and few rebuilds.
     let r_min = rve.spheres.radius.iter().cloned().fold(f64::INFINITY, f64::min);
     rve.set_skin(0.05 * r_min)?;
+    // The coupling's own cost: in every round, right after the coupled run, the same DEM work
+    // without the MPM around it (one slow spell of the machine then hits both alike).
+    let alone_best: std::sync::Mutex<Vec<(usize, f64)>> = std::sync::Mutex::new(Vec::new());
     let timed = best_of(threads, repeat, || -> Result<(f64, (usize, usize))> {
         let reg = crate::registry();
-        let mesh = Mesh::new(2, [0.0; 3], [0.5, 0.5, 1.0], [2, 2, 1])?;
+        let mesh = Mesh::new(2, [0.0; 3], [CELL, CELL, 1.0], [2, 2, 1])?;
         let mut sim = MpmSim::new(mesh.clone(), reg.build_velocity_update("PIC", &ParamMap::new())?);
         let mut objects = granite_core::ext::constitutive::ObjectMap::new();
         objects.insert("rve".into(), Arc::new(rve.clone()));
-        let law = reg.build_law_with("dem_rve", &params(&[("dem_steps", 51.0)]), &objects)?;
+        let law = reg.build_law_with("dem_rve", &params(&[("dem_steps", DEM_STEPS as f64)]), &objects)?;
         let bytes = law.bytes_per_point();
         let m = sim.add_material("sand", 1700.0, law)?;
         let (xs, vols) = cell_points(&mesh, Layout::Gauss, 2, |_| Ok(true))?;
         let volume = rve.cell_volume().unwrap_or(1.0);
         sim.add_points(m, &xs, &vols, [0.0; 3], rve.love_weber_stress(volume))?;
-        for (face, axis, v) in [("x-", 0, 0.0), ("x+", 0, 0.0), ("y-", 1, 0.0), ("y+", 1, -1e-2)] {
+        for (face, axis, v) in [("x-", 0, 0.0), ("x+", 0, 0.0), ("y-", 1, 0.0), ("y+", 1, -TOP_SPEED)] {
             let f = Face::parse(face, 2)?;
             sim.boundary.velocity.push(VelocityConstraint {
                 nodes: f.nodes(&mesh),
@@ -383,16 +417,25 @@ pub fn mpmxdem(threads: &[usize], repeat: usize) -> Result<()> {
                 value: TimeFunction::Constant(v),
             });
         }
-        sim.set_dt(1e-5)?;
+        sim.set_dt(MPM_DT)?;
         let t = Instant::now();
-        for _ in 0..200 {
+        for _ in 0..MPM_STEPS {
             sim.step()?;
         }
-        Ok((t.elapsed().as_secs_f64(), (sim.points.len(), bytes)))
+        let coupled = t.elapsed().as_secs_f64();
+        let alone = rves_alone(&rve, sim.points.len())?;
+        let mut best = alone_best.lock().unwrap_or_else(|e| e.into_inner());
+        let n = rayon::current_num_threads();
+        match best.iter_mut().find(|(threads, _)| *threads == n) {
+            Some((_, secs)) => *secs = secs.min(alone),
+            None => best.push((n, alone)),
+        }
+        Ok((coupled, (sim.points.len(), bytes)))
     })?;
+    let alone_best = alone_best.into_inner().unwrap_or_else(|e| e.into_inner());
     let mut base = None;
     for Timed { threads: n, best: secs, worst, out: (points, bytes) } in timed {
-        let sphere_steps = points as f64 * 125.0 * 51.0 * 200.0;
+        let sphere_steps = (points * rve.spheres.len() * DEM_STEPS * MPM_STEPS) as f64;
         let rate = sphere_steps / secs;
         let speedup = speedup_over(&mut base, rate);
         println!(
@@ -401,24 +444,14 @@ pub fn mpmxdem(threads: &[usize], repeat: usize) -> Result<()> {
             rate / 1e6 / n as f64,
             bytes as f64 / 1e6
         );
+        if let Some((_, alone)) = alone_best.iter().find(|(threads, _)| *threads == n) {
+            println!(
+                "           the same RVEs stepped alone (no MPM)  {alone:>7.3} s  {:>6.2} M sphere-steps/s: the coupled run does {:.1} % of that",
+                sphere_steps / alone / 1e6,
+                100.0 * alone / secs
+            );
+        }
     }
-    // The coupling's own cost: the same RVE stepped alone, same steps, one thread.
-    let standalone = best_of(&[1], repeat, || -> Result<(f64, ())> {
-        let mut sim = rve.clone();
-        sim.set_sequential(true);
-        // The oedometric increment of one MPM step (1e-2 m/s over 1 m for 1e-5 s) in 51 DEM steps.
-        let rate = 1e-2 * 1e-5 / (51.0 * sim.dt);
-        if let Some(c) = sim.cell.as_mut() {
-            c.velocity_gradient[(1, 1)] = -rate;
-        }
-        let t = Instant::now();
-        for _ in 0..16 * 51 * 200 / 4 {
-            sim.step()?;
-        }
-        Ok((t.elapsed().as_secs_f64(), ()))
-    })?;
-    let standalone = rve.spheres.len() as f64 * (16 * 51 * 200 / 4) as f64 / standalone[0].best;
-    println!("standalone DEM on the same RVE, 1 thread: {:.2} M sphere-steps/s", standalone / 1e6);
     let mut big = periodic_rve(1000, 1e5)?;
     // As the dem_rve law holds its RVEs: stepped sequentially, without the parallel gather's lists.
     big.set_sequential(true);
