@@ -14,6 +14,7 @@ pub mod measures;
 pub mod particles;
 pub mod repose;
 pub mod sim;
+pub mod stability;
 pub mod state;
 pub mod step;
 pub mod voids;

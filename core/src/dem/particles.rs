@@ -47,6 +47,11 @@ impl Spheres {
         self.radius.iter().cloned().fold(0.0, f64::max)
     }
 
+    /// The smallest radius (infinite without spheres).
+    pub fn smallest_radius(&self) -> f64 {
+        self.radius.iter().cloned().fold(f64::INFINITY, f64::min)
+    }
+
     pub fn is_empty(&self) -> bool {
         self.x.is_empty()
     }

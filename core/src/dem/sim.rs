@@ -58,10 +58,16 @@ pub struct DemSim {
     pub(crate) walls_at_build: Vec<Vec3>,
     /// Cell matrix when the candidate lists were built.
     pub(crate) h_at_build: Option<nalgebra::Matrix3<f64>>,
-    /// Largest sphere radius when the candidate lists were built (radii change only through
-    /// calls that ask for a rebuild).
+    /// Largest and smallest sphere radii when the candidate lists were built (radii change only
+    /// through calls that ask for a rebuild).
     pub(crate) radius_max_at_build: f64,
+    pub(crate) radius_min_at_build: f64,
     pub(crate) needs_rebuild: bool,
+    /// Whether the time step is to be checked against the contacts' stability limit after the
+    /// next contact stage (the lists were rebuilt or the time step set), and whether it was
+    /// found above it since it was last set (said once in `events`).
+    pub(crate) stability_due: bool,
+    pub(crate) stability_warned: bool,
     /// Number of candidate-list rebuilds so far.
     pub rebuilds: u64,
     pub events: Vec<String>,
@@ -101,11 +107,14 @@ impl DemSim {
             wall_adjacency: Adjacency::default(),
             x_at_build: Vec::new(),
             radius_max_at_build: 0.0,
+            radius_min_at_build: f64::INFINITY,
             piece_bounds: Default::default(),
             walls_at_build: Vec::new(),
             h_at_build: None,
             spare_pairs: PairList::default(),
             needs_rebuild: true,
+            stability_due: true,
+            stability_warned: false,
             rebuilds: 0,
             events: Vec::new(),
             next_id: 0,
@@ -409,6 +418,8 @@ impl DemSim {
 
     pub fn set_dt(&mut self, dt: f64) -> Result<()> {
         self.dt = crate::params::time_step(dt)?;
+        self.stability_warned = false;
+        self.stability_due = true;
         Ok(())
     }
 

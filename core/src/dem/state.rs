@@ -160,6 +160,7 @@ impl DemSim {
         sim.walls_at_build = st.walls_at_build;
         sim.h_at_build = st.h_at_build;
         sim.radius_max_at_build = sim.spheres.largest_radius();
+        sim.radius_min_at_build = sim.spheres.smallest_radius();
         sim.needs_rebuild = st.needs_rebuild;
         sim.rebuilds = st.rebuilds;
         // Reading grows arrays by doubling; copies hold just their contents (a loaded RVE is the

@@ -62,6 +62,12 @@ impl DemSim {
         self.pairs.keep_torques(!self.sequential, true);
         self.wall_pairs.keep_torques(!self.sequential, false);
         self.contacts();
+        if self.stability_due {
+            self.stability_due = false;
+            if !self.stability_warned {
+                self.warn_if_above_stable_dt();
+            }
+        }
         if !self.sequential && self.adjacency.start.len() != self.spheres.len() + 1 {
             // Left unbuilt while the simulation ran sequentially (an RVE).
             self.build_adjacency();
@@ -107,6 +113,14 @@ impl DemSim {
         }
         self.time += self.dt;
         self.step += 1;
+        // Between two rebuilds every sphere stays within half the skin of where the lists were
+        // built (further, and they are rebuilt before the next step). A sphere now further than
+        // that plus the smallest radius has moved more than a smallest radius in this one step:
+        // contacts can then be missed (it may pass through a wall or another sphere), which no
+        // stable run does.
+        if moved > 0.5 * self.skin + self.radius_min_at_build {
+            return Err(self.too_fast());
+        }
         if !moved.is_finite() {
             let bad = (0..self.spheres.len())
                 .find(|&i| !self.spheres.x[i].iter().chain(&self.spheres.v[i]).all(|c| c.is_finite()))
@@ -137,6 +151,29 @@ impl DemSim {
             self.needs_rebuild = true;
         }
         Ok(())
+    }
+
+    /// The error of a step in which a sphere moved further than the smallest radius, naming the
+    /// fastest sphere.
+    fn too_fast(&self) -> GraniteError {
+        let s = &self.spheres;
+        let speed = |i: usize| s.v[i].iter().map(|c| c * c).sum::<f64>().sqrt();
+        let fastest = (0..s.len()).max_by(|&i, &j| speed(i).total_cmp(&speed(j))).unwrap_or(0);
+        let v = if s.is_empty() { 0.0 } else { speed(fastest) };
+        let critical = self.critical_dt().map(|c| format!(" (critical_dt() = {c:.4e} s)")).unwrap_or_default();
+        GraniteError::Unstable {
+            step: self.step,
+            time: self.time,
+            reason: format!(
+                "sphere {} moves at {v:.4e} m/s, {:.4e} m in one step of {:.4e} s: more than the smallest radius \
+                 {:.4e} m, so contacts would be missed. The forces are too large for this time step: lower dt{critical}, \
+                 or look for spheres placed overlapping or given such a velocity",
+                s.id.get(fastest).copied().unwrap_or(0),
+                v * self.dt,
+                self.dt,
+                self.radius_min_at_build
+            ),
+        }
     }
 
     /// Steps on the calling thread only (an RVE inside a parallel loop over material points),
@@ -357,7 +394,10 @@ impl DemSim {
         self.walls_at_build = self.walls.iter().map(|w| w.position).collect();
         self.h_at_build = self.cell.as_ref().map(|c| c.h);
         self.radius_max_at_build = self.spheres.largest_radius();
+        self.radius_min_at_build = self.spheres.smallest_radius();
         self.needs_rebuild = false;
+        // The contact network changes little between rebuilds: checking it then is enough.
+        self.stability_due = true;
         self.rebuilds += 1;
         Ok(())
     }

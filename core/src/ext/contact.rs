@@ -170,6 +170,12 @@ pub trait ContactLaw: Send + Sync {
     fn normal_stiffness(&self, _params: &[f64]) -> f64 {
         f64::NAN
     }
+    /// Tangent normal and tangential stiffnesses `(dF_n/dδ, dF_t/du_t)` of a touching pair at
+    /// `overlap` (for the stability limit of a packing, `DemSim::stable_dt`). By default the
+    /// normal stiffness and no tangential one.
+    fn tangent_stiffness(&self, _overlap: f64, params: &[f64]) -> (f64, f64) {
+        (self.normal_stiffness(params), 0.0)
+    }
     /// Elastic energy stored in one contact (for energy balances).
     fn elastic_energy(&self, _overlap: f64, _params: &[f64], _history: &[f64]) -> f64 {
         0.0

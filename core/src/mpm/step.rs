@@ -92,25 +92,40 @@ impl MpmSim {
         Ok(&self.grid.sums)
     }
 
+    /// Stops a run whose points stopped being finite, or move faster than a cell per step: past
+    /// that speed the CFL condition `dt (c + |v|) < h` fails whatever the wave speed `c`, the
+    /// point skips over grid nodes, and a stable run never gets there.
     fn check_finite(&self) -> Result<()> {
         let p = &self.points;
-        let bad = (0..p.len()).into_par_iter().with_min_len(MIN_PER_TASK).find_first(|&i| {
-            !(p.x[i].iter().all(|c| c.is_finite())
+        let cell = (0..self.mesh.dim).map(|a| self.mesh.cell[a]).fold(f64::INFINITY, f64::min);
+        let fastest2 = (cell / self.dt).powi(2);
+        let speed2 = |i: usize| p.v[i].iter().map(|c| c * c).sum::<f64>();
+        let finite = |i: usize| {
+            p.x[i].iter().all(|c| c.is_finite())
                 && p.v[i].iter().all(|c| c.is_finite())
-                && p.stress[i].iter().all(|c| c.is_finite()))
-        });
-        match bad {
-            None => Ok(()),
-            Some(i) => Err(GraniteError::Unstable {
-                step: self.step,
-                time: self.time,
-                reason: format!(
-                    "non-finite value at material point {} (position {:?}, velocity {:?}, stress {:?}); \
-                     try a smaller time step or a more dissipative velocity update",
-                    p.id[i], p.x[i], p.v[i], p.stress[i]
-                ),
-            }),
-        }
+                && p.stress[i].iter().all(|c| c.is_finite())
+        };
+        let bad =
+            (0..p.len()).into_par_iter().with_min_len(MIN_PER_TASK).find_first(|&i| !finite(i) || speed2(i) > fastest2);
+        let Some(i) = bad else { return Ok(()) };
+        let reason = if finite(i) {
+            let speed = speed2(i).sqrt();
+            format!(
+                "material point {} moves at {speed:.4e} m/s, {:.4e} m in one step of {:.4e} s: more than a cell \
+                 ({cell:.4e} m), which breaks the CFL condition dt (c + |v|) < h; the run has blown up or the time \
+                 step is too large for this motion",
+                p.id[i],
+                speed * self.dt,
+                self.dt
+            )
+        } else {
+            format!(
+                "non-finite value at material point {} (position {:?}, velocity {:?}, stress {:?}); \
+                 try a smaller time step or a more dissipative velocity update",
+                p.id[i], p.x[i], p.v[i], p.stress[i]
+            )
+        };
+        Err(GraniteError::Unstable { step: self.step, time: self.time, reason })
     }
 
     fn handle_out_of_mesh(&mut self) -> Result<()> {

@@ -582,6 +582,9 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
     });
     engine.register_fn("dt", |s: &mut DemHandle, dt: Dynamic| s.lock().sim.dem.set_dt(number(&dt, "dt")?).or_rhai());
     engine.register_fn("critical_dt", |s: &mut DemHandle| s.lock().sim.dem.critical_dt().unwrap_or(f64::INFINITY));
+    engine.register_fn("stable_dt", |s: &mut DemHandle| {
+        s.lock().sim.dem.stable_dt().map(|limit| limit.dt).unwrap_or(f64::INFINITY)
+    });
     engine.register_fn("erase_outside", |s: &mut DemHandle, lo: Dynamic, hi: Dynamic| {
         let (lo, hi) = (vector(&lo, 3, "lower corner")?, vector(&hi, 3, "upper corner")?);
         let mut st = s.lock();

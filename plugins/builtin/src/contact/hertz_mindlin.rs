@@ -110,6 +110,11 @@ impl ContactLaw for HertzMindlin {
     fn normal_stiffness(&self, params: &[f64]) -> f64 {
         2.0 * params[0] * params[2] * REFERENCE_OVERLAP.sqrt()
     }
+    fn tangent_stiffness(&self, overlap: f64, params: &[f64]) -> (f64, f64) {
+        // dF_n/dδ = 2 E* a and Mindlin's k_t = 8 G* a, with a = sqrt(R* δ) the contact radius.
+        let a = (params[2] * overlap.max(0.0)).sqrt();
+        (2.0 * params[0] * a, 8.0 * params[1] * a)
+    }
     fn elastic_energy(&self, overlap: f64, p: &[f64], h: &[f64]) -> f64 {
         let (e_star, g_star, r_star) = (p[0], p[1], p[2]);
         let a = (r_star * overlap).sqrt();

@@ -103,6 +103,9 @@ impl ContactLaw for RollingResistance {
     fn normal_stiffness(&self, params: &[f64]) -> f64 {
         params[0]
     }
+    fn tangent_stiffness(&self, _overlap: f64, params: &[f64]) -> (f64, f64) {
+        (params[0], params[1])
+    }
     fn elastic_energy(&self, overlap: f64, p: &[f64], h: &[f64]) -> f64 {
         let u = [h[0], h[1], h[2]];
         let tr = [h[3], h[4], h[5]];
