@@ -17,14 +17,14 @@ const DENSITY: f64 = 2500.0;
 const KN: f64 = 1e4;
 
 /// A simple cubic packing of 4 x 4 x 4 equal spheres of radius `r`, overlapping by 1 % of `r`,
-/// in a periodic cube, with a frictionless linear law of tangential stiffness `kt_ratio` k_n; no
-/// gravity, no damping. Neighbours along x are given opposite x velocities (the lattice's
-/// fastest mode).
-fn lattice(kt_ratio: f64) -> DemSim {
+/// in a periodic cube, with a linear law of tangential stiffness `kt_ratio` k_n and friction
+/// angle `friction`; no gravity, no damping. Neighbours along x are given opposite x velocities
+/// (the frictionless lattice's fastest mode).
+fn lattice_with(kt_ratio: f64, friction: f64) -> DemSim {
     let mut sim = DemSim::new();
     let m = sim.add_material("m", DENSITY).unwrap();
     let law = granite::registry()
-        .build_contact_law("linear", &params(&[("kn", KN), ("kt_ratio", kt_ratio), ("friction", 0.0)]))
+        .build_contact_law("linear", &params(&[("kn", KN), ("kt_ratio", kt_ratio), ("friction", friction)]))
         .unwrap();
     sim.set_contact_law(law, None).unwrap();
     let (n, r) = (4, 0.01);
@@ -46,23 +46,36 @@ fn lattice(kt_ratio: f64) -> DemSim {
     sim
 }
 
+fn lattice(kt_ratio: f64) -> DemSim {
+    lattice_with(kt_ratio, 0.0)
+}
+
 fn sphere_mass(sim: &DemSim) -> f64 {
     DENSITY * 4.0 / 3.0 * std::f64::consts::PI * sim.spheres.radius[0].powi(3)
 }
 
 #[test]
-fn stable_dt_of_a_cubic_lattice_is_its_fastest_modes_limit() {
-    // Six contacts per sphere. The x rows: two normal springs along x and, from the four
-    // contacts across, tangential ones; the fastest mode (neighbours in opposition) has
-    // omega^2 = (4 k_n + 8 k_t) / m, so leapfrog is stable up to 2 / omega = sqrt(m / (k_n + 2 k_t)).
-    for kt_ratio in [0.0, 0.5] {
-        let sim = lattice(kt_ratio);
-        let m = sphere_mass(&sim);
-        let expected = (m / (KN + 2.0 * kt_ratio * KN)).sqrt();
-        let limit = sim.stable_dt().expect("a packing in contact has a limit");
-        assert!((limit.dt / expected - 1.0).abs() < 1e-9, "kt/kn {kt_ratio}: {} s, expected {expected} s", limit.dt);
-        assert_eq!(limit.contacts, 6);
-    }
+fn stable_dt_of_a_cubic_lattice_is_exact_without_friction_and_safe_with_it() {
+    // Six contacts per sphere. Frictionless, rotations are free and the fastest mode has
+    // neighbours in opposition along an axis: omega^2 = 4 k_n / m, stable up to sqrt(m / k_n),
+    // which Gershgorin's bound gives exactly.
+    let sim = lattice(0.0);
+    let m = sphere_mass(&sim);
+    let limit = sim.stable_dt().expect("a packing in contact has a limit");
+    let expected = (m / KN).sqrt();
+    assert!((limit.dt / expected - 1.0).abs() < 1e-9, "{} s, expected {expected} s", limit.dt);
+    assert_eq!(limit.contacts, 6);
+    // With tangential springs two modes are known exactly: the same opposition plus shear,
+    // omega^2 = (4 k_n + 8 k_t) / m, and every sphere turning the same way about an axis, each
+    // of the four contacts around it sheared by 2 l theta (l = r - overlap/2, I = 2/5 m r^2):
+    // omega^2 = 8 k_t l^2 / I. A safe limit lies below both.
+    let kt = 0.5 * KN;
+    let sim = lattice(0.5);
+    let (r, l) = (sim.spheres.radius[0], sim.spheres.radius[0] * (1.0 - 0.005));
+    let shear = 2.0 / ((4.0 * KN + 8.0 * kt) / m).sqrt();
+    let turning = 2.0 / (8.0 * kt * l * l / (0.4 * m * r * r)).sqrt();
+    let limit = sim.stable_dt().unwrap().dt;
+    assert!(limit <= shear.min(turning), "{limit} s above an exact mode's limit ({shear} s, {turning} s)");
     // Without contacts there is no limit.
     let mut sim = DemSim::new();
     let m = sim.add_material("m", DENSITY).unwrap();
@@ -72,18 +85,17 @@ fn stable_dt_of_a_cubic_lattice_is_its_fastest_modes_limit() {
 
 /// The kinetic energy after each of up to `steps` steps at `factor` times the lattice's
 /// stable_dt, the error that stopped the run if one did, and the events it gave.
-fn run_at(factor: f64, steps: usize) -> (Vec<f64>, Option<GraniteError>, Vec<String>) {
-    let mut sim = lattice(0.0);
+fn run_at(sim: &mut DemSim, factor: f64, steps: usize) -> (Vec<f64>, Option<GraniteError>) {
     let limit = sim.stable_dt().unwrap().dt;
     sim.set_dt(factor * limit).unwrap();
     let mut energy = Vec::with_capacity(steps);
     for _ in 0..steps {
         if let Err(e) = sim.step() {
-            return (energy, Some(e), sim.events.clone());
+            return (energy, Some(e));
         }
         energy.push(sim.diagnostics().kinetic_energy);
     }
-    (energy, None, sim.events.clone())
+    (energy, None)
 }
 
 fn largest(values: &[f64]) -> f64 {
@@ -94,25 +106,62 @@ fn largest(values: &[f64]) -> f64 {
 fn leapfrog_is_stable_just_below_stable_dt_and_blows_up_just_above() {
     // Just below: the fastest mode keeps its amplitude (leapfrog conserves a modified energy),
     // so the second half of the run peaks no higher than the first.
-    let (energy, error, events) = run_at(0.98, 3000);
+    let mut sim = lattice(0.0);
+    let (energy, error) = run_at(&mut sim, 0.98, 3000);
     assert!(error.is_none(), "stable below the limit: {error:?}");
     let (first, second) = (largest(&energy[..1500]), largest(&energy[1500..]));
     assert!(second <= 1.05 * first, "energy grew below the limit: peaks {first:e} J, then {second:e} J");
-    assert!(events.is_empty(), "no warning below the limit: {events:?}");
-    // Just above: that mode's amplitude is multiplied by about -1.5 each step. Within 40 steps
-    // its energy passes a thousand times that of the first three (the contacts, overlapping by
-    // 1 % of a radius, stay closed up to amplitudes 2000 times the start's). Once they open, the
-    // growth slows down; a run that then stops must stop on a sphere too fast for its step.
-    let (energy, error, events) = run_at(1.02, 3000);
+    assert!(sim.events.is_empty(), "no warning below the limit: {:?}", sim.events);
+    // Just above, with the stop turned off: that mode's amplitude is multiplied by about -1.5
+    // each step. Within 40 steps its energy passes a thousand times that of the first three (the
+    // contacts, overlapping by 1 % of a radius, stay closed up to amplitudes 2000 times the
+    // start's). Once they open the growth slows down; a run that then stops must stop on a
+    // sphere too fast for its step.
+    let mut sim = lattice(0.0);
+    sim.stop_on_unstable_dt = false;
+    let (energy, error) = run_at(&mut sim, 1.02, 3000);
     let (start, later) = (largest(&energy[..3]), largest(&energy[..40]));
     assert!(later > 1e3 * start, "no blow-up above the limit: {start:e} J -> {later:e} J");
     if let Some(e) = error {
         assert!(e.to_string().contains("more than the smallest radius"), "{e}");
     }
-    assert!(
-        events.iter().any(|e| e.contains("above the stability limit")),
-        "the time step above the limit is reported: {events:?}"
-    );
+    assert!(sim.events.iter().any(|e| e.contains("above the stability bound")), "warned: {:?}", sim.events);
+    // By default the first step proves the mode too fast (omega dt = 2.04) and stops the run.
+    let mut sim = lattice(0.0);
+    match run_at(&mut sim, 1.02, 3000) {
+        (energy, Some(GraniteError::Unstable { reason, .. })) => {
+            assert!(energy.is_empty(), "stopped at the first step");
+            assert!(reason.contains("above the stability limit") && reason.contains("multiplies"), "{reason}");
+        }
+        (_, other) => panic!("expected the run to stop: {other:?}"),
+    }
+}
+
+#[test]
+fn a_lattice_with_friction_and_spins_is_stable_just_below_stable_dt() {
+    // Tangential springs (friction high enough that no contact slides) couple translations and
+    // rotations. Stir both and check that the bound is safe: with no damping the total energy,
+    // kinetic plus elastic, stays what it was (leapfrog only makes it oscillate a little).
+    let mut sim = lattice_with(0.5, 80.0);
+    for i in 0..sim.spheres.len() {
+        let u = |k: u64| 2.0 * granite_core::ext::contact::uniform(7, 6 * i as u64 + k) - 1.0;
+        sim.spheres.v[i] = [1e-4 * u(0), 1e-4 * u(1), 1e-4 * u(2)];
+        sim.spheres.w[i] = [1e-2 * u(3), 1e-2 * u(4), 1e-2 * u(5)];
+    }
+    let total = |sim: &DemSim| {
+        let d = sim.diagnostics();
+        d.kinetic_energy + d.elastic_energy
+    };
+    let limit = sim.stable_dt().unwrap().dt;
+    sim.set_dt(0.98 * limit).unwrap();
+    let start = total(&sim);
+    let mut worst: f64 = 0.0;
+    for _ in 0..3000 {
+        sim.step().expect("stable below the bound");
+        worst = worst.max((total(&sim) / start - 1.0).abs());
+    }
+    assert!(worst < 1e-3, "the energy moved by {worst:e} of itself below the bound");
+    assert!(sim.events.is_empty(), "no warning below the bound: {:?}", sim.events);
 }
 
 /// A sphere of radius 1 cm shot at a wall 5 cm away, at `radii_per_step` radii per step.
@@ -152,26 +201,41 @@ fn a_sphere_too_fast_for_its_time_step_stops_the_run_instead_of_passing_through_
 
 #[test]
 fn a_script_reads_the_limit_of_two_spheres_in_contact() {
-    // Two equal spheres pressed together: omega^2 = k_n / (m / 2), so leapfrog is stable up to
-    // 2 / omega = sqrt(2 m / k_n), which the bound gives exactly; critical_dt is sqrt(m / (2 k_n)).
-    let src = "let sim = dem(#{ seed: 1 });\n\
+    // Two equal spheres pressed together, one spring between them: its normal vibration has
+    // omega^2 = 2 k_n / m; its tangential one, sliding and turning both spheres, omega^2 =
+    // k_t (2 / m + 2 l^2 / I) with l = r - overlap/2 and I = 2/5 m r^2. Leapfrog is stable up to
+    // 2 / omega of the faster. Frictionless, the bound is exactly the normal one; with k_t it
+    // must stay below the exact limit. critical_dt is sqrt(m / (2 k_n)).
+    let src = "let kt = param(\"kt_ratio\", 0.0, #{ min: 0.0 });\n\
+               let sim = dem(#{ seed: 1 });\n\
                let m = sim.material(#{ name: \"glass\", density: 2500.0 });\n\
-               sim.contact_law(\"linear\", #{ kn: 1e4, kt_ratio: 0.3, friction: 30.0 });\n\
+               sim.contact_law(\"linear\", #{ kn: 1e4, kt_ratio: kt, friction: 30.0 });\n\
                sim.sphere(m, [0.0, 0.0, 0.0], 0.01, #{});\n\
                sim.sphere(m, [0.0199, 0.0, 0.0], 0.01, #{});\n\
                sim.dt(1e-5);\n\
                sim.run_steps(1);\n\
                summary(\"stable_dt\", sim.stable_dt());\n\
                summary(\"critical_dt\", sim.critical_dt());\n";
-    let options = granite_core::script::RunOptions {
-        out_dir: common::out_dir("two_sphere_limit"),
-        quiet: true,
-        ..Default::default()
+    let run = |kt_ratio: &str| {
+        let options = granite_core::script::RunOptions {
+            out_dir: common::out_dir(&format!("two_sphere_limit_{kt_ratio}")),
+            overrides: common::sets(&[("kt_ratio", kt_ratio)]),
+            quiet: true,
+            ..Default::default()
+        };
+        let report =
+            granite_core::script::run_source("two_sphere_limit.rhai", src, granite::registry(), options).unwrap();
+        (common::summary_f64(&report, "stable_dt"), common::summary_f64(&report, "critical_dt"))
     };
-    let report = granite_core::script::run_source("two_sphere_limit.rhai", src, granite::registry(), options).unwrap();
-    let m = DENSITY * 4.0 / 3.0 * std::f64::consts::PI * 0.01f64.powi(3);
-    let expected = (2.0 * m / KN).sqrt();
-    let (stable, critical) = (common::summary_f64(&report, "stable_dt"), common::summary_f64(&report, "critical_dt"));
+    let (r, overlap): (f64, f64) = (0.01, 0.0001);
+    let m = DENSITY * 4.0 / 3.0 * std::f64::consts::PI * r.powi(3);
+    let (stable, critical) = run("0.0");
+    let expected = 2.0 / (2.0 * KN / m).sqrt();
     assert!((stable / expected - 1.0).abs() < 1e-9, "stable_dt {stable} s, expected {expected} s");
     assert!((critical / (m / (2.0 * KN)).sqrt() - 1.0).abs() < 1e-9, "critical_dt {critical} s");
+    let (stable, _) = run("0.3");
+    let (kt, l, inertia) = (0.3 * KN, r - 0.5 * overlap, 0.4 * m * r * r);
+    let omega2 = (2.0 * KN / m).max(kt * (2.0 / m + 2.0 * l * l / inertia));
+    let exact = 2.0 / omega2.sqrt();
+    assert!(stable <= exact, "stable_dt {stable} s above the exact limit {exact} s");
 }

@@ -68,6 +68,11 @@ pub struct DemSim {
     /// found above it since it was last set (said once in `events`).
     pub(crate) stability_due: bool,
     pub(crate) stability_warned: bool,
+    /// Step of the last check of the time step against the contacts' vibrations.
+    pub(crate) last_check: Option<u64>,
+    /// Whether a time step proved above the contacts' stability limit stops the run (else it is
+    /// only said, once).
+    pub stop_on_unstable_dt: bool,
     /// Number of candidate-list rebuilds so far.
     pub rebuilds: u64,
     pub events: Vec<String>,
@@ -115,6 +120,8 @@ impl DemSim {
             needs_rebuild: true,
             stability_due: true,
             stability_warned: false,
+            last_check: None,
+            stop_on_unstable_dt: true,
             rebuilds: 0,
             events: Vec::new(),
             next_id: 0,
@@ -420,6 +427,7 @@ impl DemSim {
         self.dt = crate::params::time_step(dt)?;
         self.stability_warned = false;
         self.stability_due = true;
+        self.last_check = None;
         Ok(())
     }
 

@@ -64,8 +64,8 @@ impl DemSim {
         self.contacts();
         if self.stability_due {
             self.stability_due = false;
-            if !self.stability_warned {
-                self.warn_if_above_stable_dt();
+            if self.last_check.is_none_or(|at| self.step >= at + crate::dem::stability::CHECK_EVERY) {
+                self.check_time_step()?;
             }
         }
         if !self.sequential && self.adjacency.start.len() != self.spheres.len() + 1 {
