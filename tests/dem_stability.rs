@@ -239,3 +239,33 @@ fn a_script_reads_the_limit_of_two_spheres_in_contact() {
     let exact = 2.0 / omega2.sqrt();
     assert!(stable <= exact, "stable_dt {stable} s above the exact limit {exact} s");
 }
+
+#[test]
+fn a_script_is_stopped_below_critical_dt_when_the_packing_cannot_follow_and_may_go_on_if_it_asks() {
+    // A simple cubic lattice with k_t = k_n and no sliding: every sphere turning the same way
+    // shears its four contacts around the axis by 2 l theta, omega^2 = 8 k_t l^2 / I, about
+    // 20 k_n / m: leapfrog needs dt < 0.45 sqrt(m/k_n), below critical_dt = 0.71 sqrt(m/k_n).
+    let src = "let sim = dem(#{ seed: 1 });\n\
+               let m = sim.material(#{ name: \"glass\", density: 2500.0 });\n\
+               sim.contact_law(\"linear\", #{ kn: 1e4, kt_ratio: 1.0, friction: 80.0 });\n\
+               let r = 0.01; let d = 2.0 * r - 0.01 * r;\n\
+               sim.periodic([4.0 * d, 4.0 * d, 4.0 * d]);\n\
+               for i in 0..4 { for j in 0..4 { for k in 0..4 {\n\
+                   sim.sphere(m, [(i.to_float() + 0.5) * d, (j.to_float() + 0.5) * d, (k.to_float() + 0.5) * d], r, #{});\n\
+               } } }\n\
+               sim.stop_on_unstable_dt(param(\"stop\", true));\n\
+               sim.dt(0.9 * sim.critical_dt());\n\
+               sim.run_steps(10);\n";
+    let run = |stop: &str| {
+        let options = granite_core::script::RunOptions {
+            out_dir: common::out_dir(&format!("turning_lattice_{stop}")),
+            overrides: common::sets(&[("stop", stop)]),
+            quiet: true,
+            ..Default::default()
+        };
+        granite_core::script::run_source("turning_lattice.rhai", src, granite::registry(), options)
+    };
+    let e = run("true").expect_err("the run must stop").to_string();
+    assert!(e.contains("line 11") && e.contains("above the stability limit of the present contacts"), "{e}");
+    run("false").expect("asked to go on, it goes on");
+}

@@ -585,6 +585,9 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
     engine.register_fn("stable_dt", |s: &mut DemHandle| {
         s.lock().sim.dem.stable_dt().map(|limit| limit.dt).unwrap_or(f64::INFINITY)
     });
+    engine.register_fn("stop_on_unstable_dt", |s: &mut DemHandle, on: bool| {
+        s.lock().sim.dem.stop_on_unstable_dt = on;
+    });
     engine.register_fn("erase_outside", |s: &mut DemHandle, lo: Dynamic, hi: Dynamic| {
         let (lo, hi) = (vector(&lo, 3, "lower corner")?, vector(&hi, 3, "upper corner")?);
         let mut st = s.lock();
