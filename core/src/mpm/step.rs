@@ -73,7 +73,7 @@ impl MpmSim {
         }
         self.time = t_next;
         self.step += 1;
-        self.check_finite()?;
+        self.check_stable()?;
         self.handle_out_of_mesh()
     }
 
@@ -95,7 +95,7 @@ impl MpmSim {
     /// Stops a run whose points stopped being finite, or move faster than a cell per step: past
     /// that speed the CFL condition `dt (c + |v|) < h` fails whatever the wave speed `c`, the
     /// point skips over grid nodes, and a stable run never gets there.
-    fn check_finite(&self) -> Result<()> {
+    fn check_stable(&self) -> Result<()> {
         let p = &self.points;
         let cell = (0..self.mesh.dim).map(|a| self.mesh.cell[a]).fold(f64::INFINITY, f64::min);
         let fastest2 = (cell / self.dt).powi(2);
