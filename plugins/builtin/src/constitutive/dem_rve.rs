@@ -322,14 +322,15 @@ impl ConstitutiveLaw for DemRve {
                 cell.velocity_gradient = if max_strain > 0.0 { e / plan.duration } else { Matrix3::zeros() };
             }
             *last_stress = None;
+            let of_point = |e: GraniteError| GraniteError::Other(format!("RVE of material point {index}: {e}"));
             for _ in 0..plan.full_steps {
-                sim.step()?;
+                sim.step().map_err(of_point)?;
             }
             if plan.last_step > 0.0 {
                 sim.dt = plan.last_step;
                 let r = sim.step();
                 sim.dt = dt;
-                r?;
+                r.map_err(of_point)?;
             }
             if let Some(cell) = sim.cell.as_mut() {
                 cell.velocity_gradient = Matrix3::zeros();
