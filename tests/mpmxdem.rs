@@ -251,3 +251,17 @@ fn coupled_checkpoint_resumes_bit_for_bit() {
     assert_eq!(sim.materials[0].state, resumed.materials[0].state);
     assert_eq!(sim.time.to_bits(), resumed.time.to_bits());
 }
+
+#[test]
+fn an_rve_time_step_above_its_contacts_bound_is_said_once_by_the_coupled_run() {
+    // The RVE's own stable_dt counts all of a grain's contacts; a time step a little above it
+    // (still far below what the RVE's contacts cannot follow at all) is worth a warning, which
+    // the MPM passes on once for all its RVEs.
+    let mut rve = granite::bench::periodic_rve(150, 1e5).unwrap();
+    let limit = rve.stable_dt().expect("a compacted RVE has contacts").dt;
+    rve.set_dt(1.05 * limit).unwrap();
+    let (_, sim, _) = coupled_run(&rve, [0.0, 0.0, -0.01], 1e-4, 3, 1e-2);
+    let said: Vec<&String> = sim.events.iter().filter(|e| e.contains("above the stability bound")).collect();
+    assert_eq!(said.len(), 1, "said once: {:?}", sim.events);
+    assert!(said[0].contains("material \"rve\"") && said[0].contains("RVE of material point 0"), "{}", said[0]);
+}

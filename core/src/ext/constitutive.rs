@@ -71,6 +71,11 @@ pub trait ConstitutiveLaw: Send + Sync {
     fn bytes_per_point(&self) -> usize {
         0
     }
+    /// What the law has to tell the user since it was last asked (warnings, not errors); the
+    /// simulation passes it on with its events.
+    fn take_events(&self) -> Vec<String> {
+        Vec::new()
+    }
 }
 
 /// Non-numeric inputs of a law by name (e.g. a prepared DEM sample for `dem_rve`).

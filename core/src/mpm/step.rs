@@ -73,6 +73,11 @@ impl MpmSim {
         }
         self.time = t_next;
         self.step += 1;
+        for m in &self.materials {
+            for e in m.law.take_events() {
+                self.events.push(format!("step {} (t = {:.6e} s), material \"{}\": {e}", self.step, self.time, m.name));
+            }
+        }
         self.check_stable()?;
         self.handle_out_of_mesh()
     }

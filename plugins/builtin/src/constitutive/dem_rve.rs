@@ -50,6 +50,11 @@ pub struct DemRve {
     weight: f64,
     max_steps: u64,
     fixed_steps: Option<u64>,
+    /// The first RVE event (e.g. a time step above its contacts' stability bound), passed on
+    /// once: every RVE of the material would say the same. Of one MPM step's, the lowest point's
+    /// (whatever thread updated which point).
+    event: Mutex<Option<(usize, String)>>,
+    event_said: std::sync::atomic::AtomicBool,
 }
 
 impl ConstitutiveLawFactory for DemRveFactory {
@@ -157,6 +162,8 @@ impl DemRve {
             rves: RwLock::new(Vec::new()),
             template,
             params,
+            event: Mutex::new(None),
+            event_said: std::sync::atomic::AtomicBool::new(false),
         })
     }
 }
@@ -248,6 +255,13 @@ impl ConstitutiveLaw for DemRve {
     fn bytes_per_point(&self) -> usize {
         self.template.memory_bytes().max(1)
     }
+    fn take_events(&self) -> Vec<String> {
+        let Some((point, event)) = self.event.lock().unwrap_or_else(|e| e.into_inner()).take() else {
+            return Vec::new();
+        };
+        self.event_said.store(true, std::sync::atomic::Ordering::Relaxed);
+        vec![format!("RVE of material point {point} (said once for all RVEs): {event}")]
+    }
     fn object_frame(&self, point: usize) -> Option<(Vec<granite_core::math::Vec3>, Vec<granite_core::io::vtk::Field>)> {
         use granite_core::io::vtk::Field;
         self.with_rve(point, |sim| {
@@ -334,6 +348,15 @@ impl ConstitutiveLaw for DemRve {
             }
             if let Some(cell) = sim.cell.as_mut() {
                 cell.velocity_gradient = Matrix3::zeros();
+            }
+            if !sim.events.is_empty() {
+                let first = std::mem::take(&mut sim.events).swap_remove(0);
+                if !self.event_said.load(std::sync::atomic::Ordering::Relaxed) {
+                    let mut event = self.event.lock().unwrap_or_else(|e| e.into_inner());
+                    if event.as_ref().is_none_or(|(point, _)| index < *point) {
+                        *event = Some((index, first));
+                    }
+                }
             }
             let volume = sim.cell_volume().unwrap_or(1.0);
             let stress: Voigt = sim.love_weber_stress(volume);
