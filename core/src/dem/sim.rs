@@ -425,10 +425,27 @@ impl DemSim {
 
     pub fn set_dt(&mut self, dt: f64) -> Result<()> {
         self.dt = crate::params::time_step(dt)?;
+        self.recheck_time_step();
+        Ok(())
+    }
+
+    /// Cundall damping (YADE's), in [0, 1).
+    pub fn set_damping(&mut self, damping: f64) -> Result<()> {
+        if !(0.0..1.0).contains(&damping) {
+            return Err(GraniteError::param("damping", damping, "Cundall damping must be in [0, 1)"));
+        }
+        self.damping = damping;
+        // It enters the stability bound.
+        self.recheck_time_step();
+        Ok(())
+    }
+
+    /// Has the time step checked against the contacts' limit after the next contact stage, and
+    /// said again if above it.
+    fn recheck_time_step(&mut self) {
         self.stability_warned = false;
         self.stability_due = true;
         self.last_check = None;
-        Ok(())
     }
 
     pub fn validate(&self) -> Result<()> {

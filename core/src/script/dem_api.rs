@@ -574,11 +574,7 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
     });
     engine.register_fn("damping", |s: &mut DemHandle, d: Dynamic| {
         let d = number(&d, "damping")?;
-        if !(0.0..1.0).contains(&d) {
-            return err(format!("Cundall damping must be in [0, 1), got {d}"));
-        }
-        s.lock().sim.dem.damping = d;
-        Ok(())
+        s.lock().sim.dem.set_damping(d).or_rhai()
     });
     engine.register_fn("dt", |s: &mut DemHandle, dt: Dynamic| s.lock().sim.dem.set_dt(number(&dt, "dt")?).or_rhai());
     engine.register_fn("critical_dt", |s: &mut DemHandle| s.lock().sim.dem.critical_dt().unwrap_or(f64::INFINITY));
