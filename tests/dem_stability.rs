@@ -199,6 +199,21 @@ fn a_sphere_too_fast_for_its_time_step_stops_the_run_instead_of_passing_through_
     assert!(sim.spheres.x[0][0] < 0.06, "it never got past the wall");
 }
 
+/// Runs a script given as text with one parameter set, quietly, into its own output folder.
+fn run_script(
+    name: &str,
+    source: &str,
+    (param, value): (&str, &str),
+) -> granite_core::Result<granite_core::script::RunReport> {
+    let options = granite_core::script::RunOptions {
+        out_dir: common::out_dir(&format!("{name}_{value}")),
+        overrides: common::sets(&[(param, value)]),
+        quiet: true,
+        ..Default::default()
+    };
+    granite_core::script::run_source(&format!("{name}.rhai"), source, granite::registry(), options)
+}
+
 #[test]
 fn a_script_reads_the_limit_of_two_spheres_in_contact() {
     // Two equal spheres pressed together, one spring between them: its normal vibration has
@@ -217,14 +232,7 @@ fn a_script_reads_the_limit_of_two_spheres_in_contact() {
                summary(\"stable_dt\", sim.stable_dt());\n\
                summary(\"critical_dt\", sim.critical_dt());\n";
     let run = |kt_ratio: &str| {
-        let options = granite_core::script::RunOptions {
-            out_dir: common::out_dir(&format!("two_sphere_limit_{kt_ratio}")),
-            overrides: common::sets(&[("kt_ratio", kt_ratio)]),
-            quiet: true,
-            ..Default::default()
-        };
-        let report =
-            granite_core::script::run_source("two_sphere_limit.rhai", src, granite::registry(), options).unwrap();
+        let report = run_script("two_sphere_limit", src, ("kt_ratio", kt_ratio)).unwrap();
         (common::summary_f64(&report, "stable_dt"), common::summary_f64(&report, "critical_dt"))
     };
     let (r, overlap): (f64, f64) = (0.01, 0.0001);
@@ -256,15 +264,7 @@ fn a_script_is_stopped_below_critical_dt_when_the_packing_cannot_follow_and_may_
                sim.stop_on_unstable_dt(param(\"stop\", true));\n\
                sim.dt(0.9 * sim.critical_dt());\n\
                sim.run_steps(10);\n";
-    let run = |stop: &str| {
-        let options = granite_core::script::RunOptions {
-            out_dir: common::out_dir(&format!("turning_lattice_{stop}")),
-            overrides: common::sets(&[("stop", stop)]),
-            quiet: true,
-            ..Default::default()
-        };
-        granite_core::script::run_source("turning_lattice.rhai", src, granite::registry(), options)
-    };
+    let run = |stop: &str| run_script("turning_lattice", src, ("stop", stop));
     let e = run("true").expect_err("the run must stop").to_string();
     assert!(e.contains("line 11") && e.contains("above the stability limit of the present contacts"), "{e}");
     run("false").expect("asked to go on, it goes on");
