@@ -14,7 +14,7 @@ use nalgebra::{DMatrix, Matrix3, Matrix6, SMatrix, Vector3};
 /// The stability limit of the present contacts and the sphere whose contacts set it.
 #[derive(Debug, Clone, Copy)]
 pub struct StableStep {
-    /// The largest time step sure to be stable (s).
+    /// A time step on the safe side of the stability limit (s).
     pub dt: f64,
     /// Id of the sphere (a member, for a clump) whose contacts give the limit.
     pub sphere: u64,
@@ -266,8 +266,8 @@ impl DemSim {
         Linearised { inv_sqrt_mass, inv_sqrt_inertia, springs, sphere_of }
     }
 
-    /// The largest time step for which the leapfrog integration of the bodies' motions,
-    /// linearised about the present contacts, is sure to stay stable: `2 / omega_max`, with
+    /// A time step on the safe side of the limit below which the leapfrog integration of the
+    /// bodies' motions, linearised about the present contacts, is stable: `2 / omega_max`, with
     /// `omega_max^2`, the largest eigenvalue of `M^-1/2 K M^-1/2`, bounded by Gershgorin's
     /// theorem row by row (six degrees of freedom a body). `K` comes from each contact's tangent
     /// stiffness `k_t I + (k_n - k_t) n n^T` (as its law gives it at the present overlap) acting
@@ -291,8 +291,9 @@ impl DemSim {
     /// `events`; if Lanczos iteration then proves that the present contacts, undamped, vibrate
     /// faster than leapfrog can follow (`omega dt > 2`), the run stops, since the packing would
     /// gain energy from nowhere step after step (unless `stop_on_unstable_dt` is off, or there
-    /// are clumps, whose rotational inertia is only bounded here). Damping is left out of that
-    /// proof: a run may be unstable below the limit it finds, never stable above it.
+    /// are clumps, whose rotational inertia is only bounded here). The proof is for the undamped
+    /// system; Cundall damping lowers the real limit (measured on an RVE), so the stop errs on the
+    /// side of running.
     pub(crate) fn check_time_step(&mut self) -> crate::Result<()> {
         self.last_check = Some(self.step);
         let lin = self.linearise();
@@ -326,7 +327,7 @@ impl DemSim {
                 "the time step {:.4e} s is above the stability limit of the present contacts: they vibrate at \
                  {omega:.4e} rad/s or faster, so leapfrog multiplies that vibration by {:.3} or more each step and the \
                  packing gains energy from nowhere. Stable only below 2/omega = {:.4e} s; stable_dt() = {limit:.4e} s \
-                 is sure to be",
+                 is on the safe side",
                 self.dt,
                 growth_per_step(omega * self.dt),
                 2.0 / omega
