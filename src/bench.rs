@@ -392,11 +392,12 @@ pub fn mpmxdem(threads: &[usize], repeat: usize) -> Result<()> {
     let mut rve = periodic_rve(125, 1e5)?;
     // The Verlet skin scripts/mpmxdem/prepare_rve.rhai gives an RVE by default (0.05 smallest
     // radii): an RVE deforms slowly, so a thin skin means fewer candidate pairs and few rebuilds.
-    let r_min = rve.spheres.radius.iter().cloned().fold(f64::INFINITY, f64::min);
+    let r_min = rve.spheres.smallest_radius();
     rve.set_skin(0.05 * r_min)?;
     // The coupling's own cost: in every round, right after the coupled run, the same DEM work
     // without the MPM around it (one slow spell of the machine then hits both alike).
-    let alone_best: std::sync::Mutex<Vec<(usize, f64)>> = std::sync::Mutex::new(Vec::new());
+    // Fastest time of that, per thread count.
+    let alone_best = std::sync::Mutex::new(std::collections::BTreeMap::<usize, f64>::new());
     let timed = best_of(threads, repeat, || -> Result<(f64, (usize, usize))> {
         let reg = crate::registry();
         let mesh = Mesh::new(2, [0.0; 3], [CELL, CELL, 1.0], [2, 2, 1])?;
@@ -425,11 +426,7 @@ pub fn mpmxdem(threads: &[usize], repeat: usize) -> Result<()> {
         let coupled = t.elapsed().as_secs_f64();
         let alone = rves_alone(&rve, sim.points.len())?;
         let mut best = alone_best.lock().unwrap_or_else(|e| e.into_inner());
-        let n = rayon::current_num_threads();
-        match best.iter_mut().find(|(threads, _)| *threads == n) {
-            Some((_, secs)) => *secs = secs.min(alone),
-            None => best.push((n, alone)),
-        }
+        best.entry(rayon::current_num_threads()).and_modify(|secs| *secs = secs.min(alone)).or_insert(alone);
         Ok((coupled, (sim.points.len(), bytes)))
     })?;
     let alone_best = alone_best.into_inner().unwrap_or_else(|e| e.into_inner());
@@ -444,7 +441,7 @@ pub fn mpmxdem(threads: &[usize], repeat: usize) -> Result<()> {
             rate / 1e6 / n as f64,
             bytes as f64 / 1e6
         );
-        if let Some((_, alone)) = alone_best.iter().find(|(threads, _)| *threads == n) {
+        if let Some(alone) = alone_best.get(&n) {
             println!(
                 "           the same RVEs stepped alone (no MPM)  {alone:>7.3} s  {:>6.2} M sphere-steps/s: the coupled run does {:.1} % of that",
                 sphere_steps / alone / 1e6,

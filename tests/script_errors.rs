@@ -116,22 +116,22 @@ fn nan_stops_the_run_and_keeps_the_last_good_state() {
 
 #[test]
 fn a_point_faster_than_a_cell_per_step_stops_the_run() {
-    // Cells of 0.1 m, dt = 1 ms (the elastic wave's limit is 1.34 ms): at 150 m/s a point would
-    // cross 1.5 cells in a step, which breaks the CFL condition whatever the material.
-    let src = |speed: f64| {
+    // HEAD's cells of 0.1 m, dt = 1 ms (the elastic wave's limit is 1.34 ms): at 1.5 cells per
+    // step a point breaks the CFL condition whatever the material.
+    let (cell, dt) = (0.1, 1e-3);
+    let src = |cells_per_step: f64| {
         format!(
             "{HEAD}let m = sim.material(\"linear_elastic\", #{{ density: 1e3, young: 5e6, poisson: 0.2 }});\n\
-             sim.fill_box(m, [0.1, 0.1], [0.2, 0.2], #{{ velocity: [{speed:?}, 0.0] }});\n\
-             sim.dt(1e-3);\nsim.run_steps(1);"
+             sim.fill_box(m, [0.1, 0.1], [0.2, 0.2], #{{ velocity: [{:?}, 0.0] }});\n\
+             sim.dt({dt:?});\nsim.run_steps(1);",
+            cells_per_step * cell / dt
         )
     };
-    let e = run_err("cfl_run", &src(150.0), &[]);
-    assert!(
-        e.contains("line 5") && e.contains("1.5000e-1 m in one step") && e.contains("more than a cell (1.0000e-1 m)"),
-        "{e}"
-    );
+    let e = run_err("cfl_run", &src(1.5), &[]);
+    let (step, limit) = (format!("{:.4e} m in one step", 1.5 * cell), format!("more than a cell ({cell:.4e} m)"));
+    assert!(e.contains("line 5") && e.contains(&step) && e.contains(&limit), "{e}");
     assert!(e.contains("last good state (step 0"), "{e}");
     // Half a cell per step is a legitimate motion.
     let options = RunOptions { out_dir: common::out_dir("cfl_ok"), quiet: true, ..Default::default() };
-    run_source("cfl_ok.rhai", &src(50.0), granite::registry(), options).expect("half a cell per step runs");
+    run_source("cfl_ok.rhai", &src(0.5), granite::registry(), options).expect("half a cell per step runs");
 }

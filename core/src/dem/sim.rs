@@ -63,12 +63,11 @@ pub struct DemSim {
     pub(crate) radius_max_at_build: f64,
     pub(crate) radius_min_at_build: f64,
     pub(crate) needs_rebuild: bool,
-    /// Whether the time step is to be checked against the contacts' stability limit after the
-    /// next contact stage (the lists were rebuilt or the time step set), and whether it was
-    /// found above it since it was last set (said once in `events`).
-    pub(crate) stability_due: bool,
+    /// Whether the time step was found above the contacts' stability bound since it was last
+    /// set (said once in `events`).
     pub(crate) stability_warned: bool,
-    /// Step of the last check of the time step against the contacts' vibrations.
+    /// Step of the last check of the time step against the contacts' vibrations; None: check
+    /// after the next contact stage (new simulation, time step or damping).
     pub(crate) last_check: Option<u64>,
     /// Whether a time step proved above the contacts' stability limit stops the run (else it is
     /// only said, once).
@@ -118,7 +117,6 @@ impl DemSim {
             h_at_build: None,
             spare_pairs: PairList::default(),
             needs_rebuild: true,
-            stability_due: true,
             stability_warned: false,
             last_check: None,
             stop_on_unstable_dt: true,
@@ -444,7 +442,6 @@ impl DemSim {
     /// said again if above it.
     fn recheck_time_step(&mut self) {
         self.stability_warned = false;
-        self.stability_due = true;
         self.last_check = None;
     }
 

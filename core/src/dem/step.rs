@@ -43,7 +43,8 @@ fn add(a: Vec3, b: Vec3) -> Vec3 {
 impl DemSim {
     /// Advances the simulation by one time step.
     pub fn step(&mut self) -> Result<()> {
-        if self.needs_rebuild {
+        let rebuilt = self.needs_rebuild;
+        if rebuilt {
             self.rebuild_candidates()?;
         }
         let servo =
@@ -62,11 +63,13 @@ impl DemSim {
         self.pairs.keep_torques(!self.sequential, true);
         self.wall_pairs.keep_torques(!self.sequential, false);
         self.contacts();
-        if self.stability_due {
-            self.stability_due = false;
-            if self.last_check.is_none_or(|at| self.step >= at + crate::dem::stability::CHECK_EVERY) {
-                self.check_time_step()?;
-            }
+        // The contact network changes little between rebuilds: checking it then is enough.
+        let check = match self.last_check {
+            None => true,
+            Some(at) => rebuilt && self.step >= at + crate::dem::stability::CHECK_EVERY,
+        };
+        if check {
+            self.check_time_step()?;
         }
         if !self.sequential && self.adjacency.start.len() != self.spheres.len() + 1 {
             // Left unbuilt while the simulation ran sequentially (an RVE).
@@ -396,8 +399,6 @@ impl DemSim {
         self.radius_max_at_build = self.spheres.largest_radius();
         self.radius_min_at_build = self.spheres.smallest_radius();
         self.needs_rebuild = false;
-        // The contact network changes little between rebuilds: checking it then is enough.
-        self.stability_due = true;
         self.rebuilds += 1;
         Ok(())
     }

@@ -46,7 +46,7 @@ impl DemScene {
     pub fn prepared(&self) -> DemSim {
         let mut dem = self.dem.clone();
         if self.auto_skin {
-            let r_min = dem.spheres.radius.iter().cloned().fold(f64::INFINITY, f64::min);
+            let r_min = dem.spheres.smallest_radius();
             if r_min.is_finite() {
                 dem.skin = 0.5 * r_min;
             }
@@ -63,7 +63,7 @@ impl ScriptSim for DemScene {
     }
     fn advance(&mut self) -> Result<()> {
         if self.auto_skin {
-            let r_min = self.dem.spheres.radius.iter().cloned().fold(f64::INFINITY, f64::min);
+            let r_min = self.dem.spheres.smallest_radius();
             if r_min.is_finite() {
                 self.dem.skin = 0.5 * r_min;
             }
