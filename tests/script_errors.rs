@@ -135,3 +135,49 @@ fn a_point_faster_than_a_cell_per_step_stops_the_run() {
     let options = RunOptions { out_dir: common::out_dir("cfl_ok"), quiet: true, ..Default::default() };
     run_source("cfl_ok.rhai", &src(0.5), granite::registry(), options).expect("half a cell per step runs");
 }
+
+#[test]
+fn a_float_where_an_integer_is_expected_lists_the_forms_that_exist() {
+    // Rhai does not turn 10.0 into an integer: the call matches no function.
+    let e = run_err("float_count", &format!("{HEAD}sim.every(10.0, |s| 1);"), &[]);
+    assert!(e.contains("line 2") && e.contains("MpmSim.every(int, Fn)") && e.contains("write 10, not 10.0"), "{e}");
+    // A script's own typo keeps Rhai's words.
+    let e = run_err("no_such_fn", &format!("{HEAD}sim.explode(1);"), &[]);
+    assert!(e.contains("line 2") && e.contains("Function not found: explode"), "{e}");
+}
+
+#[test]
+fn non_finite_vectors_and_boundary_values_are_refused_where_they_are_given() {
+    let e = run_err("nan_gravity", &format!("{HEAD}sim.gravity([0.0 / 0.0, -9.81]);"), &[]);
+    assert!(e.contains("line 2") && e.contains("`gravity`") && e.contains("finite"), "{e}");
+    // A velocity prescribed as infinite on a face with no material would change nothing and
+    // go unnoticed until points got there.
+    let e = run_err("inf_fix", &format!("{HEAD}sim.fix(\"y+\", \"y\", 1.0 / 0.0);"), &[]);
+    assert!(e.contains("line 2") && e.contains("finite"), "{e}");
+    let e = run_err("nan_table", &format!("{HEAD}sim.fix(\"y+\", \"y\", [[0.0, 0.0], [0.0 / 0.0, 1.0]]);"), &[]);
+    assert!(e.contains("line 2") && e.contains("finite"), "{e}");
+}
+
+#[test]
+fn numbers_at_the_ends_of_the_f64_range_are_shown_with_an_exponent() {
+    let e = run_err("tiny_damping", &format!("{HEAD}sim.damping(-1e-320);"), &[]);
+    assert!(e.contains("line 2") && e.contains("-1e-320") && e.len() < 200, "{e}");
+}
+
+const DEM_HEAD: &str = "let sim = dem(#{ seed: 1 });\nlet m = sim.material(#{ density: 2600.0 });\n";
+
+#[test]
+fn spheres_and_clumps_whose_mass_overflows_or_vanishes_are_refused_at_once() {
+    // A radius of 1e308 m or 1e-320 m passes "> 0", but its mass is infinite or zero; a clump of
+    // such members had an inertia whose principal axes were searched for without end.
+    for (name, call, what) in [
+        ("huge_sphere", "sim.sphere(m, [0.0, 0.0, 0.0], 1e308, #{})", "`radius` = 1e308"),
+        ("tiny_sphere", "sim.sphere(m, [0.0, 0.0, 0.0], 1e-320, #{})", "`radius` = 1e-320"),
+        ("huge_clump", "sim.clump(m, [[0.0, 0.0, 0.0, 1e308]])", "clump with volume inf"),
+        ("tiny_clump", "sim.clump(m, [[0.0, 0.0, 0.0, 1e-320]])", "clump with volume 0e0"),
+        ("spread_clump", "sim.tetra_clump(m, [0.0, 0.0, 0.0], 0.005, 1e308)", "inertia up to NaN"),
+    ] {
+        let e = run_err(name, &format!("{DEM_HEAD}{call};"), &[]);
+        assert!(e.contains("line 3") && e.contains(what), "{name}: {e}");
+    }
+}

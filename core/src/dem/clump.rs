@@ -17,6 +17,33 @@ pub struct MassProperties {
 }
 
 impl MassProperties {
+    /// A body a step can move: positive finite mass and volume, finite centre and inertia. Radii
+    /// near the ends of the f64 range give an infinite or zero volume; their inertia would leave
+    /// the principal-axis search of [`Clumps::push`] without an answer.
+    pub fn check(&self) -> Result<()> {
+        let positive = |v: f64| v.is_finite() && v > 0.0;
+        if !(positive(self.volume) && positive(self.mass))
+            || self.centroid.iter().any(|c| !c.is_finite())
+            || self.inertia.iter().any(|c| !c.is_finite())
+        {
+            return Err(GraniteError::Setup(format!(
+                "a clump with volume {:e} m^3, mass {:e} kg, centre {:?} and inertia up to {:e} kg m^2: its size, \
+                 spread or density is out of the range a step can move (volume and mass must be finite and > 0, \
+                 centre and inertia finite)",
+                self.volume,
+                self.mass,
+                self.centroid,
+                // NaN when any component is: f64::max would skip it.
+                self.inertia.iter().fold(0.0f64, |a, &b| if b.is_nan() || a.is_nan() {
+                    f64::NAN
+                } else {
+                    a.max(b.abs())
+                })
+            )));
+        }
+        Ok(())
+    }
+
     /// The same body rotated by `q` (about the origin of its coordinates) then moved by `t`.
     pub fn transformed(&self, q: &UnitQuaternion<f64>, t: Vec3) -> MassProperties {
         let c = q * Vector3::new(self.centroid[0], self.centroid[1], self.centroid[2]);
@@ -48,27 +75,48 @@ pub fn mass_properties(members: &[(Vec3, f64)], density: f64, resolution: usize)
     if members.is_empty() {
         return Err(GraniteError::Setup("a clump needs at least one sphere".into()));
     }
-    if !overlapping(members) {
-        let mut volume = 0.0;
-        let mut first = [0.0; 3];
-        for (x, r) in members {
-            let v = 4.0 / 3.0 * std::f64::consts::PI * r.powi(3);
-            volume += v;
-            for a in 0..3 {
-                first[a] += v * x[a];
-            }
+    for (k, (x, r)) in members.iter().enumerate() {
+        if !(r.is_finite() && *r > 0.0) || x.iter().any(|c| !c.is_finite()) {
+            return Err(GraniteError::param(
+                &format!("clump member {k}"),
+                format!("{x:?}, radius {r}"),
+                "needs a finite centre and a finite radius > 0",
+            ));
         }
-        let c = first.map(|f| f / volume);
-        let mut inertia = Matrix3::zeros();
-        for (x, r) in members {
-            let v = 4.0 / 3.0 * std::f64::consts::PI * r.powi(3);
-            let m = density * v;
-            let d = Vector3::new(x[0] - c[0], x[1] - c[1], x[2] - c[2]);
-            inertia +=
-                Matrix3::identity() * (0.4 * m * r * r) + (Matrix3::identity() * d.dot(&d) - d * d.transpose()) * m;
-        }
-        return Ok(MassProperties { volume, mass: density * volume, centroid: c, inertia });
     }
+    let props = if overlapping(members) {
+        voxel_integration(members, density, resolution)
+    } else {
+        exact_sums(members, density)
+    };
+    props.check()?;
+    Ok(props)
+}
+
+/// Mass properties of spheres that do not overlap: each sphere's own, moved to the common centre.
+fn exact_sums(members: &[(Vec3, f64)], density: f64) -> MassProperties {
+    let mut volume = 0.0;
+    let mut first = [0.0; 3];
+    for (x, r) in members {
+        let v = 4.0 / 3.0 * std::f64::consts::PI * r.powi(3);
+        volume += v;
+        for a in 0..3 {
+            first[a] += v * x[a];
+        }
+    }
+    let c = first.map(|f| f / volume);
+    let mut inertia = Matrix3::zeros();
+    for (x, r) in members {
+        let v = 4.0 / 3.0 * std::f64::consts::PI * r.powi(3);
+        let m = density * v;
+        let d = Vector3::new(x[0] - c[0], x[1] - c[1], x[2] - c[2]);
+        inertia += Matrix3::identity() * (0.4 * m * r * r) + (Matrix3::identity() * d.dot(&d) - d * d.transpose()) * m;
+    }
+    MassProperties { volume, mass: density * volume, centroid: c, inertia }
+}
+
+/// Mass properties of the union of overlapping spheres on a grid of `resolution`^3 voxels.
+fn voxel_integration(members: &[(Vec3, f64)], density: f64, resolution: usize) -> MassProperties {
     let n = resolution.clamp(16, 2048);
     let mut lo = [f64::INFINITY; 3];
     let mut hi = [f64::NEG_INFINITY; 3];
@@ -130,7 +178,7 @@ pub fn mass_properties(members: &[(Vec3, f64)], density: f64, resolution: usize)
     let yz = cov(1, 2, s[8], c[1], c[2]);
     let xz = cov(0, 2, s[9], c[0], c[2]);
     let inertia = Matrix3::new(yy + zz, -xy, -xz, -xy, xx + zz, -yz, -xz, -yz, xx + yy) * m_vox;
-    Ok(MassProperties { volume, mass: density * volume, centroid: c, inertia })
+    MassProperties { volume, mass: density * volume, centroid: c, inertia }
 }
 
 /// Clumps as a structure of arrays. Member spheres live in [`crate::dem::Spheres`] with their

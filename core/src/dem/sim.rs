@@ -178,6 +178,17 @@ impl DemSim {
             .get(material as usize)
             .ok_or_else(|| GraniteError::Setup(format!("no material with index {material}")))?
             .density;
+        let mass = density * 4.0 / 3.0 * std::f64::consts::PI * radius.powi(3);
+        if !(mass.is_finite() && mass > 0.0) {
+            return Err(GraniteError::param(
+                "radius",
+                radius,
+                &format!("gives a mass of {mass:e} kg at density {density:e} kg/m^3: it must be finite and > 0"),
+            ));
+        }
+        if v.iter().any(|c| !c.is_finite()) {
+            return Err(GraniteError::param("velocity", format!("{v:?}"), "must be finite"));
+        }
         self.spheres.push(self.next_id, x, radius, density, material, v);
         self.next_id += 1;
         self.needs_rebuild = true;
@@ -292,6 +303,18 @@ impl DemSim {
         members: &[(Vec3, f64)],
         props: &crate::dem::clump::MassProperties,
     ) -> Result<usize> {
+        // Everything is checked before the first member goes in: a refused clump leaves no
+        // loose spheres behind.
+        props.check()?;
+        if let Some((x, r)) =
+            members.iter().find(|(x, r)| !(r.is_finite() && *r > 0.0) || x.iter().any(|c| !c.is_finite()))
+        {
+            return Err(GraniteError::param(
+                "clump member",
+                format!("{x:?}, radius {r}"),
+                "needs a finite centre and a finite radius > 0",
+            ));
+        }
         let props = *props;
         let v = [0.0; 3];
         let first = self.spheres.len();

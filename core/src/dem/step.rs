@@ -125,9 +125,12 @@ impl DemSim {
             return Err(self.too_fast());
         }
         if !moved.is_finite() {
-            let bad = (0..self.spheres.len())
+            let Some(bad) = (0..self.spheres.len())
                 .find(|&i| !self.spheres.x[i].iter().chain(&self.spheres.v[i]).all(|c| c.is_finite()))
-                .unwrap_or(0);
+            else {
+                // Every value is finite but a distance overflowed: a sphere is absurdly fast.
+                return Err(self.too_fast());
+            };
             return Err(GraniteError::Unstable {
                 step: self.step,
                 time: self.time,

@@ -9,7 +9,8 @@ pub type RhaiResult<T> = std::result::Result<T, Box<EvalAltResult>>;
 
 /// A granite error as a Rhai runtime error; Rhai adds the script position of the failing call.
 pub fn to_rhai(e: GraniteError) -> Box<EvalAltResult> {
-    Box::new(EvalAltResult::ErrorRuntime(Dynamic::from(e.to_string()), Position::NONE))
+    let text = crate::error::compact_numbers(&e.to_string());
+    Box::new(EvalAltResult::ErrorRuntime(Dynamic::from(text), Position::NONE))
 }
 
 pub fn err<T>(msg: impl Into<String>) -> RhaiResult<T> {
@@ -37,11 +38,20 @@ pub fn number(d: &Dynamic, name: &str) -> RhaiResult<f64> {
     }
 }
 
+/// A finite number (a value that enters the physics: a position, a force, a velocity).
+pub fn finite(d: &Dynamic, name: &str) -> RhaiResult<f64> {
+    let x = number(d, name)?;
+    if !x.is_finite() {
+        return err(format!("`{name}` must be a finite number, got {x}"));
+    }
+    Ok(x)
+}
+
 pub fn integer(d: &Dynamic, name: &str) -> RhaiResult<i64> {
     d.as_int().or_else(|_| err(format!("`{name}` must be an integer, got {} ({})", d, d.type_name())))
 }
 
-/// An array of `dim` numbers (2D vectors get z = 0).
+/// An array of `dim` finite numbers (2D vectors get z = 0).
 pub fn vector(d: &Dynamic, dim: usize, name: &str) -> RhaiResult<Vec3> {
     let arr = d
         .clone()
@@ -52,15 +62,15 @@ pub fn vector(d: &Dynamic, dim: usize, name: &str) -> RhaiResult<Vec3> {
     }
     let mut v = [0.0; 3];
     for (k, x) in arr.iter().enumerate() {
-        v[k] = number(x, name)?;
+        v[k] = finite(x, name)?;
     }
     Ok(v)
 }
 
-/// An array of numbers of any length.
+/// An array of finite numbers of any length.
 pub fn numbers(d: &Dynamic, name: &str) -> RhaiResult<Vec<f64>> {
     let arr = d.clone().into_array().or_else(|_| err(format!("`{name}` must be an array of numbers")))?;
-    arr.iter().map(|x| number(x, name)).collect()
+    arr.iter().map(|x| finite(x, name)).collect()
 }
 
 pub fn counts(d: &Dynamic, dim: usize, name: &str) -> RhaiResult<[usize; 3]> {

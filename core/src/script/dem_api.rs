@@ -1,6 +1,8 @@
 //! The `dem(...)` simulation object of scripts and its methods.
 
-use super::convert::{err, get, integer, number, numbers, only_keys, param_map, string, vector, OrRhai, RhaiResult};
+use super::convert::{
+    err, finite, get, integer, number, numbers, only_keys, param_map, string, vector, OrRhai, RhaiResult,
+};
 use super::driver::{register_common, Handle, ScriptSim};
 use super::ScriptContext;
 use crate::dem::generate::{cloud, lattice, Psd};
@@ -241,7 +243,7 @@ fn psd_from(opts: &Map) -> RhaiResult<Psd> {
             Ok(psd)
         }
         Some(r) => {
-            let r = number(r, "radius")?;
+            let r = finite(r, "radius")?;
             let psd = Psd::Uniform { min: r, max: r };
             psd.validate().or_rhai()?;
             Ok(psd)
@@ -260,7 +262,7 @@ impl Handle<DemScene> {
         }
         let auto_skin = match get(&opts, "skin") {
             Some(s) => {
-                dem.skin = number(s, "skin")?;
+                dem.skin = finite(s, "skin")?;
                 if !(dem.skin >= 0.0) {
                     return err(format!("`skin` must be >= 0, got {}", dem.skin));
                 }
@@ -354,7 +356,7 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
     fn sphere(s: &mut DemHandle, m: DemMaterialHandle, x: Dynamic, r: Dynamic, opts: Map) -> RhaiResult<i64> {
         only_keys(&opts, &["velocity", "fixed"], "sphere options")?;
         let x = vector(&x, 3, "position")?;
-        let r = number(&r, "radius")?;
+        let r = finite(&r, "radius")?;
         let v = match get(&opts, "velocity") {
             Some(v) => vector(v, 3, "velocity")?,
             None => [0.0; 3],
@@ -408,7 +410,7 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
         |s: &mut DemHandle, m: DemMaterialHandle, centre: Dynamic, r_sphere: Dynamic, r_clump: Dynamic| {
             let c = vector(&centre, 3, "centre")?;
             let members =
-                crate::dem::clump::tetrahedral_members(c, number(&r_sphere, "r_sphere")?, number(&r_clump, "r_clump")?)
+                crate::dem::clump::tetrahedral_members(c, finite(&r_sphere, "r_sphere")?, finite(&r_clump, "r_clump")?)
                     .or_rhai()?;
             s.lock().sim.dem.add_clump(m.index, &members, [0.0; 3], CLUMP_VOXELS).map(|c| c as i64).or_rhai()
         },
@@ -453,10 +455,10 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
     engine.register_fn("lattice", |s: &mut DemHandle, m: DemMaterialHandle, lo: Dynamic, hi: Dynamic, opts: Map| {
         only_keys(&opts, &["spacing", "radius", "jitter", "seed"], "lattice options")?;
         let (lo, hi) = (vector(&lo, 3, "lower corner")?, vector(&hi, 3, "upper corner")?);
-        let spacing = number(get(&opts, "spacing").unwrap_or(&Dynamic::UNIT), "spacing")?;
-        let radius = number(get(&opts, "radius").unwrap_or(&Dynamic::UNIT), "radius")?;
+        let spacing = finite(get(&opts, "spacing").unwrap_or(&Dynamic::UNIT), "spacing")?;
+        let radius = finite(get(&opts, "radius").unwrap_or(&Dynamic::UNIT), "radius")?;
         let jitter = match get(&opts, "jitter") {
-            Some(j) => number(j, "jitter")?,
+            Some(j) => finite(j, "jitter")?,
             None => 0.0,
         };
         let seed = match get(&opts, "seed") {
@@ -491,7 +493,7 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
         |s: &mut DemHandle, m: DemMaterialHandle, centre: Dynamic, normal: Dynamic, radius: Dynamic| {
             let c = vector(&centre, 3, "centre")?;
             let n = unit(vector(&normal, 3, "normal")?, "normal")?;
-            let r = number(&radius, "radius")?;
+            let r = finite(&radius, "radius")?;
             if !(r > 0.0) {
                 return err("disk radius must be > 0");
             }
@@ -503,7 +505,7 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
         |s: &mut DemHandle, m: DemMaterialHandle, base: Dynamic, axis: Dynamic, radius: Dynamic, length: Dynamic| {
             let b = vector(&base, 3, "base")?;
             let a = unit(vector(&axis, 3, "axis")?, "axis")?;
-            let (r, l) = (number(&radius, "radius")?, number(&length, "length")?);
+            let (r, l) = (finite(&radius, "radius")?, finite(&length, "length")?);
             if !(r > 0.0 && l > 0.0) {
                 return err("cylinder radius and length must be > 0");
             }
@@ -596,7 +598,7 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
         Ok::<_, Box<rhai::EvalAltResult>>(lost as i64)
     });
     engine.register_fn("love_weber_stress", |s: &mut DemHandle, volume: Dynamic| {
-        let v = number(&volume, "volume")?;
+        let v = finite(&volume, "volume")?;
         if !(v > 0.0) {
             return err("volume must be > 0");
         }
@@ -605,7 +607,7 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
     engine.register_get("particles", |s: &mut DemHandle| s.lock().sim.dem.spheres.len() as i64);
     engine.register_get("memory_bytes", |s: &mut DemHandle| s.lock().sim.dem.memory_bytes() as i64);
     engine.register_fn("skin", |s: &mut DemHandle, skin: Dynamic| -> RhaiResult<()> {
-        let skin = number(&skin, "skin")?;
+        let skin = finite(&skin, "skin")?;
         let mut st = s.lock();
         st.sim.dem.set_skin(skin).or_rhai()?;
         st.sim.auto_skin = false;
@@ -678,7 +680,7 @@ fn register_cell(engine: &mut Engine) {
         let mut relax_steps = 200.0;
         for (k, v) in &opts {
             if k == "relax_steps" {
-                relax_steps = number(v, "relax_steps")?;
+                relax_steps = finite(v, "relax_steps")?;
                 if !(relax_steps >= 1.0) {
                     return err("`relax_steps` must be >= 1");
                 }
@@ -686,7 +688,7 @@ fn register_cell(engine: &mut Engine) {
             }
             if k.len() == 2 {
                 let (i, j) = (cell_axis(&k[0..1]).unwrap_or(0), cell_axis(&k[1..2]).unwrap_or(0));
-                shear.push((i, j, number(v, k)?));
+                shear.push((i, j, finite(v, k)?));
                 continue;
             }
             let a = cell_axis(k).unwrap_or(0);
@@ -696,13 +698,13 @@ fn register_cell(engine: &mut Engine) {
                 )))
             })?;
             axes[a] = match (get(&m, "rate"), get(&m, "stress")) {
-                (Some(r), None) => AxisGoal::Rate(number(r, "rate")?),
+                (Some(r), None) => AxisGoal::Rate(finite(r, "rate")?),
                 (None, Some(t)) => {
                     let max_rate = number(get(&m, "max_rate").unwrap_or(&Dynamic::from(1.0)), "max_rate")?;
                     if !(max_rate > 0.0) {
                         return err("`max_rate` must be > 0");
                     }
-                    AxisGoal::Stress { target: number(t, "stress")?, max_rate }
+                    AxisGoal::Stress { target: finite(t, "stress")?, max_rate }
                 }
                 _ => return err(format!("cell_control `{k}`: give exactly one of `rate` and `stress`")),
             };
@@ -768,12 +770,12 @@ fn register_measures(engine: &mut Engine) {
             "angle_of_repose",
         )?;
         let kind = string(get(&opts, "heap").unwrap_or(&Dynamic::from("plane_strain")), "heap")?;
-        let d = number(get(&opts, "d").unwrap_or(&Dynamic::UNIT), "d (grain diameter)")?;
+        let d = finite(get(&opts, "d").unwrap_or(&Dynamic::UNIT), "d (grain diameter)")?;
         let heap = match kind.as_str() {
             "plane_strain" => Heap::PlaneStrain {
                 x_range: range2(get(&opts, "x_range"), "x_range")?,
                 y_range: range2(get(&opts, "y_range"), "y_range")?,
-                open_x: number(get(&opts, "open_x").unwrap_or(&Dynamic::UNIT), "open_x")?,
+                open_x: finite(get(&opts, "open_x").unwrap_or(&Dynamic::UNIT), "open_x")?,
             },
             "axisymmetric" => {
                 let c = numbers(get(&opts, "centre").unwrap_or(&Dynamic::UNIT), "centre")?;
@@ -782,7 +784,7 @@ fn register_measures(engine: &mut Engine) {
                 }
                 Heap::Axisymmetric {
                     centre: [c[0], c[1]],
-                    radius: number(get(&opts, "radius").unwrap_or(&Dynamic::UNIT), "radius")?,
+                    radius: finite(get(&opts, "radius").unwrap_or(&Dynamic::UNIT), "radius")?,
                     z_range: range2(get(&opts, "z_range"), "z_range")?,
                 }
             }
@@ -802,7 +804,7 @@ fn register_measures(engine: &mut Engine) {
     });
     engine.register_fn("void_ratio_sub_volume", |s: &mut DemHandle, opts: Map| {
         only_keys(&opts, &["c", "n_mc", "shape", "seed"], "void_ratio_sub_volume")?;
-        let c = number(get(&opts, "c").unwrap_or(&Dynamic::from(0.8)), "c")?;
+        let c = finite(get(&opts, "c").unwrap_or(&Dynamic::from(0.8)), "c")?;
         if !(c > 0.5 && c <= 1.0) {
             return err(format!("`c` must be in ]0.5, 1], got {c}"));
         }
@@ -838,7 +840,7 @@ fn register_measures(engine: &mut Engine) {
         Ok(void_ratio_bounding_box(&g))
     });
     engine.register_fn("global_stress", |s: &mut DemHandle, volume: Dynamic| {
-        let v = number(&volume, "volume")?;
+        let v = finite(&volume, "volume")?;
         if !(v > 0.0) {
             return err("volume must be > 0");
         }

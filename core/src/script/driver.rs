@@ -401,11 +401,11 @@ impl<S: ScriptSim> Handle<S> {
         let caller_ctx = ctx.clone();
         let thread = std::thread::spawn(move || {
             IN_BACKGROUND_RUN.set(true);
-            let caller = Caller::Detached { engine, ctx: caller_ctx };
+            let caller = Caller::Detached { engine: engine.clone(), ctx: caller_ctx };
             let result = handle.run_plan(&caller, plan);
             let report = match &result {
                 Ok(()) => None,
-                Err(e) => Some(super::describe(e)),
+                Err(e) => Some(super::describe(e, &engine)),
             };
             if let Some(e) = &report {
                 eprintln!("granite: the background run stopped: {e}");

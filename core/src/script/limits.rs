@@ -23,7 +23,11 @@ impl Limits {
     pub fn parse(map: &Map, name: &str) -> RhaiResult<Limits> {
         only_keys(map, &KEYS, &format!("the limits of parameter `{name}`"))?;
         let bound = |key: &str| -> RhaiResult<Option<f64>> {
-            map.get(key).map(|d| number(d, &format!("{key}` of the limits of `{name}"))).transpose()
+            let what = format!("{key}` of the limits of `{name}");
+            match map.get(key).map(|d| number(d, &what)).transpose()? {
+                Some(b) if b.is_nan() => err(format!("`{what}` must be a number, got NaN")),
+                b => Ok(b),
+            }
         };
         let one_of = match map.get("one_of") {
             None => None,

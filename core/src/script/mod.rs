@@ -326,7 +326,7 @@ pub fn list_params(path: &Path, registry: Registry, options: RunOptions) -> Resu
     let ast = engine.compile(&source).map_err(|e| GraniteError::Other(format!("{name}: syntax error: {e}")))?;
     if let Err(e) = engine.run_ast(&ast) {
         if !ctx.listing_done.load(std::sync::atomic::Ordering::SeqCst) {
-            return Err(GraniteError::Other(format!("{name}: {}", describe(&e))));
+            return Err(GraniteError::Other(format!("{name}: {}", describe(&e, &engine))));
         }
     }
     let lines: Vec<&str> = source.lines().collect();
@@ -374,7 +374,7 @@ pub fn run_source(name: &str, source: &str, registry: Registry, options: RunOpti
         .map_err(|e| format!("{name}: syntax error: {e}"))
         .and_then(|ast| {
             *ctx.ast.lock().unwrap() = Some(Arc::new(ast.clone()));
-            let ran = engine.run_ast(&ast).map_err(|e| format!("{name}: {}", describe(&e)));
+            let ran = engine.run_ast(&ast).map_err(|e| format!("{name}: {}", describe(&e, &engine)));
             // Runs the script left going in the background finish before its outputs are closed.
             let failed = ctx.finish_background(false);
             ran.and_then(|_| match failed.first() {
@@ -382,7 +382,7 @@ pub fn run_source(name: &str, source: &str, registry: Registry, options: RunOpti
                 None => Ok(()),
             })
         })
-        .and_then(|_| ctx.check_overrides().map_err(|e| format!("{name}: {}", describe(&e))));
+        .and_then(|_| ctx.check_overrides().map_err(|e| format!("{name}: {}", describe(&e, &engine))));
     let mut summary = ctx.summary.lock().unwrap().clone();
     summary.insert("status".into(), Value::from(if outcome.is_ok() { "ok" } else { "failed" }));
     if let Err(e) = &outcome {
@@ -459,8 +459,9 @@ fn write_provenance(
     crate::io::write_summary(&out_dir.join("provenance.json"), &p)
 }
 
-/// A script error in one line: the message first, then where it happened.
-pub(crate) fn describe(e: &EvalAltResult) -> String {
+/// A script error in one line: the message first, then where it happened. A call that matches
+/// no function of `engine` also lists the forms the API has under that name.
+pub(crate) fn describe(e: &EvalAltResult, engine: &Engine) -> String {
     let mut inner = e;
     let mut pos = e.position();
     while let EvalAltResult::ErrorInFunctionCall(_, _, next, p) = inner {
@@ -471,6 +472,7 @@ pub(crate) fn describe(e: &EvalAltResult) -> String {
     }
     let msg = match inner {
         EvalAltResult::ErrorRuntime(d, _) => d.to_string(),
+        EvalAltResult::ErrorFunctionNotFound(call, _) => function_not_found(call, engine),
         other => {
             let s = other.to_string();
             match s.find(" (line ") {
@@ -484,6 +486,29 @@ pub(crate) fn describe(e: &EvalAltResult) -> String {
         Some(line) => format!("line {line}: {msg}"),
         None => msg,
     }
+}
+
+/// "Function not found: every (MpmSim, f64, Fn)" with the forms of `every` that exist; Rhai
+/// does not turn a float into an integer, so a count or an index written `10.0` lands here.
+fn function_not_found(call: &str, engine: &Engine) -> String {
+    let name = call.split_once(" (").map_or(call, |(name, _)| name);
+    let forms: Vec<String> = repl::api_signatures(engine)
+        .into_iter()
+        .filter(|form| {
+            let head = form.split_once('(').map_or(form.as_str(), |(head, _)| head);
+            head.rsplit('.').next() == Some(name)
+        })
+        .collect();
+    if forms.is_empty() {
+        // A script function or one of Rhai's own: its text says enough.
+        return format!("Function not found: {call} (`:api` in `granite repl` lists granite's functions)");
+    }
+    let hint = if call.contains("f64") && forms.iter().any(|f| f.contains("int")) {
+        "; counts and indices are integers: write 10, not 10.0"
+    } else {
+        ""
+    };
+    format!("no form of `{name}` takes these arguments ({call}); the API has: {}{hint}", forms.join(", "))
 }
 
 #[cfg(test)]

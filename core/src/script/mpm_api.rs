@@ -1,7 +1,7 @@
 //! The `mpm(...)` simulation object of scripts and its methods.
 
 use super::convert::{
-    counts, err, get, integer, number, numbers, only_keys, param_map, string, vector, OrRhai, RhaiResult,
+    counts, err, finite, get, integer, number, numbers, only_keys, param_map, string, vector, OrRhai, RhaiResult,
 };
 use super::driver::{register_common, Handle, ScriptSim};
 use super::ScriptContext;
@@ -243,7 +243,7 @@ fn parse_mesh(opts: &Map, dim_hint: Option<usize>) -> RhaiResult<Mesh> {
         None => return err("mesh needs `cell` (cell size in m, a number or one per axis)"),
         Some(c) if c.is_array() => vector(c, dim, "cell")?,
         Some(c) => {
-            let h = number(c, "cell")?;
+            let h = finite(c, "cell")?;
             [h, h, h]
         }
     };
@@ -304,7 +304,7 @@ pub(super) fn time_function(value: &Dynamic, name: &str) -> RhaiResult<(TimeFunc
         }
         return Ok((TimeFunction::table(table).or_rhai()?, None));
     }
-    Ok((TimeFunction::Constant(number(value, name)?), None))
+    Ok((TimeFunction::Constant(finite(value, name)?), None))
 }
 
 enum Region {
@@ -555,7 +555,7 @@ impl Handle<MpmScene> {
 
     /// Geostatic stress: `sigma_v = -rho |g| (surface - height)`, horizontal `K0 sigma_v`.
     fn geostatic(&mut self, surface: Dynamic, k0: Dynamic) -> RhaiResult<()> {
-        let (surface, k0) = (number(&surface, "surface")?, number(&k0, "k0")?);
+        let (surface, k0) = (finite(&surface, "surface")?, finite(&k0, "k0")?);
         if !(k0 >= 0.0) {
             return err(format!("`k0` must be >= 0, got {k0}"));
         }
@@ -616,7 +616,7 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
         s.fill(None, &m, region, Map::new())
     });
     engine.register_fn("add_points", |s: &mut SimHandle, m: MaterialHandle, positions: Array, volume: Dynamic| {
-        let volume = number(&volume, "volume")?;
+        let volume = finite(&volume, "volume")?;
         let mut st = s.lock();
         let dim = st.sim.mpm.dim();
         let xs = positions.iter().map(|p| vector(p, dim, "position")).collect::<RhaiResult<Vec<_>>>()?;
@@ -702,7 +702,7 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
         Ok(())
     });
     engine.register_fn("track_runout", |s: &mut SimHandle, width: Dynamic, height: Dynamic| {
-        let (w, h) = (number(&width, "width")?, number(&height, "height")?);
+        let (w, h) = (finite(&width, "width")?, finite(&height, "height")?);
         if !(w > 0.0 && h > 0.0) {
             return err("track_runout needs the initial column width and height (> 0)");
         }

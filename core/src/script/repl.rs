@@ -56,18 +56,14 @@ impl ReplSession {
         match result {
             Ok(v) if v.is_unit() => Outcome::Value(None),
             Ok(v) => Outcome::Value(Some(v.to_string())),
-            Err(e) => Outcome::Error(describe(&e)),
+            Err(e) => Outcome::Error(describe(&e, &self.engine)),
         }
     }
 
     /// The script API's functions whose signature contains `filter` (all for an empty one),
     /// sorted: what `:api` prints.
     pub fn api(&self, filter: &str) -> Vec<String> {
-        let mut found: Vec<String> =
-            self.engine.gen_fn_signatures(false).iter().map(|s| readable(s)).filter(|s| s.contains(filter)).collect();
-        found.sort();
-        found.dedup();
-        found
+        api_signatures(&self.engine).into_iter().filter(|s| s.contains(filter)).collect()
     }
 
     /// Makes every run, in the background or not, pause at its next step, keeping the state (Ctrl-C).
@@ -80,6 +76,14 @@ impl ReplSession {
     pub fn finish(&self) {
         self.ctx.finish_background(true);
     }
+}
+
+/// Every function of the script API in the script's terms (see [`readable`]), sorted.
+pub(crate) fn api_signatures(engine: &rhai::Engine) -> Vec<String> {
+    let mut found: Vec<String> = engine.gen_fn_signatures(false).iter().map(|s| readable(s)).collect();
+    found.sort();
+    found.dedup();
+    found
 }
 
 /// Whether a parse error only says the input stops too early: an open block, bracket or
