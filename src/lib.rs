@@ -97,6 +97,34 @@ pub fn parse_override(s: &str) -> std::result::Result<(String, String), String> 
     }
 }
 
+/// The most worker threads the command line takes: far beyond any core count, low enough that a
+/// typo (`--threads 100000`) is an error rather than minutes of thread creation.
+pub const MAX_THREADS: usize = 1024;
+
+/// A whole number of at least `MIN` (step, point and particle counts, repeats).
+pub fn parse_at_least<const MIN: usize>(s: &str) -> std::result::Result<usize, String> {
+    match s.trim().parse::<usize>() {
+        Ok(n) if n >= MIN => Ok(n),
+        _ => Err(format!("expected a whole number >= {MIN}, got `{s}`")),
+    }
+}
+
+/// A thread count, 1 to [`MAX_THREADS`].
+pub fn parse_threads(s: &str) -> std::result::Result<usize, String> {
+    match s.trim().parse::<usize>() {
+        Ok(n) if (1..=MAX_THREADS).contains(&n) => Ok(n),
+        _ => Err(format!("expected a thread count from 1 to {MAX_THREADS}, got `{s}`")),
+    }
+}
+
+/// A strain: a number in (0, 1).
+pub fn parse_strain(s: &str) -> std::result::Result<f64, String> {
+    match s.trim().parse::<f64>() {
+        Ok(x) if x > 0.0 && x < 1.0 => Ok(x),
+        _ => Err(format!("expected a strain in (0, 1), got `{s}`")),
+    }
+}
+
 /// Human-readable list of the registered plugins and their parameters.
 pub fn plugin_listing() -> String {
     use std::fmt::Write;

@@ -23,7 +23,7 @@ enum Command {
         #[arg(long)]
         out: Option<PathBuf>,
         /// Worker threads (default: all cores).
-        #[arg(long)]
+        #[arg(long, value_parser = granite::parse_threads)]
         threads: Option<usize>,
         /// No progress lines.
         #[arg(long)]
@@ -57,26 +57,26 @@ enum Command {
         /// Which benchmark: mpm, dem, mpmxdem, triaxial.
         which: String,
         /// Material points in the 3D block (about).
-        #[arg(long, default_value_t = 100_000)]
+        #[arg(long, default_value_t = 100_000, value_parser = granite::parse_at_least::<10>)]
         points: usize,
         /// Steps to time.
-        #[arg(long, default_value_t = 50)]
+        #[arg(long, default_value_t = 50, value_parser = granite::parse_at_least::<1>)]
         steps: usize,
         /// DEM: particle counts, comma separated.
-        #[arg(long, default_value = "10000,50000", value_delimiter = ',')]
+        #[arg(long, default_value = "10000,50000", value_delimiter = ',', value_parser = granite::parse_at_least::<1>)]
         particles: Vec<usize>,
         /// DEM: timed steps (after 200 of warm-up).
-        #[arg(long, default_value_t = 2000)]
+        #[arg(long, default_value_t = 2000, value_parser = granite::parse_at_least::<1>)]
         dem_steps: usize,
         /// Thread counts to measure, comma separated.
-        #[arg(long, default_value = "1,2", value_delimiter = ',')]
+        #[arg(long, default_value = "1,2", value_delimiter = ',', value_parser = granite::parse_threads)]
         threads: Vec<usize>,
         /// triaxial: axial strain to reach.
-        #[arg(long, default_value_t = 0.1)]
+        #[arg(long, default_value_t = 0.1, value_parser = granite::parse_strain)]
         axial_strain: f64,
         /// dem, mpmxdem: runs of each measurement; the fastest is reported (a shared machine's
         /// slow spells only ever slow a run down).
-        #[arg(long, default_value_t = 3)]
+        #[arg(long, default_value_t = 3, value_parser = granite::parse_at_least::<1>)]
         repeat: usize,
     },
     /// List the registered plugins (constitutive laws, velocity updates) and their parameters.
@@ -88,7 +88,7 @@ enum Command {
         #[arg(long)]
         params: PathBuf,
         /// Runs at a time.
-        #[arg(long, default_value_t = 1)]
+        #[arg(long, default_value_t = 1, value_parser = granite::parse_at_least::<1>)]
         jobs: usize,
         /// Output folder (default: out/<script stem>_batch/).
         #[arg(long)]
@@ -128,10 +128,6 @@ fn main() -> ExitCode {
             }
         }
         Command::Run { script, set, out, threads, quiet, plugins, .. } => {
-            if threads == Some(0) {
-                eprintln!("granite: --threads must be >= 1");
-                return ExitCode::from(2);
-            }
             match granite::run_with_plugins(&script, set, out, quiet, threads, plugins) {
                 Ok(report) => {
                     if !quiet {

@@ -141,3 +141,21 @@ fn batch_runs_every_set_and_reports_a_failure() {
         assert!(dir.join(format!("runs/run_{k:03}/summary.json")).exists());
     }
 }
+
+#[test]
+fn counts_out_of_range_are_refused_by_the_command_line() {
+    // Each would have run something meaningless (no threads, 100 000 threads being created,
+    // a benchmark of zero runs printing NaN speed-ups) instead of saying what is allowed.
+    for (args, says) in [
+        (&["run", "scripts/mpm/bouncing_cube.rhai", "--threads", "0"][..], "thread count from 1 to 1024"),
+        (&["run", "scripts/mpm/bouncing_cube.rhai", "--threads", "100000"][..], "thread count from 1 to 1024"),
+        (&["bench", "dem", "--repeat", "0"][..], "whole number >= 1"),
+        (&["bench", "mpm", "--threads", "1,0"][..], "thread count from 1 to 1024"),
+        (&["bench", "triaxial", "--axial-strain", "nan"][..], "strain in (0, 1)"),
+    ] {
+        let out = granite().current_dir(common::root()).args(args).output().unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{args:?}: {err}");
+        assert!(err.contains(says), "{args:?}: {err}");
+    }
+}
