@@ -10,7 +10,8 @@ use std::path::Path;
 const HELP: &str = "granite repl: the script API one input at a time (variables and functions are kept).
   sim.run(), sim.run(n)   run in the background (until paused, or n steps); the prompt stays usable
   sim.pause(), sim.wait(), sim.running, sim.step()   pause, wait for the end, ask, one step
-  sim.run_steps(n), sim.run_until(t)   run at the prompt; Ctrl-C pauses any run, state kept
+  sim.run_steps(n), sim.run_until(t)   run at the prompt; Ctrl-C pauses any run, state kept,
+                          and stops the input being evaluated (a loop of runs, an endless loop)
   sim.diagnostics(), sim.time, sim.step   inspect (between two steps, also while running)
   sim.gravity([..]), sim.damping(d), sim.vtk_every(n) ...   change (between two steps, also while running)
   a line ending inside { ( [ continues on the next line; an empty line ends it
@@ -26,9 +27,13 @@ pub fn run(script: Option<&Path>, options: RunOptions) -> Result<usize> {
     let mut failures = 0;
     if let Some(path) = script {
         let source = std::fs::read_to_string(path).map_err(|e| granite_core::error::GraniteError::io(path, e))?;
-        if let Outcome::Error(e) = session.eval(&source, false) {
-            eprintln!("{}: {e}", path.display());
-            failures += 1;
+        match session.eval(&source, false) {
+            Outcome::Error(e) => {
+                eprintln!("{}: {e}", path.display());
+                failures += 1;
+            }
+            Outcome::Interrupted(e) => eprintln!("{}: {e}", path.display()),
+            _ => {}
         }
     }
     let interactive = std::io::stdin().is_terminal();
@@ -79,6 +84,7 @@ pub fn run(script: Option<&Path>, options: RunOptions) -> Result<usize> {
                 failures += 1;
                 eprintln!("error: {e}");
             }
+            Outcome::Interrupted(e) => eprintln!("{e}"),
         }
         reader.remember(pending.trim_end());
         pending.clear();

@@ -211,3 +211,38 @@ fn api_lists_the_functions_in_the_scripts_terms() {
     assert!(lines.iter().all(|l| l.contains("wall_") || l.contains("no_such_function")), "{lines:?}");
     assert!(lines.last().is_some_and(|l| l.contains("no function of the API matches")), "{lines:?}");
 }
+
+/// Ctrl-C stops the input being evaluated, not only a run: an endless loop, and a loop of runs
+/// (whose run is paused first, then the loop stops instead of starting the next run). The
+/// session goes on with its variables and its simulation, and an interruption is no failure.
+#[test]
+fn ctrl_c_stops_a_loop_at_the_prompt() {
+    const RUN: u64 = 100_000;
+    let mut repl = Repl::start("loop");
+    let interrupt = |repl: &Repl| {
+        std::thread::sleep(Duration::from_millis(500));
+        Command::new("kill").args(["-INT", &repl.child.id().to_string()]).status().expect("kill runs");
+    };
+    repl.send("let turns = 0;\nprint_line(\"looping\");\nwhile true { turns += 1; }\n");
+    assert_eq!(repl.line("loop starts"), "looping");
+    interrupt(&repl);
+    repl.send("print_line(`turns ${turns}`);\n");
+    let turns = numbers(&repl.line("after the loop"), "turns");
+    assert!(turns[0] > 0.0, "the loop ran and its variable is kept: {turns:?}");
+
+    repl.send(&falling_block());
+    repl.send(&format!("print_line(\"runs\");\nfor k in 0..1000 {{ sim.run_steps({RUN}); }}\n"));
+    assert_eq!(repl.line("runs start"), "runs");
+    interrupt(&repl);
+    repl.send("print_line(`stopped ${sim.step} ${sim.time} ${speed(sim)}`);\n");
+    let s = numbers(&repl.line("after the runs"), "stopped");
+    let (step, t, v) = (s[0], s[1], s[2]);
+    // Stopped inside the run under way (its steps are not a multiple of RUN), not at the end of
+    // the loop's thousand runs; nothing lost: free fall to the step it stopped at.
+    assert!(step > 0.0 && step < 1000.0 * RUN as f64 && step % RUN as f64 != 0.0, "{step}");
+    assert!((t - step * DT).abs() < 1e-9 * t.max(1.0) && (v - G1 * t).abs() < 1e-6 * G1 * t, "{s:?}");
+
+    let (status, errors) = repl.finish();
+    assert_eq!(errors.matches("interrupted by Ctrl-C").count(), 2, "{errors}");
+    assert_eq!(status, Some(0), "an interrupted input is not a failure: {errors}");
+}

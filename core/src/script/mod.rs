@@ -257,9 +257,26 @@ fn to_json(d: &Dynamic) -> Value {
     }
 }
 
+thread_local! {
+    /// On the thread evaluating a REPL input: the count of Ctrl-C presses when it began. A press
+    /// since then stops the input (an endless loop, a loop of runs) after pausing any run; other
+    /// threads (a background run's callbacks) and `granite run` are not interrupted this way.
+    pub(crate) static INTERRUPTIBLE_SINCE: std::cell::Cell<Option<u64>> = const { std::cell::Cell::new(None) };
+}
+
+/// What an input stopped by Ctrl-C ends with (see [`INTERRUPTIBLE_SINCE`]).
+pub(crate) const INTERRUPTED: &str = "interrupted by Ctrl-C";
+
 fn build_engine(ctx: &Arc<ScriptContext>) -> Engine {
     let mut engine = Engine::new();
     engine.set_max_expr_depths(128, 64);
+    let c = ctx.clone();
+    // Checked at every operation: a loop of runs does only a few between two runs, and the
+    // check outside the REPL is one thread-local read.
+    engine.on_progress(move |_| match INTERRUPTIBLE_SINCE.get() {
+        Some(presses) if c.pause_requests() != presses => Some(Dynamic::from(INTERRUPTED)),
+        _ => None,
+    });
     // param(name, default) and param(name, default, limits), for each kind of default.
     macro_rules! register_param {
         ($kind:ty, $to_dynamic:expr) => {
@@ -473,6 +490,9 @@ pub(crate) fn describe(e: &EvalAltResult, engine: &Engine) -> String {
     let msg = match inner {
         EvalAltResult::ErrorRuntime(d, _) => d.to_string(),
         EvalAltResult::ErrorFunctionNotFound(call, _) => function_not_found(call, engine),
+        EvalAltResult::ErrorTerminated(_, _) => {
+            format!("{INTERRUPTED}: the input stopped here; simulations keep their state")
+        }
         other => {
             let s = other.to_string();
             match s.find(" (line ") {

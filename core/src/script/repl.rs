@@ -25,6 +25,9 @@ pub enum Outcome {
     /// A syntax or run-time error, with its position; nothing of the input took effect
     /// beyond the statements before the failing one.
     Error(String),
+    /// Stopped by Ctrl-C (any run paused first), with where: what the user asked for, not a
+    /// failure.
+    Interrupted(String),
 }
 
 impl ReplSession {
@@ -51,11 +54,16 @@ impl ReplSession {
         };
         let with_functions = self.functions.merge(&ast);
         *self.ctx.ast.lock().unwrap() = Some(Arc::new(with_functions.clone()));
+        super::INTERRUPTIBLE_SINCE.set(Some(self.ctx.pause_requests()));
         let result = self.engine.eval_ast_with_scope::<Dynamic>(&mut self.scope, &with_functions);
+        super::INTERRUPTIBLE_SINCE.set(None);
         self.functions = self.functions.merge(&ast.clone_functions_only());
         match result {
             Ok(v) if v.is_unit() => Outcome::Value(None),
             Ok(v) => Outcome::Value(Some(v.to_string())),
+            Err(e) if matches!(*e, rhai::EvalAltResult::ErrorTerminated(..)) => {
+                Outcome::Interrupted(describe(&e, &self.engine))
+            }
             Err(e) => Outcome::Error(describe(&e, &self.engine)),
         }
     }
