@@ -2,7 +2,7 @@
 //! functions once per step, callbacks every N steps, output, progress, falling back on the last
 //! good state), and the script methods built on it.
 
-use super::convert::{err, number, OrRhai, RhaiResult};
+use super::convert::{err, finite, number, OrRhai, RhaiResult};
 use super::output::Output;
 use super::ScriptContext;
 use crate::error::{GraniteError, Result};
@@ -371,7 +371,7 @@ impl<S: ScriptSim> Handle<S> {
     }
 
     pub fn run_until(&self, ctx: &NativeCallContext, t_end: Dynamic) -> RhaiResult<()> {
-        let t_end = number(&t_end, "time")?;
+        let t_end = finite(&t_end, "time")?;
         let steps = {
             let st = self.lock();
             st.sim.validate().or_rhai()?;
