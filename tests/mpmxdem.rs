@@ -75,6 +75,23 @@ fn p_min_and_deformation_time_follow_eqs_4_2_to_4_5() {
 }
 
 #[test]
+fn fixed_dem_steps_are_a_whole_number_within_the_safeguard() {
+    let rve = lattice_rve();
+    let law = DemRve::new(params(&[("dem_steps", 51.0)]), &objects(&rve)).unwrap();
+    assert_eq!(law.plan(1e-4, 1e5, 1e-5).full_steps, 51);
+    // Half a step was taken as one before; a count beyond max_dem_steps failed only at the
+    // first call, naming a deformation time that fixed steps do not use.
+    for (given, says) in [
+        (&[("dem_steps", 0.5)][..], "whole number >= 1"),
+        (&[("dem_steps", 100.0), ("max_dem_steps", 99.0)][..], "must not exceed max_dem_steps = 99"),
+        (&[("max_dem_steps", 2.5)][..], "whole number >= 1"),
+    ] {
+        let e = DemRve::new(params(given), &objects(&rve)).err().expect("refused").to_string();
+        assert!(e.contains(says), "{given:?}: {e}");
+    }
+}
+
+#[test]
 fn zero_increment_returns_the_prepared_stress() {
     let rve = granite::bench::periodic_rve(300, 1e5).unwrap();
     let volume = rve.cell_volume().unwrap();

@@ -131,6 +131,16 @@ impl Params {
         }
     }
 
+    /// A whole number >= 1 (a count of steps), or an error naming the parameter.
+    pub fn count(&self, name: &str) -> Result<u64> {
+        let v = self.get(name);
+        if v >= 1.0 && v.fract() == 0.0 && v < u64::MAX as f64 {
+            Ok(v as u64)
+        } else {
+            Err(GraniteError::param_in(self.qualified(name), v, "must be a whole number >= 1"))
+        }
+    }
+
     /// `value >= 0`, or an error naming the parameter.
     pub fn non_negative(&self, name: &str) -> Result<f64> {
         let v = self.get(name);

@@ -143,9 +143,15 @@ impl DemRve {
         let mean_diameter = 2.0 * s.radius.iter().sum::<f64>() / s.len() as f64;
         let grain_size = if params.is_set("grain_size") { params.positive("grain_size")? } else { mean_diameter };
         let g = params.non_negative("gravity")?;
-        let max_steps = params.positive("max_dem_steps")? as u64;
-        let fixed_steps =
-            if params.is_set("dem_steps") { Some(params.positive("dem_steps")?.round().max(1.0) as u64) } else { None };
+        let max_steps = params.count("max_dem_steps")?;
+        let fixed_steps = if params.is_set("dem_steps") { Some(params.count("dem_steps")?) } else { None };
+        if let Some(n) = fixed_steps.filter(|&n| n > max_steps) {
+            return Err(GraniteError::param_in(
+                format!("`dem_steps` of {}", params.owner()),
+                n,
+                &format!("must not exceed max_dem_steps = {max_steps}"),
+            ));
+        }
         let mut template = template;
         template.set_sequential(true);
         template.cell_control = None;
