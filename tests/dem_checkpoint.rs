@@ -22,3 +22,39 @@ fn saved_state_resumes_bit_for_bit() {
     assert_eq!(sim.pairs.history, resumed.pairs.history);
     assert_eq!(sim.time.to_bits(), resumed.time.to_bits());
 }
+
+/// A state file edited by hand, truncated or written by another program is refused with what is
+/// wrong in it; before, an index out of range or a short array panicked at the first step.
+#[test]
+fn inconsistent_state_files_are_refused_with_the_reason() {
+    let mut sim = granite::bench::gravity_deposition(300).unwrap();
+    for _ in 0..500 {
+        sim.step().unwrap();
+    }
+    let dir = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("target/test-out/dem_checkpoint_bad");
+    std::fs::create_dir_all(&dir).unwrap();
+    let good = sim.to_json().unwrap();
+    assert!(!good["pairs"]["a"].as_array().unwrap().is_empty(), "the state must hold pairs");
+    let n = sim.spheres.len();
+    type Edit = fn(&mut serde_json::Value);
+    let edits: [(&str, Edit, String); 6] = [
+        ("pair index", |s| s["pairs"]["b"][0] = 99_999.into(), format!("an index beyond the {n} spheres")),
+        (
+            "short radii",
+            |s| drop(s["spheres"]["radius"].as_array_mut().unwrap().pop()),
+            format!("`radius` has {} entries, `x` {n}", n - 1),
+        ),
+        ("short history", |s| drop(s["pairs"]["history"].as_array_mut().unwrap().pop()), "history values for".into()),
+        ("contact law", |s| s["pairs"]["law"][0] = 7.into(), "contact law 7 of 1".into()),
+        ("material", |s| s["spheres"]["material"][3] = 2.into(), "sphere 3: material 2 of 1".into()),
+        ("mass", |s| s["spheres"]["mass"][5] = 0.0.into(), "sphere 5: radius".into()),
+    ];
+    for (what, edit, says) in edits {
+        let mut state = good.clone();
+        edit(&mut state);
+        let path = dir.join("state.json");
+        std::fs::write(&path, state.to_string()).unwrap();
+        let e = granite_core::dem::DemSim::load(&path, &granite::registry()).err().expect(what).to_string();
+        assert!(e.contains("not a usable DEM state") && e.contains(&says), "{what}: {e}");
+    }
+}

@@ -25,3 +25,34 @@ fn mohr_coulomb_column_resumes_bit_for_bit() {
     );
     assert_eq!(sim.materials[0].state, resumed.materials[0].state);
 }
+
+/// A checkpoint edited by hand or truncated is refused with what is wrong in it, instead of
+/// panicking at the first step.
+#[test]
+fn inconsistent_checkpoints_are_refused_with_the_reason() {
+    let sim = granite::bench::mohr_coulomb_column(0.1).unwrap();
+    let dir = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("target/test-out/mpm_checkpoint_bad");
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("checkpoint.json");
+    sim.save(&path).unwrap();
+    let good: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+    let nodes = sim.mesh.node_count();
+    type Edit = fn(&mut serde_json::Value);
+    let edits: [(&str, Edit, String); 4] = [
+        ("short stress", |s| drop(s["points"]["stress"].as_array_mut().unwrap().pop()), "`stress` has".into()),
+        ("point count", |s| s["materials"][0]["count"] = 1_000_000.into(), "counts 1000000 points".into()),
+        (
+            "node",
+            |s| s["boundary"]["velocity"][0]["nodes"][0] = 99_999_999.into(),
+            format!("node 99999999 of the mesh's {nodes}"),
+        ),
+        ("mesh", |s| s["mesh"]["cells"][0] = 0.into(), "every axis needs at least one cell".into()),
+    ];
+    for (what, edit, says) in edits {
+        let mut state = good.clone();
+        edit(&mut state);
+        std::fs::write(&path, state.to_string()).unwrap();
+        let e = granite_core::mpm::MpmSim::load(&path, &granite::registry()).err().expect(what).to_string();
+        assert!(e.contains("not a usable MPM checkpoint") && e.contains(&says), "{what}: {e}");
+    }
+}

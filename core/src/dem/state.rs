@@ -154,8 +154,6 @@ impl DemSim {
         sim.seed = st.seed;
         sim.pairs = st.pairs;
         sim.wall_pairs = st.wall_pairs;
-        sim.adjacency = st.adjacency;
-        sim.wall_adjacency = st.wall_adjacency;
         sim.x_at_build = st.x_at_build;
         sim.walls_at_build = st.walls_at_build;
         sim.h_at_build = st.h_at_build;
@@ -163,6 +161,11 @@ impl DemSim {
         sim.radius_min_at_build = sim.spheres.smallest_radius();
         sim.needs_rebuild = st.needs_rebuild;
         sim.rebuilds = st.rebuilds;
+        check_consistent(&sim).map_err(|e| GraniteError::Other(format!("{source}: not a usable DEM state: {e}")))?;
+        // Derived from the pair lists, which were checked: rebuilt rather than trusted (the
+        // saved ones were built the same way from the same lists).
+        let _ = (st.adjacency, st.wall_adjacency);
+        sim.build_adjacency();
         // Reading grows arrays by doubling; copies hold just their contents (a loaded RVE is the
         // template of every material point's copy, so its reported memory should be theirs).
         sim.spheres = sim.spheres.clone();
@@ -170,5 +173,139 @@ impl DemSim {
         sim.wall_pairs = sim.wall_pairs.clone();
         sim.x_at_build = sim.x_at_build.clone();
         Ok(sim)
+    }
+}
+
+/// What a step relies on in a state read from a file (edited by hand, truncated, or from another
+/// program): array lengths that agree, indices in range, values a step can use. A file breaking
+/// one is refused with what is wrong, instead of panicking or running on garbage.
+fn check_consistent(sim: &DemSim) -> std::result::Result<(), String> {
+    let s = &sim.spheres;
+    let n = s.len();
+    let lengths = [
+        ("id", s.id.len()),
+        ("v", s.v.len()),
+        ("w", s.w.len()),
+        ("radius", s.radius.len()),
+        ("mass", s.mass.len()),
+        ("inertia", s.inertia.len()),
+        ("material", s.material.len()),
+        ("force", s.force.len()),
+        ("torque", s.torque.len()),
+        ("blocked", s.blocked.len()),
+        ("clump", s.clump.len()),
+    ];
+    same_length("spheres", "x", n, &lengths)?;
+    let finite = |v: &Vec3| v.iter().all(|c| c.is_finite());
+    let positive = |x: f64| x.is_finite() && x > 0.0;
+    for i in 0..n {
+        if !(positive(s.radius[i]) && positive(s.mass[i]) && positive(s.inertia[i])) {
+            return Err(format!(
+                "sphere {i}: radius {}, mass {}, inertia {} (each must be finite and > 0)",
+                s.radius[i], s.mass[i], s.inertia[i]
+            ));
+        }
+        if !(finite(&s.x[i]) && finite(&s.v[i]) && finite(&s.w[i])) {
+            return Err(format!("sphere {i}: non-finite position or velocity"));
+        }
+        if s.material[i] as usize >= sim.materials.len() {
+            return Err(format!("sphere {i}: material {} of {}", s.material[i], sim.materials.len()));
+        }
+        if s.clump[i] != crate::dem::particles::FREE && s.clump[i] as usize >= sim.clumps.len() {
+            return Err(format!("sphere {i}: clump {} of {}", s.clump[i], sim.clumps.len()));
+        }
+    }
+    let c = &sim.clumps;
+    let clumps = c.len();
+    let lengths = [
+        ("v", c.v.len()),
+        ("w", c.w.len()),
+        ("q", c.q.len()),
+        ("mass", c.mass.len()),
+        ("inertia", c.inertia.len()),
+        ("volume", c.volume.len()),
+        ("force", c.force.len()),
+        ("torque", c.torque.len()),
+    ];
+    same_length("clumps", "x", clumps, &lengths)?;
+    same_length("clumps", "members", c.members.len(), &[("local", c.local.len())])?;
+    if clumps > 0 {
+        let ordered = c.start.len() == clumps + 1
+            && c.start.windows(2).all(|w| w[0] <= w[1])
+            && c.start.last().is_some_and(|&e| e as usize == c.members.len());
+        if !ordered || c.members.iter().any(|&m| m as usize >= n) {
+            return Err("clump member lists do not match the spheres".into());
+        }
+        if c.mass.iter().any(|&m| !positive(m)) || c.inertia.iter().flatten().any(|&i| !positive(i)) {
+            return Err("a clump has a mass or inertia that is not finite and > 0".into());
+        }
+    }
+    let laws = sim.laws.len();
+    if sim.default_law.is_some_and(|l| l as usize >= laws) || sim.law_of.values().any(|&l| l as usize >= laws) {
+        return Err(format!("a material pair uses a contact law beyond the {laws} saved"));
+    }
+    for (name, list, others) in [("pairs", &sim.pairs, n), ("wall pairs", &sim.wall_pairs, sim.walls.len())] {
+        let m = list.len();
+        let lengths = [
+            ("b", list.b.len()),
+            ("shift", list.shift.len()),
+            ("law", list.law.len()),
+            ("touching", list.touching.len()),
+            ("force", list.force.len()),
+        ];
+        same_length(name, "a", m, &lengths)?;
+        if list.a.iter().any(|&i| i as usize >= n) || list.b.iter().any(|&j| j as usize >= others) {
+            return Err(format!("{name}: an index beyond the {n} spheres or {} walls", sim.walls.len()));
+        }
+        if let Some(&l) = list.law.iter().find(|&&l| l as usize >= laws) {
+            return Err(format!("{name}: contact law {l} of {laws}"));
+        }
+        let (ps, hs) = (list.param_stride, list.history_stride);
+        if list
+            .law
+            .iter()
+            .any(|&l| sim.laws[l as usize].param_count() > ps || sim.laws[l as usize].history_count() > hs)
+        {
+            return Err(format!("{name}: {ps} parameters and {hs} history values a pair, fewer than a law keeps"));
+        }
+        if list.params.len() != m * ps || list.history.len() != m * hs {
+            return Err(format!(
+                "{name}: {} parameters and {} history values for {m} pairs of {ps} and {hs}",
+                list.params.len(),
+                list.history.len()
+            ));
+        }
+        let key = |k: usize| (list.a[k], list.b[k], list.shift[k]);
+        if (1..m).any(|k| key(k - 1) >= key(k)) {
+            return Err(format!("{name}: not sorted by (first, second, image) without repeats"));
+        }
+    }
+    same_length("the positions at the last list build", "spheres", n, &[("x_at_build", sim.x_at_build.len())])?;
+    same_length(
+        "the wall positions at the last list build",
+        "walls",
+        sim.walls.len(),
+        &[("walls_at_build", sim.walls_at_build.len())],
+    )?;
+    if let Some(cell) = &sim.cell {
+        let det = cell.h.determinant();
+        if !(det.is_finite() && det > 0.0) {
+            return Err(format!("periodic cell of volume {det} (must be finite and > 0)"));
+        }
+    }
+    if !(sim.dt.is_finite() && sim.dt >= 0.0 && sim.skin.is_finite() && sim.skin >= 0.0 && sim.time.is_finite()) {
+        return Err(format!("time step {}, skin {}, time {} (finite, the first two >= 0)", sim.dt, sim.skin, sim.time));
+    }
+    if !(0.0..1.0).contains(&sim.damping) {
+        return Err(format!("damping {} (must be in [0, 1))", sim.damping));
+    }
+    Ok(())
+}
+
+/// Every array of `group` as long as its `reference` one.
+fn same_length(group: &str, reference: &str, n: usize, lengths: &[(&str, usize)]) -> std::result::Result<(), String> {
+    match lengths.iter().find(|(_, len)| *len != n) {
+        Some((name, len)) => Err(format!("{group}: `{name}` has {len} entries, `{reference}` {n}")),
+        None => Ok(()),
     }
 }

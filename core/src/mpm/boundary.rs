@@ -20,6 +20,9 @@ impl TimeFunction {
         if points.is_empty() {
             return Err(GraniteError::param("table", "[]", "needs at least one (time, value) pair"));
         }
+        if points.iter().any(|(t, v)| !(t.is_finite() && v.is_finite())) {
+            return Err(GraniteError::param("table", format!("{points:?}"), "times and values must be finite"));
+        }
         if points.windows(2).any(|w| w[1].0 <= w[0].0) {
             return Err(GraniteError::param("table", "times", "times must increase strictly"));
         }

@@ -3,7 +3,7 @@
 
 use crate::error::{GraniteError, Result};
 use crate::math::Vec3;
-use crate::mpm::boundary::Boundary;
+use crate::mpm::boundary::{Boundary, TimeFunction};
 use crate::mpm::mesh::Mesh;
 use crate::mpm::points::Points;
 use crate::mpm::sim::{Material, MpmSim, OutOfMeshPolicy, StressScheme};
@@ -100,7 +100,12 @@ impl MpmSim {
             )));
         }
         let update = registry.build_velocity_update(&st.velocity_update, &st.velocity_update_params)?;
-        let mut sim = MpmSim::new(st.mesh, update);
+        let not_usable =
+            |e: String| GraniteError::Other(format!("{}: not a usable MPM checkpoint: {e}", path.display()));
+        // Mesh::new checks what deserializing skipped.
+        let mesh = Mesh::new(st.mesh.dim, st.mesh.origin, st.mesh.cell, st.mesh.cells)
+            .map_err(|e| not_usable(format!("mesh: {e}")))?;
+        let mut sim = MpmSim::new(mesh, update);
         for m in st.materials {
             let law = match m.objects {
                 None => registry.build_law(&m.law, &m.params)?,
@@ -122,6 +127,96 @@ impl MpmSim {
         sim.out_of_mesh = st.out_of_mesh;
         sim.deleted_points = st.deleted_points;
         sim.set_next_id(st.next_id);
+        check_consistent(&sim).map_err(not_usable)?;
         Ok(sim)
     }
+}
+
+/// What a step relies on in a checkpoint read from a file (edited by hand, truncated, or from
+/// another program): array lengths that agree, points grouped by material as the counts say,
+/// node indices in the mesh, values a step can use. A file breaking one is refused with what is
+/// wrong, instead of panicking or running on garbage.
+fn check_consistent(sim: &MpmSim) -> std::result::Result<(), String> {
+    let p = &sim.points;
+    let n = p.len();
+    let lengths = [
+        ("id", p.id.len()),
+        ("material", p.material.len()),
+        ("mass", p.mass.len()),
+        ("volume", p.volume.len()),
+        ("v", p.v.len()),
+        ("stress", p.stress.len()),
+        ("strain", p.strain.len()),
+        ("dstrain", p.dstrain.len()),
+        ("affine", p.affine.len()),
+    ];
+    if let Some((name, len)) = lengths.iter().find(|(_, len)| *len != n) {
+        return Err(format!("points: `{name}` has {len} entries, `x` {n}"));
+    }
+    let positive = |x: f64| x.is_finite() && x > 0.0;
+    for i in 0..n {
+        if !(positive(p.mass[i]) && positive(p.volume[i])) {
+            return Err(format!("point {i}: mass {}, volume {} (each must be finite and > 0)", p.mass[i], p.volume[i]));
+        }
+        let values = p.x[i].iter().chain(&p.v[i]).chain(&p.stress[i]).chain(&p.strain[i]);
+        if !values.into_iter().all(|c| c.is_finite()) {
+            return Err(format!("point {i}: a non-finite position, velocity, stress or strain"));
+        }
+    }
+    // Points are stored material by material, `count` of each, in material order.
+    let mut first = 0;
+    for (m, material) in sim.materials.iter().enumerate() {
+        let block = first..first + material.count;
+        if block.end > n || p.material[block.clone()].iter().any(|&k| k as usize != m) {
+            return Err(format!(
+                "material {m} (\"{}\") counts {} points that are not its own",
+                material.name, material.count
+            ));
+        }
+        let per_point = material.law.state_names().len();
+        if material.state.len() != material.count * per_point {
+            return Err(format!(
+                "material {m}: {} state values for {} points of {per_point}",
+                material.state.len(),
+                material.count
+            ));
+        }
+        if !positive(material.density) {
+            return Err(format!("material {m}: density {}", material.density));
+        }
+        first = block.end;
+    }
+    if first != n {
+        return Err(format!("{n} points, {first} counted by the materials"));
+    }
+    let (nodes, dim) = (sim.mesh.node_count(), sim.mesh.dim);
+    let b = &sim.boundary;
+    let sets = b.velocity.iter().map(|c| (&c.nodes, c.axis)).chain(b.friction.iter().map(|c| (&c.nodes, c.axis)));
+    for (set, axis) in sets {
+        if axis >= dim {
+            return Err(format!("a boundary condition on axis {axis} of a {dim}D mesh"));
+        }
+        if let Some(k) = set.iter().find(|&&k| k as usize >= nodes) {
+            return Err(format!("a boundary condition on node {k} of the mesh's {nodes}"));
+        }
+    }
+    for f in &b.forces {
+        if f.force.len() != f.nodes.len() || f.nodes.iter().any(|&k| k as usize >= nodes) {
+            return Err(format!(
+                "a nodal force of {} nodes, {} forces, or a node beyond {nodes}",
+                f.nodes.len(),
+                f.force.len()
+            ));
+        }
+    }
+    let functions = b.velocity.iter().map(|c| &c.value).chain(b.forces.iter().map(|f| &f.factor));
+    for function in functions {
+        if let TimeFunction::Table(points) = function {
+            TimeFunction::table(points.clone()).map_err(|e| format!("a boundary table: {e}"))?;
+        }
+    }
+    if !(sim.dt.is_finite() && sim.dt >= 0.0 && sim.time.is_finite() && (0.0..1.0).contains(&sim.damping)) {
+        return Err(format!("time step {}, time {}, damping {}", sim.dt, sim.time, sim.damping));
+    }
+    Ok(())
 }
