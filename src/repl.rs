@@ -59,6 +59,12 @@ pub fn run(script: Option<&Path>, options: RunOptions) -> Result<usize> {
                     println!("{HELP}");
                     continue;
                 }
+                _ if trimmed.starts_with(':') && !(trimmed == ":api" || trimmed.starts_with(":api ")) => {
+                    // No Rhai input starts with a colon: a mistyped command.
+                    failures += 1;
+                    eprintln!("error: unknown command `{trimmed}`; the commands are :api [text], :help and :quit");
+                    continue;
+                }
                 _ if trimmed == ":api" || trimmed.starts_with(":api ") => {
                     let filter = trimmed[":api".len()..].trim();
                     let found = session.api(filter);

@@ -196,7 +196,7 @@ fn background_run_pause_change_wait() {
 #[test]
 fn api_lists_the_functions_in_the_scripts_terms() {
     let mut repl = Repl::start("api");
-    repl.send(":api wall_\n:api no_such_function\nprint_line(\"end\");\n");
+    repl.send(":api wall_\n:api no_such_function\n:apiwall\nprint_line(\"end\");\n");
     let mut lines = Vec::new();
     loop {
         let line = repl.line("api listing");
@@ -206,7 +206,9 @@ fn api_lists_the_functions_in_the_scripts_terms() {
         lines.push(line);
     }
     let (status, errors) = repl.finish();
-    assert_eq!(status, Some(0), "{errors}");
+    // A mistyped command is said to be one (not a Rhai syntax error at the colon).
+    assert!(errors.contains("unknown command `:apiwall`"), "{errors}");
+    assert_eq!(status, Some(1), "{errors}");
     assert!(lines.iter().any(|l| l.trim() == "DemSim.wall_plane(DemMaterial, value, value) -> int"), "{lines:?}");
     assert!(lines.iter().all(|l| l.contains("wall_") || l.contains("no_such_function")), "{lines:?}");
     assert!(lines.last().is_some_and(|l| l.contains("no function of the API matches")), "{lines:?}");
