@@ -697,6 +697,7 @@ fn register_cell(engine: &mut Engine) {
                     "cell_control `{k}` takes #{{ rate: 1/s }} or #{{ stress: Pa, max_rate: 1/s }}"
                 )))
             })?;
+            only_keys(&m, &["rate", "stress", "max_rate"], &format!("cell_control `{k}`"))?;
             axes[a] = match (get(&m, "rate"), get(&m, "stress")) {
                 (Some(r), None) => AxisGoal::Rate(finite(r, "rate")?),
                 (None, Some(t)) => {
