@@ -12,6 +12,7 @@ pub mod dem;
 pub mod error;
 pub mod ext;
 pub mod io;
+mod loaded;
 pub mod math;
 pub mod mpm;
 pub mod par;

@@ -180,6 +180,7 @@ impl DemSim {
 /// program): array lengths that agree, indices in range, values a step can use. A file breaking
 /// one is refused with what is wrong, instead of panicking or running on garbage.
 fn check_consistent(sim: &DemSim) -> std::result::Result<(), String> {
+    use crate::loaded::same_length;
     let s = &sim.spheres;
     let n = s.len();
     let lengths = [
@@ -300,12 +301,4 @@ fn check_consistent(sim: &DemSim) -> std::result::Result<(), String> {
         return Err(format!("damping {} (must be in [0, 1))", sim.damping));
     }
     Ok(())
-}
-
-/// Every array of `group` as long as its `reference` one.
-fn same_length(group: &str, reference: &str, n: usize, lengths: &[(&str, usize)]) -> std::result::Result<(), String> {
-    match lengths.iter().find(|(_, len)| *len != n) {
-        Some((name, len)) => Err(format!("{group}: `{name}` has {len} entries, `{reference}` {n}")),
-        None => Ok(()),
-    }
 }

@@ -150,9 +150,7 @@ fn check_consistent(sim: &MpmSim) -> std::result::Result<(), String> {
         ("dstrain", p.dstrain.len()),
         ("affine", p.affine.len()),
     ];
-    if let Some((name, len)) = lengths.iter().find(|(_, len)| *len != n) {
-        return Err(format!("points: `{name}` has {len} entries, `x` {n}"));
-    }
+    crate::loaded::same_length("points", "x", n, &lengths)?;
     let positive = |x: f64| x.is_finite() && x > 0.0;
     for i in 0..n {
         if !(positive(p.mass[i]) && positive(p.volume[i])) {
