@@ -99,3 +99,15 @@ fn clump_settles_on_a_floor() {
     let lowest = (0..4).map(|i| s.spheres.x[i][2] - s.spheres.radius[i]).fold(f64::INFINITY, f64::min);
     assert!(lowest < 0.0 && lowest > -1e-3, "lowest point at {lowest}");
 }
+
+/// A clump refused for one member (here a radius whose mass underflows to zero next to a
+/// normal one, so the union's mass is fine) leaves no loose member spheres behind.
+#[test]
+fn a_refused_clump_adds_no_spheres() {
+    let mut sim = DemSim::new();
+    let m = sim.add_material("grains", 2650.0).unwrap();
+    let members = [([0.0, 0.0, 0.0], 1e-2), ([0.1, 0.0, 0.0], 1e-110)];
+    let e = sim.add_clump(m, &members, [0.0; 3], 64).err().expect("refused").to_string();
+    assert!(e.contains("`radius` = 1e-110") && e.contains("mass of 0e0 kg"), "{e}");
+    assert_eq!((sim.spheres.len(), sim.clumps.len()), (0, 0));
+}

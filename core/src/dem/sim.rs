@@ -167,11 +167,24 @@ impl DemSim {
     }
 
     pub fn add_sphere(&mut self, material: u16, x: Vec3, radius: f64, v: Vec3) -> Result<usize> {
+        let density = self.check_sphere(material, x, radius, v)?;
+        self.spheres.push(self.next_id, x, radius, density, material, v);
+        self.next_id += 1;
+        self.needs_rebuild = true;
+        Ok(self.spheres.len() - 1)
+    }
+
+    /// A sphere a step can move: finite position and velocity, a radius whose mass at the
+    /// material's density is finite and > 0. Returns that density.
+    fn check_sphere(&self, material: u16, x: Vec3, radius: f64, v: Vec3) -> Result<f64> {
         if !(radius > 0.0 && radius.is_finite()) {
             return Err(GraniteError::param("radius", radius, "must be > 0"));
         }
         if x.iter().any(|c| !c.is_finite()) {
             return Err(GraniteError::param("position", format!("{x:?}"), "must be finite"));
+        }
+        if v.iter().any(|c| !c.is_finite()) {
+            return Err(GraniteError::param("velocity", format!("{v:?}"), "must be finite"));
         }
         let density = self
             .materials
@@ -186,13 +199,7 @@ impl DemSim {
                 &format!("gives a mass of {mass:e} kg at density {density:e} kg/m^3: it must be finite and > 0"),
             ));
         }
-        if v.iter().any(|c| !c.is_finite()) {
-            return Err(GraniteError::param("velocity", format!("{v:?}"), "must be finite"));
-        }
-        self.spheres.push(self.next_id, x, radius, density, material, v);
-        self.next_id += 1;
-        self.needs_rebuild = true;
-        Ok(self.spheres.len() - 1)
+        Ok(density)
     }
 
     /// Makes the domain periodic with the given cell (or open again with None).
@@ -306,14 +313,8 @@ impl DemSim {
         // Everything is checked before the first member goes in: a refused clump leaves no
         // loose spheres behind.
         props.check()?;
-        if let Some((x, r)) =
-            members.iter().find(|(x, r)| !(r.is_finite() && *r > 0.0) || x.iter().any(|c| !c.is_finite()))
-        {
-            return Err(GraniteError::param(
-                "clump member",
-                format!("{x:?}, radius {r}"),
-                "needs a finite centre and a finite radius > 0",
-            ));
+        for (x, r) in members {
+            self.check_sphere(material, *x, *r, [0.0; 3])?;
         }
         let props = *props;
         let v = [0.0; 3];
