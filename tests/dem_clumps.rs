@@ -107,7 +107,7 @@ fn a_refused_clump_adds_no_spheres() {
     let mut sim = DemSim::new();
     let m = sim.add_material("grains", 2650.0).unwrap();
     let members = [([0.0, 0.0, 0.0], 1e-2), ([0.1, 0.0, 0.0], 1e-110)];
-    let e = sim.add_clump(m, &members, [0.0; 3], 64).err().expect("refused").to_string();
+    let e = sim.add_clump(m, &members, [0.0; 3], 64).expect_err("refused").to_string();
     assert!(e.contains("`radius` = 1e-110") && e.contains("mass of 0e0 kg"), "{e}");
     assert_eq!((sim.spheres.len(), sim.clumps.len()), (0, 0));
 }

@@ -334,7 +334,12 @@ impl<S: ScriptSim> Handle<S> {
                 for ((target, _), v) in driven.iter().zip(values) {
                     st.sim.set_driven(*target, v);
                 }
-                if let Err(e) = st.sim.advance() {
+                // A script law runs inside the step: a Ctrl-C at the prompt pauses the run after
+                // the step (and stops the input then), never halfway through it.
+                let interruptible = super::INTERRUPTIBLE_SINCE.take();
+                let advanced = st.sim.advance();
+                super::INTERRUPTIBLE_SINCE.set(interruptible);
+                if let Err(e) = advanced {
                     return Err(st.fail(e));
                 }
                 for ev in st.sim.drain_events() {

@@ -260,7 +260,8 @@ fn to_json(d: &Dynamic) -> Value {
 thread_local! {
     /// On the thread evaluating a REPL input: the count of Ctrl-C presses when it began. A press
     /// since then stops the input (an endless loop, a loop of runs) after pausing any run; other
-    /// threads (a background run's callbacks) and `granite run` are not interrupted this way.
+    /// threads (a background run's callbacks), script laws inside a step and `granite run` are
+    /// not interrupted this way.
     pub(crate) static INTERRUPTIBLE_SINCE: std::cell::Cell<Option<u64>> = const { std::cell::Cell::new(None) };
 }
 
