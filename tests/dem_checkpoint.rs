@@ -35,7 +35,7 @@ fn inconsistent_state_files_are_refused_with_the_reason() {
     std::fs::create_dir_all(&dir).unwrap();
     let good = sim.to_json().unwrap();
     assert!(!good["pairs"]["a"].as_array().unwrap().is_empty(), "the state must hold pairs");
-    let n = sim.spheres.len();
+    let (n, laws, materials) = (sim.spheres.len(), sim.laws.len(), sim.materials.len());
     type Edit = fn(&mut serde_json::Value);
     let edits: [(&str, Edit, String); 6] = [
         ("pair index", |s| s["pairs"]["b"][0] = 99_999.into(), format!("an index beyond the {n} spheres")),
@@ -45,8 +45,8 @@ fn inconsistent_state_files_are_refused_with_the_reason() {
             format!("`radius` has {} entries, `x` {n}", n - 1),
         ),
         ("short history", |s| drop(s["pairs"]["history"].as_array_mut().unwrap().pop()), "history values for".into()),
-        ("contact law", |s| s["pairs"]["law"][0] = 7.into(), "contact law 7 of 1".into()),
-        ("material", |s| s["spheres"]["material"][3] = 2.into(), "sphere 3: material 2 of 1".into()),
+        ("contact law", |s| s["pairs"]["law"][0] = 7.into(), format!("contact law 7 of {laws}")),
+        ("material", |s| s["spheres"]["material"][3] = 2.into(), format!("sphere 3: material 2 of {materials}")),
         ("mass", |s| s["spheres"]["mass"][5] = 0.0.into(), "sphere 5: radius".into()),
     ];
     for (what, edit, says) in edits {

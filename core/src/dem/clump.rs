@@ -33,12 +33,8 @@ impl MassProperties {
                 self.volume,
                 self.mass,
                 self.centroid,
-                // NaN when any component is: f64::max would skip it.
-                self.inertia.iter().fold(0.0f64, |a, &b| if b.is_nan() || a.is_nan() {
-                    f64::NAN
-                } else {
-                    a.max(b.abs())
-                })
+                // amax skips a NaN; the message should show it.
+                if self.inertia.iter().any(|c| c.is_nan()) { f64::NAN } else { self.inertia.amax() }
             )));
         }
         Ok(())

@@ -34,6 +34,11 @@ pub struct Spheres {
     pub clump: Vec<u32>,
 }
 
+/// Mass of a sphere of `radius` at `density`.
+pub fn sphere_mass(density: f64, radius: f64) -> f64 {
+    density * 4.0 / 3.0 * std::f64::consts::PI * radius.powi(3)
+}
+
 /// `clump` value of a sphere that belongs to no clump.
 pub const FREE: u32 = u32::MAX;
 
@@ -57,7 +62,7 @@ impl Spheres {
     }
 
     pub fn push(&mut self, id: u64, x: Vec3, radius: f64, density: f64, material: u16, v: Vec3) {
-        let mass = density * 4.0 / 3.0 * std::f64::consts::PI * radius.powi(3);
+        let mass = sphere_mass(density, radius);
         self.id.push(id);
         self.x.push(x);
         self.v.push(v);

@@ -191,7 +191,7 @@ impl DemSim {
             .get(material as usize)
             .ok_or_else(|| GraniteError::Setup(format!("no material with index {material}")))?
             .density;
-        let mass = density * 4.0 / 3.0 * std::f64::consts::PI * radius.powi(3);
+        let mass = crate::dem::particles::sphere_mass(density, radius);
         if !(mass.is_finite() && mass > 0.0) {
             return Err(GraniteError::param(
                 "radius",

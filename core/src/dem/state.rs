@@ -3,7 +3,7 @@
 
 use crate::dem::cell::{CellControl, PeriodicCell};
 use crate::dem::clump::Clumps;
-use crate::dem::contacts::{Adjacency, PairList};
+use crate::dem::contacts::PairList;
 use crate::dem::particles::Spheres;
 use crate::dem::sim::{DemMaterial, DemSim};
 use crate::dem::walls::Wall;
@@ -46,8 +46,6 @@ pub(crate) struct DemState {
     seed: u64,
     pairs: PairList,
     wall_pairs: PairList,
-    adjacency: Adjacency,
-    wall_adjacency: Adjacency,
     x_at_build: Vec<Vec3>,
     walls_at_build: Vec<Vec3>,
     h_at_build: Option<nalgebra::Matrix3<f64>>,
@@ -88,8 +86,6 @@ impl DemSim {
             seed: self.seed,
             pairs: self.pairs.clone(),
             wall_pairs: self.wall_pairs.clone(),
-            adjacency: self.adjacency.clone(),
-            wall_adjacency: self.wall_adjacency.clone(),
             x_at_build: self.x_at_build.clone(),
             walls_at_build: self.walls_at_build.clone(),
             h_at_build: self.h_at_build,
@@ -146,7 +142,7 @@ impl DemSim {
         sim.cell = st.cell;
         sim.cell_control = st.cell_control;
         sim.cell_reference = st.cell_reference;
-        sim.damping = st.damping;
+        sim.set_damping(st.damping).map_err(|e| GraniteError::Other(format!("{source}: {e}")))?;
         sim.dt = st.dt;
         sim.time = st.time;
         sim.step = st.step;
@@ -162,9 +158,8 @@ impl DemSim {
         sim.needs_rebuild = st.needs_rebuild;
         sim.rebuilds = st.rebuilds;
         check_consistent(&sim).map_err(|e| GraniteError::Other(format!("{source}: not a usable DEM state: {e}")))?;
-        // Derived from the pair lists, which were checked: rebuilt rather than trusted (the
-        // saved ones were built the same way from the same lists).
-        let _ = (st.adjacency, st.wall_adjacency);
+        // The per-sphere pair lists derive from the checked pair lists: built here, not saved
+        // (files that hold them from earlier versions still load; the field is ignored).
         sim.build_adjacency();
         // Reading grows arrays by doubling; copies hold just their contents (a loaded RVE is the
         // template of every material point's copy, so its reported memory should be theirs).
@@ -296,9 +291,6 @@ fn check_consistent(sim: &DemSim) -> std::result::Result<(), String> {
     }
     if !(sim.dt.is_finite() && sim.dt >= 0.0 && sim.skin.is_finite() && sim.skin >= 0.0 && sim.time.is_finite()) {
         return Err(format!("time step {}, skin {}, time {} (finite, the first two >= 0)", sim.dt, sim.skin, sim.time));
-    }
-    if !(0.0..1.0).contains(&sim.damping) {
-        return Err(format!("damping {} (must be in [0, 1))", sim.damping));
     }
     Ok(())
 }

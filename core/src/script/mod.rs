@@ -524,7 +524,10 @@ fn function_not_found(call: &str, engine: &Engine) -> String {
         // A script function or one of Rhai's own: its text says enough.
         return format!("Function not found: {call} (`:api` in `granite repl` lists granite's functions)");
     }
-    let hint = if call.contains("f64") && forms.iter().any(|f| f.contains("int")) {
+    // An `int` argument, not "int" inside a name such as `point_stress`.
+    let takes_int =
+        |form: &String| form.split_once('(').is_some_and(|(_, args)| args.split([',', ')']).any(|a| a.trim() == "int"));
+    let hint = if call.contains("f64") && forms.iter().any(takes_int) {
         "; counts and indices are integers: write 10, not 10.0"
     } else {
         ""
