@@ -60,6 +60,42 @@ fn sheared_gas_moves_affinely_through_flips() {
     }
 }
 
+/// Newton's first law in a deforming cell: a sphere that touches nothing keeps its whole velocity
+/// (fluctuation plus the field `L x`) and moves in a straight line, whatever the cell does around
+/// it, as in YADE (`homoDeform` 2). The fluctuation alone changes: the field differs where the
+/// sphere goes.
+#[test]
+fn a_free_sphere_keeps_its_velocity_in_a_deforming_cell() {
+    let (mut sim, m) = sim_with_law(1e4);
+    sim.set_cell(Some(PeriodicCell::new_box([1.0; 3])));
+    let x0 = [0.5, 0.4, 0.3];
+    sim.add_sphere(m, x0, 0.01, [0.01, -0.02, 0.03]).unwrap();
+    // Shear, stretch and compression together.
+    let l = nalgebra::Matrix3::new(0.1, 0.0, 0.5, 0.0, 0.05, 0.0, 0.2, 0.0, -0.15);
+    sim.cell.as_mut().unwrap().velocity_gradient = l;
+    sim.set_dt(1e-3).unwrap();
+    let whole = |sim: &DemSim| {
+        let (x, v) = (sim.spheres.x[0], sim.spheres.v[0]);
+        let lx = l * nalgebra::Vector3::new(x[0], x[1], x[2]);
+        [v[0] + lx[0], v[1] + lx[1], v[2] + lx[2]]
+    };
+    let v_start = whole(&sim);
+    let steps = 200;
+    for _ in 0..steps {
+        sim.step().unwrap();
+    }
+    let t = steps as f64 * 1e-3;
+    let (v_end, x) = (whole(&sim), sim.spheres.x[0]);
+    for a in 0..3 {
+        assert!((v_end[a] - v_start[a]).abs() < 1e-14, "velocity {v_end:?}, started at {v_start:?}");
+        // Well inside the cell: no wrapping to undo.
+        let straight = x0[a] + v_start[a] * t;
+        assert!((x[a] - straight).abs() < 1e-12, "at {x:?}, a straight line gives {straight}");
+    }
+    // The fluctuation did change: by -L (x - x0).
+    assert!((sim.spheres.v[0][0] - 0.01).abs() > 1e-3);
+}
+
 /// A simple cubic packing of equal spheres of radius r, overlap delta, spacing d = 2r - delta.
 fn cubic_packing(n: usize, r: f64, delta: f64, kn: f64) -> DemSim {
     let (mut sim, m) = sim_with_law(kn);

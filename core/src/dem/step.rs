@@ -1149,14 +1149,15 @@ struct Motion {
     damping: f64,
     dt: f64,
     affine: Option<(Matrix3<f64>, Matrix3<f64>)>,
-    /// `gravity` and the columns of `affine`'s `(L, F)` as lanes.
+    /// `gravity` and the columns of `affine`'s `(L, F, L dt)` as lanes.
     gravity_lanes: Lanes,
-    affine_columns: Option<([Lanes; 3], [Lanes; 3])>,
+    affine_columns: Option<([Lanes; 3], [Lanes; 3], [Lanes; 3])>,
 }
 
 impl Motion {
     fn new(gravity: Vec3, damping: f64, dt: f64, affine: Option<(Matrix3<f64>, Matrix3<f64>)>) -> Motion {
-        let affine_columns = affine.as_ref().map(|(l, f)| (simd::columns(l), simd::columns(f)));
+        let affine_columns =
+            affine.as_ref().map(|(l, f)| (simd::columns(l), simd::columns(f), simd::columns(&(l * dt))));
         Motion { gravity, damping, dt, affine, gravity_lanes: simd::widen(gravity), affine_columns }
     }
 
@@ -1212,14 +1213,19 @@ impl Motion {
         // component-wise form took three.
         let (x4, v4, w4) = (widen(*x), widen(*v), widen(*w));
         let (lx, reference) = match &self.affine_columns {
-            Some((l, f)) => (mat_vec4(l, x4), mat_vec4(f, widen(*x0))),
+            Some((l, f, _)) => (mat_vec4(l, x4), mat_vec4(f, widen(*x0))),
             None => ([0.0; 4], widen(*x0)),
         };
         // One packed division instead of six scalar ones: the divider is the slowest unit here.
         let (inv_m, inv_i) = simd::reciprocals(m, inertia);
         let acc = add4(scale4(f, inv_m), self.gravity_lanes);
         let v4 = add4(v4, scale4(cundall4(acc, v4, damping, dt), dt));
-        let x4 = add4(x4, scale4(add4(v4, lx), dt));
+        let moving = add4(v4, lx);
+        let x4 = add4(x4, scale4(moving, dt));
+        let v4 = match &self.affine_columns {
+            Some((_, _, l_dt)) => newton_in_cell(v4, mat_vec4(l_dt, moving)),
+            None => v4,
+        };
         let w4 = add4(w4, scale4(cundall4(scale4(t, inv_i), w4, damping, dt), dt));
         (*x, *v, *w) = (narrow(x4), narrow(v4), narrow(w4));
         let d2 = mul4(sub4(x4, reference), sub4(x4, reference));
@@ -1246,15 +1252,37 @@ impl Motion {
             if blocked & (dof::X << a) == 0 {
                 v[a] += damp(f[a] * inv_m + gravity[a], v[a]) * dt;
             }
-            x[a] += (v[a] + lx[a]) * dt;
             if blocked & (dof::RX << a) == 0 {
                 w[a] += damp(t[a] * inv_i, w[a]) * dt;
+            }
+        }
+        let moving = add(*v, lx);
+        for a in 0..3 {
+            x[a] += moving[a] * dt;
+        }
+        if let Some((l, _)) = affine {
+            // A blocked component keeps its prescribed fluctuation.
+            let field_change = newton_in_cell(widen(*v), scale4(widen(mat_vec(l, moving)), dt));
+            for a in 0..3 {
+                if blocked & (dof::X << a) == 0 {
+                    v[a] = field_change[a];
+                }
             }
         }
         let d = sub(*x, reference);
         let d2 = [d[0] * d[0], d[1] * d[1], d[2] * d[2]];
         (d2[0] + d2[1] + d2[2], add4(widen(d2), add4(widen(*v), widen(*w))))
     }
+}
+
+/// The fluctuation `v` after a step in a periodic cell: Newton's law holds for the whole velocity
+/// `v + L x`, which only forces change (YADE's default `homoDeform`), so when a sphere moves by
+/// `moving dt` its fluctuation around the field at its new place drops by `L moving dt`
+/// (`field_change`). Kept at the old place's field instead, a sphere rising across a shear flow
+/// would gain speed along it without a force.
+#[inline(always)]
+fn newton_in_cell(v: Lanes, field_change: Lanes) -> Lanes {
+    sub4(v, field_change)
 }
 
 /// YADE's Cundall damping of an acceleration: reduced by `damping` against the sign of the
@@ -1347,7 +1375,13 @@ fn integrate_clumps(
         for a in 0..3 {
             let acc = damp(f[a] / mass + gravity[a], cl.v[c][a]);
             cl.v[c][a] += acc * dt;
-            cl.x[c][a] += (cl.v[c][a] + lx[a]) * dt;
+        }
+        let moving = add(cl.v[c], lx);
+        for a in 0..3 {
+            cl.x[c][a] += moving[a] * dt;
+        }
+        if let Some((l, _)) = &affine {
+            cl.v[c] = narrow(newton_in_cell(widen(cl.v[c]), scale4(widen(mat_vec(l, moving)), dt)));
         }
         // Euler's equations in the world frame: I w' = T - w x (I w).
         let rot = cl.q[c].to_rotation_matrix();
@@ -1368,7 +1402,12 @@ fn integrate_clumps(
             let arm = cl.q[c] * Vector3::new(l[0], l[1], l[2]);
             let arm = [arm[0], arm[1], arm[2]];
             sp.x[i] = add(xc, arm);
-            sp.v[i] = add(cl.v[c], cross(cl.w[c], arm));
+            // A member's fluctuation: the clump's rigid motion less the field's change across the arm.
+            let field_across_arm = match &affine {
+                Some((l, _)) => mat_vec(l, arm),
+                None => [0.0; 3],
+            };
+            sp.v[i] = sub(add(cl.v[c], cross(cl.w[c], arm)), field_across_arm);
             sp.w[i] = cl.w[c];
             let reference = match &affine {
                 Some((_, fm)) => mat_vec(fm, x_at_build[i]),
