@@ -27,8 +27,9 @@ const BEFORE_DRIFT: f64 = 1000.0;
 const SAME_LAW: f64 = 1e-3;
 /// Relative damping offsets of a run (0) and its twins.
 const TWINS: [f64; 3] = [0.0, 1e-9, 2e-9];
-/// How much further granite and YADE may drift from each other than each drifts from its twins:
-/// the two codes start drifting from about 1e-4 (see `SAME_LAW`) instead of 1e-9, earlier.
+/// How much further granite and YADE may drift from each other than each drifts from its twins
+/// (the two codes start drifting from about 1e-4, see `SAME_LAW`, instead of 1e-9: earlier), or
+/// than `SAME_LAW` where the runs hardly drift.
 const DRIFT_MARGIN: f64 = 2.0;
 
 fn yade_script(name: &str) -> PathBuf {
@@ -120,7 +121,7 @@ fn mean(values: &[f64]) -> f64 {
 /// The periodic comparison: the packing under a constant cell velocity gradient. granite writes
 /// its rows at multiples of `every` counted from step 0 and the packing stops at a multiple of
 /// 500 steps (prepare.rhai), so `every` divides 500 for both codes to sample the same steps.
-fn periodic_case(name: &str, steps: usize, every: usize, gradient: &[(&str, f64)]) {
+fn periodic_case(name: &str, steps: usize, every: usize, options: &[(&str, &str)]) {
     assert_eq!(500 % every, 0);
     let state = packing();
     let damping = 0.2;
@@ -131,7 +132,7 @@ fn periodic_case(name: &str, steps: usize, every: usize, gradient: &[(&str, f64)
             ("friction", "30.0".to_string()),
             ("damping", format!("{:.12}", damping * (1.0 + offset))),
         ];
-        sets.extend(gradient.iter().map(|(k, v)| (*k, v.to_string())));
+        sets.extend(options.iter().map(|(k, v)| (*k, v.to_string())));
         sets
     };
     let mut granite_runs = Vec::new();
@@ -158,25 +159,32 @@ fn periodic_case(name: &str, steps: usize, every: usize, gradient: &[(&str, f64)
         "{name}: before the drift {early_max:.2e}; drift (rms of the stress gaps) granite-YADE {across:.4}, \
          granite-granite {within_granite:.4}, YADE-YADE {within_yade:.4}"
     );
-    assert!(
-        across <= DRIFT_MARGIN * within_granite.max(within_yade),
-        "{name}: granite and YADE drift {across:.4} apart, each from its twins at most {:.4}",
-        within_granite.max(within_yade)
-    );
+    // A packing that hardly drifts (rolling resistance calms its rearrangements) keeps the codes'
+    // own difference instead, which may grow with the strain as much.
+    let allowed = DRIFT_MARGIN * within_granite.max(within_yade).max(SAME_LAW);
+    assert!(across <= allowed, "{name}: granite and YADE drift {across:.4} apart, more than {allowed:.4}");
 }
 
 #[test]
 #[ignore = "needs YADE (apt-get install yade); about a minute in release"]
 fn constant_volume_compression_matches_yade() {
     // Compression along z at 2 /s, x and y stretched to keep the volume: about 9 % axial strain.
-    periodic_case("yade_compression", 20_000, 250, &[("l_xx", 1.0), ("l_yy", 1.0), ("l_zz", -2.0)]);
+    periodic_case("yade_compression", 20_000, 250, &[("l_xx", "1.0"), ("l_yy", "1.0"), ("l_zz", "-2.0")]);
 }
 
 #[test]
 #[ignore = "needs YADE (apt-get install yade); about a minute in release"]
 fn simple_shear_matches_yade() {
     // Shear rate 4 /s in the xz plane at constant volume: a shear strain of about 0.19.
-    periodic_case("yade_shear", 20_000, 500, &[("l_xz", 4.0)]);
+    periodic_case("yade_shear", 20_000, 500, &[("l_xz", "4.0")]);
+}
+
+#[test]
+#[ignore = "needs YADE (apt-get install yade); about a minute in release"]
+fn simple_shear_with_rolling_resistance_matches_yade() {
+    // The Camargue sand law of the coupling (table 5.2's alpha_r, alpha_t, eta_r), against YADE's
+    // CohFrictPhys without cohesion and its incremental moment law.
+    periodic_case("yade_rolling", 20_000, 500, &[("l_xz", "4.0"), ("law", "rolling_resistance")]);
 }
 
 fn mean_and_sd(values: &[f64]) -> (f64, f64) {

@@ -6,7 +6,9 @@
 # CundallStrack, NewtonIntegrator) and run; every `every` steps a row of OUT.csv gets the
 # Love-Weber stress (periodic cell), the kinetic energy, the vertical force on the last wall (the floor of a granite box) and the
 # number of contacts. Optional values: friction (degrees), damping, and l_xx, l_yy, l_zz, l_xz,
-# the cell's velocity gradient (1/s), all overriding the state's.
+# the cell's velocity gradient (1/s), all overriding the state's; law=rolling_resistance with
+# alpha_r, alpha_t and eta_r gives the grains granite's `rolling_resistance` law instead
+# (CohFrictMat without cohesion, ScGeom6D, the incremental CohesionMoment law).
 import json
 import math
 import sys
@@ -26,20 +28,39 @@ law = laws[0]["params"]
 friction = float(options.pop("friction", law.get("friction", 0.0)))
 damping = float(options.pop("damping", state["damping"]))
 gradient = {k: float(options.pop(k, 0.0)) for k in ("l_xx", "l_yy", "l_zz", "l_xz")}
+rolling = options.pop("law", "linear") == "rolling_resistance"
+alpha_r, alpha_t, eta_r = (float(options.pop(k, d)) for k, d in (("alpha_r", 7.5), ("alpha_t", 0.2), ("eta_r", 0.22)))
 if options:
     sys.exit(f"unknown options {sorted(options)}")
 density = state["materials"][0]["density"]
 
 # FrictMat's `poisson` is YADE's ks/kn; kn = 2 E1 R1 E2 R2 / (E1 R1 + E2 R2) as granite's `young`
 # (a wall counts as a sphere of the grain's radius in both).
-material = O.materials.append(
-    FrictMat(
-        young=law["young"],
-        poisson=law.get("kt_ratio", 0.0),
-        frictionAngle=math.radians(friction),
-        density=density,
+if rolling:
+    # k_r = alpha_r kt r1 r2, k_tw = alpha_t kt r1 r2, both capped at eta_r |F_n| min(r1, r2).
+    material = O.materials.append(
+        CohFrictMat(
+            young=law["young"],
+            poisson=law.get("kt_ratio", 0.0),
+            frictionAngle=math.radians(friction),
+            density=density,
+            isCohesive=False,
+            momentRotationLaw=True,
+            alphaKr=alpha_r,
+            alphaKtw=alpha_t,
+            etaRoll=eta_r,
+            etaTwist=eta_r,
+        )
     )
-)
+else:
+    material = O.materials.append(
+        FrictMat(
+            young=law["young"],
+            poisson=law.get("kt_ratio", 0.0),
+            frictionAngle=math.radians(friction),
+            density=density,
+        )
+    )
 walls = []
 for wall in state["walls"]:
     normal = wall["shape"].get("Plane", {}).get("normal")
@@ -64,9 +85,11 @@ O.engines = [
     ForceResetter(),
     InsertionSortCollider([Bo1_Sphere_Aabb(), Bo1_Wall_Aabb()]),
     InteractionLoop(
-        [Ig2_Sphere_Sphere_ScGeom(), Ig2_Wall_Sphere_ScGeom()],
-        [Ip2_FrictMat_FrictMat_FrictPhys()],
-        [Law2_ScGeom_FrictPhys_CundallStrack()],
+        [Ig2_Sphere_Sphere_ScGeom6D(), Ig2_Wall_Sphere_ScGeom()] if rolling else [Ig2_Sphere_Sphere_ScGeom(), Ig2_Wall_Sphere_ScGeom()],
+        [Ip2_CohFrictMat_CohFrictMat_CohFrictPhys()] if rolling else [Ip2_FrictMat_FrictMat_FrictPhys()],
+        [Law2_ScGeom6D_CohFrictPhys_CohesionMoment(useIncrementalForm=True, always_use_moment_law=True)]
+        if rolling
+        else [Law2_ScGeom_FrictPhys_CundallStrack()],
     ),
     NewtonIntegrator(damping=damping, gravity=Vector3(*state["gravity"])),
 ]

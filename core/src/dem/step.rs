@@ -10,7 +10,7 @@ use crate::dem::sim::DemSim;
 use crate::dem::walls::Wall;
 use crate::error::{GraniteError, Result};
 use crate::ext::{ContactBatch, ContactLaw};
-use crate::math::{mat_vec, Vec3};
+use crate::math::{dot3, mat_vec, Vec3};
 use crate::simd::{self, add4, mat_vec4, mul4, narrow, scale4, sub4, widen, Lanes};
 use nalgebra::Matrix3;
 use std::sync::Arc;
@@ -921,7 +921,7 @@ fn wall_contacts(
             if sp.rotation {
                 s.rel_spin[e] = [-sp.w[i][0], -sp.w[i][1], -sp.w[i][2]];
             }
-            s.lever[e] = [crate::math::dot3(arm_a, geo.normal), 0.0];
+            s.lever[e] = [dot3(arm_a, geo.normal), 0.0];
             len += 1;
         }
         s.len = len;
