@@ -1,5 +1,6 @@
 //! granite against YADE 2023.02a on the same scenes (the scripts in tests/yade/): a periodic
-//! packing under a constant-volume compression and a simple shear, and a deposition into a box.
+//! packing under a constant-volume compression and a simple shear (linear, rolling-resistance and
+//! Hertz-Mindlin laws), and a deposition into a box.
 //! YADE runs from granite's saved state with its standard engines (ScGeom, FrictPhys,
 //! CundallStrack, NewtonIntegrator): same grains, velocities, law, damping and time step.
 //!
@@ -185,6 +186,19 @@ fn simple_shear_with_rolling_resistance_matches_yade() {
     // The Camargue sand law of the coupling (table 5.2's alpha_r, alpha_t, eta_r), against YADE's
     // CohFrictPhys without cohesion and its incremental moment law.
     periodic_case("yade_rolling", 20_000, 500, &[("l_xz", "4.0"), ("law", "rolling_resistance")]);
+}
+
+#[test]
+#[ignore = "needs YADE (apt-get install yade); about a minute in release"]
+fn simple_shear_with_hertz_mindlin_matches_yade() {
+    // Hertz's normal force and Mindlin's tangential stiffness against YADE's MindlinPhys; a modulus
+    // that gives the packing's contacts about the stiffness of the linear law it was made with.
+    periodic_case(
+        "yade_hertz",
+        20_000,
+        500,
+        &[("l_xz", "4.0"), ("law", "hertz_mindlin"), ("young", "1e9"), ("poisson", "0.25")],
+    );
 }
 
 fn mean_and_sd(values: &[f64]) -> (f64, f64) {

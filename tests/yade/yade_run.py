@@ -8,7 +8,8 @@
 # number of contacts. Optional values: friction (degrees), damping, and l_xx, l_yy, l_zz, l_xz,
 # the cell's velocity gradient (1/s), all overriding the state's; law=rolling_resistance with
 # alpha_r, alpha_t and eta_r gives the grains granite's `rolling_resistance` law instead
-# (CohFrictMat without cohesion, ScGeom6D, the incremental CohesionMoment law).
+# (CohFrictMat without cohesion, ScGeom6D, the incremental CohesionMoment law);
+# law=hertz_mindlin with young and poisson gives granite's `hertz_mindlin` (MindlinPhys).
 import json
 import math
 import sys
@@ -28,8 +29,11 @@ law = laws[0]["params"]
 friction = float(options.pop("friction", law.get("friction", 0.0)))
 damping = float(options.pop("damping", state["damping"]))
 gradient = {k: float(options.pop(k, 0.0)) for k in ("l_xx", "l_yy", "l_zz", "l_xz")}
-rolling = options.pop("law", "linear") == "rolling_resistance"
+law_name = options.pop("law", "linear")
+rolling, hertz = law_name == "rolling_resistance", law_name == "hertz_mindlin"
 alpha_r, alpha_t, eta_r = (float(options.pop(k, d)) for k, d in (("alpha_r", 7.5), ("alpha_t", 0.2), ("eta_r", 0.22)))
+young = float(options.pop("young", law["young"]))
+poisson = float(options.pop("poisson", 0.25))
 if options:
     sys.exit(f"unknown options {sorted(options)}")
 density = state["materials"][0]["density"]
@@ -51,6 +55,11 @@ if rolling:
             etaRoll=eta_r,
             etaTwist=eta_r,
         )
+    )
+elif hertz:
+    # E* = E / (2 (1 - nu^2)), G* = G / (2 (2 - nu)) for two grains of one material.
+    material = O.materials.append(
+        FrictMat(young=young, poisson=poisson, frictionAngle=math.radians(friction), density=density)
     )
 else:
     material = O.materials.append(
@@ -86,9 +95,15 @@ O.engines = [
     InsertionSortCollider([Bo1_Sphere_Aabb(), Bo1_Wall_Aabb()]),
     InteractionLoop(
         [Ig2_Sphere_Sphere_ScGeom6D(), Ig2_Wall_Sphere_ScGeom()] if rolling else [Ig2_Sphere_Sphere_ScGeom(), Ig2_Wall_Sphere_ScGeom()],
-        [Ip2_CohFrictMat_CohFrictMat_CohFrictPhys()] if rolling else [Ip2_FrictMat_FrictMat_FrictPhys()],
+        [Ip2_CohFrictMat_CohFrictMat_CohFrictPhys()]
+        if rolling
+        else [Ip2_FrictMat_FrictMat_MindlinPhys()]
+        if hertz
+        else [Ip2_FrictMat_FrictMat_FrictPhys()],
         [Law2_ScGeom6D_CohFrictPhys_CohesionMoment(useIncrementalForm=True, always_use_moment_law=True)]
         if rolling
+        else [Law2_ScGeom_MindlinPhys_Mindlin()]
+        if hertz
         else [Law2_ScGeom_FrictPhys_CundallStrack()],
     ),
     NewtonIntegrator(damping=damping, gravity=Vector3(*state["gravity"])),
