@@ -5,8 +5,8 @@
 # `linear` law. The same scene is built with YADE's standard engines (ScGeom, FrictPhys,
 # CundallStrack, NewtonIntegrator) and run; every `every` steps a row of OUT.csv gets the
 # Love-Weber stress (periodic cell), the kinetic energy, the vertical force on the last wall (the floor of a granite box) and the
-# number of contacts. Optional values: friction (degrees), damping, and l_xx, l_yy, l_zz, l_xz,
-# the cell's velocity gradient (1/s), all overriding the state's; law=rolling_resistance with
+# number of contacts. Optional values: young (Pa), kt_ratio, friction (degrees), damping, and
+# l_xx, l_yy, l_zz, l_xz, the cell's velocity gradient (1/s), all overriding the state's; law=rolling_resistance with
 # alpha_r, alpha_t and eta_r gives the grains granite's `rolling_resistance` law instead
 # (CohFrictMat without cohesion, ScGeom6D, the incremental CohesionMoment law);
 # law=hertz_mindlin with young and poisson gives granite's `hertz_mindlin` (MindlinPhys).
@@ -33,43 +33,31 @@ law_name = options.pop("law", "linear")
 rolling, hertz = law_name == "rolling_resistance", law_name == "hertz_mindlin"
 alpha_r, alpha_t, eta_r = (float(options.pop(k, d)) for k, d in (("alpha_r", 7.5), ("alpha_t", 0.2), ("eta_r", 0.22)))
 young = float(options.pop("young", law["young"]))
+kt_ratio = float(options.pop("kt_ratio", law.get("kt_ratio", 0.0)))
 poisson = float(options.pop("poisson", 0.25))
 if options:
     sys.exit(f"unknown options {sorted(options)}")
 density = state["materials"][0]["density"]
 
-# FrictMat's `poisson` is YADE's ks/kn; kn = 2 E1 R1 E2 R2 / (E1 R1 + E2 R2) as granite's `young`
-# (a wall counts as a sphere of the grain's radius in both).
+# FrictMat's `poisson` is YADE's ks/kn in FrictPhys and CohFrictPhys, and kn = 2 E1 R1 E2 R2 /
+# (E1 R1 + E2 R2) as granite's `young` (a wall counts as a sphere of the grain's radius in both);
+# MindlinPhys reads the true Poisson ratio: E* = E / (2 (1 - nu^2)), G* = G / (2 (2 - nu)).
+common = dict(young=young, frictionAngle=math.radians(friction), density=density)
 if rolling:
     # k_r = alpha_r kt r1 r2, k_tw = alpha_t kt r1 r2, both capped at eta_r |F_n| min(r1, r2).
-    material = O.materials.append(
-        CohFrictMat(
-            young=law["young"],
-            poisson=law.get("kt_ratio", 0.0),
-            frictionAngle=math.radians(friction),
-            density=density,
-            isCohesive=False,
-            momentRotationLaw=True,
-            alphaKr=alpha_r,
-            alphaKtw=alpha_t,
-            etaRoll=eta_r,
-            etaTwist=eta_r,
-        )
-    )
-elif hertz:
-    # E* = E / (2 (1 - nu^2)), G* = G / (2 (2 - nu)) for two grains of one material.
-    material = O.materials.append(
-        FrictMat(young=young, poisson=poisson, frictionAngle=math.radians(friction), density=density)
+    material = CohFrictMat(
+        poisson=kt_ratio,
+        isCohesive=False,
+        momentRotationLaw=True,
+        alphaKr=alpha_r,
+        alphaKtw=alpha_t,
+        etaRoll=eta_r,
+        etaTwist=eta_r,
+        **common,
     )
 else:
-    material = O.materials.append(
-        FrictMat(
-            young=law["young"],
-            poisson=law.get("kt_ratio", 0.0),
-            frictionAngle=math.radians(friction),
-            density=density,
-        )
-    )
+    material = FrictMat(poisson=poisson if hertz else kt_ratio, **common)
+material = O.materials.append(material)
 walls = []
 for wall in state["walls"]:
     normal = wall["shape"].get("Plane", {}).get("normal")
@@ -80,11 +68,23 @@ for wall in state["walls"]:
     sense = 1 if normal[axis] > 0 else -1
     walls.append(O.bodies.append(utils.wall(wall["position"][axis], axis=axis, sense=sense, material=material)))
 spheres = state["spheres"]
+sphere_ids = []
 for x, r, v, w in zip(spheres["x"], spheres["radius"], spheres["v"], spheres["w"]):
     body = utils.sphere(Vector3(*x), r, material=material)
     body.state.vel = Vector3(*v)
     body.state.angVel = Vector3(*w)
-    O.bodies.append(body)
+    sphere_ids.append(O.bodies.append(body))
+# Clumps: YADE sums its members' masses (overlaps counted twice); granite integrated the union by
+# voxels, so the clump takes granite's mass and principal inertia (the tetrahedral clumps of the
+# comparison are isotropic, so the principal frame does not matter), velocity and spin.
+clumps = state["clumps"]
+for c in range(len(clumps["mass"])):
+    members = clumps["members"][clumps["start"][c] : clumps["start"][c + 1]]
+    clump = O.bodies[O.bodies.clump([sphere_ids[m] for m in members])]
+    clump.state.mass = clumps["mass"][c]
+    clump.state.inertia = Vector3(*clumps["inertia"][c])
+    clump.state.vel = Vector3(*clumps["v"][c])
+    clump.state.angVel = Vector3(*clumps["w"][c])
 
 if state.get("cell"):
     O.periodic = True
