@@ -1,8 +1,9 @@
 //! granite against YADE 2023.02a on the same scenes (the scripts in tests/yade/): a periodic
 //! packing under a constant-volume compression and a simple shear (linear, rolling-resistance and
 //! Hertz-Mindlin laws), and a deposition into a box.
-//! YADE runs from granite's saved state with its standard engines (ScGeom, FrictPhys,
-//! CundallStrack, NewtonIntegrator): same grains, velocities, law, damping and time step.
+//! YADE runs from granite's saved state with its standard engines (ScGeom, FrictPhys and
+//! CundallStrack, or CohFrictPhys with the incremental moment law, or MindlinPhys;
+//! NewtonIntegrator): same grains, velocities, law, damping and time step.
 //!
 //! Two granular runs that differ in the last bits drift apart (the packing is chaotic), so the
 //! comparison has two parts. Until the runs drift, the stresses agree to what the two codes'
