@@ -161,3 +161,31 @@ fn counts_out_of_range_are_refused_by_the_command_line() {
         assert!(err.contains(says), "{args:?}: {err}");
     }
 }
+
+/// Default output intervals follow the run's length up to each call's end: a loop of short calls
+/// (the YADE way of running until a condition holds) writes about 20 frames and 500 series rows
+/// each time its step count doubles, not 20 frames and 500 rows per call.
+#[test]
+fn a_loop_of_short_runs_does_not_flood_the_output() {
+    let (calls, steps) = (64u32, 100u64);
+    let src = format!(
+        "let sim = dem(#{{ seed: 1 }});\n\
+         let m = sim.material(#{{ name: \"glass\", density: 2500.0 }});\n\
+         sim.contact_law(\"linear\", #{{ kn: 1.0e4, kt_ratio: 0.5, friction: 30.0 }});\n\
+         sim.sphere(m, [0.0, 0.0, 0.0], 0.01, #{{ velocity: [0.1, 0.0, 0.0] }});\n\
+         sim.dt(1.0e-4);\n\
+         for k in 0..{calls} {{ sim.run_steps({steps}); }}\n"
+    );
+    let out = common::run_text("loop_output", &src);
+    let frames = std::fs::read_dir(out.join("vtk"))
+        .unwrap()
+        .filter(|e| e.as_ref().is_ok_and(|e| e.path().extension().is_some_and(|x| x == "vtu")));
+    let (_, rows) = common::read_csv(&out.join("series.csv"));
+    // log2(64) = 6 doublings after the first call's 20 frames and 500 rows.
+    let doublings = (calls as f64).log2() + 1.0;
+    let frames = frames.count() as f64;
+    assert!(frames <= 20.0 * (doublings + 1.0), "{frames} frames for {calls} calls");
+    assert!(rows.len() as f64 <= 500.0 * (doublings + 1.0), "{} rows for {calls} calls", rows.len());
+    // Still a full run's worth: every doubling writes some.
+    assert!(frames >= 20.0 * doublings / 2.0, "only {frames} frames");
+}

@@ -260,10 +260,16 @@ impl<S: ScriptSim> Handle<S> {
         }
         st.ctx.check_overrides()?;
         st.sim.validate().or_rhai()?;
-        // Unless the script set them, output intervals follow each call's length: a short first
-        // call (common in the REPL) must not fix every-step output for later long ones.
+        // Unless the script set them, output intervals follow the run's length up to this call's
+        // end: a short first call (common in the REPL) must not fix every-step output for later
+        // long ones, and a script looping over short calls (`loop { sim.run_steps(500); ... }`)
+        // must not write 20 frames and 500 rows per call; it gets about 20 frames and 500 rows
+        // each time its step count doubles.
         let (series_every, vtk_every) = match steps {
-            Some(n) => ((n / 500).max(1), (n / 20).max(1)),
+            Some(n) => {
+                let end = st.sim.steps().saturating_add(n);
+                ((end / 500).max(1), (end / 20).max(1))
+            }
             None => (OPEN_RUN_SERIES_EVERY, OPEN_RUN_VTK_EVERY),
         };
         let plan = Plan {
