@@ -204,6 +204,40 @@ impl DemSim {
         [sym(0, 0), sym(1, 1), sym(2, 2), sym(0, 1), sym(1, 2), sym(0, 2)]
     }
 
+    /// [`DemSim::love_weber_stress`] over `volume` and [`DemSim::axis_stiffness`] in one pass over
+    /// the pairs, as the stress servo needs both every step (bit for bit the same sums).
+    pub fn stress_and_axis_stiffness(&self, volume: f64) -> (Voigt, [f64; 3]) {
+        let mut s = [0.0; 9];
+        let mut k = [0.0; 3];
+        let p = &self.pairs;
+        let ps = p.param_stride;
+        for c in 0..p.len() {
+            if !p.touching[c] {
+                continue;
+            }
+            let (i, j) = (p.a[c] as usize, p.b[c] as usize);
+            let image = match &self.cell {
+                Some(cell) => cell.shift_vector(p.shift[c]),
+                None => [0.0; 3],
+            };
+            let l: Vec3 = [0, 1, 2].map(|a| self.spheres.x[j][a] + image[a] - self.spheres.x[i][a]);
+            let f = p.force[c];
+            for a in 0..3 {
+                for b in 0..3 {
+                    s[3 * a + b] += f[a] * l[b];
+                }
+            }
+            let kn = self.laws[p.law[c] as usize].normal_stiffness(&p.params[c * ps..(c + 1) * ps]);
+            if kn > 0.0 {
+                for a in 0..3 {
+                    k[a] += kn * l[a] * l[a];
+                }
+            }
+        }
+        let sym = |a: usize, b: usize| 0.5 * (s[3 * a + b] + s[3 * b + a]) / volume;
+        ([sym(0, 0), sym(1, 1), sym(2, 2), sym(0, 1), sym(1, 2), sym(0, 2)], k.map(|v| v / volume))
+    }
+
     /// Stiffness of the packing along each axis, `(1/V) sum_c k_n l_a^2` over touching contacts:
     /// the stress increment per unit strain of an affine deformation (normal springs only).
     pub fn axis_stiffness(&self) -> [f64; 3] {

@@ -50,11 +50,8 @@ impl DemSim {
         let servo =
             self.cell_control.as_ref().is_some_and(|c| c.axes.iter().any(|a| matches!(a, AxisGoal::Stress { .. })));
         if let (Some(control), Some(cell)) = (&self.cell_control, &self.cell) {
-            let (stress, stiffness) = if servo {
-                (self.love_weber_stress(cell.volume()), self.axis_stiffness())
-            } else {
-                ([0.0; 6], [0.0; 3])
-            };
+            let (stress, stiffness) =
+                if servo { self.stress_and_axis_stiffness(cell.volume()) } else { ([0.0; 6], [0.0; 3]) };
             let l = control.velocity_gradient(&stress, stiffness, self.dt);
             if let Some(cell) = self.cell.as_mut() {
                 cell.velocity_gradient = l;
