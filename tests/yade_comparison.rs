@@ -223,7 +223,8 @@ fn deposition_settles_as_in_yade() {
     let yade = Series::read(&yade(&dirs[0].join("initial.json"), "yade_deposition_yade", &sets(0.4)[..2]));
     let base = &runs[0];
 
-    // Free fall and the first touches of the walls, before grains meet grains: the same motion.
+    // Free fall and the first touches of the walls, before grains meet grains: the same motion,
+    // apart from rounding (1.6e-9 at step 400 when measured).
     for i in 1..base.rows.len() {
         if base.get(i, "contacts") > 0.0 {
             break;

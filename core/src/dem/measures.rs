@@ -181,36 +181,37 @@ impl DemSim {
     /// `sigma_ij = (1/V) sum_c f_i l_j`, f the force on particle 1 and l the branch vector from 1
     /// to 2. Tension positive: a compressed packing has negative diagonal stress.
     pub fn love_weber_stress(&self, volume: f64) -> Voigt {
-        let mut s = [0.0; 9];
-        let p = &self.pairs;
-        for k in 0..p.len() {
-            if !p.touching[k] {
-                continue;
-            }
-            let (i, j) = (p.a[k] as usize, p.b[k] as usize);
-            let image = match &self.cell {
-                Some(c) => c.shift_vector(p.shift[k]),
-                None => [0.0; 3],
-            };
-            let l: Vec3 = [0, 1, 2].map(|a| self.spheres.x[j][a] + image[a] - self.spheres.x[i][a]);
-            let f = p.force[k];
-            for a in 0..3 {
-                for b in 0..3 {
-                    s[3 * a + b] += f[a] * l[b];
-                }
-            }
-        }
-        let sym = |a: usize, b: usize| 0.5 * (s[3 * a + b] + s[3 * b + a]) / volume;
-        [sym(0, 0), sym(1, 1), sym(2, 2), sym(0, 1), sym(1, 2), sym(0, 2)]
+        let mut sums = [0.0; 9];
+        self.touching_branches(|c, l| add_force_branch(&mut sums, self.pairs.force[c], l));
+        symmetric_over(&sums, volume)
     }
 
-    /// [`DemSim::love_weber_stress`] over `volume` and [`DemSim::axis_stiffness`] in one pass over
-    /// the pairs, as the stress servo needs both every step (bit for bit the same sums).
+    /// [`DemSim::love_weber_stress`] over `volume` and, in the same pass over the pairs (the stress
+    /// servo needs both every step), the stiffness of the packing along each axis,
+    /// `(1/V) sum_c k_n l_a^2`: the stress increment per unit strain of an affine deformation
+    /// (normal springs only).
     pub fn stress_and_axis_stiffness(&self, volume: f64) -> (Voigt, [f64; 3]) {
-        let mut s = [0.0; 9];
+        let mut sums = [0.0; 9];
         let mut k = [0.0; 3];
         let p = &self.pairs;
         let ps = p.param_stride;
+        self.touching_branches(|c, l| {
+            add_force_branch(&mut sums, p.force[c], l);
+            let kn = self.laws[p.law[c] as usize].normal_stiffness(&p.params[c * ps..(c + 1) * ps]);
+            if kn > 0.0 {
+                for a in 0..3 {
+                    k[a] += kn * l[a] * l[a];
+                }
+            }
+        });
+        (symmetric_over(&sums, volume), k.map(|v| v / volume))
+    }
+
+    /// Calls `visit` with each touching sphere pair and its branch vector from sphere 1 to sphere 2
+    /// (through its periodic image).
+    #[inline(always)]
+    fn touching_branches(&self, mut visit: impl FnMut(usize, Vec3)) {
+        let p = &self.pairs;
         for c in 0..p.len() {
             if !p.touching[c] {
                 continue;
@@ -220,47 +221,8 @@ impl DemSim {
                 Some(cell) => cell.shift_vector(p.shift[c]),
                 None => [0.0; 3],
             };
-            let l: Vec3 = [0, 1, 2].map(|a| self.spheres.x[j][a] + image[a] - self.spheres.x[i][a]);
-            let f = p.force[c];
-            for a in 0..3 {
-                for b in 0..3 {
-                    s[3 * a + b] += f[a] * l[b];
-                }
-            }
-            let kn = self.laws[p.law[c] as usize].normal_stiffness(&p.params[c * ps..(c + 1) * ps]);
-            if kn > 0.0 {
-                for a in 0..3 {
-                    k[a] += kn * l[a] * l[a];
-                }
-            }
+            visit(c, [0, 1, 2].map(|a| self.spheres.x[j][a] + image[a] - self.spheres.x[i][a]));
         }
-        let sym = |a: usize, b: usize| 0.5 * (s[3 * a + b] + s[3 * b + a]) / volume;
-        ([sym(0, 0), sym(1, 1), sym(2, 2), sym(0, 1), sym(1, 2), sym(0, 2)], k.map(|v| v / volume))
-    }
-
-    /// Stiffness of the packing along each axis, `(1/V) sum_c k_n l_a^2` over touching contacts:
-    /// the stress increment per unit strain of an affine deformation (normal springs only).
-    pub fn axis_stiffness(&self) -> [f64; 3] {
-        let Some(volume) = self.cell_volume() else { return [0.0; 3] };
-        let p = &self.pairs;
-        let ps = p.param_stride;
-        let mut k = [0.0; 3];
-        for c in 0..p.len() {
-            if !p.touching[c] {
-                continue;
-            }
-            let kn = self.laws[p.law[c] as usize].normal_stiffness(&p.params[c * ps..(c + 1) * ps]);
-            if !(kn > 0.0) {
-                continue;
-            }
-            let (i, j) = (p.a[c] as usize, p.b[c] as usize);
-            let image = self.cell.as_ref().map(|cell| cell.shift_vector(p.shift[c])).unwrap_or([0.0; 3]);
-            for a in 0..3 {
-                let l = self.spheres.x[j][a] + image[a] - self.spheres.x[i][a];
-                k[a] += kn * l * l;
-            }
-        }
-        k.map(|v| v / volume)
     }
 
     /// Global stress of a packing at rest under gravity (appendix A, eq. .14): wall contact forces
@@ -275,23 +237,29 @@ impl DemSim {
             let i = p.a[k] as usize;
             let wall = &self.walls[p.b[k] as usize];
             let Some(c) = wall.contact(self.spheres.x[i], self.spheres.radius[i], 0.0) else { continue };
-            let f = p.force[k];
-            for a in 0..3 {
-                for b in 0..3 {
-                    s[3 * a + b] += f[a] * c.point[b];
-                }
-            }
+            add_force_branch(&mut s, p.force[k], c.point);
         }
         let g = self.gravity;
         for i in 0..self.spheres.len() {
-            let (m, x) = (self.spheres.mass[i], self.spheres.x[i]);
-            for a in 0..3 {
-                for b in 0..3 {
-                    s[3 * a + b] += m * g[a] * x[b];
-                }
-            }
+            let m = self.spheres.mass[i];
+            add_force_branch(&mut s, [m * g[0], m * g[1], m * g[2]], self.spheres.x[i]);
         }
-        let sym = |a: usize, b: usize| 0.5 * (s[3 * a + b] + s[3 * b + a]) / volume;
-        [sym(0, 0), sym(1, 1), sym(2, 2), sym(0, 1), sym(1, 2), sym(0, 2)]
+        symmetric_over(&s, volume)
     }
+}
+
+/// Adds `f l^T` (row-major) to the sums of a Love-Weber stress.
+#[inline(always)]
+fn add_force_branch(sums: &mut [f64; 9], f: Vec3, l: Vec3) {
+    for a in 0..3 {
+        for b in 0..3 {
+            sums[3 * a + b] += f[a] * l[b];
+        }
+    }
+}
+
+/// The symmetric part of the Love-Weber sums over `volume`, in Voigt order.
+fn symmetric_over(sums: &[f64; 9], volume: f64) -> Voigt {
+    let sym = |a: usize, b: usize| 0.5 * (sums[3 * a + b] + sums[3 * b + a]) / volume;
+    [sym(0, 0), sym(1, 1), sym(2, 2), sym(0, 1), sym(1, 2), sym(0, 2)]
 }

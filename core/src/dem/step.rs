@@ -1219,8 +1219,12 @@ impl Motion {
         let v4 = add4(v4, scale4(cundall4(acc, v4, damping, dt), dt));
         let moving = add4(v4, lx);
         let x4 = add4(x4, scale4(moving, dt));
+        // Newton's law holds for the whole velocity `v + L x`, which only forces change (YADE's
+        // default `homoDeform`): a sphere that moved by `moving dt` keeps its fluctuation around
+        // the field at its new place, `L moving dt` less. (Kept at the old place's field, a sphere
+        // rising across a shear flow would gain speed along it without a force.)
         let v4 = match &self.affine_columns {
-            Some((_, _, l_dt)) => newton_in_cell(v4, mat_vec4(l_dt, moving)),
+            Some((_, _, l_dt)) => sub4(v4, mat_vec4(l_dt, moving)),
             None => v4,
         };
         let w4 = add4(w4, scale4(cundall4(scale4(t, inv_i), w4, damping, dt), dt));
@@ -1258,11 +1262,12 @@ impl Motion {
             x[a] += moving[a] * dt;
         }
         if let Some((l, _)) = affine {
-            // A blocked component keeps its prescribed fluctuation.
-            let field_change = newton_in_cell(widen(*v), scale4(widen(mat_vec(l, moving)), dt));
+            // Newton's law for the whole velocity, as in `advance_free`; a blocked component keeps
+            // its prescribed fluctuation.
+            let field_change = mat_vec(l, moving);
             for a in 0..3 {
                 if blocked & (dof::X << a) == 0 {
-                    v[a] = field_change[a];
+                    v[a] -= field_change[a] * dt;
                 }
             }
         }
@@ -1270,16 +1275,6 @@ impl Motion {
         let d2 = [d[0] * d[0], d[1] * d[1], d[2] * d[2]];
         (d2[0] + d2[1] + d2[2], add4(widen(d2), add4(widen(*v), widen(*w))))
     }
-}
-
-/// The fluctuation `v` after a step in a periodic cell: Newton's law holds for the whole velocity
-/// `v + L x`, which only forces change (YADE's default `homoDeform`), so when a sphere moves by
-/// `moving dt` its fluctuation around the field at its new place drops by `L moving dt`
-/// (`field_change`). Kept at the old place's field instead, a sphere rising across a shear flow
-/// would gain speed along it without a force.
-#[inline(always)]
-fn newton_in_cell(v: Lanes, field_change: Lanes) -> Lanes {
-    sub4(v, field_change)
 }
 
 /// YADE's Cundall damping of an acceleration: reduced by `damping` against the sign of the
@@ -1378,7 +1373,11 @@ fn integrate_clumps(
             cl.x[c][a] += moving[a] * dt;
         }
         if let Some((l, _)) = &affine {
-            cl.v[c] = narrow(newton_in_cell(widen(cl.v[c]), scale4(widen(mat_vec(l, moving)), dt)));
+            // Newton's law for the whole velocity, as for a sphere (`Motion::advance_free`).
+            let field_change = mat_vec(l, moving);
+            for a in 0..3 {
+                cl.v[c][a] -= field_change[a] * dt;
+            }
         }
         // Euler's equations in the world frame: I w' = T - w x (I w).
         let rot = cl.q[c].to_rotation_matrix();
