@@ -181,9 +181,8 @@ impl DemSim {
     /// `sigma_ij = (1/V) sum_c f_i l_j`, f the force on particle 1 and l the branch vector from 1
     /// to 2. Tension positive: a compressed packing has negative diagonal stress.
     pub fn love_weber_stress(&self, volume: f64) -> Voigt {
-        let mut sums = [0.0; 9];
-        self.touching_branches(|c, l| add_force_branch(&mut sums, self.pairs.force[c], l));
-        symmetric_over(&sums, volume)
+        // One walk over the pairs for both measures; the stiffness sums cost little beside it.
+        self.stress_and_axis_stiffness(volume).0
     }
 
     /// [`DemSim::love_weber_stress`] over `volume` and, in the same pass over the pairs (the stress
@@ -191,27 +190,10 @@ impl DemSim {
     /// `(1/V) sum_c k_n l_a^2`: the stress increment per unit strain of an affine deformation
     /// (normal springs only).
     pub fn stress_and_axis_stiffness(&self, volume: f64) -> (Voigt, [f64; 3]) {
-        let mut sums = [0.0; 9];
+        let mut s = [0.0; 9];
         let mut k = [0.0; 3];
         let p = &self.pairs;
         let ps = p.param_stride;
-        self.touching_branches(|c, l| {
-            add_force_branch(&mut sums, p.force[c], l);
-            let kn = self.laws[p.law[c] as usize].normal_stiffness(&p.params[c * ps..(c + 1) * ps]);
-            if kn > 0.0 {
-                for a in 0..3 {
-                    k[a] += kn * l[a] * l[a];
-                }
-            }
-        });
-        (symmetric_over(&sums, volume), k.map(|v| v / volume))
-    }
-
-    /// Calls `visit` with each touching sphere pair and its branch vector from sphere 1 to sphere 2
-    /// (through its periodic image).
-    #[inline(always)]
-    fn touching_branches(&self, mut visit: impl FnMut(usize, Vec3)) {
-        let p = &self.pairs;
         for c in 0..p.len() {
             if !p.touching[c] {
                 continue;
@@ -221,8 +203,24 @@ impl DemSim {
                 Some(cell) => cell.shift_vector(p.shift[c]),
                 None => [0.0; 3],
             };
-            visit(c, [0, 1, 2].map(|a| self.spheres.x[j][a] + image[a] - self.spheres.x[i][a]));
+            let (xi, xj) = (self.spheres.x[i], self.spheres.x[j]);
+            // Spelled out: `array::map` stays a call here, once per contact.
+            let l: Vec3 = [xj[0] + image[0] - xi[0], xj[1] + image[1] - xi[1], xj[2] + image[2] - xi[2]];
+            let f = p.force[c];
+            for a in 0..3 {
+                for b in 0..3 {
+                    s[3 * a + b] += f[a] * l[b];
+                }
+            }
+            let kn = self.laws[p.law[c] as usize].normal_stiffness(&p.params[c * ps..(c + 1) * ps]);
+            if kn > 0.0 {
+                for a in 0..3 {
+                    k[a] += kn * l[a] * l[a];
+                }
+            }
         }
+        let sym = |a: usize, b: usize| 0.5 * (s[3 * a + b] + s[3 * b + a]) / volume;
+        ([sym(0, 0), sym(1, 1), sym(2, 2), sym(0, 1), sym(1, 2), sym(0, 2)], k.map(|v| v / volume))
     }
 
     /// Global stress of a packing at rest under gravity (appendix A, eq. .14): wall contact forces
@@ -237,29 +235,23 @@ impl DemSim {
             let i = p.a[k] as usize;
             let wall = &self.walls[p.b[k] as usize];
             let Some(c) = wall.contact(self.spheres.x[i], self.spheres.radius[i], 0.0) else { continue };
-            add_force_branch(&mut s, p.force[k], c.point);
+            let f = p.force[k];
+            for a in 0..3 {
+                for b in 0..3 {
+                    s[3 * a + b] += f[a] * c.point[b];
+                }
+            }
         }
         let g = self.gravity;
         for i in 0..self.spheres.len() {
-            let m = self.spheres.mass[i];
-            add_force_branch(&mut s, [m * g[0], m * g[1], m * g[2]], self.spheres.x[i]);
+            let (m, x) = (self.spheres.mass[i], self.spheres.x[i]);
+            for a in 0..3 {
+                for b in 0..3 {
+                    s[3 * a + b] += m * g[a] * x[b];
+                }
+            }
         }
-        symmetric_over(&s, volume)
+        let sym = |a: usize, b: usize| 0.5 * (s[3 * a + b] + s[3 * b + a]) / volume;
+        [sym(0, 0), sym(1, 1), sym(2, 2), sym(0, 1), sym(1, 2), sym(0, 2)]
     }
-}
-
-/// Adds `f l^T` (row-major) to the sums of a Love-Weber stress.
-#[inline(always)]
-fn add_force_branch(sums: &mut [f64; 9], f: Vec3, l: Vec3) {
-    for a in 0..3 {
-        for b in 0..3 {
-            sums[3 * a + b] += f[a] * l[b];
-        }
-    }
-}
-
-/// The symmetric part of the Love-Weber sums over `volume`, in Voigt order.
-fn symmetric_over(sums: &[f64; 9], volume: f64) -> Voigt {
-    let sym = |a: usize, b: usize| 0.5 * (sums[3 * a + b] + sums[3 * b + a]) / volume;
-    [sym(0, 0), sym(1, 1), sym(2, 2), sym(0, 1), sym(1, 2), sym(0, 2)]
 }
