@@ -23,9 +23,10 @@ fn gravity_deposition_is_thread_count_independent() {
 }
 
 /// A dense, sheared periodic packing (image contacts, friction, spins), stepped `threads`-wide
-/// or sequentially (the RVE path: forces summed pair by pair as the contacts are computed).
-fn sheared_periodic(threads: usize, sequential: bool) -> (Vec<[f64; 3]>, Vec<[f64; 3]>, usize) {
-    use granite_core::dem::cell::PeriodicCell;
+/// or sequentially (the RVE path: forces summed pair by pair as the contacts are computed);
+/// with `servo`, a stress servo then unloads it to half its mean stress for 100 more steps.
+fn sheared_periodic(threads: usize, sequential: bool, servo: bool) -> (Vec<[f64; 3]>, Vec<[f64; 3]>, usize) {
+    use granite_core::dem::cell::{AxisGoal, CellControl, PeriodicCell};
     use granite_core::dem::generate::lattice;
     let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
     pool.install(|| {
@@ -53,19 +54,44 @@ fn sheared_periodic(threads: usize, sequential: bool) -> (Vec<[f64; 3]>, Vec<[f6
         for _ in 0..300 {
             sim.step().unwrap();
         }
+        if servo {
+            // Half the present mean stress, and no rate limit: the servo's rate follows the
+            // stress it sums to the last bit.
+            let stress = sim.love_weber_stress(sim.cell_volume().unwrap());
+            let target = 0.5 * (stress[0] + stress[1] + stress[2]) / 3.0;
+            assert!(target < 0.0, "the packing must be compressed ({stress:?})");
+            let goal = AxisGoal::Stress { target, max_rate: f64::INFINITY };
+            sim.cell_control = Some(CellControl { axes: [goal; 3], shear: vec![], relax_steps: 200.0 });
+            for _ in 0..100 {
+                sim.step().unwrap();
+            }
+            let l = sim.cell.as_ref().unwrap().velocity_gradient;
+            assert!((0..3).all(|a| l[(a, a)] != 0.0), "the servo does not move the cell: {l}");
+        }
         (sim.spheres.x.clone(), sim.spheres.w.clone(), sim.pairs.touching_count())
     })
 }
 
 #[test]
 fn sequential_and_parallel_stepping_agree_bit_for_bit() {
-    let sequential = sheared_periodic(1, true);
-    let parallel = sheared_periodic(2, false);
+    let sequential = sheared_periodic(1, true, false);
+    let parallel = sheared_periodic(2, false, false);
     assert_eq!(sequential.0.len(), 12 * 12 * 12);
     assert!(sequential.2 > 2000, "the packing must be in contact ({} contacts)", sequential.2);
     assert!(sequential.1.iter().any(|w| w.iter().any(|c| c.abs() > 0.0)), "no sphere spins");
     assert!(sequential.0 == parallel.0 && sequential.1 == parallel.1, "sequential and 2-thread stepping differ");
-    assert!(parallel == sheared_periodic(1, false), "1 and 2 threads differ");
+    assert!(parallel == sheared_periodic(1, false, false), "1 and 2 threads differ");
+}
+
+/// The servo sums the Love-Weber stress over its pairs every step, in parallel when the
+/// simulation steps in parallel: over more pairs than one block of that sum, the result must
+/// not depend on it.
+#[test]
+fn a_stress_servo_steps_the_same_on_any_thread_count() {
+    let sequential = sheared_periodic(1, true, true);
+    assert!(sequential.2 > 2000, "the packing must be in contact ({} contacts)", sequential.2);
+    assert!(sequential == sheared_periodic(2, false, true), "sequential and 2-thread stepping differ");
+    assert!(sequential == sheared_periodic(1, false, true), "sequential and 1-thread stepping differ");
 }
 
 /// The series of a script run by the `granite` command, with the AVX2 kernels on or off.

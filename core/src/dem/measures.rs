@@ -5,6 +5,9 @@ use crate::dem::contacts::PairList;
 use crate::dem::sim::DemSim;
 use crate::math::{Vec3, Voigt};
 
+/// Pairs summed together in the Love-Weber stress: blocks of a few microseconds of work.
+const PAIRS_PER_BLOCK: usize = 1024;
+
 #[derive(Debug, Clone, Default)]
 pub struct DemDiagnostics {
     pub particles: usize,
@@ -190,11 +193,38 @@ impl DemSim {
     /// `(1/V) sum_c k_n l_a^2`: the stress increment per unit strain of an affine deformation
     /// (normal springs only).
     pub fn stress_and_axis_stiffness(&self, volume: f64) -> (Voigt, [f64; 3]) {
+        // Summed block by block, and the blocks in order: the same sums whatever the thread
+        // count. The servo needs them every step; in parallel, the blocks keep both cores busy
+        // instead of leaving one to fall asleep while the other sums alone.
+        let blocks: Vec<_> = (0..self.pairs.len())
+            .step_by(PAIRS_PER_BLOCK)
+            .map(|b| b..(b + PAIRS_PER_BLOCK).min(self.pairs.len()))
+            .collect();
+        let parts = if self.sequential {
+            blocks.into_iter().map(|b| self.pair_sums(b)).collect()
+        } else {
+            crate::par::run_pieces(blocks, |b| self.pair_sums(b))
+        };
+        let (mut s, mut k) = ([0.0; 9], [0.0; 3]);
+        for (ps, pk) in parts {
+            for (a, b) in s.iter_mut().zip(ps) {
+                *a += b;
+            }
+            for (a, b) in k.iter_mut().zip(pk) {
+                *a += b;
+            }
+        }
+        let sym = |a: usize, b: usize| 0.5 * (s[3 * a + b] + s[3 * b + a]) / volume;
+        ([sym(0, 0), sym(1, 1), sym(2, 2), sym(0, 1), sym(1, 2), sym(0, 2)], k.map(|v| v / volume))
+    }
+
+    /// `sum f_a l_b` (row-major) and `sum k_n l_a^2` over the touching pairs of `range`.
+    fn pair_sums(&self, range: std::ops::Range<usize>) -> ([f64; 9], [f64; 3]) {
         let mut s = [0.0; 9];
         let mut k = [0.0; 3];
         let p = &self.pairs;
         let ps = p.param_stride;
-        for c in 0..p.len() {
+        for c in range {
             if !p.touching[c] {
                 continue;
             }
@@ -219,8 +249,7 @@ impl DemSim {
                 }
             }
         }
-        let sym = |a: usize, b: usize| 0.5 * (s[3 * a + b] + s[3 * b + a]) / volume;
-        ([sym(0, 0), sym(1, 1), sym(2, 2), sym(0, 1), sym(1, 2), sym(0, 2)], k.map(|v| v / volume))
+        (s, k)
     }
 
     /// Global stress of a packing at rest under gravity (appendix A, eq. .14): wall contact forces
