@@ -358,11 +358,13 @@ const CELL: f64 = 0.5;
 
 /// Seconds to step `copies` copies of `rve` as the coupled run of [`mpmxdem`] steps its RVEs, in
 /// the current pool: per MPM step, each copy takes its DEM steps at the oedometric strain rate
-/// (one copy per task, in parallel over copies), with nothing else around.
-fn rves_alone(rve: &granite_core::dem::DemSim, copies: usize) -> Result<f64> {
+/// (one copy per task, in parallel over copies), with nothing else around. Also the seconds
+/// spent inside the tasks, summed over tasks: against the wall time times the threads, what
+/// the threads waited; against the same sum on one thread, how much slower the same work ran.
+fn rves_alone(rve: &granite_core::dem::DemSim, copies: usize) -> Result<RvesAlone> {
     use rayon::prelude::*;
-    let mut sims: Vec<_> = (0..copies).map(|_| rve.clone()).collect();
-    for sim in sims.iter_mut() {
+    let mut sims: Vec<_> = (0..copies).map(|_| (rve.clone(), 0.0)).collect();
+    for (sim, _) in sims.iter_mut() {
         sim.set_sequential(true);
         // One MPM step's strain increment spread over its DEM steps, as the dem_rve law does.
         let rate = TOP_SPEED / (2.0 * CELL) * MPM_DT / (DEM_STEPS as f64 * sim.dt);
@@ -372,9 +374,20 @@ fn rves_alone(rve: &granite_core::dem::DemSim, copies: usize) -> Result<f64> {
     }
     let t = Instant::now();
     for _ in 0..MPM_STEPS {
-        sims.par_iter_mut().try_for_each(|sim| (0..DEM_STEPS).try_for_each(|_| sim.step()))?;
+        sims.par_iter_mut().try_for_each(|(sim, busy)| {
+            let started = Instant::now();
+            let done = (0..DEM_STEPS).try_for_each(|_| sim.step());
+            *busy += started.elapsed().as_secs_f64();
+            done
+        })?;
     }
-    Ok(t.elapsed().as_secs_f64())
+    Ok(RvesAlone { wall: t.elapsed().as_secs_f64(), busy: sims.iter().map(|(_, busy)| busy).sum() })
+}
+
+#[derive(Clone, Copy)]
+struct RvesAlone {
+    wall: f64,
+    busy: f64,
 }
 
 /// `granite bench mpmxdem`: an oedometric scene of 16 material points, each with a 125-sphere
@@ -397,7 +410,7 @@ pub fn mpmxdem(threads: &[usize], repeat: usize) -> Result<()> {
     // The coupling's own cost: in every round, right after the coupled run, the same DEM work
     // without the MPM around it (one slow spell of the machine then hits both alike).
     // Fastest time of that, per thread count.
-    let alone_best = std::sync::Mutex::new(std::collections::BTreeMap::<usize, f64>::new());
+    let alone_best = std::sync::Mutex::new(std::collections::BTreeMap::<usize, RvesAlone>::new());
     let timed = best_of(threads, repeat, || -> Result<(f64, (usize, usize))> {
         let reg = crate::registry();
         let mesh = Mesh::new(2, [0.0; 3], [CELL, CELL, 1.0], [2, 2, 1])?;
@@ -426,7 +439,10 @@ pub fn mpmxdem(threads: &[usize], repeat: usize) -> Result<()> {
         let coupled = t.elapsed().as_secs_f64();
         let alone = rves_alone(&rve, sim.points.len())?;
         let mut best = alone_best.lock().unwrap_or_else(|e| e.into_inner());
-        best.entry(rayon::current_num_threads()).and_modify(|secs| *secs = secs.min(alone)).or_insert(alone);
+        let entry = best.entry(rayon::current_num_threads()).or_insert(alone);
+        if alone.wall < entry.wall {
+            *entry = alone;
+        }
         Ok((coupled, (sim.points.len(), bytes)))
     })?;
     let alone_best = alone_best.into_inner().unwrap_or_else(|e| e.into_inner());
@@ -441,12 +457,21 @@ pub fn mpmxdem(threads: &[usize], repeat: usize) -> Result<()> {
             rate / 1e6 / n as f64,
             bytes as f64 / 1e6
         );
-        if let Some(alone) = alone_best.get(&n) {
+        if let Some(&RvesAlone { wall: alone, busy }) = alone_best.get(&n) {
             println!(
                 "           the same RVEs stepped alone (no MPM)  {alone:>7.3} s  {:>6.2} M sphere-steps/s: the coupled run does {:.1} % of that",
                 sphere_steps / alone / 1e6,
                 100.0 * alone / secs
             );
+            // Where a second thread's time goes: waiting for work (the code's share of a
+            // speed-up short of the thread count), or the same work running slower (the machine's).
+            if let (true, Some(one)) = (n > 1, alone_best.get(&1)) {
+                println!(
+                    "           in that run the threads were inside RVE steps {:.1} % of the time, and the same RVE steps took {:.2}x their time on 1 thread",
+                    100.0 * busy / (alone * n as f64),
+                    busy / one.busy
+                );
+            }
         }
     }
     let mut big = periodic_rve(1000, 1e5)?;
