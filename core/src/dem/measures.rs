@@ -194,16 +194,17 @@ impl DemSim {
     /// (normal springs only).
     pub fn stress_and_axis_stiffness(&self, volume: f64) -> (Voigt, [f64; 3]) {
         // Summed block by block, and the blocks in order: the same sums whatever the thread
-        // count. The servo needs them every step; in parallel, the blocks keep both cores busy
-        // instead of leaving one to fall asleep while the other sums alone.
+        // count. The servo needs them every step; when the step runs in parallel, so do the
+        // blocks, keeping both cores busy instead of leaving one to fall asleep while the other
+        // sums alone.
         let blocks: Vec<_> = (0..self.pairs.len())
             .step_by(PAIRS_PER_BLOCK)
             .map(|b| b..(b + PAIRS_PER_BLOCK).min(self.pairs.len()))
             .collect();
-        let parts = if self.sequential {
-            blocks.into_iter().map(|b| self.pair_sums(b)).collect()
-        } else {
+        let parts = if self.in_parallel() {
             crate::par::run_pieces(blocks, |b| self.pair_sums(b))
+        } else {
+            blocks.into_iter().map(|b| self.pair_sums(b)).collect()
         };
         let (mut s, mut k) = ([0.0; 9], [0.0; 3]);
         for (ps, pk) in parts {

@@ -21,6 +21,10 @@ const CHUNK: usize = 128;
 /// simulation renumbered in space before it first runs.
 const MIN_SPHERES_PER_PIECE: usize = 128;
 const MIN_SPHERES_TO_ORDER: usize = 1024;
+/// Fewest spheres stepped in parallel: below, pieces are not regions of space (see
+/// `order_spheres_in_space`), and two threads were slower than one (periodic RVEs, best of 7:
+/// 1000 spheres 110 against 98 us a step; 1500: 121 against 148).
+const MIN_SPHERES_IN_PARALLEL: usize = MIN_SPHERES_TO_ORDER;
 /// Most per-pair parameters / history values a contact law may use.
 pub const MAX_PARAMS: usize = 16;
 pub const MAX_HISTORY: usize = 16;
@@ -196,11 +200,12 @@ impl DemSim {
     }
 
     /// Whether this step runs its stages in parallel pieces. Otherwise (an RVE, one thread, or
-    /// too few spheres for two pieces) each contact adds its force and torques to its spheres as
-    /// soon as it is computed: the same sums in the same order, without storing a torque per
-    /// pair and gathering them again, which costs 5-20 % of a step on one thread.
-    fn in_parallel(&self) -> bool {
-        !self.sequential && crate::par::piece_count(self.spheres.len(), MIN_SPHERES_PER_PIECE) > 1
+    /// too few spheres) each contact adds its force and torques to its spheres as soon as it is
+    /// computed: the same sums in the same order, without storing a torque per pair and
+    /// gathering them again, which costs 5-40 % of a step on one thread.
+    pub(crate) fn in_parallel(&self) -> bool {
+        let n = self.spheres.len();
+        !self.sequential && n >= MIN_SPHERES_IN_PARALLEL && crate::par::piece_count(n, MIN_SPHERES_PER_PIECE) > 1
     }
 
     /// Per-sphere lists of pairs for the parallel gather; a sequential simulation (an RVE) sums
