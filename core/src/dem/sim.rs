@@ -53,6 +53,8 @@ pub struct DemSim {
     pub(crate) wall_adjacency: Adjacency,
     /// Where the parallel contact stage cuts the pair lists (found again after a rebuild).
     pub(crate) piece_bounds: crate::dem::step::PieceBounds,
+    /// Which spheres the parallel contact stage found in contact (see `ContactFlags`).
+    pub(crate) touched: crate::dem::step::ContactFlags,
     /// Positions (spheres) and wall positions when the candidate lists were built.
     pub(crate) x_at_build: Vec<Vec3>,
     pub(crate) walls_at_build: Vec<Vec3>,
@@ -113,6 +115,7 @@ impl DemSim {
             radius_max_at_build: 0.0,
             radius_min_at_build: f64::INFINITY,
             piece_bounds: Default::default(),
+            touched: Default::default(),
             walls_at_build: Vec::new(),
             h_at_build: None,
             spare_pairs: PairList::default(),
@@ -256,6 +259,7 @@ impl DemSim {
             + pairs(&self.spare_pairs)
             + pairs(&self.wall_pairs)
             + (self.adjacency.entries.capacity() + self.adjacency.start.capacity()) * 4
+            + self.touched.capacity()
             + self.clumps.len() * 200
     }
 

@@ -13,6 +13,7 @@ use crate::ext::{ContactBatch, ContactLaw};
 use crate::math::{dot3, mat_vec, Vec3};
 use crate::simd::{self, add4, mat_vec4, mul4, narrow, scale4, sub4, widen, Lanes};
 use nalgebra::Matrix3;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
 /// Pairs per law call.
@@ -94,7 +95,7 @@ impl DemSim {
             integrate_wide((&mut self.spheres, &self.x_at_build, &motion))
         } else {
             let lists = (&self.pairs, &self.adjacency, &self.wall_pairs, &self.wall_adjacency);
-            gather_and_integrate(&mut self.spheres, lists, &self.x_at_build, &motion)
+            gather_and_integrate(&mut self.spheres, lists, &self.touched.0, &self.x_at_build, &motion)
         };
         if !self.clumps.is_empty() {
             let clump_moved = integrate_clumps(
@@ -243,10 +244,12 @@ impl DemSim {
                 laws,
                 dt,
                 scratch: &mut scratch,
-                sums: Some(Sums { force, torque }),
+                sums: Collect::Sums(Sums { force, torque }),
             });
             return;
         }
+        self.touched.fit(x.len());
+        let touched = &self.touched.0[..];
         let bounds = &self.piece_bounds;
         let pieces: Vec<_> = PairChunk::whole(&mut self.pairs, strides)
             .cut_at(&bounds.sphere_pairs)
@@ -256,7 +259,8 @@ impl DemSim {
         crate::par::run_pieces(pieces, |(sphere_pairs, wall_pairs)| {
             let mut scratch = ScratchGuard::take();
             let scratch = &mut *scratch;
-            contact_job_wide(ContactJob { sp: &sp, walls, sphere_pairs, wall_pairs, laws, dt, scratch, sums: None });
+            let sums = Collect::Touched(touched);
+            contact_job_wide(ContactJob { sp: &sp, walls, sphere_pairs, wall_pairs, laws, dt, scratch, sums });
         });
     }
 
@@ -571,6 +575,40 @@ struct Motions<'a> {
     rotation: bool,
 }
 
+/// What the contact stage makes of the forces besides storing them in the pairs.
+enum Collect<'a> {
+    /// Sequential stepping: adds them to the spheres' sums as they come.
+    Sums(Sums<'a>),
+    /// Parallel stepping: marks the spheres that have any, for the gather.
+    Touched(&'a [AtomicBool]),
+}
+
+/// Which spheres the parallel contact stage found in contact this step: set by the contact
+/// stage (the pieces of a pair's two spheres may both set a flag, only ever to true), read and
+/// cleared by the gather, which then skips the pair lists of spheres in no contact (most of a
+/// falling cloud). A flag left set (a step stopped between the stages) only costs a walk.
+#[derive(Debug, Default)]
+pub(crate) struct ContactFlags(Vec<AtomicBool>);
+
+impl Clone for ContactFlags {
+    /// Flags live within a step: a copy starts with none.
+    fn clone(&self) -> ContactFlags {
+        ContactFlags::default()
+    }
+}
+
+impl ContactFlags {
+    pub(crate) fn capacity(&self) -> usize {
+        self.0.capacity()
+    }
+
+    fn fit(&mut self, spheres: usize) {
+        if self.0.len() != spheres {
+            self.0 = (0..spheres).map(|_| AtomicBool::new(false)).collect();
+        }
+    }
+}
+
 /// Per-sphere force and torque sums, filled pair by pair by a sequential contact stage.
 struct Sums<'a> {
     force: &'a mut [Vec3],
@@ -700,7 +738,7 @@ impl<'a> PairChunk<'a> {
 /// (sequential stepping), also adds them to the spheres, in pair order as the parallel gather
 /// does. Wall pairs have no second sphere (`second` false).
 #[inline(always)]
-fn write_back(c: &mut PairChunk<'_>, s: &Scratch, sums: &mut Option<Sums<'_>>, second: bool) {
+fn write_back(c: &mut PairChunk<'_>, s: &Scratch, sums: &mut Collect<'_>, second: bool) {
     if s.rotation {
         write_back_as::<true>(c, s, sums, second);
     } else {
@@ -711,7 +749,7 @@ fn write_back(c: &mut PairChunk<'_>, s: &Scratch, sums: &mut Option<Sums<'_>>, s
 /// [`write_back`], with or without contact moments (without, the laws left them unset: adding
 /// zeros would only cost).
 #[inline(always)]
-fn write_back_as<const MOMENTS: bool>(c: &mut PairChunk<'_>, s: &Scratch, sums: &mut Option<Sums<'_>>, second: bool) {
+fn write_back_as<const MOMENTS: bool>(c: &mut PairChunk<'_>, s: &Scratch, sums: &mut Collect<'_>, second: bool) {
     let mut run = Run::NONE;
     for e in 0..s.len {
         let k = s.slot[e] as usize;
@@ -731,7 +769,13 @@ fn write_back_as<const MOMENTS: bool>(c: &mut PairChunk<'_>, s: &Scratch, sums: 
                 c.torque_b[k] = torque_b;
             }
         }
-        if let Some(sums) = sums {
+        if let Collect::Touched(touched) = sums {
+            touched[c.a[k] as usize].store(true, Ordering::Relaxed);
+            if second {
+                touched[c.b[k] as usize].store(true, Ordering::Relaxed);
+            }
+        }
+        if let Collect::Sums(sums) = sums {
             let i = c.a[k] as usize;
             if i != run.sphere {
                 run.store(sums);
@@ -752,7 +796,7 @@ fn write_back_as<const MOMENTS: bool>(c: &mut PairChunk<'_>, s: &Scratch, sums: 
             }
         }
     }
-    if let Some(sums) = sums {
+    if let Collect::Sums(sums) = sums {
         run.store(sums);
     }
 }
@@ -811,7 +855,7 @@ struct ContactJob<'j> {
     laws: &'j [Arc<dyn ContactLaw>],
     dt: f64,
     scratch: &'j mut Scratch,
-    sums: Option<Sums<'j>>,
+    sums: Collect<'j>,
 }
 
 #[inline(always)]
@@ -831,7 +875,7 @@ fn sphere_contacts(
     pairs: PairChunk<'_>,
     (laws, dt): (&[Arc<dyn ContactLaw>], f64),
     scratch: &mut Scratch,
-    sums: &mut Option<Sums<'_>>,
+    sums: &mut Collect<'_>,
 ) {
     let cell = sp.cell;
     let l = cell.map(|c| c.velocity_gradient);
@@ -901,7 +945,7 @@ fn wall_contacts(
     pairs: PairChunk<'_>,
     (laws, dt): (&[Arc<dyn ContactLaw>], f64),
     scratch: &mut Scratch,
-    sums: &mut Option<Sums<'_>>,
+    sums: &mut Collect<'_>,
 ) {
     // Plain loops, no closures: all of this must inline into `contact_job_wide`'s AVX2 twin.
     let mut rest = Some(pairs);
@@ -991,6 +1035,7 @@ fn sphere_piece_size(n: usize) -> usize {
 fn gather_and_integrate(
     sp: &mut Spheres,
     (pairs, adj, walls, wall_adj): (&PairList, &Adjacency, &PairList, &Adjacency),
+    touched: &[AtomicBool],
     x_at_build: &[Vec3],
     motion: &Motion,
 ) -> f64 {
@@ -1010,7 +1055,8 @@ fn gather_and_integrate(
     let travel = crate::par::run_pieces(pieces, |(part, (((x, v), w), (force, torque)))| {
         let moving = PieceState { x, v, w, force, torque };
         let fixed = SphereConstants { mass, inertia, blocked, clump, x_at_build };
-        gather_piece_wide(GatherJob { first: part * per, moving, fixed, lists: (pairs, adj, walls, wall_adj), motion })
+        let lists = (pairs, adj, walls, wall_adj);
+        gather_piece_wide(GatherJob { first: part * per, moving, fixed, lists, touched, motion })
     });
     travel.into_iter().fold(Travel::default(), Travel::merge).largest()
 }
@@ -1022,6 +1068,8 @@ struct GatherJob<'j> {
     moving: PieceState<'j>,
     fixed: SphereConstants<'j>,
     lists: (&'j PairList, &'j Adjacency, &'j PairList, &'j Adjacency),
+    /// The contact stage's flags (see `ContactFlags`).
+    touched: &'j [AtomicBool],
     motion: &'j Motion,
 }
 
@@ -1063,7 +1111,7 @@ fn all_free(blocked: &[u8], clump: &[u32]) -> bool {
 /// [`gather_piece`], for spheres known to be `ALL_FREE` or not.
 #[inline(always)]
 fn gather_piece_as<const ALL_FREE: bool>(job: GatherJob<'_>) -> Travel {
-    let GatherJob { first, moving, fixed, lists, motion } = job;
+    let GatherJob { first, moving, fixed, lists, touched, motion } = job;
     let PieceState { x, v, w, force, torque } = moving;
     let SphereConstants { mass, inertia, blocked, clump, x_at_build } = fixed;
     let (pairs, adj, walls, wall_adj) = lists;
@@ -1072,7 +1120,11 @@ fn gather_piece_as<const ALL_FREE: bool>(job: GatherJob<'_>) -> Travel {
         let i = first + k;
         let mut fs = [0.0; 3];
         let mut ts = [0.0; 3];
-        for &e in adj.of(i) {
+        let in_contact = touched[i].load(Ordering::Relaxed);
+        if in_contact {
+            touched[i].store(false, Ordering::Relaxed);
+        }
+        for &e in if in_contact { adj.of(i) } else { &[] } {
             let p = (e >> 1) as usize;
             if !pairs.touching[p] {
                 continue;
@@ -1085,7 +1137,7 @@ fn gather_piece_as<const ALL_FREE: bool>(job: GatherJob<'_>) -> Travel {
                 ts = add(ts, pairs.torque_b[p]);
             }
         }
-        for &e in wall_adj.of(i) {
+        for &e in if in_contact { wall_adj.of(i) } else { &[] } {
             let p = (e >> 1) as usize;
             if walls.touching[p] {
                 fs = add(fs, walls.force[p]);
