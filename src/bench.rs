@@ -259,7 +259,7 @@ pub fn machine_reference(threads: &[usize], repeat: usize) -> Result<()> {
             Ok((t.elapsed().as_secs_f64(), ()))
         })?;
         for (t, speedup) in timed.iter().zip(same_work_per_thread_speedups(&timed)) {
-            println!("  {name:<11}  threads {}  {:>7.2} ms  speed-up {speedup:.2}x", t.threads, t.best * 1e3);
+            println!("  {name:<11}  threads {}  {:>7.2} ms{speedup}", t.threads, t.best * 1e3);
         }
     }
     Ok(())
@@ -340,7 +340,7 @@ pub fn dem(counts: &[usize], steps: usize, threads: &[usize], repeat: usize) -> 
     })?;
     for (t, speedup) in timed.iter().zip(same_work_per_thread_speedups(&timed)) {
         println!(
-            "the same RVE, one copy per thread (nothing shared)  threads {}  {:>7.4} ms per step  speed-up {speedup:.2}x",
+            "the same RVE, one copy per thread (nothing shared)  threads {}  {:>7.4} ms per step{speedup}",
             t.threads,
             t.best / steps as f64 * 1e3
         );
@@ -534,10 +534,14 @@ pub fn triaxial(threads: &[usize], axial_strain: f64) -> Result<()> {
     Ok(())
 }
 
-/// Speed-ups of runs giving every thread the same work: n t1 / tn (NaN without a 1-thread run).
-fn same_work_per_thread_speedups<T>(timed: &[Timed<T>]) -> Vec<f64> {
+/// Speed-ups of runs giving every thread the same work, `n t1 / tn`, as text to print (none
+/// without a 1-thread run to compare with).
+fn same_work_per_thread_speedups<T>(timed: &[Timed<T>]) -> Vec<String> {
     let one = timed.iter().find(|t| t.threads == 1).map(|t| t.best);
-    timed.iter().map(|t| one.map_or(f64::NAN, |one| t.threads as f64 * one / t.best)).collect()
+    timed
+        .iter()
+        .map(|t| one.map_or(String::new(), |one| format!("  speed-up {:.2}x", t.threads as f64 * one / t.best)))
+        .collect()
 }
 
 /// `rate` over the first rate measured (which `base` keeps).
