@@ -209,8 +209,8 @@ impl DemSim {
         !self.sequential && n >= MIN_SPHERES_IN_PARALLEL && crate::par::piece_count(n, MIN_SPHERES_PER_PIECE) > 1
     }
 
-    /// Per-sphere lists of pairs for the parallel gather; a sequential simulation (an RVE) sums
-    /// forces pair by pair instead and keeps none (less memory per RVE).
+    /// Per-sphere lists of pairs for the parallel gather; a simulation stepping sequentially
+    /// (see `in_parallel`) sums forces pair by pair instead and keeps none (less memory per RVE).
     pub(crate) fn build_adjacency(&mut self) {
         let n = self.spheres.len();
         (self.adjacency, self.wall_adjacency) = if !self.in_parallel() {
@@ -221,8 +221,9 @@ impl DemSim {
     }
 
     /// Sphere-sphere and sphere-wall contact forces of this step. In parallel, both lists are cut
-    /// into the same number of pieces, so one stage does them all; sequentially (an RVE), each
-    /// contact also adds its force and torques to its spheres as soon as it is computed.
+    /// into the same number of pieces, so one stage does them all; sequentially (see
+    /// `in_parallel`), each contact also adds its force and torques to its spheres as soon as it
+    /// is computed.
     fn contacts(&mut self, parallel: bool) {
         if parallel {
             self.piece_bounds.refresh(self.spheres.len(), self.rebuilds, &self.pairs, &self.wall_pairs);
@@ -734,9 +735,10 @@ impl<'a> PairChunk<'a> {
     }
 }
 
-/// Writes the law results of a chunk back to its pairs, with lever-arm torques; with `sums`
-/// (sequential stepping), also adds them to the spheres, in pair order as the parallel gather
-/// does. Wall pairs have no second sphere (`second` false).
+/// Writes the law results of a chunk back to its pairs, with lever-arm torques; stepping
+/// sequentially, also adds them to the spheres, in pair order as the parallel gather does;
+/// in parallel, flags the spheres in contact for the gather. Wall pairs have no second sphere
+/// (`second` false).
 #[inline(always)]
 fn write_back(c: &mut PairChunk<'_>, s: &Scratch, sums: &mut Collect<'_>, second: bool) {
     if s.rotation {
