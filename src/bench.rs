@@ -384,6 +384,7 @@ fn rves_alone(rve: &granite_core::dem::DemSim, copies: usize) -> Result<RvesAlon
     Ok(RvesAlone { wall: t.elapsed().as_secs_f64(), busy: sims.iter().map(|(_, busy)| busy).sum() })
 }
 
+/// What [`rves_alone`] measured: wall seconds, and seconds inside the RVE tasks over all threads.
 #[derive(Clone, Copy)]
 struct RvesAlone {
     wall: f64,
