@@ -197,24 +197,19 @@ impl DemSim {
         // count. The servo needs them every step; when the step runs in parallel, so do the
         // blocks, keeping both cores busy instead of leaving one to fall asleep while the other
         // sums alone.
-        let blocks: Vec<_> = (0..self.pairs.len())
-            .step_by(PAIRS_PER_BLOCK)
-            .map(|b| b..(b + PAIRS_PER_BLOCK).min(self.pairs.len()))
-            .collect();
-        let parts = if self.in_parallel() {
-            crate::par::run_pieces(blocks, |b| self.pair_sums(b))
-        } else {
-            blocks.into_iter().map(|b| self.pair_sums(b)).collect()
+        let len = self.pairs.len();
+        let blocks = (0..len).step_by(PAIRS_PER_BLOCK).map(|b| b..(b + PAIRS_PER_BLOCK).min(len));
+        let add = |(mut s, mut k): ([f64; 9], [f64; 3]), (ps, pk): ([f64; 9], [f64; 3])| {
+            s.iter_mut().zip(ps).for_each(|(a, b)| *a += b);
+            k.iter_mut().zip(pk).for_each(|(a, b)| *a += b);
+            (s, k)
         };
-        let (mut s, mut k) = ([0.0; 9], [0.0; 3]);
-        for (ps, pk) in parts {
-            for (a, b) in s.iter_mut().zip(ps) {
-                *a += b;
-            }
-            for (a, b) in k.iter_mut().zip(pk) {
-                *a += b;
-            }
-        }
+        let zero = ([0.0; 9], [0.0; 3]);
+        let (s, k) = if self.in_parallel() {
+            crate::par::run_pieces(blocks.collect(), |b| self.pair_sums(b)).into_iter().fold(zero, add)
+        } else {
+            blocks.map(|b| self.pair_sums(b)).fold(zero, add)
+        };
         let sym = |a: usize, b: usize| 0.5 * (s[3 * a + b] + s[3 * b + a]) / volume;
         ([sym(0, 0), sym(1, 1), sym(2, 2), sym(0, 1), sym(1, 2), sym(0, 2)], k.map(|v| v / volume))
     }

@@ -22,9 +22,9 @@ const CHUNK: usize = 128;
 /// simulation renumbered in space before it first runs.
 const MIN_SPHERES_PER_PIECE: usize = 128;
 const MIN_SPHERES_TO_ORDER: usize = 1024;
-/// Fewest spheres stepped in parallel: below, pieces are not regions of space (see
-/// `order_spheres_in_space`), and two threads were slower than one (periodic RVEs, best of 7:
-/// 1000 spheres 110 against 98 us a step; 1500: 121 against 148).
+/// Fewest spheres stepped in parallel (enough for several pieces): below, pieces are not
+/// regions of space (see `order_spheres_in_space`), and two threads were slower than one
+/// (periodic RVEs, best of 7: 1000 spheres 110 against 98 us a step; 1500: 121 against 148).
 const MIN_SPHERES_IN_PARALLEL: usize = MIN_SPHERES_TO_ORDER;
 /// Most per-pair parameters / history values a contact law may use.
 pub const MAX_PARAMS: usize = 16;
@@ -205,8 +205,7 @@ impl DemSim {
     /// computed: the same sums in the same order, without storing a torque per pair and
     /// gathering them again, which costs 5-40 % of a step on one thread.
     pub(crate) fn in_parallel(&self) -> bool {
-        let n = self.spheres.len();
-        !self.sequential && n >= MIN_SPHERES_IN_PARALLEL && crate::par::piece_count(n, MIN_SPHERES_PER_PIECE) > 1
+        !self.sequential && self.spheres.len() >= MIN_SPHERES_IN_PARALLEL && rayon::current_num_threads() > 1
     }
 
     /// Per-sphere lists of pairs for the parallel gather; a simulation stepping sequentially
@@ -1122,11 +1121,13 @@ fn gather_piece_as<const ALL_FREE: bool>(job: GatherJob<'_>) -> Travel {
         let i = first + k;
         let mut fs = [0.0; 3];
         let mut ts = [0.0; 3];
-        let in_contact = touched[i].load(Ordering::Relaxed);
-        if in_contact {
+        let (of_pairs, of_walls): (&[u32], &[u32]) = if touched[i].load(Ordering::Relaxed) {
             touched[i].store(false, Ordering::Relaxed);
-        }
-        for &e in if in_contact { adj.of(i) } else { &[] } {
+            (adj.of(i), wall_adj.of(i))
+        } else {
+            (&[], &[])
+        };
+        for &e in of_pairs {
             let p = (e >> 1) as usize;
             if !pairs.touching[p] {
                 continue;
@@ -1139,7 +1140,7 @@ fn gather_piece_as<const ALL_FREE: bool>(job: GatherJob<'_>) -> Travel {
                 ts = add(ts, pairs.torque_b[p]);
             }
         }
-        for &e in if in_contact { wall_adj.of(i) } else { &[] } {
+        for &e in of_walls {
             let p = (e >> 1) as usize;
             if walls.touching[p] {
                 fs = add(fs, walls.force[p]);
