@@ -21,8 +21,9 @@ pub struct PairList {
     pub force: Vec<Vec3>,
     /// Torques on `a` and on `b` (lever arms and contact moments included), kept only by
     /// simulations stepped in parallel, whose force gather reads them later (with the
-    /// integration, when neighbours' positions may already have moved); empty otherwise, and
-    /// `torque_b` also empty for wall pairs. Recomputed every step, so never saved.
+    /// integration, when neighbours' positions may already have moved): `torque_b` for pairs of
+    /// spheres (their first spheres' sums come summed from the contact stage), `torque_a` for
+    /// wall pairs; empty otherwise. Recomputed every step, so never saved.
     #[serde(skip)]
     pub torque_a: Vec<Vec3>,
     #[serde(skip)]
@@ -70,11 +71,11 @@ impl PairList {
         self.history = history;
     }
 
-    /// Keeps (or drops) the per-pair torques, those on second particles only if `second` (see
-    /// `torque_a`).
+    /// Keeps (or drops) the per-pair torques: on second particles for a list of pairs of
+    /// particles (`second`), else on first ones (see `torque_a`).
     pub fn keep_torques(&mut self, on: bool, second: bool) {
         let n = self.len();
-        for (torques, keep) in [(&mut self.torque_a, on), (&mut self.torque_b, on && second)] {
+        for (torques, keep) in [(&mut self.torque_a, on && !second), (&mut self.torque_b, on && second)] {
             if keep {
                 torques.resize(n, [0.0; 3]);
             } else {

@@ -55,6 +55,9 @@ pub struct DemSim {
     pub(crate) piece_bounds: crate::dem::step::PieceBounds,
     /// Which spheres the parallel contact stage found in contact (see `ContactFlags`).
     pub(crate) touched: crate::dem::step::ContactFlags,
+    /// Each sphere's sums over the pairs it is first in, left by the parallel contact stage for
+    /// the gather (see `FirstSums`).
+    pub(crate) first_sums: crate::dem::step::FirstSums,
     /// Positions (spheres) and wall positions when the candidate lists were built.
     pub(crate) x_at_build: Vec<Vec3>,
     pub(crate) walls_at_build: Vec<Vec3>,
@@ -116,6 +119,7 @@ impl DemSim {
             radius_min_at_build: f64::INFINITY,
             piece_bounds: Default::default(),
             touched: Default::default(),
+            first_sums: Default::default(),
             walls_at_build: Vec::new(),
             h_at_build: None,
             spare_pairs: PairList::default(),
@@ -260,6 +264,7 @@ impl DemSim {
             + pairs(&self.wall_pairs)
             + (self.adjacency.entries.capacity() + self.adjacency.start.capacity()) * 4
             + self.touched.capacity()
+            + self.first_sums.bytes()
             + self.clumps.len() * 200
     }
 

@@ -95,7 +95,8 @@ impl DemSim {
             integrate_wide((&mut self.spheres, &self.x_at_build, &motion))
         } else {
             let lists = (&self.pairs, &self.adjacency, &self.wall_pairs, &self.wall_adjacency);
-            gather_and_integrate(&mut self.spheres, lists, &self.touched.0, &self.x_at_build, &motion)
+            let from_contacts = (&self.touched.0[..], &self.first_sums);
+            gather_and_integrate(&mut self.spheres, lists, from_contacts, &self.x_at_build, &motion)
         };
         if !self.clumps.is_empty() {
             let clump_moved = integrate_clumps(
@@ -215,7 +216,9 @@ impl DemSim {
         (self.adjacency, self.wall_adjacency) = if !self.in_parallel() {
             (Adjacency::default(), Adjacency::default())
         } else {
-            (Adjacency::build(n, &self.pairs.a, Some(&self.pairs.b)), Adjacency::build(n, &self.wall_pairs.a, None))
+            // The gather reads a sphere's pairs as second sphere (and its walls); its pairs as
+            // first sphere come summed by the contact stage (`FirstSums`).
+            (Adjacency::build(n, &self.pairs.b, None), Adjacency::build(n, &self.wall_pairs.a, None))
         };
     }
 
@@ -249,17 +252,20 @@ impl DemSim {
             return;
         }
         self.touched.fit(x.len());
-        let touched = &self.touched.0[..];
+        self.first_sums.fit(x.len());
+        let flags = &self.touched.0[..];
         let bounds = &self.piece_bounds;
-        let pieces: Vec<_> = PairChunk::whole(&mut self.pairs, strides)
-            .cut_at(&bounds.sphere_pairs)
-            .into_iter()
-            .zip(PairChunk::whole(&mut self.wall_pairs, strides).cut_at(&bounds.wall_pairs))
-            .collect();
-        crate::par::run_pieces(pieces, |(sphere_pairs, wall_pairs)| {
+        let sphere_pieces = PairChunk::whole(&mut self.pairs, strides).cut_at(&bounds.sphere_pairs);
+        let wall_pieces = PairChunk::whole(&mut self.wall_pairs, strides).cut_at(&bounds.wall_pairs);
+        let first_pieces = self.first_sums.pieces(sphere_piece_size(x.len()));
+        // A piece's pairs are those whose first sphere is among its spheres.
+        debug_assert_eq!(sphere_pieces.len(), first_pieces.len());
+        let pieces: Vec<_> = sphere_pieces.into_iter().zip(wall_pieces).zip(first_pieces).collect();
+        crate::par::run_pieces(pieces, |((sphere_pairs, wall_pairs), first)| {
             let mut scratch = ScratchGuard::take();
             let scratch = &mut *scratch;
-            let sums = Collect::Touched(touched);
+            first.some.fill(false);
+            let sums = Collect::Touched { flags, first };
             contact_job_wide(ContactJob { sp: &sp, walls, sphere_pairs, wall_pairs, laws, dt, scratch, sums });
         });
     }
@@ -579,8 +585,65 @@ struct Motions<'a> {
 enum Collect<'a> {
     /// Sequential stepping: adds them to the spheres' sums as they come.
     Sums(Sums<'a>),
-    /// Parallel stepping: marks the spheres that have any, for the gather.
-    Touched(&'a [AtomicBool]),
+    /// Parallel stepping: sums each sphere's pairs as first sphere into `first` (a piece's own
+    /// spheres: pairs are sorted by their first sphere), and marks the spheres that are second
+    /// in a touching pair or touch a wall, for the gather.
+    Touched { flags: &'a [AtomicBool], first: FirstSumsPiece<'a> },
+}
+
+/// Each sphere's force and torque summed over the touching pairs in which it is the first
+/// sphere, in pair order, from zero: what the parallel contact stage leaves for the gather, which
+/// adds them after the sphere's pairs as second sphere and before its walls. Stepping
+/// sequentially makes the same sums: see `write_back`. Filled anew every step; a copy starts
+/// empty.
+#[derive(Debug, Default)]
+pub(crate) struct FirstSums {
+    force: Vec<Vec3>,
+    torque: Vec<Vec3>,
+    /// Whether the sphere is first in any touching pair this step (else its sums are stale).
+    some: Vec<bool>,
+}
+
+impl Clone for FirstSums {
+    fn clone(&self) -> FirstSums {
+        FirstSums::default()
+    }
+}
+
+impl FirstSums {
+    pub(crate) fn bytes(&self) -> usize {
+        (self.force.capacity() + self.torque.capacity()) * std::mem::size_of::<Vec3>() + self.some.capacity()
+    }
+
+    fn fit(&mut self, spheres: usize) {
+        if self.force.len() != spheres {
+            *self = FirstSums {
+                force: vec![[0.0; 3]; spheres],
+                torque: vec![[0.0; 3]; spheres],
+                some: vec![false; spheres],
+            };
+        }
+    }
+
+    /// The parts of `per` consecutive spheres, in order.
+    fn pieces(&mut self, per: usize) -> Vec<FirstSumsPiece<'_>> {
+        let FirstSums { force, torque, some } = self;
+        force
+            .chunks_mut(per)
+            .zip(torque.chunks_mut(per))
+            .zip(some.chunks_mut(per))
+            .enumerate()
+            .map(|(p, ((force, torque), some))| FirstSumsPiece { first: p * per, force, torque, some })
+            .collect()
+    }
+}
+
+/// The part of [`FirstSums`] of one parallel piece's spheres, from sphere `first`.
+struct FirstSumsPiece<'a> {
+    first: usize,
+    force: &'a mut [Vec3],
+    torque: &'a mut [Vec3],
+    some: &'a mut [bool],
 }
 
 /// Which spheres the parallel contact stage found in contact this step: set by the contact
@@ -734,24 +797,34 @@ impl<'a> PairChunk<'a> {
     }
 }
 
-/// Writes the law results of a chunk back to its pairs, with lever-arm torques; stepping
-/// sequentially, also adds them to the spheres, in pair order as the parallel gather does;
-/// in parallel, flags the spheres in contact for the gather. Wall pairs have no second sphere
+/// Writes the law results of a chunk back to its pairs, with lever-arm torques. Each sphere's
+/// forces are summed in this order, stepping sequentially or in parallel alike: its pairs as
+/// second sphere (in pair order, from zero), then its pairs as first sphere (summed apart, from
+/// zero, in pair order: `run`, carried from chunk to chunk), then its walls (in pair order).
+/// Stepping sequentially, the first two go straight into the spheres' sums (pairs come sorted
+/// by their first sphere, so all pairs of a sphere as second come before its own run) and the
+/// walls follow them; in parallel, a piece sums its own spheres' runs into `first` and flags the
+/// second spheres and those touching walls for the gather. Wall pairs have no second sphere
 /// (`second` false).
 #[inline(always)]
-fn write_back(c: &mut PairChunk<'_>, s: &Scratch, sums: &mut Collect<'_>, second: bool) {
+fn write_back(c: &mut PairChunk<'_>, s: &Scratch, sums: &mut Collect<'_>, second: bool, run: Run) -> Run {
     if s.rotation {
-        write_back_as::<true>(c, s, sums, second);
+        write_back_as::<true>(c, s, sums, second, run)
     } else {
-        write_back_as::<false>(c, s, sums, second);
+        write_back_as::<false>(c, s, sums, second, run)
     }
 }
 
 /// [`write_back`], with or without contact moments (without, the laws left them unset: adding
 /// zeros would only cost).
 #[inline(always)]
-fn write_back_as<const MOMENTS: bool>(c: &mut PairChunk<'_>, s: &Scratch, sums: &mut Collect<'_>, second: bool) {
-    let mut run = Run::NONE;
+fn write_back_as<const MOMENTS: bool>(
+    c: &mut PairChunk<'_>,
+    s: &Scratch,
+    sums: &mut Collect<'_>,
+    second: bool,
+    mut run: Run,
+) -> Run {
     for e in 0..s.len {
         let k = s.slot[e] as usize;
         let f = s.force[e];
@@ -764,48 +837,59 @@ fn write_back_as<const MOMENTS: bool>(c: &mut PairChunk<'_>, s: &Scratch, sums: 
             let m = s.moment[e];
             (torque_a, torque_b) = (add(torque_a, m), sub(torque_b, m));
         }
-        if !c.torque_a.is_empty() {
-            c.torque_a[k] = torque_a;
-            if second {
-                c.torque_b[k] = torque_b;
-            }
-        }
-        if let Collect::Touched(touched) = sums {
-            touched[c.a[k] as usize].store(true, Ordering::Relaxed);
-            if second {
-                touched[c.b[k] as usize].store(true, Ordering::Relaxed);
-            }
-        }
-        if let Collect::Sums(sums) = sums {
-            let i = c.a[k] as usize;
-            if i != run.sphere {
-                run.store(sums);
-                run = Run::load(sums, i);
-            }
-            run.force = add(run.force, f);
-            run.torque = add(run.torque, torque_a);
-            if second {
-                let j = c.b[k] as usize;
-                if j == i {
-                    // A sphere against its own periodic image.
-                    run.force = sub(run.force, f);
-                    run.torque = add(run.torque, torque_b);
+        let i = c.a[k] as usize;
+        match sums {
+            Collect::Touched { flags, first } => {
+                if second {
+                    if !c.torque_b.is_empty() {
+                        c.torque_b[k] = torque_b;
+                    }
+                    flags[c.b[k] as usize].store(true, Ordering::Relaxed);
+                    if i != run.sphere {
+                        run.finish_into(first);
+                        run = Run::start(i);
+                    }
+                    run.force = add(run.force, f);
+                    run.torque = add(run.torque, torque_a);
                 } else {
+                    if !c.torque_a.is_empty() {
+                        c.torque_a[k] = torque_a;
+                    }
+                    flags[i].store(true, Ordering::Relaxed);
+                }
+            }
+            Collect::Sums(sums) => {
+                if second {
+                    if i != run.sphere {
+                        run.finish_onto(sums);
+                        run = Run::start(i);
+                    }
+                    run.force = add(run.force, f);
+                    run.torque = add(run.torque, torque_a);
+                    // Also when j is i (a sphere against its own periodic image): its pairs as
+                    // second sphere are summed apart from its run.
+                    let j = c.b[k] as usize;
                     sums.force[j] = sub(sums.force[j], f);
                     sums.torque[j] = add(sums.torque[j], torque_b);
+                } else {
+                    // Walls: added to the sums one after another, kept in registers over a
+                    // sphere's pairs (they come sorted by sphere) and stored at the next sphere.
+                    if i != run.sphere {
+                        run.store(sums);
+                        run = Run::load(sums, i);
+                    }
+                    run.force = add(run.force, f);
+                    run.torque = add(run.torque, torque_a);
                 }
             }
         }
     }
-    if let Collect::Sums(sums) = sums {
-        run.store(sums);
-    }
+    run
 }
 
-/// The sums of the sphere whose pairs come one after another (pairs are sorted by their first
-/// sphere), kept in registers over its run: adding each force to memory would make every
-/// contact wait for the previous one's store. The same additions in the same order as adding
-/// to memory.
+/// A sphere's running force and torque sums over a run of consecutive pairs (pairs are sorted by
+/// their first sphere), kept in registers: adding each force to memory would make every contact
+/// wait for the previous one's store.
 struct Run {
     sphere: usize,
     force: Vec3,
@@ -816,6 +900,13 @@ impl Run {
     /// No sphere yet.
     const NONE: Run = Run { sphere: usize::MAX, force: [0.0; 3], torque: [0.0; 3] };
 
+    /// A sphere's sums as first sphere, from zero.
+    #[inline(always)]
+    fn start(sphere: usize) -> Run {
+        Run { sphere, force: [0.0; 3], torque: [0.0; 3] }
+    }
+
+    /// Continues the sums held in memory (the same additions as adding to memory).
     #[inline(always)]
     fn load(sums: &Sums<'_>, sphere: usize) -> Run {
         Run { sphere, force: sums.force[sphere], torque: sums.torque[sphere] }
@@ -826,6 +917,25 @@ impl Run {
         if self.sphere != usize::MAX {
             sums.force[self.sphere] = self.force;
             sums.torque[self.sphere] = self.torque;
+        }
+    }
+
+    /// Adds a finished run as first sphere to the sphere's sums as second sphere (see
+    /// `write_back`).
+    #[inline(always)]
+    fn finish_onto(&self, sums: &mut Sums<'_>) {
+        if self.sphere != usize::MAX {
+            sums.force[self.sphere] = add(sums.force[self.sphere], self.force);
+            sums.torque[self.sphere] = add(sums.torque[self.sphere], self.torque);
+        }
+    }
+
+    /// Leaves a finished run as first sphere for the parallel gather.
+    #[inline(always)]
+    fn finish_into(&self, first: &mut FirstSumsPiece<'_>) {
+        if self.sphere != usize::MAX {
+            let k = self.sphere - first.first;
+            (first.force[k], first.torque[k], first.some[k]) = (self.force, self.torque, true);
         }
     }
 }
@@ -885,6 +995,7 @@ fn sphere_contacts(
     let (x, v, w, radius) = (&sp.x[..spheres], &sp.v[..spheres], &sp.w[..spheres], &sp.radius[..spheres]);
     // Plain loops, no closures: all of this must inline into `contact_job_wide`'s AVX2 twin.
     let mut rest = Some(pairs);
+    let mut run = Run::NONE;
     while let Some(mut chunk) = PairChunk::next_chunk(&mut rest) {
         let (c, s) = (&mut chunk, &mut *scratch);
         // The count of touching contacts stays in a register: in `s.len` every contact would wait
@@ -934,7 +1045,11 @@ fn sphere_contacts(
         }
         s.len = len;
         s.run_laws(laws, dt, c.state());
-        write_back(c, s, sums, true);
+        run = write_back(c, s, sums, true, run);
+    }
+    match sums {
+        Collect::Sums(sums) => run.finish_onto(sums),
+        Collect::Touched { first, .. } => run.finish_into(first),
     }
 }
 
@@ -982,7 +1097,10 @@ fn wall_contacts(
         }
         s.len = len;
         s.run_laws(laws, dt, c.state());
-        write_back(c, s, sums, false);
+        let run = write_back(c, s, sums, false, Run::NONE);
+        if let Collect::Sums(sums) = sums {
+            run.store(sums);
+        }
     }
 }
 
@@ -1036,7 +1154,7 @@ fn sphere_piece_size(n: usize) -> usize {
 fn gather_and_integrate(
     sp: &mut Spheres,
     (pairs, adj, walls, wall_adj): (&PairList, &Adjacency, &PairList, &Adjacency),
-    touched: &[AtomicBool],
+    (touched, first_sums): (&[AtomicBool], &FirstSums),
     x_at_build: &[Vec3],
     motion: &Motion,
 ) -> f64 {
@@ -1057,7 +1175,7 @@ fn gather_and_integrate(
         let moving = PieceState { x, v, w, force, torque };
         let fixed = SphereConstants { mass, inertia, blocked, clump, x_at_build };
         let lists = (pairs, adj, walls, wall_adj);
-        gather_piece_wide(GatherJob { first: part * per, moving, fixed, lists, touched, motion })
+        gather_piece_wide(GatherJob { first: part * per, moving, fixed, lists, touched, first_sums, motion })
     });
     travel.into_iter().fold(Travel::default(), Travel::merge).largest()
 }
@@ -1069,8 +1187,9 @@ struct GatherJob<'j> {
     moving: PieceState<'j>,
     fixed: SphereConstants<'j>,
     lists: (&'j PairList, &'j Adjacency, &'j PairList, &'j Adjacency),
-    /// The contact stage's flags (see `ContactFlags`).
+    /// The contact stage's flags (see `ContactFlags`) and sums (see `FirstSums`).
     touched: &'j [AtomicBool],
+    first_sums: &'j FirstSums,
     motion: &'j Motion,
 }
 
@@ -1112,7 +1231,7 @@ fn all_free(blocked: &[u8], clump: &[u32]) -> bool {
 /// [`gather_piece`], for spheres known to be `ALL_FREE` or not.
 #[inline(always)]
 fn gather_piece_as<const ALL_FREE: bool>(job: GatherJob<'_>) -> Travel {
-    let GatherJob { first, moving, fixed, lists, touched, motion } = job;
+    let GatherJob { first, moving, fixed, lists, touched, first_sums, motion } = job;
     let PieceState { x, v, w, force, torque } = moving;
     let SphereConstants { mass, inertia, blocked, clump, x_at_build } = fixed;
     let (pairs, adj, walls, wall_adj) = lists;
@@ -1127,18 +1246,17 @@ fn gather_piece_as<const ALL_FREE: bool>(job: GatherJob<'_>) -> Travel {
         } else {
             (&[], &[])
         };
+        // In the order of `write_back`: pairs as second sphere, then as first, then walls.
         for &e in of_pairs {
             let p = (e >> 1) as usize;
-            if !pairs.touching[p] {
-                continue;
-            }
-            if e & 1 == 0 {
-                fs = add(fs, pairs.force[p]);
-                ts = add(ts, pairs.torque_a[p]);
-            } else {
+            if pairs.touching[p] {
                 fs = sub(fs, pairs.force[p]);
                 ts = add(ts, pairs.torque_b[p]);
             }
+        }
+        if first_sums.some[i] {
+            fs = add(fs, first_sums.force[i]);
+            ts = add(ts, first_sums.torque[i]);
         }
         for &e in of_walls {
             let p = (e >> 1) as usize;
