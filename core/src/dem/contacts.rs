@@ -164,8 +164,8 @@ impl PairList {
     }
 }
 
-/// For each particle, the pairs it belongs to, in increasing pair index: entries are
-/// `pair << 1 | side` with side 0 when the particle is `a`, 1 when it is `b`.
+/// For each particle, the pairs that list it in `of` (their first particles, or their second
+/// ones), in increasing pair index.
 #[derive(Debug, Clone, Default, serde::Serialize, serde::Deserialize)]
 pub struct Adjacency {
     pub start: Vec<u32>,
@@ -173,30 +173,20 @@ pub struct Adjacency {
 }
 
 impl Adjacency {
-    pub fn build(particles: usize, a: &[u32], b: Option<&[u32]>) -> Adjacency {
+    /// `of[k]` is the particle of pair `k` to list it under.
+    pub fn build(particles: usize, of: &[u32]) -> Adjacency {
         let mut start = vec![0u32; particles + 1];
-        for &i in a {
+        for &i in of {
             start[i as usize + 1] += 1;
-        }
-        if let Some(b) = b {
-            for &j in b {
-                start[j as usize + 1] += 1;
-            }
         }
         for i in 0..particles {
             start[i + 1] += start[i];
         }
         let mut fill = start.clone();
         let mut entries = vec![0u32; start[particles] as usize];
-        for k in 0..a.len() {
-            let i = a[k] as usize;
-            entries[fill[i] as usize] = (k as u32) << 1;
-            fill[i] += 1;
-            if let Some(b) = b {
-                let j = b[k] as usize;
-                entries[fill[j] as usize] = ((k as u32) << 1) | 1;
-                fill[j] += 1;
-            }
+        for (k, &i) in of.iter().enumerate() {
+            entries[fill[i as usize] as usize] = k as u32;
+            fill[i as usize] += 1;
         }
         Adjacency { start, entries }
     }

@@ -218,7 +218,7 @@ impl DemSim {
         } else {
             // The gather reads a sphere's pairs as second sphere (and its walls); its pairs as
             // first sphere come summed by the contact stage (`FirstSums`).
-            (Adjacency::build(n, &self.pairs.b, None), Adjacency::build(n, &self.wall_pairs.a, None))
+            (Adjacency::build(n, &self.pairs.b), Adjacency::build(n, &self.wall_pairs.a))
         };
     }
 
@@ -1247,8 +1247,8 @@ fn gather_piece_as<const ALL_FREE: bool>(job: GatherJob<'_>) -> Travel {
             (&[], &[])
         };
         // In the order of `write_back`: pairs as second sphere, then as first, then walls.
-        for &e in of_pairs {
-            let p = (e >> 1) as usize;
+        for &p in of_pairs {
+            let p = p as usize;
             if pairs.touching[p] {
                 fs = sub(fs, pairs.force[p]);
                 ts = add(ts, pairs.torque_b[p]);
@@ -1258,8 +1258,8 @@ fn gather_piece_as<const ALL_FREE: bool>(job: GatherJob<'_>) -> Travel {
             fs = add(fs, first_sums.force[i]);
             ts = add(ts, first_sums.torque[i]);
         }
-        for &e in of_walls {
-            let p = (e >> 1) as usize;
+        for &p in of_walls {
+            let p = p as usize;
             if walls.touching[p] {
                 fs = add(fs, walls.force[p]);
                 ts = add(ts, walls.torque_a[p]);
