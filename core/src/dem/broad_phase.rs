@@ -47,7 +47,7 @@ const FORWARD: [[i64; 3]; 13] = [
     [1, 1, 1],
 ];
 
-/// Candidates found in any order (each once, `a < b`), sorted by `(a, b, shift)` as
+/// Candidates found in any order (each once, `a > b`), sorted by `(a, b, shift)` as
 /// [`candidates_by_particle`] returns them: counted out by first particle, then each particle's
 /// few sorted.
 fn sorted_by_first(n: usize, blocks: Vec<Vec<Candidate>>) -> Vec<Candidate> {
@@ -108,7 +108,8 @@ fn by_blocks(n: usize, search: impl Fn(usize, &mut Vec<Candidate>) + Sync) -> Ve
         .collect()
 }
 
-/// Candidate pairs `(a, b)`, `a < b`, whose gap is below `skin`; sorted by `(a, b)`.
+/// Candidate pairs `(a, b)`, `a > b`, whose gap is below `skin`; sorted by `(a, b)`. The first
+/// sphere is the larger index: the step's force sums rely on it (see `step::write_back`).
 pub fn sphere_pairs(x: &[Vec3], radius: &[f64], skin: f64) -> Vec<Candidate> {
     let n = x.len();
     if n < 2 {
@@ -156,9 +157,9 @@ pub fn sphere_pairs(x: &[Vec3], radius: &[f64], skin: f64) -> Vec<Candidate> {
                 for (&j, &(xj, rj)) in items[run.clone()].iter().zip(&by_cell[run]) {
                     let d = [xj[0] - xi[0], xj[1] - xi[1], xj[2] - xi[2]];
                     let reach = ri + rj + skin;
-                    // One branch, rarely taken (`&`, not `&&`): a test of `j > i` first would
+                    // One branch, rarely taken (`&`, not `&&`): a test of `j < i` first would
                     // be mispredicted about every other particle.
-                    if (d[0] * d[0] + d[1] * d[1] + d[2] * d[2] < reach * reach) & (j as usize > i) {
+                    if (d[0] * d[0] + d[1] * d[1] + d[2] * d[2] < reach * reach) & ((j as usize) < i) {
                         found.push((i as u32, j, [0; 3]));
                     }
                 }
@@ -234,7 +235,7 @@ fn periodic_pairs(x: &[Vec3], radius: &[f64], (skin, cell): (f64, &PeriodicCell)
                 let j = j as usize;
                 let dv = [xj[0] - x[i][0], xj[1] - x[i][1], xj[2] - x[i][2]];
                 let r = radius[i] + rj + skin;
-                if (dv[0] * dv[0] + dv[1] * dv[1] + dv[2] * dv[2] < r * r) & (j > i) {
+                if (dv[0] * dv[0] + dv[1] * dv[1] + dv[2] * dv[2] < r * r) & (j < i) {
                     found.push((i as u32, j as u32, [0; 3]));
                 }
             }
@@ -251,11 +252,11 @@ fn periodic_pairs(x: &[Vec3], radius: &[f64], (skin, cell): (f64, &PeriodicCell)
                     let j = j as usize;
                     // From the first particle: j's image w seen from i, or i's image -w
                     // seen from j.
-                    let (from, to, image) = if j > i { (x[i], xj, ahead) } else { (xj, x[i], behind) };
+                    let (from, to, image) = if j < i { (x[i], xj, ahead) } else { (xj, x[i], behind) };
                     let dv = [to[0] + image[0] - from[0], to[1] + image[1] - from[1], to[2] + image[2] - from[2]];
                     let r = radius[i] + rj + skin;
                     if dv[0] * dv[0] + dv[1] * dv[1] + dv[2] * dv[2] < r * r {
-                        found.push(if j > i { (i as u32, j as u32, w) } else { (j as u32, i as u32, back) });
+                        found.push(if j < i { (i as u32, j as u32, w) } else { (j as u32, i as u32, back) });
                     }
                 }
             }
@@ -285,7 +286,7 @@ fn periodic_pairs(x: &[Vec3], radius: &[f64], (skin, cell): (f64, &PeriodicCell)
                         // One branch, rarely taken (`&`, not `&&`; see `sphere_pairs`). A
                         // particle never pairs with its own image: the cell is wider than twice
                         // the reach.
-                        if (dv[0] * dv[0] + dv[1] * dv[1] + dv[2] * dv[2] < r * r) & (j > i) {
+                        if (dv[0] * dv[0] + dv[1] * dv[1] + dv[2] * dv[2] < r * r) & (j < i) {
                             found.push((i as u32, j as u32, w));
                         }
                     }
@@ -346,7 +347,7 @@ mod tests {
         let fast = sphere_pairs(&x, &r, skin);
         let mut brute = Vec::new();
         for i in 0..x.len() {
-            for j in i + 1..x.len() {
+            for j in 0..i {
                 let d: f64 = (0..3).map(|a| (x[j][a] - x[i][a]).powi(2)).sum::<f64>().sqrt();
                 if d < r[i] + r[j] + skin {
                     brute.push((i as u32, j as u32, [0; 3]));

@@ -19,13 +19,10 @@ pub struct PairList {
     pub touching: Vec<bool>,
     /// Force on `a` (b gets the opposite).
     pub force: Vec<Vec3>,
-    /// Torques on `a` and on `b` (lever arms and contact moments included), kept only by
-    /// simulations stepped in parallel, whose force gather reads them later (with the
-    /// integration, when neighbours' positions may already have moved): `torque_b` for pairs of
-    /// spheres (their first spheres' sums come summed from the contact stage), `torque_a` for
-    /// wall pairs; empty otherwise. Recomputed every step, so never saved.
-    #[serde(skip)]
-    pub torque_a: Vec<Vec3>,
+    /// Torque on `b` (lever arm and contact moment included), kept only by a list of sphere
+    /// pairs stepped in parallel, and written only for pairs whose spheres lie in different
+    /// parallel pieces: the force gather adds them after the contact stage (see
+    /// `step::write_back`). Empty otherwise; recomputed every step, so never saved.
     #[serde(skip)]
     pub torque_b: Vec<Vec3>,
 }
@@ -62,25 +59,19 @@ impl PairList {
         self.law = permute(&self.law, &order);
         self.touching = permute(&self.touching, &order);
         self.force = permute(&self.force, &order);
-        for torques in [&mut self.torque_a, &mut self.torque_b] {
-            if !torques.is_empty() {
-                *torques = permute(torques, &order);
-            }
+        if !self.torque_b.is_empty() {
+            self.torque_b = permute(&self.torque_b, &order);
         }
         self.params = params;
         self.history = history;
     }
 
-    /// Keeps (or drops) the per-pair torques: on second particles for a list of pairs of
-    /// particles (`second`), else on first ones (see `torque_a`).
-    pub fn keep_torques(&mut self, on: bool, second: bool) {
-        let n = self.len();
-        for (torques, keep) in [(&mut self.torque_a, on && !second), (&mut self.torque_b, on && second)] {
-            if keep {
-                torques.resize(n, [0.0; 3]);
-            } else {
-                *torques = Vec::new();
-            }
+    /// Keeps (or drops) the per-pair torques on second spheres (see `torque_b`).
+    pub fn keep_torques(&mut self, on: bool) {
+        if on {
+            self.torque_b.resize(self.len(), [0.0; 3]);
+        } else {
+            self.torque_b = Vec::new();
         }
     }
 
@@ -94,7 +85,6 @@ impl PairList {
         self.history.shrink_to_fit();
         self.touching.shrink_to_fit();
         self.force.shrink_to_fit();
-        self.torque_a.shrink_to_fit();
         self.torque_b.shrink_to_fit();
     }
 
@@ -129,9 +119,8 @@ impl PairList {
         reuse(&mut next.touching, n);
         (next.param_stride, next.history_stride) = (param_stride, history_stride);
         // Forces are recomputed every step; torques only where the list keeps them.
-        let kept = |torques: &Vec<Vec3>| if torques.is_empty() { 0 } else { n };
-        let (torque_a_len, torque_b_len) = (kept(&self.torque_a), kept(&self.torque_b));
-        for (v, len) in [(&mut next.force, n), (&mut next.torque_a, torque_a_len), (&mut next.torque_b, torque_b_len)] {
+        let torque_b_len = if self.torque_b.is_empty() { 0 } else { n };
+        for (v, len) in [(&mut next.force, n), (&mut next.torque_b, torque_b_len)] {
             v.clear();
             v.resize(len, [0.0; 3]);
         }
@@ -165,19 +154,22 @@ impl PairList {
 }
 
 /// For each particle, the pairs that list it in `of` (their first particles, or their second
-/// ones), in increasing pair index.
-#[derive(Debug, Clone, Default, serde::Serialize, serde::Deserialize)]
+/// ones) and that are kept, in increasing pair index.
+#[derive(Debug, Clone, Default)]
 pub struct Adjacency {
     pub start: Vec<u32>,
     pub entries: Vec<u32>,
 }
 
 impl Adjacency {
-    /// `of[k]` is the particle of pair `k` to list it under.
-    pub fn build(particles: usize, of: &[u32]) -> Adjacency {
+    /// `of[k]` is the particle of pair `k` to list it under; pairs for which `keep(k)` is false
+    /// are left out.
+    pub fn build(particles: usize, of: &[u32], keep: impl Fn(usize) -> bool) -> Adjacency {
         let mut start = vec![0u32; particles + 1];
-        for &i in of {
-            start[i as usize + 1] += 1;
+        for (k, &i) in of.iter().enumerate() {
+            if keep(k) {
+                start[i as usize + 1] += 1;
+            }
         }
         for i in 0..particles {
             start[i + 1] += start[i];
@@ -185,13 +177,20 @@ impl Adjacency {
         let mut fill = start.clone();
         let mut entries = vec![0u32; start[particles] as usize];
         for (k, &i) in of.iter().enumerate() {
-            entries[fill[i as usize] as usize] = k as u32;
-            fill[i as usize] += 1;
+            if keep(k) {
+                entries[fill[i as usize] as usize] = k as u32;
+                fill[i as usize] += 1;
+            }
         }
         Adjacency { start, entries }
     }
 
     pub fn of(&self, particle: usize) -> &[u32] {
         &self.entries[self.start[particle] as usize..self.start[particle + 1] as usize]
+    }
+
+    /// Bytes held.
+    pub fn bytes(&self) -> usize {
+        (self.start.capacity() + self.entries.capacity()) * 4
     }
 }

@@ -2,7 +2,7 @@
 
 use crate::dem::cell::{CellControl, PeriodicCell};
 use crate::dem::clump::{mass_properties, Clumps};
-use crate::dem::contacts::{Adjacency, PairList};
+use crate::dem::contacts::PairList;
 use crate::dem::particles::Spheres;
 use crate::dem::walls::Wall;
 use crate::error::{GraniteError, Result};
@@ -49,15 +49,9 @@ pub struct DemSim {
     pub wall_pairs: PairList,
     /// Storage the next rebuild of `pairs` fills (the previous list's; see `PairList::merge`).
     pub(crate) spare_pairs: PairList,
-    pub(crate) adjacency: Adjacency,
-    pub(crate) wall_adjacency: Adjacency,
-    /// Where the parallel contact stage cuts the pair lists (found again after a rebuild).
+    /// Where the parallel stages cut the pair lists, and the pairs across the cuts (found again
+    /// after a rebuild).
     pub(crate) piece_bounds: crate::dem::step::PieceBounds,
-    /// Which spheres the parallel contact stage found in contact (see `ContactFlags`).
-    pub(crate) touched: crate::dem::step::ContactFlags,
-    /// Each sphere's sums over the pairs it is first in, left by the parallel contact stage for
-    /// the gather (see `FirstSums`).
-    pub(crate) first_sums: crate::dem::step::FirstSums,
     /// Positions (spheres) and wall positions when the candidate lists were built.
     pub(crate) x_at_build: Vec<Vec3>,
     pub(crate) walls_at_build: Vec<Vec3>,
@@ -112,14 +106,10 @@ impl DemSim {
             sequential: false,
             pairs: PairList::default(),
             wall_pairs: PairList::default(),
-            adjacency: Adjacency::default(),
-            wall_adjacency: Adjacency::default(),
             x_at_build: Vec::new(),
             radius_max_at_build: 0.0,
             radius_min_at_build: f64::INFINITY,
             piece_bounds: Default::default(),
-            touched: Default::default(),
-            first_sums: Default::default(),
             walls_at_build: Vec::new(),
             h_at_build: None,
             spare_pairs: PairList::default(),
@@ -254,7 +244,7 @@ impl DemSim {
             + std::mem::size_of::<u32>();
         let pairs = |p: &PairList| {
             p.a.capacity() * (2 * 4 + 12 + 2 + 1 + 24)
-                + (p.torque_a.capacity() + p.torque_b.capacity()) * 24
+                + p.torque_b.capacity() * 24
                 + (p.params.capacity() + p.history.capacity()) * 8
         };
         s.x.capacity() * per_sphere
@@ -262,9 +252,7 @@ impl DemSim {
             + pairs(&self.pairs)
             + pairs(&self.spare_pairs)
             + pairs(&self.wall_pairs)
-            + (self.adjacency.entries.capacity() + self.adjacency.start.capacity()) * 4
-            + self.touched.capacity()
-            + self.first_sums.bytes()
+            + self.piece_bounds.bytes()
             + self.clumps.len() * 200
     }
 

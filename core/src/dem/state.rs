@@ -14,7 +14,8 @@ use serde::{Deserialize, Serialize};
 use std::path::Path;
 
 const FORMAT: &str = "granite-dem-state";
-const VERSION: u32 = 1;
+/// 2: a pair of spheres is stored under its larger index (`a > b`); 1 stored it under the smaller.
+const VERSION: u32 = 2;
 
 /// A contact law by registry name and parameters (rebuilt from the registry on load).
 #[derive(Serialize, Deserialize)]
@@ -158,9 +159,9 @@ impl DemSim {
         sim.needs_rebuild = st.needs_rebuild;
         sim.rebuilds = st.rebuilds;
         check_consistent(&sim).map_err(|e| GraniteError::Other(format!("{source}: not a usable DEM state: {e}")))?;
-        // The per-sphere pair lists derive from the checked pair lists: built here, not saved
-        // (files that hold them from earlier versions still load; the field is ignored).
-        sim.build_adjacency();
+        // The parallel stages' cuts of the pair lists are found again on the first step, not saved
+        // (files that hold per-sphere pair lists from earlier versions still load; the field is
+        // ignored).
         // Reading grows arrays by doubling; copies hold just their contents (a loaded RVE is the
         // template of every material point's copy, so its reported memory should be theirs).
         sim.spheres = sim.spheres.clone();
@@ -275,6 +276,10 @@ fn check_consistent(sim: &DemSim) -> std::result::Result<(), String> {
         if (1..m).any(|k| key(k - 1) >= key(k)) {
             return Err(format!("{name}: not sorted by (first, second, image) without repeats"));
         }
+    }
+    // The force sums' order rests on it (see `step::write_back`).
+    if let Some(k) = (0..sim.pairs.len()).find(|&k| sim.pairs.a[k] <= sim.pairs.b[k]) {
+        return Err(format!("pairs: pair {k} has a first sphere not above its second"));
     }
     same_length("the positions at the last list build", "spheres", n, &[("x_at_build", sim.x_at_build.len())])?;
     same_length(

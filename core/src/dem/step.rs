@@ -13,7 +13,6 @@ use crate::ext::{ContactBatch, ContactLaw};
 use crate::math::{dot3, mat_vec, Vec3};
 use crate::simd::{self, add4, mat_vec4, mul4, narrow, scale4, sub4, widen, Lanes};
 use nalgebra::Matrix3;
-use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
 /// Pairs per law call.
@@ -63,8 +62,7 @@ impl DemSim {
             }
         }
         let parallel = self.in_parallel();
-        self.pairs.keep_torques(parallel, true);
-        self.wall_pairs.keep_torques(parallel, false);
+        self.pairs.keep_torques(parallel);
         self.contacts(parallel);
         // The contact network changes little between rebuilds: checking it then is enough.
         let check = match self.last_check {
@@ -73,10 +71,6 @@ impl DemSim {
         };
         if check {
             self.check_time_step()?;
-        }
-        if parallel && self.adjacency.start.len() != self.spheres.len() + 1 {
-            // Left unbuilt while the simulation ran sequentially (an RVE, or on one thread).
-            self.build_adjacency();
         }
         wall_forces(&mut self.walls, &self.wall_pairs);
         // The cell deforms over the step; particles follow its affine field on top of their own motion.
@@ -91,12 +85,11 @@ impl DemSim {
             _ => (None, 0.0),
         };
         let motion = Motion::new(self.gravity, self.damping, self.dt, affine);
+
         let mut moved = if !parallel {
             integrate_wide((&mut self.spheres, &self.x_at_build, &motion))
         } else {
-            let lists = (&self.pairs, &self.adjacency, &self.wall_pairs, &self.wall_adjacency);
-            let from_contacts = (&self.touched.0[..], &self.first_sums);
-            gather_and_integrate(&mut self.spheres, lists, from_contacts, &self.x_at_build, &motion)
+            gather_and_integrate(&mut self.spheres, &self.pairs, &self.piece_bounds, &self.x_at_build, &motion)
         };
         if !self.clumps.is_empty() {
             let clump_moved = integrate_clumps(
@@ -152,7 +145,8 @@ impl DemSim {
                     *s = shift_after_flip(&m, *s);
                 }
                 self.pairs.resort();
-                self.build_adjacency();
+                // The pairs across pieces are listed by pair index, which the sort changed.
+                self.piece_bounds = PieceBounds::default();
                 self.needs_rebuild = true;
             }
         }
@@ -191,53 +185,32 @@ impl DemSim {
     /// RVE is copied to every material point).
     pub fn set_sequential(&mut self, on: bool) {
         self.sequential = on;
-        self.pairs.keep_torques(!on, true);
-        self.wall_pairs.keep_torques(!on, false);
+        self.pairs.keep_torques(!on);
         if on {
             self.spare_pairs = PairList::default();
+            self.piece_bounds = PieceBounds::default();
             self.pairs.shrink_to_fit();
             self.wall_pairs.shrink_to_fit();
         }
-        self.build_adjacency();
     }
 
-    /// Whether this step runs its stages in parallel pieces. Otherwise (an RVE, one thread, or
-    /// too few spheres) each contact adds its force and torques to its spheres as soon as it is
-    /// computed: the same sums in the same order, without storing a torque per pair and
-    /// gathering them again, which costs 5-40 % of a step on one thread.
+    /// Whether this step runs its stages in parallel pieces of consecutive spheres (and their
+    /// pairs), rather than on the calling thread (an RVE, one thread, or too few spheres). Both
+    /// make the same sums in the same order (see `write_back`).
     pub(crate) fn in_parallel(&self) -> bool {
         !self.sequential && self.spheres.len() >= MIN_SPHERES_IN_PARALLEL && rayon::current_num_threads() > 1
     }
 
-    /// Per-sphere lists of pairs for the parallel gather; a simulation stepping sequentially
-    /// (see `in_parallel`) sums forces pair by pair instead and keeps none (less memory per RVE).
-    pub(crate) fn build_adjacency(&mut self) {
-        let n = self.spheres.len();
-        (self.adjacency, self.wall_adjacency) = if !self.in_parallel() {
-            (Adjacency::default(), Adjacency::default())
-        } else {
-            // The gather reads a sphere's pairs as second sphere (and its walls); its pairs as
-            // first sphere come summed by the contact stage (`FirstSums`).
-            (Adjacency::build(n, &self.pairs.b), Adjacency::build(n, &self.wall_pairs.a))
-        };
-    }
-
-    /// Sphere-sphere and sphere-wall contact forces of this step. In parallel, both lists are cut
-    /// into the same number of pieces, so one stage does them all; sequentially (see
-    /// `in_parallel`), each contact also adds its force and torques to its spheres as soon as it
-    /// is computed.
+    /// Sphere-sphere and sphere-wall contact forces of this step, summed into the spheres'
+    /// loads. In parallel, both lists are cut into the pieces of the spheres they start from, so
+    /// one stage does them all; the loads of pairs across pieces are left for the gather.
     fn contacts(&mut self, parallel: bool) {
-        if parallel {
-            self.piece_bounds.refresh(self.spheres.len(), self.rebuilds, &self.pairs, &self.wall_pairs);
-        }
         let strides = (self.pairs.param_stride, self.pairs.history_stride);
         let Spheres { x, v, w, radius, force, torque, .. } = &mut self.spheres;
         let rotation = self.laws.iter().any(|l| l.resists_rotation());
         let sp = Motions { x, v, w, radius, cell: self.cell.as_ref(), rotation };
         let (walls, laws, dt) = (&self.walls, &self.laws[..], self.dt);
         if !parallel {
-            force.iter_mut().for_each(|f| *f = [0.0; 3]);
-            torque.iter_mut().for_each(|t| *t = [0.0; 3]);
             let mut scratch = ScratchGuard::take();
             contact_job_wide(ContactJob {
                 sp: &sp,
@@ -247,26 +220,24 @@ impl DemSim {
                 laws,
                 dt,
                 scratch: &mut scratch,
-                sums: Collect::Sums(Sums { force, torque }),
+                loads: Loads { first: 0, force, torque },
             });
             return;
         }
-        self.touched.fit(x.len());
-        self.first_sums.fit(x.len());
-        let flags = &self.touched.0[..];
-        let bounds = &self.piece_bounds;
+        let bounds = &mut self.piece_bounds;
+        bounds.refresh(x.len(), self.rebuilds, &self.pairs, &self.wall_pairs);
+        let per = bounds.per;
         let sphere_pieces = PairChunk::whole(&mut self.pairs, strides).cut_at(&bounds.sphere_pairs);
         let wall_pieces = PairChunk::whole(&mut self.wall_pairs, strides).cut_at(&bounds.wall_pairs);
-        let first_pieces = self.first_sums.pieces(sphere_piece_size(x.len()));
+        let load_pieces = force.chunks_mut(per).zip(torque.chunks_mut(per)).enumerate();
         // A piece's pairs are those whose first sphere is among its spheres.
-        debug_assert_eq!(sphere_pieces.len(), first_pieces.len());
-        let pieces: Vec<_> = sphere_pieces.into_iter().zip(wall_pieces).zip(first_pieces).collect();
-        crate::par::run_pieces(pieces, |((sphere_pairs, wall_pairs), first)| {
+        debug_assert_eq!(sphere_pieces.len(), x.len().div_ceil(per));
+        let pieces: Vec<_> = sphere_pieces.into_iter().zip(wall_pieces).zip(load_pieces).collect();
+        crate::par::run_pieces(pieces, |((sphere_pairs, wall_pairs), (part, (force, torque)))| {
             let mut scratch = ScratchGuard::take();
             let scratch = &mut *scratch;
-            first.some.fill(false);
-            let sums = Collect::Touched { flags, first };
-            contact_job_wide(ContactJob { sp: &sp, walls, sphere_pairs, wall_pairs, laws, dt, scratch, sums });
+            let loads = Loads { first: part * per, force, torque };
+            contact_job_wide(ContactJob { sp: &sp, walls, sphere_pairs, wall_pairs, laws, dt, scratch, loads });
         });
     }
 
@@ -315,7 +286,8 @@ impl DemSim {
         Ok(())
     }
 
-    /// Numbers the spheres slab by slab across the longest side of the domain (then row by row),
+    /// Numbers the spheres slab by slab across the longest side of the domain (then row by row;
+    /// under gravity, across the longest side that is not the nearest to it),
     /// so that a parallel piece of spheres, and of the pairs sorted by their first sphere, is a
     /// region of space: its neighbours' data is mostly the piece's own, and stays in that core's
     /// cache. Done only before the first candidate lists exist (no pair to renumber), for systems
@@ -345,6 +317,13 @@ impl DemSim {
         }
         let mut axes = [0, 1, 2];
         axes.sort_by(|&a, &b| size[b].total_cmp(&size[a]));
+        // Under gravity the slabs stand along it, the axis nearest to it coming last: a settling
+        // heap then puts a share of its bottom, where the contacts are, in every piece, and its
+        // force chains, mostly along gravity, within pieces (a pair across pieces costs a store
+        // and a gather; see `write_back`).
+        let g = self.gravity;
+        let down = (0..3).max_by(|&a, &b| g[a].abs().total_cmp(&g[b].abs())).filter(|&a| g[a] != 0.0);
+        axes.sort_by_key(|&a| Some(a) == down);
         let cells = size.map(|l| ((l / reach) as u64).clamp(1, 1 << 20));
         let key = |f: &Vec3| axes.map(|a| ((f[a] * cells[a] as f64) as u64).min(cells[a] - 1));
         let mut order: Vec<usize> = (0..n).collect();
@@ -416,7 +395,7 @@ impl DemSim {
             self.spare_pairs = spare;
         }
         self.wall_pairs = wall_list;
-        self.build_adjacency();
+        self.piece_bounds = PieceBounds::default();
         self.x_at_build = self.spheres.x.clone();
         self.walls_at_build = self.walls.iter().map(|w| w.position).collect();
         self.h_at_build = self.cell.as_ref().map(|c| c.h);
@@ -581,101 +560,22 @@ struct Motions<'a> {
     rotation: bool,
 }
 
-/// What the contact stage makes of the forces besides storing them in the pairs.
-enum Collect<'a> {
-    /// Sequential stepping: adds them to the spheres' sums as they come.
-    Sums(Sums<'a>),
-    /// Parallel stepping: sums each sphere's pairs as first sphere into `first` (a piece's own
-    /// spheres: pairs are sorted by their first sphere), and marks the spheres that are second
-    /// in a touching pair or touch a wall, for the gather.
-    Touched { flags: &'a [AtomicBool], first: FirstSumsPiece<'a> },
-}
-
-/// Each sphere's force and torque summed over the touching pairs in which it is the first
-/// sphere, in pair order, from zero: what the parallel contact stage leaves for the gather, which
-/// adds them after the sphere's pairs as second sphere and before its walls. Stepping
-/// sequentially makes the same sums: see `write_back`. Filled anew every step; a copy starts
-/// empty.
-#[derive(Debug, Default)]
-pub(crate) struct FirstSums {
-    force: Vec<Vec3>,
-    torque: Vec<Vec3>,
-    /// Whether the sphere is first in any touching pair this step (else its sums are stale).
-    some: Vec<bool>,
-}
-
-impl Clone for FirstSums {
-    fn clone(&self) -> FirstSums {
-        FirstSums::default()
-    }
-}
-
-impl FirstSums {
-    pub(crate) fn bytes(&self) -> usize {
-        (self.force.capacity() + self.torque.capacity()) * std::mem::size_of::<Vec3>() + self.some.capacity()
-    }
-
-    fn fit(&mut self, spheres: usize) {
-        if self.force.len() != spheres {
-            *self = FirstSums {
-                force: vec![[0.0; 3]; spheres],
-                torque: vec![[0.0; 3]; spheres],
-                some: vec![false; spheres],
-            };
-        }
-    }
-
-    /// The parts of `per` consecutive spheres, in order.
-    fn pieces(&mut self, per: usize) -> Vec<FirstSumsPiece<'_>> {
-        let FirstSums { force, torque, some } = self;
-        force
-            .chunks_mut(per)
-            .zip(torque.chunks_mut(per))
-            .zip(some.chunks_mut(per))
-            .enumerate()
-            .map(|(p, ((force, torque), some))| FirstSumsPiece { first: p * per, force, torque, some })
-            .collect()
-    }
-}
-
-/// The part of [`FirstSums`] of one parallel piece's spheres, from sphere `first`.
-struct FirstSumsPiece<'a> {
+/// The loads (force and torque sums) of a run of consecutive spheres from sphere `first`, which
+/// the contact stage adds its forces to: all spheres when stepping sequentially, a parallel
+/// piece's otherwise.
+struct Loads<'a> {
     first: usize,
     force: &'a mut [Vec3],
     torque: &'a mut [Vec3],
-    some: &'a mut [bool],
 }
 
-/// Which spheres the parallel contact stage found in contact this step: set by the contact
-/// stage (the pieces of a pair's two spheres may both set a flag, only ever to true), read and
-/// cleared by the gather, which then skips the pair lists of spheres in no contact (most of a
-/// falling cloud). A flag left set (a step stopped between the stages) only costs a walk.
-#[derive(Debug, Default)]
-pub(crate) struct ContactFlags(Vec<AtomicBool>);
-
-impl Clone for ContactFlags {
-    /// Flags live within a step: a copy starts with none.
-    fn clone(&self) -> ContactFlags {
-        ContactFlags::default()
+impl Loads<'_> {
+    /// Where sphere `i` is in this run, if it is in it.
+    #[inline(always)]
+    fn index(&self, i: usize) -> Option<usize> {
+        let k = i.wrapping_sub(self.first);
+        (k < self.force.len()).then_some(k)
     }
-}
-
-impl ContactFlags {
-    pub(crate) fn capacity(&self) -> usize {
-        self.0.capacity()
-    }
-
-    fn fit(&mut self, spheres: usize) {
-        if self.0.len() != spheres {
-            self.0 = (0..spheres).map(|_| AtomicBool::new(false)).collect();
-        }
-    }
-}
-
-/// Per-sphere force and torque sums, filled pair by pair by a sequential contact stage.
-struct Sums<'a> {
-    force: &'a mut [Vec3],
-    torque: &'a mut [Vec3],
 }
 
 /// The per-pair arrays of a run of consecutive pairs of a pair list.
@@ -691,8 +591,7 @@ struct PairChunk<'a> {
     history: &'a mut [f64],
     touching: &'a mut [bool],
     force: &'a mut [Vec3],
-    torque_a: &'a mut [Vec3],
-    /// Both empty when the list keeps no torques (sequential stepping); `torque_b` also for walls.
+    /// Empty when the list keeps no torques (sequential stepping, walls).
     torque_b: &'a mut [Vec3],
 }
 
@@ -709,7 +608,6 @@ impl<'a> PairChunk<'a> {
             history: &mut p.history,
             touching: &mut p.touching,
             force: &mut p.force,
-            torque_a: &mut p.torque_a,
             torque_b: &mut p.torque_b,
         }
     }
@@ -733,25 +631,10 @@ impl<'a> PairChunk<'a> {
         let (history, history2) = self.history.split_at_mut(mid * hs);
         let (touching, touching2) = self.touching.split_at_mut(mid);
         let (force, force2) = self.force.split_at_mut(mid);
-        let kept = |torques: &[Vec3]| if torques.is_empty() { 0 } else { mid };
-        let (torque_a, torque_a2) = self.torque_a.split_at_mut(kept(self.torque_a));
-        let (torque_b, torque_b2) = self.torque_b.split_at_mut(kept(self.torque_b));
+        let (torque_b, torque_b2) = self.torque_b.split_at_mut(if self.torque_b.is_empty() { 0 } else { mid });
         let strides = self.strides;
         (
-            PairChunk {
-                first: self.first,
-                strides,
-                a,
-                b,
-                shift,
-                law,
-                params,
-                history,
-                touching,
-                force,
-                torque_a,
-                torque_b,
-            },
+            PairChunk { first: self.first, strides, a, b, shift, law, params, history, touching, force, torque_b },
             PairChunk {
                 first: self.first + mid,
                 strides,
@@ -763,7 +646,6 @@ impl<'a> PairChunk<'a> {
                 history: history2,
                 touching: touching2,
                 force: force2,
-                torque_a: torque_a2,
                 torque_b: torque_b2,
             },
         )
@@ -797,21 +679,26 @@ impl<'a> PairChunk<'a> {
     }
 }
 
-/// Writes the law results of a chunk back to its pairs, with lever-arm torques. Each sphere's
-/// forces are summed in this order, stepping sequentially or in parallel alike: its pairs as
-/// second sphere (in pair order, from zero), then its pairs as first sphere (summed apart, from
-/// zero, in pair order: `run`, carried from chunk to chunk), then its walls (in pair order).
-/// Stepping sequentially, the first two go straight into the spheres' sums (pairs come sorted
-/// by their first sphere, so all pairs of a sphere as second come before its own run) and the
-/// walls follow them; in parallel, a piece sums its own spheres' runs into `first` and flags the
-/// second spheres and those touching walls for the gather. Wall pairs have no second sphere
-/// (`second` false).
+/// Writes the law results of a chunk back to its pairs, with lever-arm torques, and adds them to
+/// the spheres' loads. Each sphere's loads are summed in one order on any number of threads:
+/// - its walls, in pair order, from zero (the contact stage does them first);
+/// - its sphere pairs in pair order: since pairs are sorted by their first sphere and the second
+///   is the smaller index, its own pairs come first; they are summed apart from zero (`run`,
+///   carried from chunk to chunk) and added when they end, and then each pair in which it is
+///   second is added in turn.
+///
+/// A parallel piece holds the pairs whose first sphere is among its spheres, and each piece's
+/// pairs come before those of the pieces after it. So the pairs of a sphere not yet added when
+/// its piece is done are those whose first sphere is in a later piece: the last ones in this
+/// order. Their torques on the second sphere are stored with the pairs, and the gather adds them
+/// after the contact stage (see `gather_piece`). Wall pairs have no second sphere (`second`
+/// false).
 #[inline(always)]
-fn write_back(c: &mut PairChunk<'_>, s: &Scratch, sums: &mut Collect<'_>, second: bool, run: Run) -> Run {
+fn write_back(c: &mut PairChunk<'_>, s: &Scratch, loads: &mut Loads<'_>, second: bool, run: Run) -> Run {
     if s.rotation {
-        write_back_as::<true>(c, s, sums, second, run)
+        write_back_as::<true>(c, s, loads, second, run)
     } else {
-        write_back_as::<false>(c, s, sums, second, run)
+        write_back_as::<false>(c, s, loads, second, run)
     }
 }
 
@@ -821,7 +708,7 @@ fn write_back(c: &mut PairChunk<'_>, s: &Scratch, sums: &mut Collect<'_>, second
 fn write_back_as<const MOMENTS: bool>(
     c: &mut PairChunk<'_>,
     s: &Scratch,
-    sums: &mut Collect<'_>,
+    loads: &mut Loads<'_>,
     second: bool,
     mut run: Run,
 ) -> Run {
@@ -838,49 +725,18 @@ fn write_back_as<const MOMENTS: bool>(
             (torque_a, torque_b) = (add(torque_a, m), sub(torque_b, m));
         }
         let i = c.a[k] as usize;
-        match sums {
-            Collect::Touched { flags, first } => {
-                if second {
-                    if !c.torque_b.is_empty() {
-                        c.torque_b[k] = torque_b;
-                    }
-                    flags[c.b[k] as usize].store(true, Ordering::Relaxed);
-                    if i != run.sphere {
-                        run.finish_into(first);
-                        run = Run::start(i);
-                    }
-                    run.force = add(run.force, f);
-                    run.torque = add(run.torque, torque_a);
-                } else {
-                    if !c.torque_a.is_empty() {
-                        c.torque_a[k] = torque_a;
-                    }
-                    flags[i].store(true, Ordering::Relaxed);
+        if i != run.sphere {
+            run = run.finish(loads, second, i);
+        }
+        run.force = add(run.force, f);
+        run.torque = add(run.torque, torque_a);
+        if second {
+            match loads.index(c.b[k] as usize) {
+                Some(j) => {
+                    loads.force[j] = sub(loads.force[j], f);
+                    loads.torque[j] = add(loads.torque[j], torque_b);
                 }
-            }
-            Collect::Sums(sums) => {
-                if second {
-                    if i != run.sphere {
-                        run.finish_onto(sums);
-                        run = Run::start(i);
-                    }
-                    run.force = add(run.force, f);
-                    run.torque = add(run.torque, torque_a);
-                    // Also when j is i (a sphere against its own periodic image): its pairs as
-                    // second sphere are summed apart from its run.
-                    let j = c.b[k] as usize;
-                    sums.force[j] = sub(sums.force[j], f);
-                    sums.torque[j] = add(sums.torque[j], torque_b);
-                } else {
-                    // Walls: added to the sums one after another, kept in registers over a
-                    // sphere's pairs (they come sorted by sphere) and stored at the next sphere.
-                    if i != run.sphere {
-                        run.store(sums);
-                        run = Run::load(sums, i);
-                    }
-                    run.force = add(run.force, f);
-                    run.torque = add(run.torque, torque_a);
-                }
+                None => c.torque_b[k] = torque_b,
             }
         }
     }
@@ -900,42 +756,26 @@ impl Run {
     /// No sphere yet.
     const NONE: Run = Run { sphere: usize::MAX, force: [0.0; 3], torque: [0.0; 3] };
 
-    /// A sphere's sums as first sphere, from zero.
+    /// Ends this run and starts `next`'s from zero: see [`Run::end`].
     #[inline(always)]
-    fn start(sphere: usize) -> Run {
-        Run { sphere, force: [0.0; 3], torque: [0.0; 3] }
+    fn finish(&self, loads: &mut Loads<'_>, add_on: bool, next: usize) -> Run {
+        self.end(loads, add_on);
+        Run { sphere: next, force: [0.0; 3], torque: [0.0; 3] }
     }
 
-    /// Continues the sums held in memory (the same additions as adding to memory).
+    /// Adds the sums to the sphere's loads (`add_on`: sphere pairs), or stores them (walls, which
+    /// come first: from zero either way, and a store does not wait for the loads to be read).
     #[inline(always)]
-    fn load(sums: &Sums<'_>, sphere: usize) -> Run {
-        Run { sphere, force: sums.force[sphere], torque: sums.torque[sphere] }
-    }
-
-    #[inline(always)]
-    fn store(&self, sums: &mut Sums<'_>) {
-        if self.sphere != usize::MAX {
-            sums.force[self.sphere] = self.force;
-            sums.torque[self.sphere] = self.torque;
+    fn end(&self, loads: &mut Loads<'_>, add_on: bool) {
+        if self.sphere == usize::MAX {
+            return;
         }
-    }
-
-    /// Adds a finished run as first sphere to the sphere's sums as second sphere (see
-    /// `write_back`).
-    #[inline(always)]
-    fn finish_onto(&self, sums: &mut Sums<'_>) {
-        if self.sphere != usize::MAX {
-            sums.force[self.sphere] = add(sums.force[self.sphere], self.force);
-            sums.torque[self.sphere] = add(sums.torque[self.sphere], self.torque);
-        }
-    }
-
-    /// Leaves a finished run as first sphere for the parallel gather.
-    #[inline(always)]
-    fn finish_into(&self, first: &mut FirstSumsPiece<'_>) {
-        if self.sphere != usize::MAX {
-            let k = self.sphere - first.first;
-            (first.force[k], first.torque[k], first.some[k]) = (self.force, self.torque, true);
+        let i = self.sphere - loads.first;
+        if add_on {
+            loads.force[i] = add(loads.force[i], self.force);
+            loads.torque[i] = add(loads.torque[i], self.torque);
+        } else {
+            (loads.force[i], loads.torque[i]) = (self.force, self.torque);
         }
     }
 }
@@ -949,9 +789,6 @@ fn open_contact(c: &mut PairChunk<'_>, k: usize) {
     }
     c.touching[k] = false;
     c.force[k] = [0.0; 3];
-    if let Some(t) = c.torque_a.get_mut(k) {
-        *t = [0.0; 3];
-    }
     let hs = c.strides.1;
     c.history[k * hs..(k + 1) * hs].iter_mut().for_each(|h| *h = 0.0);
 }
@@ -966,14 +803,18 @@ struct ContactJob<'j> {
     laws: &'j [Arc<dyn ContactLaw>],
     dt: f64,
     scratch: &'j mut Scratch,
-    sums: Collect<'j>,
+    /// The loads of the run's spheres (those the pairs start from), summed anew.
+    loads: Loads<'j>,
 }
 
 #[inline(always)]
 fn contact_job(job: ContactJob<'_>) {
-    let ContactJob { sp, walls, sphere_pairs, wall_pairs, laws, dt, scratch, mut sums } = job;
-    sphere_contacts(sp, sphere_pairs, (laws, dt), scratch, &mut sums);
-    wall_contacts(sp, walls, wall_pairs, (laws, dt), scratch, &mut sums);
+    let ContactJob { sp, walls, sphere_pairs, wall_pairs, laws, dt, scratch, mut loads } = job;
+    loads.force.fill([0.0; 3]);
+    loads.torque.fill([0.0; 3]);
+    // Walls first: see `write_back`.
+    wall_contacts(sp, walls, wall_pairs, (laws, dt), scratch, &mut loads);
+    sphere_contacts(sp, sphere_pairs, (laws, dt), scratch, &mut loads);
 }
 
 crate::wide_kernel!(fn contact_job_wide(job: ContactJob<'_>) => contact_job);
@@ -986,7 +827,7 @@ fn sphere_contacts(
     pairs: PairChunk<'_>,
     (laws, dt): (&[Arc<dyn ContactLaw>], f64),
     scratch: &mut Scratch,
-    sums: &mut Collect<'_>,
+    loads: &mut Loads<'_>,
 ) {
     let cell = sp.cell;
     let l = cell.map(|c| c.velocity_gradient);
@@ -1045,12 +886,9 @@ fn sphere_contacts(
         }
         s.len = len;
         s.run_laws(laws, dt, c.state());
-        run = write_back(c, s, sums, true, run);
+        run = write_back(c, s, loads, true, run);
     }
-    match sums {
-        Collect::Sums(sums) => run.finish_onto(sums),
-        Collect::Touched { first, .. } => run.finish_into(first),
-    }
+    run.end(loads, true);
 }
 
 /// Sphere-wall geometry and contact forces (the wall is particle 2, infinitely heavy).
@@ -1061,10 +899,11 @@ fn wall_contacts(
     pairs: PairChunk<'_>,
     (laws, dt): (&[Arc<dyn ContactLaw>], f64),
     scratch: &mut Scratch,
-    sums: &mut Collect<'_>,
+    loads: &mut Loads<'_>,
 ) {
     // Plain loops, no closures: all of this must inline into `contact_job_wide`'s AVX2 twin.
     let mut rest = Some(pairs);
+    let mut run = Run::NONE;
     while let Some(mut chunk) = PairChunk::next_chunk(&mut rest) {
         let (c, s) = (&mut chunk, &mut *scratch);
         let mut len = 0;
@@ -1097,11 +936,9 @@ fn wall_contacts(
         }
         s.len = len;
         s.run_laws(laws, dt, c.state());
-        let run = write_back(c, s, sums, false, Run::NONE);
-        if let Collect::Sums(sums) = sums {
-            run.store(sums);
-        }
+        run = write_back(c, s, loads, false, run);
     }
+    run.end(loads, false);
 }
 
 /// Branch vector from sphere `i` to sphere `j` (or its periodic image `shift`).
@@ -1114,17 +951,21 @@ pub(crate) fn branch(x: &[Vec3], i: usize, j: usize, shift: [i32; 3], cell: Opti
     add(sub(x[j], x[i]), image)
 }
 
-/// Where the parallel contact stage cuts the pair lists: its pieces follow the spheres' pieces
-/// of the force gather (pairs are sorted by their first sphere), so a worker mostly sums forces
-/// it computed itself, from its own cache. The cuts move only when the lists are rebuilt, so
-/// they are searched for then, not every step. Any cuts give the same forces (each pair's force
-/// is its own); these only decide which worker computes which pairs.
+/// Where the parallel stages cut the pair lists: at the pieces of consecutive spheres that their
+/// first spheres fall in (pairs are sorted by first sphere), so a worker mostly sums forces it
+/// computed itself, from its own cache; and, for each sphere, its pairs whose first sphere lies
+/// in another piece, whose loads the gather adds (see `write_back`). Found again when the lists
+/// change (a rebuild, a flip) or the piece size does; any cuts give the same forces.
 #[derive(Debug, Clone, Default)]
 pub(crate) struct PieceBounds {
     /// Sphere count, spheres per piece, rebuild count and list lengths the cuts were found for.
     key: (usize, usize, u64, usize, usize),
+    /// Spheres per piece (the last may hold fewer).
+    per: usize,
     sphere_pairs: Vec<usize>,
     wall_pairs: Vec<usize>,
+    /// Under each sphere, its pairs as second sphere whose first sphere is in a later piece.
+    across: Adjacency,
 }
 
 impl PieceBounds {
@@ -1137,7 +978,12 @@ impl PieceBounds {
         let cuts = |list: &PairList| -> Vec<usize> {
             (per..spheres).step_by(per).map(|s| list.a.partition_point(|&a| (a as usize) < s)).collect()
         };
-        *self = PieceBounds { key, sphere_pairs: cuts(pairs), wall_pairs: cuts(walls) };
+        let across = Adjacency::build(spheres, &pairs.b, |k| pairs.a[k] as usize / per != pairs.b[k] as usize / per);
+        *self = PieceBounds { key, per, sphere_pairs: cuts(pairs), wall_pairs: cuts(walls), across };
+    }
+
+    pub(crate) fn bytes(&self) -> usize {
+        (self.sphere_pairs.capacity() + self.wall_pairs.capacity()) * std::mem::size_of::<usize>() + self.across.bytes()
     }
 }
 
@@ -1147,14 +993,14 @@ fn sphere_piece_size(n: usize) -> usize {
     n.div_ceil(crate::par::piece_count(n, MIN_SPHERES_PER_PIECE)).max(1)
 }
 
-/// Sums each sphere's contact forces and torques, pair by pair in increasing pair index, and
-/// moves it, in parallel parts of consecutive spheres. A sphere reads only pair arrays and its
-/// own state (second torques are stored by the contact stage), so moving it while another part
-/// still sums is safe. Returns the largest displacement (see `integrate`).
+/// Adds to each sphere's loads those of its pairs across pieces (see `write_back`) and moves it,
+/// in the parallel pieces of the contact stage. A sphere reads only pair arrays and its own
+/// state, so moving it while another piece still sums is safe. Returns the largest displacement
+/// (see `integrate`).
 fn gather_and_integrate(
     sp: &mut Spheres,
-    (pairs, adj, walls, wall_adj): (&PairList, &Adjacency, &PairList, &Adjacency),
-    (touched, first_sums): (&[AtomicBool], &FirstSums),
+    pairs: &PairList,
+    bounds: &PieceBounds,
     x_at_build: &[Vec3],
     motion: &Motion,
 ) -> f64 {
@@ -1162,7 +1008,8 @@ fn gather_and_integrate(
     if x.is_empty() {
         return 0.0;
     }
-    let per = sphere_piece_size(x.len());
+    let per = bounds.per;
+    debug_assert_eq!(bounds.key.0, x.len(), "the pieces of the contact stage");
     let pieces: Vec<_> = x
         .chunks_mut(per)
         .zip(v.chunks_mut(per))
@@ -1174,22 +1021,19 @@ fn gather_and_integrate(
     let travel = crate::par::run_pieces(pieces, |(part, (((x, v), w), (force, torque)))| {
         let moving = PieceState { x, v, w, force, torque };
         let fixed = SphereConstants { mass, inertia, blocked, clump, x_at_build };
-        let lists = (pairs, adj, walls, wall_adj);
-        gather_piece_wide(GatherJob { first: part * per, moving, fixed, lists, touched, first_sums, motion })
+        gather_piece_wide(GatherJob { first: part * per, moving, fixed, pairs, across: &bounds.across, motion })
     });
     travel.into_iter().fold(Travel::default(), Travel::merge).largest()
 }
 
 /// One parallel piece of the force gather with the integration: consecutive spheres from
-/// `first`, their state (`moving`), what stays fixed over the step and the pair lists.
+/// `first`, their state (`moving`), what stays fixed over the step and the pairs across pieces.
 struct GatherJob<'j> {
     first: usize,
     moving: PieceState<'j>,
     fixed: SphereConstants<'j>,
-    lists: (&'j PairList, &'j Adjacency, &'j PairList, &'j Adjacency),
-    /// The contact stage's flags (see `ContactFlags`) and sums (see `FirstSums`).
-    touched: &'j [AtomicBool],
-    first_sums: &'j FirstSums,
+    pairs: &'j PairList,
+    across: &'j Adjacency,
     motion: &'j Motion,
 }
 
@@ -1213,11 +1057,22 @@ struct SphereConstants<'j> {
 
 #[inline(always)]
 fn gather_piece(job: GatherJob<'_>) -> Travel {
-    let range = job.first..job.first + job.moving.x.len();
-    if all_free(&job.fixed.blocked[range.clone()], &job.fixed.clump[range]) {
-        gather_piece_as::<true>(job)
+    let GatherJob { first, moving, fixed, pairs, across, motion } = job;
+    for (k, (fs, ts)) in moving.force.iter_mut().zip(moving.torque.iter_mut()).enumerate() {
+        // The last terms of `write_back`'s order.
+        for &p in across.of(first + k) {
+            let p = p as usize;
+            if pairs.touching[p] {
+                *fs = sub(*fs, pairs.force[p]);
+                *ts = add(*ts, pairs.torque_b[p]);
+            }
+        }
+    }
+    let range = first..first + moving.x.len();
+    if all_free(&fixed.blocked[range.clone()], &fixed.clump[range]) {
+        integrate_run::<true>(first, moving, &fixed, motion)
     } else {
-        gather_piece_as::<false>(job)
+        integrate_run::<false>(first, moving, &fixed, motion)
     }
 }
 
@@ -1226,56 +1081,6 @@ fn gather_piece(job: GatherJob<'_>) -> Travel {
 #[inline(always)]
 fn all_free(blocked: &[u8], clump: &[u32]) -> bool {
     blocked.iter().fold(0, |any, &b| any | b) == 0 && clump.iter().all(|&c| c == FREE)
-}
-
-/// [`gather_piece`], for spheres known to be `ALL_FREE` or not.
-#[inline(always)]
-fn gather_piece_as<const ALL_FREE: bool>(job: GatherJob<'_>) -> Travel {
-    let GatherJob { first, moving, fixed, lists, touched, first_sums, motion } = job;
-    let PieceState { x, v, w, force, torque } = moving;
-    let SphereConstants { mass, inertia, blocked, clump, x_at_build } = fixed;
-    let (pairs, adj, walls, wall_adj) = lists;
-    let mut travel = Travel::default();
-    for k in 0..x.len() {
-        let i = first + k;
-        let mut fs = [0.0; 3];
-        let mut ts = [0.0; 3];
-        let (of_pairs, of_walls): (&[u32], &[u32]) = if touched[i].load(Ordering::Relaxed) {
-            touched[i].store(false, Ordering::Relaxed);
-            (adj.of(i), wall_adj.of(i))
-        } else {
-            (&[], &[])
-        };
-        // In the order of `write_back`: pairs as second sphere, then as first, then walls.
-        for &p in of_pairs {
-            let p = p as usize;
-            if pairs.touching[p] {
-                fs = sub(fs, pairs.force[p]);
-                ts = add(ts, pairs.torque_b[p]);
-            }
-        }
-        if first_sums.some[i] {
-            fs = add(fs, first_sums.force[i]);
-            ts = add(ts, first_sums.torque[i]);
-        }
-        for &p in of_walls {
-            let p = p as usize;
-            if walls.touching[p] {
-                fs = add(fs, walls.force[p]);
-                ts = add(ts, walls.torque_a[p]);
-            }
-        }
-        force[k] = fs;
-        torque[k] = ts;
-        let (moved2, state) = motion.advance_as::<ALL_FREE>(
-            (&mut x[k], &mut v[k], &mut w[k]),
-            (mass[i], inertia[i], blocked[i], clump[i]),
-            (widen(fs), widen(ts)),
-            &x_at_build[i],
-        );
-        travel.record(moved2, state);
-    }
-    travel
 }
 
 crate::wide_kernel!(fn gather_piece_wide(job: GatherJob<'_>) -> Travel => gather_piece);
@@ -1308,10 +1113,26 @@ fn integrate(job: (&mut Spheres, &[Vec3], &Motion)) -> f64 {
 #[inline(always)]
 fn integrate_as<const ALL_FREE: bool>((sp, x_at_build, motion): (&mut Spheres, &[Vec3], &Motion)) -> f64 {
     let Spheres { x, v, w, mass, inertia, force, torque, blocked, clump, .. } = sp;
+    let moving = PieceState { x, v, w, force, torque };
+    let fixed = SphereConstants { mass, inertia, blocked, clump, x_at_build };
+    integrate_run::<ALL_FREE>(0, moving, &fixed, motion).largest()
+}
+
+/// Moves the spheres of a run that starts at sphere `first`, under the loads in its `force` and
+/// `torque`.
+#[inline(always)]
+fn integrate_run<const ALL_FREE: bool>(
+    first: usize,
+    PieceState { x, v, w, force, torque }: PieceState<'_>,
+    fixed: &SphereConstants<'_>,
+    motion: &Motion,
+) -> Travel {
     let n = x.len();
-    let (x, v, w, mass, inertia, force, torque) =
-        (&mut x[..n], &mut v[..n], &mut w[..n], &mass[..n], &inertia[..n], &force[..n], &torque[..n]);
-    let (blocked, clump, x_at_build) = (&blocked[..n], &clump[..n], &x_at_build[..n]);
+    let range = first..first + n;
+    let (v, w, force, torque) = (&mut v[..n], &mut w[..n], &force[..n], &torque[..n]);
+    let (mass, inertia) = (&fixed.mass[range.clone()], &fixed.inertia[range.clone()]);
+    let (blocked, clump, x_at_build) =
+        (&fixed.blocked[range.clone()], &fixed.clump[range.clone()], &fixed.x_at_build[range]);
     let mut travel = Travel::default();
     for i in 0..n {
         let (moved2, state) = motion.advance_as::<ALL_FREE>(
@@ -1322,7 +1143,7 @@ fn integrate_as<const ALL_FREE: bool>((sp, x_at_build, motion): (&mut Spheres, &
         );
         travel.record(moved2, state);
     }
-    travel.largest()
+    travel
 }
 
 crate::wide_kernel!(fn integrate_wide(job: (&mut Spheres, &[Vec3], &Motion)) -> f64 => integrate);
