@@ -1,5 +1,5 @@
 //! Candidate contact pairs with their per-pair parameters and history, kept across rebuilds of
-//! the candidate list, and the per-particle adjacency used to gather forces in a fixed order.
+//! the candidate list.
 
 use crate::math::Vec3;
 
@@ -19,12 +19,6 @@ pub struct PairList {
     pub touching: Vec<bool>,
     /// Force on `a` (b gets the opposite).
     pub force: Vec<Vec3>,
-    /// Torque on `b` (lever arm and contact moment included), kept only by a list of sphere
-    /// pairs stepped in parallel, and written only for pairs whose spheres lie in different
-    /// parallel pieces: the force gather adds them after the contact stage (see
-    /// `step::write_back`). Empty otherwise; recomputed every step, so never saved.
-    #[serde(skip)]
-    pub torque_b: Vec<Vec3>,
 }
 
 impl PairList {
@@ -59,20 +53,8 @@ impl PairList {
         self.law = permute(&self.law, &order);
         self.touching = permute(&self.touching, &order);
         self.force = permute(&self.force, &order);
-        if !self.torque_b.is_empty() {
-            self.torque_b = permute(&self.torque_b, &order);
-        }
         self.params = params;
         self.history = history;
-    }
-
-    /// Keeps (or drops) the per-pair torques on second spheres (see `torque_b`).
-    pub fn keep_torques(&mut self, on: bool) {
-        if on {
-            self.torque_b.resize(self.len(), [0.0; 3]);
-        } else {
-            self.torque_b = Vec::new();
-        }
     }
 
     /// Gives back storage beyond the pairs held (rebuilds grow it by doubling).
@@ -85,7 +67,6 @@ impl PairList {
         self.history.shrink_to_fit();
         self.touching.shrink_to_fit();
         self.force.shrink_to_fit();
-        self.torque_b.shrink_to_fit();
     }
 
     pub fn touching_count(&self) -> usize {
@@ -118,12 +99,9 @@ impl PairList {
         reuse(&mut next.history, n * history_stride);
         reuse(&mut next.touching, n);
         (next.param_stride, next.history_stride) = (param_stride, history_stride);
-        // Forces are recomputed every step; torques only where the list keeps them.
-        let torque_b_len = if self.torque_b.is_empty() { 0 } else { n };
-        for (v, len) in [(&mut next.force, n), (&mut next.torque_b, torque_b_len)] {
-            v.clear();
-            v.resize(len, [0.0; 3]);
-        }
+        // Forces are recomputed every step.
+        next.force.clear();
+        next.force.resize(n, [0.0; 3]);
         let same_layout = self.param_stride == param_stride && self.history_stride == history_stride;
         let mut old = 0;
         let mut scratch = vec![0.0; param_stride];
@@ -150,47 +128,5 @@ impl PairList {
             }
         }
         std::mem::swap(self, next);
-    }
-}
-
-/// For each particle, the pairs that list it in `of` (their first particles, or their second
-/// ones) and that are kept, in increasing pair index.
-#[derive(Debug, Clone, Default)]
-pub struct Adjacency {
-    pub start: Vec<u32>,
-    pub entries: Vec<u32>,
-}
-
-impl Adjacency {
-    /// `of[k]` is the particle of pair `k` to list it under; pairs for which `keep(k)` is false
-    /// are left out.
-    pub fn build(particles: usize, of: &[u32], keep: impl Fn(usize) -> bool) -> Adjacency {
-        let mut start = vec![0u32; particles + 1];
-        for (k, &i) in of.iter().enumerate() {
-            if keep(k) {
-                start[i as usize + 1] += 1;
-            }
-        }
-        for i in 0..particles {
-            start[i + 1] += start[i];
-        }
-        let mut fill = start.clone();
-        let mut entries = vec![0u32; start[particles] as usize];
-        for (k, &i) in of.iter().enumerate() {
-            if keep(k) {
-                entries[fill[i as usize] as usize] = k as u32;
-                fill[i as usize] += 1;
-            }
-        }
-        Adjacency { start, entries }
-    }
-
-    pub fn of(&self, particle: usize) -> &[u32] {
-        &self.entries[self.start[particle] as usize..self.start[particle + 1] as usize]
-    }
-
-    /// Bytes held.
-    pub fn bytes(&self) -> usize {
-        (self.start.capacity() + self.entries.capacity()) * 4
     }
 }

@@ -49,9 +49,10 @@ pub struct DemSim {
     pub wall_pairs: PairList,
     /// Storage the next rebuild of `pairs` fills (the previous list's; see `PairList::merge`).
     pub(crate) spare_pairs: PairList,
-    /// Where the parallel stages cut the pair lists, and the pairs across the cuts (found again
-    /// after a rebuild).
+    /// Where the parallel stages cut the pair lists (found again after a rebuild).
     pub(crate) piece_bounds: crate::dem::step::PieceBounds,
+    /// What each parallel contact piece leaves for the gather (see `Handover`).
+    pub(crate) handovers: crate::dem::step::Handovers,
     /// Positions (spheres) and wall positions when the candidate lists were built.
     pub(crate) x_at_build: Vec<Vec3>,
     pub(crate) walls_at_build: Vec<Vec3>,
@@ -109,6 +110,7 @@ impl DemSim {
             x_at_build: Vec::new(),
             radius_max_at_build: 0.0,
             radius_min_at_build: f64::INFINITY,
+            handovers: Default::default(),
             piece_bounds: Default::default(),
             walls_at_build: Vec::new(),
             h_at_build: None,
@@ -243,9 +245,7 @@ impl DemSim {
             + std::mem::size_of::<u8>()
             + std::mem::size_of::<u32>();
         let pairs = |p: &PairList| {
-            p.a.capacity() * (2 * 4 + 12 + 2 + 1 + 24)
-                + p.torque_b.capacity() * 24
-                + (p.params.capacity() + p.history.capacity()) * 8
+            p.a.capacity() * (2 * 4 + 12 + 2 + 1 + 24) + (p.params.capacity() + p.history.capacity()) * 8
         };
         s.x.capacity() * per_sphere
             + self.x_at_build.capacity() * 24
@@ -253,6 +253,7 @@ impl DemSim {
             + pairs(&self.spare_pairs)
             + pairs(&self.wall_pairs)
             + self.piece_bounds.bytes()
+            + self.handovers.bytes()
             + self.clumps.len() * 200
     }
 

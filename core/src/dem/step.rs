@@ -4,7 +4,7 @@
 use crate::dem::broad_phase::{periodic_sphere_pairs, sphere_pairs, wall_pairs};
 use crate::dem::cell::{shift_after_flip, AxisGoal, PeriodicCell};
 use crate::dem::clump::Clumps;
-use crate::dem::contacts::{Adjacency, PairList};
+use crate::dem::contacts::PairList;
 use crate::dem::particles::{dof, Spheres, FREE};
 use crate::dem::sim::DemSim;
 use crate::dem::walls::Wall;
@@ -62,7 +62,6 @@ impl DemSim {
             }
         }
         let parallel = self.in_parallel();
-        self.pairs.keep_torques(parallel);
         self.contacts(parallel);
         // The contact network changes little between rebuilds: checking it then is enough.
         let check = match self.last_check {
@@ -89,7 +88,7 @@ impl DemSim {
         let mut moved = if !parallel {
             integrate_wide((&mut self.spheres, &self.x_at_build, &motion))
         } else {
-            gather_and_integrate(&mut self.spheres, &self.pairs, &self.piece_bounds, &self.x_at_build, &motion)
+            gather_and_integrate(&mut self.spheres, &self.handovers, self.piece_bounds.per, &self.x_at_build, &motion)
         };
         if !self.clumps.is_empty() {
             let clump_moved = integrate_clumps(
@@ -145,8 +144,6 @@ impl DemSim {
                     *s = shift_after_flip(&m, *s);
                 }
                 self.pairs.resort();
-                // The pairs across pieces are listed by pair index, which the sort changed.
-                self.piece_bounds = PieceBounds::default();
                 self.needs_rebuild = true;
             }
         }
@@ -185,10 +182,10 @@ impl DemSim {
     /// RVE is copied to every material point).
     pub fn set_sequential(&mut self, on: bool) {
         self.sequential = on;
-        self.pairs.keep_torques(!on);
         if on {
             self.spare_pairs = PairList::default();
             self.piece_bounds = PieceBounds::default();
+            self.handovers = Handovers::default();
             self.pairs.shrink_to_fit();
             self.wall_pairs.shrink_to_fit();
         }
@@ -212,6 +209,7 @@ impl DemSim {
         let (walls, laws, dt) = (&self.walls, &self.laws[..], self.dt);
         if !parallel {
             let mut scratch = ScratchGuard::take();
+            let mut none = Handover::default();
             contact_job_wide(ContactJob {
                 sp: &sp,
                 walls,
@@ -220,8 +218,9 @@ impl DemSim {
                 laws,
                 dt,
                 scratch: &mut scratch,
-                loads: Loads { first: 0, force, torque },
+                loads: Loads { first: 0, force, torque, handover: &mut none },
             });
+            debug_assert!(none.sphere.is_empty(), "one piece holds every pair");
             return;
         }
         let bounds = &mut self.piece_bounds;
@@ -229,14 +228,16 @@ impl DemSim {
         let per = bounds.per;
         let sphere_pieces = PairChunk::whole(&mut self.pairs, strides).cut_at(&bounds.sphere_pairs);
         let wall_pieces = PairChunk::whole(&mut self.wall_pairs, strides).cut_at(&bounds.wall_pairs);
-        let load_pieces = force.chunks_mut(per).zip(torque.chunks_mut(per)).enumerate();
+        let handovers = self.handovers.fit(sphere_pieces.len());
+        let load_pieces = force.chunks_mut(per).zip(torque.chunks_mut(per)).zip(handovers).enumerate();
         // A piece's pairs are those whose first sphere is among its spheres.
         debug_assert_eq!(sphere_pieces.len(), x.len().div_ceil(per));
         let pieces: Vec<_> = sphere_pieces.into_iter().zip(wall_pieces).zip(load_pieces).collect();
-        crate::par::run_pieces(pieces, |((sphere_pairs, wall_pairs), (part, (force, torque)))| {
+        crate::par::run_pieces(pieces, |((sphere_pairs, wall_pairs), (part, ((force, torque), handover)))| {
             let mut scratch = ScratchGuard::take();
             let scratch = &mut *scratch;
-            let loads = Loads { first: part * per, force, torque };
+            handover.clear();
+            let loads = Loads { first: part * per, force, torque, handover };
             contact_job_wide(ContactJob { sp: &sp, walls, sphere_pairs, wall_pairs, laws, dt, scratch, loads });
         });
     }
@@ -395,7 +396,6 @@ impl DemSim {
             self.spare_pairs = spare;
         }
         self.wall_pairs = wall_list;
-        self.piece_bounds = PieceBounds::default();
         self.x_at_build = self.spheres.x.clone();
         self.walls_at_build = self.walls.iter().map(|w| w.position).collect();
         self.h_at_build = self.cell.as_ref().map(|c| c.h);
@@ -567,6 +567,56 @@ struct Loads<'a> {
     first: usize,
     force: &'a mut [Vec3],
     torque: &'a mut [Vec3],
+    /// The loads of pairs whose second sphere lies before `first`, for the gather.
+    handover: &'a mut Handover,
+}
+
+/// The loads of one parallel piece's touching pairs whose second sphere lies in an earlier piece,
+/// in pair order: the last terms of those spheres' sums (see `write_back`), which the contact
+/// stage hands over to the gather. Filled anew every step.
+#[derive(Debug, Default)]
+pub(crate) struct Handover {
+    sphere: Vec<u32>,
+    force: Vec<Vec3>,
+    torque: Vec<Vec3>,
+}
+
+impl Handover {
+    fn clear(&mut self) {
+        self.sphere.clear();
+        self.force.clear();
+        self.torque.clear();
+    }
+
+    #[inline(always)]
+    fn push(&mut self, sphere: usize, force: Vec3, torque: Vec3) {
+        self.sphere.push(sphere as u32);
+        self.force.push(force);
+        self.torque.push(torque);
+    }
+}
+
+/// One [`Handover`] per parallel piece, kept from step to step for their storage.
+#[derive(Debug, Default)]
+pub(crate) struct Handovers(Vec<Handover>);
+
+impl Clone for Handovers {
+    /// Handovers live within a step: a copy starts with none.
+    fn clone(&self) -> Handovers {
+        Handovers::default()
+    }
+}
+
+impl Handovers {
+    /// One per piece, in piece order.
+    fn fit(&mut self, pieces: usize) -> &mut [Handover] {
+        self.0.resize_with(pieces, Handover::default);
+        &mut self.0
+    }
+
+    pub(crate) fn bytes(&self) -> usize {
+        self.0.iter().map(|h| h.sphere.capacity() * 4 + (h.force.capacity() + h.torque.capacity()) * 24).sum()
+    }
 }
 
 impl Loads<'_> {
@@ -591,8 +641,6 @@ struct PairChunk<'a> {
     history: &'a mut [f64],
     touching: &'a mut [bool],
     force: &'a mut [Vec3],
-    /// Empty when the list keeps no torques (sequential stepping, walls).
-    torque_b: &'a mut [Vec3],
 }
 
 impl<'a> PairChunk<'a> {
@@ -608,7 +656,6 @@ impl<'a> PairChunk<'a> {
             history: &mut p.history,
             touching: &mut p.touching,
             force: &mut p.force,
-            torque_b: &mut p.torque_b,
         }
     }
 
@@ -631,10 +678,9 @@ impl<'a> PairChunk<'a> {
         let (history, history2) = self.history.split_at_mut(mid * hs);
         let (touching, touching2) = self.touching.split_at_mut(mid);
         let (force, force2) = self.force.split_at_mut(mid);
-        let (torque_b, torque_b2) = self.torque_b.split_at_mut(if self.torque_b.is_empty() { 0 } else { mid });
         let strides = self.strides;
         (
-            PairChunk { first: self.first, strides, a, b, shift, law, params, history, touching, force, torque_b },
+            PairChunk { first: self.first, strides, a, b, shift, law, params, history, touching, force },
             PairChunk {
                 first: self.first + mid,
                 strides,
@@ -646,7 +692,6 @@ impl<'a> PairChunk<'a> {
                 history: history2,
                 touching: touching2,
                 force: force2,
-                torque_b: torque_b2,
             },
         )
     }
@@ -690,9 +735,8 @@ impl<'a> PairChunk<'a> {
 /// A parallel piece holds the pairs whose first sphere is among its spheres, and each piece's
 /// pairs come before those of the pieces after it. So the pairs of a sphere not yet added when
 /// its piece is done are those whose first sphere is in a later piece: the last ones in this
-/// order. Their torques on the second sphere are stored with the pairs, and the gather adds them
-/// after the contact stage (see `gather_piece`). Wall pairs have no second sphere (`second`
-/// false).
+/// order. The piece hands their loads over to the gather, which adds them after the contact stage
+/// (see `gather_piece`). Wall pairs have no second sphere (`second` false).
 #[inline(always)]
 fn write_back(c: &mut PairChunk<'_>, s: &Scratch, loads: &mut Loads<'_>, second: bool, run: Run) -> Run {
     if s.rotation {
@@ -736,7 +780,7 @@ fn write_back_as<const MOMENTS: bool>(
                     loads.force[j] = sub(loads.force[j], f);
                     loads.torque[j] = add(loads.torque[j], torque_b);
                 }
-                None => c.torque_b[k] = torque_b,
+                None => loads.handover.push(c.b[k] as usize, f, torque_b),
             }
         }
     }
@@ -953,9 +997,8 @@ pub(crate) fn branch(x: &[Vec3], i: usize, j: usize, shift: [i32; 3], cell: Opti
 
 /// Where the parallel stages cut the pair lists: at the pieces of consecutive spheres that their
 /// first spheres fall in (pairs are sorted by first sphere), so a worker mostly sums forces it
-/// computed itself, from its own cache; and, for each sphere, its pairs whose first sphere lies
-/// in another piece, whose loads the gather adds (see `write_back`). Found again when the lists
-/// change (a rebuild, a flip) or the piece size does; any cuts give the same forces.
+/// computed itself, from its own cache. Found again when the lists are rebuilt or the piece size
+/// changes; any cuts give the same forces.
 #[derive(Debug, Clone, Default)]
 pub(crate) struct PieceBounds {
     /// Sphere count, spheres per piece, rebuild count and list lengths the cuts were found for.
@@ -964,8 +1007,6 @@ pub(crate) struct PieceBounds {
     per: usize,
     sphere_pairs: Vec<usize>,
     wall_pairs: Vec<usize>,
-    /// Under each sphere, its pairs as second sphere whose first sphere is in a later piece.
-    across: Adjacency,
 }
 
 impl PieceBounds {
@@ -978,12 +1019,11 @@ impl PieceBounds {
         let cuts = |list: &PairList| -> Vec<usize> {
             (per..spheres).step_by(per).map(|s| list.a.partition_point(|&a| (a as usize) < s)).collect()
         };
-        let across = Adjacency::build(spheres, &pairs.b, |k| pairs.a[k] as usize / per != pairs.b[k] as usize / per);
-        *self = PieceBounds { key, per, sphere_pairs: cuts(pairs), wall_pairs: cuts(walls), across };
+        *self = PieceBounds { key, per, sphere_pairs: cuts(pairs), wall_pairs: cuts(walls) };
     }
 
     pub(crate) fn bytes(&self) -> usize {
-        (self.sphere_pairs.capacity() + self.wall_pairs.capacity()) * std::mem::size_of::<usize>() + self.across.bytes()
+        (self.sphere_pairs.capacity() + self.wall_pairs.capacity()) * std::mem::size_of::<usize>()
     }
 }
 
@@ -993,14 +1033,14 @@ fn sphere_piece_size(n: usize) -> usize {
     n.div_ceil(crate::par::piece_count(n, MIN_SPHERES_PER_PIECE)).max(1)
 }
 
-/// Adds to each sphere's loads those of its pairs across pieces (see `write_back`) and moves it,
-/// in the parallel pieces of the contact stage. A sphere reads only pair arrays and its own
+/// Adds to each sphere's loads those that later pieces handed over (see `write_back`) and moves
+/// it, in the parallel pieces of the contact stage. A sphere reads only pair arrays and its own
 /// state, so moving it while another piece still sums is safe. Returns the largest displacement
 /// (see `integrate`).
 fn gather_and_integrate(
     sp: &mut Spheres,
-    pairs: &PairList,
-    bounds: &PieceBounds,
+    handovers: &Handovers,
+    per: usize,
     x_at_build: &[Vec3],
     motion: &Motion,
 ) -> f64 {
@@ -1008,8 +1048,7 @@ fn gather_and_integrate(
     if x.is_empty() {
         return 0.0;
     }
-    let per = bounds.per;
-    debug_assert_eq!(bounds.key.0, x.len(), "the pieces of the contact stage");
+    debug_assert_eq!(handovers.0.len(), x.len().div_ceil(per), "the pieces of the contact stage");
     let pieces: Vec<_> = x
         .chunks_mut(per)
         .zip(v.chunks_mut(per))
@@ -1021,19 +1060,20 @@ fn gather_and_integrate(
     let travel = crate::par::run_pieces(pieces, |(part, (((x, v), w), (force, torque)))| {
         let moving = PieceState { x, v, w, force, torque };
         let fixed = SphereConstants { mass, inertia, blocked, clump, x_at_build };
-        gather_piece_wide(GatherJob { first: part * per, moving, fixed, pairs, across: &bounds.across, motion })
+        let later = &handovers.0[part + 1..];
+        gather_piece_wide(GatherJob { first: part * per, moving, fixed, later, motion })
     });
     travel.into_iter().fold(Travel::default(), Travel::merge).largest()
 }
 
 /// One parallel piece of the force gather with the integration: consecutive spheres from
-/// `first`, their state (`moving`), what stays fixed over the step and the pairs across pieces.
+/// `first`, their state (`moving`), what stays fixed over the step and the handovers of the
+/// pieces after this one.
 struct GatherJob<'j> {
     first: usize,
     moving: PieceState<'j>,
     fixed: SphereConstants<'j>,
-    pairs: &'j PairList,
-    across: &'j Adjacency,
+    later: &'j [Handover],
     motion: &'j Motion,
 }
 
@@ -1057,18 +1097,19 @@ struct SphereConstants<'j> {
 
 #[inline(always)]
 fn gather_piece(job: GatherJob<'_>) -> Travel {
-    let GatherJob { first, moving, fixed, pairs, across, motion } = job;
-    for (k, (fs, ts)) in moving.force.iter_mut().zip(moving.torque.iter_mut()).enumerate() {
-        // The last terms of `write_back`'s order.
-        for &p in across.of(first + k) {
-            let p = p as usize;
-            if pairs.touching[p] {
-                *fs = sub(*fs, pairs.force[p]);
-                *ts = add(*ts, pairs.torque_b[p]);
+    let GatherJob { first, moving, fixed, later, motion } = job;
+    let range = first..first + moving.x.len();
+    // The last terms of `write_back`'s order: piece after piece, each in pair order.
+    for h in later {
+        for (e, &i) in h.sphere.iter().enumerate() {
+            let i = i as usize;
+            if range.contains(&i) {
+                let k = i - first;
+                moving.force[k] = sub(moving.force[k], h.force[e]);
+                moving.torque[k] = add(moving.torque[k], h.torque[e]);
             }
         }
     }
-    let range = first..first + moving.x.len();
     if all_free(&fixed.blocked[range.clone()], &fixed.clump[range]) {
         integrate_run::<true>(first, moving, &fixed, motion)
     } else {
