@@ -220,7 +220,7 @@ impl DemSim {
                 scratch: &mut scratch,
                 loads: Loads { first: 0, force, torque, handover: &mut none },
             });
-            debug_assert!(none.sphere.is_empty(), "one piece holds every pair");
+            debug_assert!(none.0.is_empty(), "one piece holds every pair");
             return;
         }
         let bounds = &mut self.piece_bounds;
@@ -236,9 +236,10 @@ impl DemSim {
         crate::par::run_pieces(pieces, |((sphere_pairs, wall_pairs), (part, ((force, torque), handover)))| {
             let mut scratch = ScratchGuard::take();
             let scratch = &mut *scratch;
-            handover.clear();
-            let loads = Loads { first: part * per, force, torque, handover };
+            handover.0.clear();
+            let loads = Loads { first: part * per, force, torque, handover: &mut *handover };
             contact_job_wide(ContactJob { sp: &sp, walls, sphere_pairs, wall_pairs, laws, dt, scratch, loads });
+            handover.0.sort_by_key(|e| e.0);
         });
     }
 
@@ -571,28 +572,25 @@ struct Loads<'a> {
     handover: &'a mut Handover,
 }
 
-/// The loads of one parallel piece's touching pairs whose second sphere lies in an earlier piece,
-/// in pair order: the last terms of those spheres' sums (see `write_back`), which the contact
-/// stage hands over to the gather. Filled anew every step.
+/// The loads (second sphere, force on the first sphere, torque on the second) of one parallel
+/// piece's touching pairs whose second sphere lies in an earlier piece: the last terms of those
+/// spheres' sums (see `write_back`), which the contact stage hands over to the gather. Filled
+/// in pair order, then sorted by sphere, stably (a sphere's loads stay in pair order), so that
+/// each earlier piece finds its spheres' loads in one run. Filled anew every step.
 #[derive(Debug, Default)]
-pub(crate) struct Handover {
-    sphere: Vec<u32>,
-    force: Vec<Vec3>,
-    torque: Vec<Vec3>,
-}
+pub(crate) struct Handover(Vec<(u32, Vec3, Vec3)>);
 
 impl Handover {
-    fn clear(&mut self) {
-        self.sphere.clear();
-        self.force.clear();
-        self.torque.clear();
-    }
-
     #[inline(always)]
     fn push(&mut self, sphere: usize, force: Vec3, torque: Vec3) {
-        self.sphere.push(sphere as u32);
-        self.force.push(force);
-        self.torque.push(torque);
+        self.0.push((sphere as u32, force, torque));
+    }
+
+    /// The loads of the spheres in `range`, in sphere order, each sphere's in pair order.
+    fn of(&self, range: std::ops::Range<usize>) -> &[(u32, Vec3, Vec3)] {
+        let from = self.0.partition_point(|e| (e.0 as usize) < range.start);
+        let to = self.0.partition_point(|e| (e.0 as usize) < range.end);
+        &self.0[from..to]
     }
 }
 
@@ -615,7 +613,7 @@ impl Handovers {
     }
 
     pub(crate) fn bytes(&self) -> usize {
-        self.0.iter().map(|h| h.sphere.capacity() * 4 + (h.force.capacity() + h.torque.capacity()) * 24).sum()
+        self.0.iter().map(|h| h.0.capacity() * std::mem::size_of::<(u32, Vec3, Vec3)>()).sum()
     }
 }
 
@@ -1101,13 +1099,10 @@ fn gather_piece(job: GatherJob<'_>) -> Travel {
     let range = first..first + moving.x.len();
     // The last terms of `write_back`'s order: piece after piece, each in pair order.
     for h in later {
-        for (e, &i) in h.sphere.iter().enumerate() {
-            let i = i as usize;
-            if range.contains(&i) {
-                let k = i - first;
-                moving.force[k] = sub(moving.force[k], h.force[e]);
-                moving.torque[k] = add(moving.torque[k], h.torque[e]);
-            }
+        for &(i, f, t) in h.of(range.clone()) {
+            let k = i as usize - first;
+            moving.force[k] = sub(moving.force[k], f);
+            moving.torque[k] = add(moving.torque[k], t);
         }
     }
     if all_free(&fixed.blocked[range.clone()], &fixed.clump[range]) {
