@@ -37,8 +37,17 @@ fn inconsistent_state_files_are_refused_with_the_reason() {
     assert!(!good["pairs"]["a"].as_array().unwrap().is_empty(), "the state must hold pairs");
     let (n, laws, materials) = (sim.spheres.len(), sim.laws.len(), sim.materials.len());
     type Edit = fn(&mut serde_json::Value);
-    let edits: [(&str, Edit, String); 6] = [
+    let edits: [(&str, Edit, String); 7] = [
         ("pair index", |s| s["pairs"]["b"][0] = 99_999.into(), format!("an index beyond the {n} spheres")),
+        (
+            // The force sums' order rests on pairs stored under their larger index.
+            "pair orientation",
+            |s| {
+                let (a, b) = (s["pairs"]["a"][0].clone(), s["pairs"]["b"][0].clone());
+                (s["pairs"]["a"][0], s["pairs"]["b"][0]) = (b, a);
+            },
+            "pair 0 has a first sphere not above its second".into(),
+        ),
         (
             "short radii",
             |s| drop(s["spheres"]["radius"].as_array_mut().unwrap().pop()),

@@ -84,7 +84,6 @@ impl DemSim {
             _ => (None, 0.0),
         };
         let motion = Motion::new(self.gravity, self.damping, self.dt, affine);
-
         let mut moved = if !parallel {
             integrate_wide((&mut self.spheres, &self.x_at_build, &motion))
         } else {
