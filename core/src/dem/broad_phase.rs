@@ -326,6 +326,16 @@ pub fn wall_pairs(x: &[Vec3], radius: &[f64], walls: &[Wall], skin: f64) -> Vec<
     })
 }
 
+/// Reproducible uniform numbers in [0, 1) for the tests (a 64-bit linear congruential generator).
+#[cfg(test)]
+fn uniform(seed: u64) -> impl FnMut() -> f64 {
+    let mut s = seed;
+    move || {
+        s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        (s >> 11) as f64 / (1u64 << 53) as f64
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -334,11 +344,7 @@ mod tests {
     fn cell_list_finds_the_same_pairs_as_brute_force() {
         let mut x = Vec::new();
         let mut r = Vec::new();
-        let mut s = 12345u64;
-        let mut next = || {
-            s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-            (s >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut next = uniform(12345);
         for _ in 0..600 {
             x.push([next(), next() * 0.5, next() * 2.0]);
             r.push(0.02 + 0.02 * next());
@@ -360,11 +366,7 @@ mod tests {
 
     #[test]
     fn wall_candidates_are_the_spheres_within_the_skin_of_each_wall() {
-        let mut s = 777u64;
-        let mut next = || {
-            s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-            (s >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut next = uniform(777);
         let x: Vec<Vec3> = (0..2000).map(|_| [2.4 * next() - 1.2, 2.4 * next() - 1.2, 2.4 * next() - 0.2]).collect();
         let r: Vec<f64> = (0..x.len()).map(|_| 0.02 + 0.03 * next()).collect();
         let plane = |normal: Vec3, at: Vec3| Wall::new("", WallShape::Plane { normal }, at, 0);
@@ -405,11 +407,7 @@ mod periodic_tests {
     fn half_stencil_finds_exactly_the_whole_stencils_pairs() {
         // A dense random packing in a sheared, compressed cell, with cells enough for the half
         // stencil on every axis.
-        let mut seed = 12345u64;
-        let mut next = || {
-            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-            (seed >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut next = uniform(12345);
         let mut cell = PeriodicCell::new_box([0.2, 0.25, 0.3]);
         cell.h[(0, 1)] = 0.07;
         cell.h[(2, 0)] = -0.04;

@@ -159,9 +159,7 @@ impl DemSim {
         sim.needs_rebuild = st.needs_rebuild;
         sim.rebuilds = st.rebuilds;
         check_consistent(&sim).map_err(|e| GraniteError::Other(format!("{source}: not a usable DEM state: {e}")))?;
-        // The parallel stages' cuts of the pair lists are found again on the first step, not saved
-        // (files that hold per-sphere pair lists from earlier versions still load; the field is
-        // ignored).
+        // The parallel stages' cuts of the pair lists are found again on the first step, not saved.
         // Reading grows arrays by doubling; copies hold just their contents (a loaded RVE is the
         // template of every material point's copy, so its reported memory should be theirs).
         sim.spheres = sim.spheres.clone();
