@@ -17,9 +17,12 @@ use std::sync::Arc;
 
 /// Pairs per law call.
 const CHUNK: usize = 128;
-/// Fewest spheres worth a parallel piece of their own (with their pairs), and fewest in a
-/// simulation renumbered in space before it first runs.
-const MIN_SPHERES_PER_PIECE: usize = 128;
+/// Fewest spheres worth a parallel piece of their own (with their pairs). Every piece boundary
+/// hands loads over (see `write_back`), which costs instructions: the 1500-sphere periodic RVE,
+/// stepped in the pieces of two workers on one thread, took 11 % more instructions than the
+/// sequential pass in 11 pieces of 128 spheres or more, and 6.6 % in 4 of 375 (callgrind).
+const MIN_SPHERES_PER_PIECE: usize = 375;
+/// Fewest spheres in a simulation renumbered in space before it first runs.
 const MIN_SPHERES_TO_ORDER: usize = 1024;
 /// Fewest spheres stepped in parallel (enough for several pieces): below, pieces are not
 /// regions of space (see `order_spheres_in_space`), and two threads were slower than one
@@ -87,7 +90,8 @@ impl DemSim {
         let mut moved = if !parallel {
             integrate_wide((&mut self.spheres, &self.x_at_build, &motion))
         } else {
-            gather_and_integrate(&mut self.spheres, &self.handovers, self.piece_bounds.per, &self.x_at_build, &motion)
+            let starts = &self.piece_bounds.spheres;
+            gather_and_integrate(&mut self.spheres, &self.handovers, starts, &self.x_at_build, &motion)
         };
         if !self.clumps.is_empty() {
             let clump_moved = integrate_clumps(
@@ -217,28 +221,28 @@ impl DemSim {
                 laws,
                 dt,
                 scratch: &mut scratch,
-                loads: Loads { first: 0, force, torque, handover: &mut none },
+                loads: Loads { first: 0, force, torque, handover: &mut none, starts: &[] },
             });
             debug_assert!(none.0.is_empty(), "one piece holds every pair");
             return;
         }
         let bounds = &mut self.piece_bounds;
         bounds.refresh(x.len(), self.rebuilds, &self.pairs, &self.wall_pairs);
-        let per = bounds.per;
+        let starts = &bounds.spheres[..];
         let sphere_pieces = PairChunk::whole(&mut self.pairs, strides).cut_at(&bounds.sphere_pairs);
         let wall_pieces = PairChunk::whole(&mut self.wall_pairs, strides).cut_at(&bounds.wall_pairs);
         let handovers = self.handovers.fit(sphere_pieces.len());
-        let load_pieces = force.chunks_mut(per).zip(torque.chunks_mut(per)).zip(handovers).enumerate();
+        let load_pieces =
+            pieces_of(force, starts).into_iter().zip(pieces_of(torque, starts)).zip(handovers).enumerate();
         // A piece's pairs are those whose first sphere is among its spheres.
-        debug_assert_eq!(sphere_pieces.len(), x.len().div_ceil(per));
+        debug_assert_eq!(sphere_pieces.len(), starts.len() - 1);
         let pieces: Vec<_> = sphere_pieces.into_iter().zip(wall_pieces).zip(load_pieces).collect();
         crate::par::run_pieces(pieces, |((sphere_pairs, wall_pairs), (part, ((force, torque), handover)))| {
             let mut scratch = ScratchGuard::take();
             let scratch = &mut *scratch;
-            handover.0.clear();
-            let loads = Loads { first: part * per, force, torque, handover: &mut *handover };
+            handover.start(part);
+            let loads = Loads { first: starts[part], force, torque, handover: &mut *handover, starts };
             contact_job_wide(ContactJob { sp: &sp, walls, sphere_pairs, wall_pairs, laws, dt, scratch, loads });
-            handover.0.sort_by_key(|e| e.0);
         });
     }
 
@@ -569,27 +573,36 @@ struct Loads<'a> {
     torque: &'a mut [Vec3],
     /// The loads of pairs whose second sphere lies before `first`, for the gather.
     handover: &'a mut Handover,
+    /// The first sphere of each parallel piece, then the sphere count: where to hand loads over.
+    starts: &'a [usize],
 }
 
-/// The loads (second sphere, force on the first sphere, torque on the second) of one parallel
-/// piece's touching pairs whose second sphere lies in an earlier piece: the last terms of those
-/// spheres' sums (see `write_back`), which the contact stage hands over to the gather. Filled
-/// in pair order, then sorted by sphere, stably (a sphere's loads stay in pair order), so that
-/// each earlier piece finds its spheres' loads in one run. Filled anew every step.
+/// A load handed over: the second sphere of a pair, the force on its first sphere and the torque
+/// on the second.
+type HandedLoad = (u32, Vec3, Vec3);
+
+/// The loads of one parallel piece's touching pairs whose second sphere lies in an earlier piece:
+/// the last terms of those spheres' sums (see `write_back`), which the contact stage hands over
+/// to the gather. One list per earlier piece, each in pair order (so each sphere's loads are),
+/// which that piece's gather reads whole. Filled anew every step.
 #[derive(Debug, Default)]
-pub(crate) struct Handover(Vec<(u32, Vec3, Vec3)>);
+pub(crate) struct Handover(Vec<Vec<HandedLoad>>);
 
 impl Handover {
-    #[inline(always)]
-    fn push(&mut self, sphere: usize, force: Vec3, torque: Vec3) {
-        self.0.push((sphere as u32, force, torque));
+    /// Empties the lists for the `earlier` pieces before this one, keeping their storage.
+    fn start(&mut self, earlier: usize) {
+        self.0.resize_with(earlier, Vec::new);
+        self.0.iter_mut().for_each(Vec::clear);
     }
 
-    /// The loads of the spheres in `range`, in sphere order, each sphere's in pair order.
-    fn of(&self, range: std::ops::Range<usize>) -> &[(u32, Vec3, Vec3)] {
-        let from = self.0.partition_point(|e| (e.0 as usize) < range.start);
-        let to = self.0.partition_point(|e| (e.0 as usize) < range.end);
-        &self.0[from..to]
+    #[inline(always)]
+    fn push(&mut self, piece: usize, sphere: usize, force: Vec3, torque: Vec3) {
+        self.0[piece].push((sphere as u32, force, torque));
+    }
+
+    /// The loads handed over to the spheres of `piece`, in pair order.
+    fn to(&self, piece: usize) -> &[HandedLoad] {
+        &self.0[piece]
     }
 }
 
@@ -612,7 +625,9 @@ impl Handovers {
     }
 
     pub(crate) fn bytes(&self) -> usize {
-        self.0.iter().map(|h| h.0.capacity() * std::mem::size_of::<(u32, Vec3, Vec3)>()).sum()
+        let lists = self.0.iter().flat_map(|h| &h.0);
+        lists.map(|l| l.capacity() * std::mem::size_of::<HandedLoad>()).sum::<usize>()
+            + self.0.iter().map(|h| h.0.capacity() * std::mem::size_of::<Vec<HandedLoad>>()).sum::<usize>()
     }
 }
 
@@ -622,6 +637,13 @@ impl Loads<'_> {
     fn index(&self, i: usize) -> Option<usize> {
         let k = i.wrapping_sub(self.first);
         (k < self.force.len()).then_some(k)
+    }
+
+    /// Hands a pair's loads over to its second sphere `j`, which lies in an earlier piece.
+    #[inline(always)]
+    fn hand_over(&mut self, j: usize, force: Vec3, torque: Vec3) {
+        let piece = self.starts.partition_point(|&s| s <= j) - 1;
+        self.handover.push(piece, j, force, torque);
     }
 }
 
@@ -777,7 +799,7 @@ fn write_back_as<const MOMENTS: bool>(
                     loads.force[j] = sub(loads.force[j], f);
                     loads.torque[j] = add(loads.torque[j], torque_b);
                 }
-                None => loads.handover.push(c.b[k] as usize, f, torque_b),
+                None => loads.hand_over(c.b[k] as usize, f, torque_b),
             }
         }
     }
@@ -992,42 +1014,73 @@ pub(crate) fn branch(x: &[Vec3], i: usize, j: usize, shift: [i32; 3], cell: Opti
     add(sub(x[j], x[i]), image)
 }
 
-/// Where the parallel stages cut the pair lists: at the pieces of consecutive spheres that their
-/// first spheres fall in (pairs are sorted by first sphere), so a worker mostly sums forces it
-/// computed itself, from its own cache. Found again when the lists are rebuilt or the piece size
-/// changes; any cuts give the same forces.
+/// Where the parallel stages cut the spheres and the pair lists: into pieces of consecutive
+/// spheres with the pairs whose first spheres fall in them (pairs are sorted by first sphere), so
+/// a worker mostly sums forces it computed itself, from its own cache. Found again when the lists
+/// are rebuilt or the piece count changes; any cuts give the same forces.
 #[derive(Debug, Clone, Default)]
 pub(crate) struct PieceBounds {
-    /// Sphere count, spheres per piece, rebuild count and list lengths the cuts were found for.
+    /// Sphere count, piece count, rebuild count and list lengths the cuts were found for.
     key: (usize, usize, u64, usize, usize),
-    /// Spheres per piece (the last may hold fewer).
-    per: usize,
+    /// The first sphere of each piece, then the sphere count.
+    spheres: Vec<usize>,
+    /// Where each piece after the first starts in the pair lists.
     sphere_pairs: Vec<usize>,
     wall_pairs: Vec<usize>,
 }
 
 impl PieceBounds {
+    /// Cuts into pieces of about equal work, counting one unit for each candidate pair (the
+    /// contact stage) and one for each sphere (the gather): in the periodic RVE a candidate costs
+    /// about 220 instructions a step and a sphere's integration 160 (callgrind). Equal sphere
+    /// counts would not do: in a periodic cell the pairs that wrap round it belong to the last
+    /// spheres (pairs are stored under their larger index), whose piece then held twice the
+    /// pairs of the first.
     fn refresh(&mut self, spheres: usize, rebuilds: u64, pairs: &PairList, walls: &PairList) {
-        let per = sphere_piece_size(spheres);
-        let key = (spheres, per, rebuilds, pairs.len(), walls.len());
+        let pieces = crate::par::piece_count(spheres, MIN_SPHERES_PER_PIECE);
+        let key = (spheres, pieces, rebuilds, pairs.len(), walls.len());
         if key == self.key {
             return;
         }
-        let cuts = |list: &PairList| -> Vec<usize> {
-            (per..spheres).step_by(per).map(|s| list.a.partition_point(|&a| (a as usize) < s)).collect()
-        };
-        *self = PieceBounds { key, per, sphere_pairs: cuts(pairs), wall_pairs: cuts(walls) };
+        let before = |list: &PairList, s: usize| list.a.partition_point(|&a| (a as usize) < s);
+        let work_before = |s: usize| s + before(pairs, s) + before(walls, s);
+        let total = work_before(spheres);
+        let mut starts = vec![0];
+        for k in 1..pieces {
+            let target = total * k / pieces;
+            // The first sphere with at least `target` work before it (work grows with s).
+            let (mut lo, mut hi) = (*starts.last().unwrap_or(&0), spheres);
+            while lo < hi {
+                let mid = (lo + hi) / 2;
+                if work_before(mid) < target {
+                    lo = mid + 1;
+                } else {
+                    hi = mid;
+                }
+            }
+            starts.push(lo);
+        }
+        starts.push(spheres);
+        let cuts = |list: &PairList| starts[1..pieces].iter().map(|&s| before(list, s)).collect();
+        *self = PieceBounds { key, sphere_pairs: cuts(pairs), wall_pairs: cuts(walls), spheres: starts };
     }
 
     pub(crate) fn bytes(&self) -> usize {
-        (self.sphere_pairs.capacity() + self.wall_pairs.capacity()) * std::mem::size_of::<usize>()
+        (self.spheres.capacity() + self.sphere_pairs.capacity() + self.wall_pairs.capacity())
+            * std::mem::size_of::<usize>()
     }
 }
 
-/// Spheres per parallel piece of `n`: small enough for idle workers to find pieces to take over,
-/// large enough that claiming one costs little next to its work.
-fn sphere_piece_size(n: usize) -> usize {
-    n.div_ceil(crate::par::piece_count(n, MIN_SPHERES_PER_PIECE)).max(1)
+/// `data` cut into the pieces that start at `starts` (then its length).
+fn pieces_of<'a, T>(mut data: &'a mut [T], starts: &[usize]) -> Vec<&'a mut [T]> {
+    starts
+        .windows(2)
+        .map(|w| {
+            let (piece, rest) = std::mem::take(&mut data).split_at_mut(w[1] - w[0]);
+            data = rest;
+            piece
+        })
+        .collect()
 }
 
 /// Adds to each sphere's loads those that later pieces handed over (see `write_back`) and moves
@@ -1037,7 +1090,7 @@ fn sphere_piece_size(n: usize) -> usize {
 fn gather_and_integrate(
     sp: &mut Spheres,
     handovers: &Handovers,
-    per: usize,
+    starts: &[usize],
     x_at_build: &[Vec3],
     motion: &Motion,
 ) -> f64 {
@@ -1045,12 +1098,12 @@ fn gather_and_integrate(
     if x.is_empty() {
         return 0.0;
     }
-    debug_assert_eq!(handovers.0.len(), x.len().div_ceil(per), "the pieces of the contact stage");
-    let pieces: Vec<_> = x
-        .chunks_mut(per)
-        .zip(v.chunks_mut(per))
-        .zip(w.chunks_mut(per))
-        .zip(force.chunks_mut(per).zip(torque.chunks_mut(per)))
+    debug_assert_eq!(handovers.0.len(), starts.len() - 1, "the pieces of the contact stage");
+    let pieces: Vec<_> = pieces_of(x, starts)
+        .into_iter()
+        .zip(pieces_of(v, starts))
+        .zip(pieces_of(w, starts))
+        .zip(pieces_of(force, starts).into_iter().zip(pieces_of(torque, starts)))
         .enumerate()
         .collect();
     let (mass, inertia, blocked, clump) = (&mass[..], &inertia[..], &blocked[..], &clump[..]);
@@ -1058,16 +1111,17 @@ fn gather_and_integrate(
         let moving = PieceState { x, v, w, force, torque };
         let fixed = SphereConstants { mass, inertia, blocked, clump, x_at_build };
         let later = &handovers.0[part + 1..];
-        gather_piece_wide(GatherJob { first: part * per, moving, fixed, later, motion })
+        gather_piece_wide(GatherJob { first: starts[part], part, moving, fixed, later, motion })
     });
     travel.into_iter().fold(Travel::default(), Travel::merge).largest()
 }
 
 /// One parallel piece of the force gather with the integration: consecutive spheres from
-/// `first`, their state (`moving`), what stays fixed over the step and the handovers of the
-/// pieces after this one.
+/// `first` (piece number `part`), their state (`moving`), what stays fixed over the step and the
+/// handovers of the pieces after this one.
 struct GatherJob<'j> {
     first: usize,
+    part: usize,
     moving: PieceState<'j>,
     fixed: SphereConstants<'j>,
     later: &'j [Handover],
@@ -1094,11 +1148,11 @@ struct SphereConstants<'j> {
 
 #[inline(always)]
 fn gather_piece(job: GatherJob<'_>) -> Travel {
-    let GatherJob { first, moving, fixed, later, motion } = job;
+    let GatherJob { first, part, moving, fixed, later, motion } = job;
     let range = first..first + moving.x.len();
     // The last terms of `write_back`'s order: piece after piece, each in pair order.
     for h in later {
-        for &(i, f, t) in h.of(range.clone()) {
+        for &(i, f, t) in h.to(part) {
             let k = i as usize - first;
             moving.force[k] = sub(moving.force[k], f);
             moving.torque[k] = add(moving.torque[k], t);
@@ -1466,6 +1520,35 @@ fn integrate_clumps(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn pieces_hold_equal_work_when_the_last_spheres_hold_most_pairs() {
+        // 2000 spheres: sphere i is the first of i / 500 pairs (the last quarter holds 3 a
+        // sphere, the first none), as the wrap-round pairs of a periodic cell load its last slab.
+        let (spheres, mut pairs) = (2000, PairList::default());
+        for i in 0..spheres {
+            for k in 0..i / 500 {
+                pairs.a.push(i as u32);
+                pairs.b.push(k as u32);
+            }
+        }
+        let walls = PairList::default();
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(2).build().unwrap();
+        let mut bounds = PieceBounds::default();
+        pool.install(|| bounds.refresh(spheres, 0, &pairs, &walls));
+        let pieces = bounds.spheres.len() - 1;
+        assert!(pieces > 2, "{pieces} pieces");
+        let work_before = |s: usize| s + pairs.a.partition_point(|&a| (a as usize) < s);
+        let fair = work_before(spheres) as f64 / pieces as f64;
+        // A cut can only fall between spheres: a piece may be off by one sphere's work (4 units).
+        for w in bounds.spheres.windows(2) {
+            let work = (work_before(w[1]) - work_before(w[0])) as f64;
+            assert!((work - fair).abs() <= 4.0, "piece {w:?}: {work} units of work, fair share {fair}");
+        }
+        let cut_pairs: Vec<usize> = bounds.spheres[1..pieces].iter().map(|&s| work_before(s) - s).collect();
+        assert_eq!(bounds.sphere_pairs, cut_pairs, "pair lists cut where their first spheres are");
+        assert!(bounds.spheres[1] - bounds.spheres[0] > bounds.spheres[pieces] - bounds.spheres[pieces - 1]);
+    }
 
     #[test]
     fn first_build_numbers_spheres_slab_by_slab_along_the_longest_side() {
