@@ -50,12 +50,12 @@ pub fn run_pieces<T: Send, R: Send>(pieces: Vec<T>, work: impl Fn(T) -> R + Sync
         for (k, r) in (0..runs).map(|k| (k, (ctx.index() + k) % runs)) {
             let own = k == 0;
             while let Some(t) = claim(&left[r], own) {
+                let _counted = Finished(&done);
                 let piece = slots[t].lock().unwrap_or_else(|e| e.into_inner()).take();
                 if let Some(piece) = piece {
                     let out = work(piece);
                     *results[t].lock().unwrap_or_else(|e| e.into_inner()) = Some(out);
                 }
-                done.fetch_add(1, Ordering::Release);
             }
         }
         // The stage ends when its last piece does. A worker out of pieces waits for that here,
@@ -74,6 +74,16 @@ pub fn run_pieces<T: Send, R: Send>(pieces: Vec<T>, work: impl Fn(T) -> R + Sync
         }
     });
     results.into_iter().map(|r| r.into_inner().unwrap_or_else(|e| e.into_inner()).expect("every piece ran")).collect()
+}
+
+/// Counts a piece as finished when dropped, also when its work panicked: the other workers then
+/// stop waiting, and the panic reaches the caller instead of leaving them waiting for ever.
+struct Finished<'a>(&'a AtomicUsize);
+
+impl Drop for Finished<'_> {
+    fn drop(&mut self) {
+        self.0.fetch_add(1, Ordering::Release);
+    }
 }
 
 /// A range `[front, back)` of piece indices in one word.
@@ -110,5 +120,19 @@ mod tests {
         assert_eq!(pool.install(|| piece_count(100, 300)), 1);
         let single = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap();
         assert_eq!(single.install(|| piece_count(1000, 300)), 1);
+    }
+
+    #[test]
+    fn a_panicking_piece_reaches_the_caller_instead_of_leaving_the_others_waiting() {
+        let (sender, receiver) = std::sync::mpsc::channel();
+        std::thread::spawn(move || {
+            let pool = rayon::ThreadPoolBuilder::new().num_threads(2).build().unwrap();
+            let outcome = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+                pool.install(|| run_pieces((0..8).collect(), |p: usize| assert!(p != 5, "piece {p} fails")))
+            }));
+            sender.send(outcome.is_err()).ok();
+        });
+        let outcome = receiver.recv_timeout(std::time::Duration::from_secs(30));
+        assert_eq!(outcome, Ok(true), "the panic must reach the caller, not leave the others waiting");
     }
 }
