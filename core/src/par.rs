@@ -1,8 +1,9 @@
 //! Parallel loops over pieces of data, for stages run every time step.
 //!
 //! One stage is one `rayon::broadcast`. Worker `t` of the current pool owns the `t`-th run of
-//! consecutive pieces and claims them one by one from its front; when its run is done it claims
-//! what is left of the others' runs from their back. Balanced stages keep each piece on the same worker
+//! consecutive pieces (the runs laid round the pieces as on a ring, see [`piece_at`]) and claims
+//! them one by one from its front; when its run is done it claims what is left of the others'
+//! runs from their back. Balanced stages keep each piece on the same worker
 //! from one step to the next (its data stays in that core's cache); uneven ones, like the
 //! contacts at the bottom of a settling heap, still balance. On small DEM systems, where a stage
 //! lasts tens of microseconds, this costs less than rayon's recursive splitting of zipped
@@ -40,16 +41,16 @@ pub fn run_pieces<T: Send, R: Send>(pieces: Vec<T>, work: impl Fn(T) -> R + Sync
     let n = pieces.len();
     let slots: Vec<Mutex<Option<T>>> = pieces.into_iter().map(|p| Mutex::new(Some(p))).collect();
     let results: Vec<Mutex<Option<R>>> = (0..n).map(|_| Mutex::new(None)).collect();
-    let runs = rayon::current_num_threads().min(n);
-    let run_start = |r: usize| r * n / runs;
+    let runs = Runs { pieces: n, runs: rayon::current_num_threads().min(n) };
     // What is left of each run: its owner takes from the front, helpers from the back, so the
     // owner's pieces stay its own from one step to the next wherever the two meet.
-    let left: Vec<AtomicU64> = (0..runs).map(|r| AtomicU64::new(pack(run_start(r), run_start(r + 1)))).collect();
+    let left: Vec<AtomicU64> = (0..runs.runs).map(|r| AtomicU64::new(pack(runs.start(r), runs.start(r + 1)))).collect();
     let done = AtomicUsize::new(0);
     rayon::broadcast(|ctx| {
-        for (k, r) in (0..runs).map(|k| (k, (ctx.index() + k) % runs)) {
+        for (k, r) in (0..runs.runs).map(|k| (k, (ctx.index() + k) % runs.runs)) {
             let own = k == 0;
-            while let Some(t) = claim(&left[r], own) {
+            while let Some(at) = claim(&left[r], own) {
+                let t = runs.piece_at(at);
                 let _counted = Finished(&done);
                 let piece = slots[t].lock().unwrap_or_else(|e| e.into_inner()).take();
                 if let Some(piece) = piece {
@@ -74,6 +75,35 @@ pub fn run_pieces<T: Send, R: Send>(pieces: Vec<T>, work: impl Fn(T) -> R + Sync
         }
     });
     results.into_iter().map(|r| r.into_inner().unwrap_or_else(|e| e.into_inner()).expect("every piece ran")).collect()
+}
+
+/// How a stage's pieces are dealt out: `runs` runs of consecutive positions, one per worker, on a
+/// ring of `pieces` positions.
+struct Runs {
+    pieces: usize,
+    runs: usize,
+}
+
+impl Runs {
+    /// The first position of run `r` (of `runs`, then the count).
+    fn start(&self, r: usize) -> usize {
+        r * self.pieces / self.runs
+    }
+
+    /// The piece at position `at`: the runs start half a run before piece 0, so the first worker
+    /// owns the last pieces and the first ones.
+    ///
+    /// Why: in the DEM stages a pair between two workers' runs belongs to the later run, whose worker
+    /// computes it reading the other's spheres, and hands its load over to the earlier run's worker,
+    /// which reads it from the other core's cache in the gather. With runs from piece 0 the first
+    /// worker would only receive such loads and the last would only compute such pairs; in a
+    /// periodic cell the pairs that wrap round from the last spheres to the first cross that same
+    /// boundary, so both stages were lopsided (in the 1500-sphere RVE on two workers the gather's
+    /// two pieces that received them took 15-17 us against 9-12 us). Half a run in, every worker has
+    /// one boundary of each kind.
+    fn piece_at(&self, at: usize) -> usize {
+        (at + self.pieces - self.start(1) / 2) % self.pieces
+    }
 }
 
 /// Counts a piece as finished when dropped, also when its work panicked: the other workers then
@@ -120,6 +150,35 @@ mod tests {
         assert_eq!(pool.install(|| piece_count(100, 300)), 1);
         let single = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap();
         assert_eq!(single.install(|| piece_count(1000, 300)), 1);
+    }
+
+    #[test]
+    fn every_worker_computes_pairs_across_one_run_boundary_and_receives_loads_across_one() {
+        // Pieces on a ring (a periodic cell): the pair across the boundary between pieces p and
+        // p + 1 belongs to p + 1, and across the wrap (n - 1 to 0) to n - 1, the larger index.
+        for (n, runs) in [(4, 2), (8, 2), (12, 3), (32, 2), (26, 2)] {
+            let deal = Runs { pieces: n, runs };
+            let owner: Vec<usize> = (0..runs)
+                .flat_map(|r| (deal.start(r)..deal.start(r + 1)).map(move |at| (at, r)))
+                .map(|(at, r)| (deal.piece_at(at), r))
+                .fold(vec![usize::MAX; n], |mut owner, (piece, r)| {
+                    owner[piece] = r;
+                    owner
+                });
+            assert!(owner.iter().all(|&r| r < runs), "every piece has one owner");
+            let (mut computes, mut receives) = (vec![0; runs], vec![0; runs]);
+            for p in 0..n {
+                let (low, high) = (p, (p + 1) % n);
+                let holder = low.max(high);
+                let other = low.min(high);
+                if owner[holder] != owner[other] {
+                    computes[owner[holder]] += 1;
+                    receives[owner[other]] += 1;
+                }
+            }
+            assert_eq!(computes, vec![1; runs], "{n} pieces on {runs} workers: pair boundaries computed");
+            assert_eq!(receives, vec![1; runs], "{n} pieces on {runs} workers: loads received");
+        }
     }
 
     #[test]
