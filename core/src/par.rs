@@ -1,16 +1,17 @@
 //! Parallel loops over pieces of data, for stages run every time step.
 //!
 //! One stage is one `rayon::broadcast`. Worker `t` of the current pool owns the `t`-th run of
-//! consecutive pieces (the runs laid round the pieces as on a ring, see [`piece_at`]) and claims
+//! consecutive pieces (the runs laid round the pieces as on a ring, see [`Runs::piece_at`]) and claims
 //! them one by one from its front; when its run is done it claims what is left of the others'
 //! runs from their back. Balanced stages keep each piece on the same worker
 //! from one step to the next (its data stays in that core's cache); uneven ones, like the
 //! contacts at the bottom of a settling heap, still balance. On small DEM systems, where a stage
 //! lasts tens of microseconds, this costs less than rayon's recursive splitting of zipped
 //! iterators. Results never depend on which worker ran a piece: each piece is computed on its own
-//! and results come back in piece order.
+//! and results come back in piece order. Two stages over the same pieces, the second of which may
+//! change what the first reads, run in one broadcast with [`run_pieces_then`].
 
-use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
 use std::sync::Mutex;
 
 /// Pieces per worker at most: enough for a worker that finishes early to find pieces to take
@@ -47,34 +48,87 @@ pub fn run_pieces<T: Send, R: Send>(pieces: Vec<T>, work: impl Fn(T) -> R + Sync
     let left: Vec<AtomicU64> = (0..runs.runs).map(|r| AtomicU64::new(pack(runs.start(r), runs.start(r + 1)))).collect();
     let done = AtomicUsize::new(0);
     rayon::broadcast(|ctx| {
-        for (k, r) in (0..runs.runs).map(|k| (k, (ctx.index() + k) % runs.runs)) {
-            let own = k == 0;
-            while let Some(at) = claim(&left[r], own) {
-                let t = runs.piece_at(at);
-                let _counted = Finished(&done);
-                let piece = slots[t].lock().unwrap_or_else(|e| e.into_inner()).take();
-                if let Some(piece) = piece {
-                    let out = work(piece);
-                    *results[t].lock().unwrap_or_else(|e| e.into_inner()) = Some(out);
-                }
+        runs.claim_each(&left, ctx.index(), |t| {
+            let _counted = Finished(&done);
+            let piece = slots[t].lock().unwrap_or_else(|e| e.into_inner()).take();
+            if let Some(piece) = piece {
+                let out = work(piece);
+                *results[t].lock().unwrap_or_else(|e| e.into_inner()) = Some(out);
             }
-        }
+        });
         // The stage ends when its last piece does. A worker out of pieces waits for that here,
         // awake, rather than in the pool, which puts a thread to sleep after some tens of
         // microseconds idle: waking it for the next stage then took 30-50 us on a 2-core virtual
-        // machine, as long as a small stage. After a short spin it yields its core, in case more
-        // threads than cores were asked for.
-        let mut spins = 0u32;
-        while done.load(Ordering::Acquire) < n {
-            if spins < SPINS_BEFORE_YIELDING {
-                spins += 1;
-                std::hint::spin_loop();
-            } else {
-                std::thread::yield_now();
-            }
-        }
+        // machine, as long as a small stage.
+        wait_until(|| done.load(Ordering::Acquire) == n);
     });
+    in_piece_order(results)
+}
+
+/// Runs two stages over the same pieces in one broadcast, and returns the second's results in
+/// piece order: `first(p)` for every piece `p`, then `second(p)`. `first(q)` may read the data of
+/// pieces `reads_from[q]..=q` and `second(p)` may change piece `p`'s, so `second(p)` waits until
+/// every `first(q)` that reads piece `p` has finished. A worker out of first-stage pieces goes on
+/// with second-stage pieces that are ready, instead of waiting for the slowest first-stage piece
+/// (on two workers whose speeds differ, as a shared machine's cores do from moment to moment, one
+/// of them always waited for the other); and the join and start between two broadcasts go.
+pub fn run_pieces_then<R: Send>(
+    reads_from: &[usize],
+    first: impl Fn(usize) + Sync,
+    second: impl Fn(usize) -> R + Sync,
+) -> Vec<R> {
+    let n = reads_from.len();
+    if n <= 1 || rayon::current_num_threads() == 1 {
+        (0..n).for_each(&first);
+        return (0..n).map(second).collect();
+    }
+    let runs = Runs { pieces: n, runs: rayon::current_num_threads().min(n) };
+    let left: Vec<AtomicU64> = (0..runs.runs).map(|r| AtomicU64::new(pack(runs.start(r), runs.start(r + 1)))).collect();
+    let first_done: Vec<AtomicBool> = (0..n).map(|_| AtomicBool::new(false)).collect();
+    let second_taken: Vec<AtomicBool> = (0..n).map(|_| AtomicBool::new(false)).collect();
+    let results: Vec<Mutex<Option<R>>> = (0..n).map(|_| Mutex::new(None)).collect();
+    let done = AtomicUsize::new(0);
+    // No unfinished first(q) reads piece p. Every first-stage piece has been claimed before any
+    // worker waits on this, and a first-stage piece waits for nothing, so the wait ends.
+    let ready = |p: usize| (p..n).all(|q| reads_from[q] > p || first_done[q].load(Ordering::Acquire));
+    rayon::broadcast(|ctx| {
+        runs.claim_each(&left, ctx.index(), |t| {
+            let _finished = Flag(&first_done[t]);
+            first(t);
+        });
+        // Own pieces first (their data is in this core's cache), from the last: in the DEM stages
+        // a piece's first stage reads the pieces before it, so the last pieces are ready first.
+        let own = (0..n).rev().filter(|&p| runs.owner(p) == ctx.index());
+        for p in own.chain((0..n).rev()) {
+            if second_taken[p].swap(true, Ordering::AcqRel) {
+                continue;
+            }
+            let _counted = Finished(&done);
+            wait_until(|| ready(p));
+            let out = second(p);
+            *results[p].lock().unwrap_or_else(|e| e.into_inner()) = Some(out);
+        }
+        wait_until(|| done.load(Ordering::Acquire) == n);
+    });
+    in_piece_order(results)
+}
+
+fn in_piece_order<R>(results: Vec<Mutex<Option<R>>>) -> Vec<R> {
     results.into_iter().map(|r| r.into_inner().unwrap_or_else(|e| e.into_inner()).expect("every piece ran")).collect()
+}
+
+/// Waits, awake, until `ready()`: a short spin, then yielding the core in case more threads than
+/// cores were asked for.
+fn wait_until(ready: impl Fn() -> bool) {
+    let mut spins = 0u32;
+    while !ready() {
+        if spins < SPINS_BEFORE_YIELDING {
+            spins += 1;
+            std::hint::spin_loop();
+        } else {
+            std::thread::yield_now();
+        }
+    }
 }
 
 /// How a stage's pieces are dealt out: `runs` runs of consecutive positions, one per worker, on a
@@ -88,6 +142,22 @@ impl Runs {
     /// The first position of run `r` (of `runs`, then the count).
     fn start(&self, r: usize) -> usize {
         r * self.pieces / self.runs
+    }
+
+    /// The worker whose run holds piece `p`.
+    fn owner(&self, p: usize) -> usize {
+        let at = (p + self.start(1) / 2) % self.pieces;
+        (0..self.runs).rev().find(|&r| self.start(r) <= at).unwrap_or(0)
+    }
+
+    /// Runs `work` on pieces as worker `worker` claims them: its own run from the front, then
+    /// what is left of the others' runs from their back (`left`: what is left of each run).
+    fn claim_each(&self, left: &[AtomicU64], worker: usize, mut work: impl FnMut(usize)) {
+        for (k, r) in (0..self.runs).map(|k| (k, (worker + k) % self.runs)) {
+            while let Some(at) = claim(&left[r], k == 0) {
+                work(self.piece_at(at));
+            }
+        }
     }
 
     /// The piece at position `at`: the runs start half a run before piece 0, so the first worker
@@ -113,6 +183,16 @@ struct Finished<'a>(&'a AtomicUsize);
 impl Drop for Finished<'_> {
     fn drop(&mut self) {
         self.0.fetch_add(1, Ordering::Release);
+    }
+}
+
+/// Marks a first-stage piece as finished when dropped, also when its work panicked (see
+/// [`Finished`]).
+struct Flag<'a>(&'a AtomicBool);
+
+impl Drop for Flag<'_> {
+    fn drop(&mut self) {
+        self.0.store(true, Ordering::Release);
     }
 }
 
@@ -178,6 +258,42 @@ mod tests {
             }
             assert_eq!(computes, vec![1; runs], "{n} pieces on {runs} workers: pair boundaries computed");
             assert_eq!(receives, vec![1; runs], "{n} pieces on {runs} workers: loads received");
+        }
+    }
+
+    #[test]
+    fn a_second_stage_piece_waits_for_every_first_stage_piece_that_reads_it() {
+        use std::sync::atomic::AtomicBool;
+        // Eight pieces on a ring: first(q) reads q - 1 and q, and the last one also piece 0.
+        let n = 8;
+        let mut reads_from: Vec<usize> = (0..n).map(|q: usize| q.saturating_sub(1)).collect();
+        reads_from[n - 1] = 0;
+        let finished: Vec<AtomicBool> = (0..n).map(|_| AtomicBool::new(false)).collect();
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(2).build().unwrap();
+        for round in 0..20 {
+            let out = pool.install(|| {
+                run_pieces_then(
+                    &reads_from,
+                    |q| {
+                        // Uneven first stages, so that the second stage of the other worker's
+                        // pieces would start early if it did not wait.
+                        if (q + round) % 3 == 0 {
+                            std::thread::sleep(std::time::Duration::from_micros(300));
+                        }
+                        finished[q].store(true, Ordering::Release);
+                    },
+                    |p| {
+                        let unfinished: Vec<usize> =
+                            (p..n).filter(|&q| reads_from[q] <= p && !finished[q].load(Ordering::Acquire)).collect();
+                        (p, unfinished)
+                    },
+                )
+            });
+            for (p, (piece, unfinished)) in out.into_iter().enumerate() {
+                assert_eq!(piece, p, "results in piece order");
+                assert!(unfinished.is_empty(), "round {round}: piece {p} moved while {unfinished:?} still read it");
+            }
+            finished.iter().for_each(|f| f.store(false, Ordering::Relaxed));
         }
     }
 

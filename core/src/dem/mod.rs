@@ -13,6 +13,7 @@ pub mod generate;
 pub mod measures;
 pub mod particles;
 pub mod repose;
+mod rows;
 pub mod sim;
 pub mod stability;
 pub mod state;

@@ -6,6 +6,7 @@ use crate::dem::cell::{shift_after_flip, AxisGoal, PeriodicCell};
 use crate::dem::clump::Clumps;
 use crate::dem::contacts::PairList;
 use crate::dem::particles::{dof, Spheres, FREE};
+use crate::dem::rows::{ReadRows, SharedRows};
 use crate::dem::sim::DemSim;
 use crate::dem::walls::Wall;
 use crate::error::{GraniteError, Result};
@@ -13,7 +14,7 @@ use crate::ext::{ContactBatch, ContactLaw};
 use crate::math::{dot3, mat_vec, Vec3};
 use crate::simd::{self, add4, mat_vec4, mul4, narrow, scale4, sub4, widen, Lanes};
 use nalgebra::Matrix3;
-use std::sync::Arc;
+use std::sync::{Arc, Mutex, OnceLock};
 
 /// Pairs per law call.
 const CHUNK: usize = 128;
@@ -65,34 +66,50 @@ impl DemSim {
             }
         }
         let parallel = self.in_parallel();
-        self.contacts(parallel);
         // The contact network changes little between rebuilds: checking it then is enough.
         let check = match self.last_check {
             None => true,
             Some(at) => rebuilt && self.step >= at + crate::dem::stability::CHECK_EVERY,
         };
-        if check {
-            self.check_time_step()?;
-        }
-        wall_forces(&mut self.walls, &self.wall_pairs);
-        // The cell deforms over the step; particles follow its affine field on top of their own motion.
-        let (affine, strain_since_build) = match (&mut self.cell, &self.h_at_build) {
-            (Some(cell), Some(h0)) => {
-                let l = cell.velocity_gradient;
+        // The cell deforms over the step; particles follow its affine field on top of their own
+        // motion. The contacts of this step see the cell as it was at its start.
+        let deformed = match (&self.cell, &self.h_at_build) {
+            (Some(cell), Some(_)) => {
+                let mut cell = cell.clone();
                 cell.deform(self.dt);
-                let f = cell.h * h0.try_inverse().unwrap_or_else(Matrix3::identity);
+                Some(cell)
+            }
+            _ => None,
+        };
+        let (affine, strain_since_build) = match (&self.cell, &deformed, &self.h_at_build) {
+            (Some(cell), Some(next), Some(h0)) => {
+                let f = next.h * h0.try_inverse().unwrap_or_else(Matrix3::identity);
                 let growth = (f - Matrix3::identity()).norm();
-                (Some((l, f)), growth)
+                (Some((cell.velocity_gradient, f)), growth)
             }
             _ => (None, 0.0),
         };
         let motion = Motion::new(self.gravity, self.damping, self.dt, affine);
-        let mut moved = if !parallel {
-            integrate_wide((&mut self.spheres, &self.x_at_build, &motion))
+        let mut moved = if parallel && !check {
+            self.contacts_and_motion(&motion)
         } else {
-            let starts = &self.piece_bounds.spheres;
-            gather_and_integrate(&mut self.spheres, &self.handovers, starts, &self.x_at_build, &motion)
+            // The stability check reads this step's contacts before anything moves, so that a
+            // step it stops leaves the spheres where they were.
+            self.contacts(parallel);
+            if check {
+                self.check_time_step()?;
+            }
+            if parallel {
+                let starts = &self.piece_bounds.spheres;
+                gather_and_integrate(&mut self.spheres, &self.handovers, starts, &self.x_at_build, &motion)
+            } else {
+                integrate_wide((&mut self.spheres, &self.x_at_build, &motion))
+            }
         };
+        wall_forces(&mut self.walls, &self.wall_pairs);
+        if deformed.is_some() {
+            self.cell = deformed;
+        }
         if !self.clumps.is_empty() {
             let clump_moved = integrate_clumps(
                 &mut self.clumps,
@@ -208,6 +225,7 @@ impl DemSim {
         let strides = (self.pairs.param_stride, self.pairs.history_stride);
         let Spheres { x, v, w, radius, force, torque, .. } = &mut self.spheres;
         let rotation = self.laws.iter().any(|l| l.resists_rotation());
+        let (x, v, w) = (ReadRows::new(x), ReadRows::new(v), ReadRows::new(w));
         let sp = Motions { x, v, w, radius, cell: self.cell.as_ref(), rotation };
         let (walls, laws, dt) = (&self.walls, &self.laws[..], self.dt);
         if !parallel {
@@ -227,7 +245,7 @@ impl DemSim {
             return;
         }
         let bounds = &mut self.piece_bounds;
-        bounds.refresh(x.len(), self.rebuilds, &self.pairs, &self.wall_pairs);
+        bounds.refresh(radius.len(), self.rebuilds, &self.pairs, &self.wall_pairs);
         let starts = &bounds.spheres[..];
         let sphere_pieces = PairChunk::whole(&mut self.pairs, strides).cut_at(&bounds.sphere_pairs);
         let wall_pieces = PairChunk::whole(&mut self.wall_pairs, strides).cut_at(&bounds.wall_pairs);
@@ -244,6 +262,81 @@ impl DemSim {
             let loads = Loads { first: starts[part], force, torque, handover: &mut *handover, starts };
             contact_job_wide(ContactJob { sp: &sp, walls, sphere_pairs, wall_pairs, laws, dt, scratch, loads });
         });
+    }
+
+    /// The contact stage and the gather with the integration of a parallel step, in one pass
+    /// (`par::run_pieces_then`): a piece's spheres move as soon as no contact piece that reads
+    /// them is still running, so a worker done with its contacts moves spheres instead of waiting
+    /// for the other's. The same sums in the same order as [`DemSim::contacts`] then
+    /// [`gather_and_integrate`]. Returns the largest displacement (see `integrate`).
+    fn contacts_and_motion(&mut self, motion: &Motion) -> f64 {
+        let strides = (self.pairs.param_stride, self.pairs.history_stride);
+        self.piece_bounds.refresh(self.spheres.len(), self.rebuilds, &self.pairs, &self.wall_pairs);
+        let bounds = &self.piece_bounds;
+        let starts = &bounds.spheres[..];
+        let Spheres { x, v, w, radius, force, torque, mass, inertia, blocked, clump, .. } = &mut self.spheres;
+        let rotation = self.laws.iter().any(|l| l.resists_rotation());
+        let (x, v, w) = (SharedRows::new(x), SharedRows::new(v), SharedRows::new(w));
+        let (walls, laws, dt, cell) = (&self.walls, &self.laws[..], self.dt, self.cell.as_ref());
+        let sphere_pieces = PairChunk::whole(&mut self.pairs, strides).cut_at(&bounds.sphere_pairs);
+        let wall_pieces = PairChunk::whole(&mut self.wall_pairs, strides).cut_at(&bounds.wall_pairs);
+        let handovers = self.handovers.fit(sphere_pieces.len());
+        let loads = pieces_of(force, starts).into_iter().zip(pieces_of(torque, starts));
+        let contact_pieces: Vec<_> =
+            sphere_pieces.into_iter().zip(wall_pieces).zip(loads.zip(handovers)).map(|p| Mutex::new(Some(p))).collect();
+        let n = contact_pieces.len();
+        debug_assert_eq!(n, starts.len() - 1);
+        // What a piece's contact stage hands to its own integration, and to the earlier pieces'.
+        let loads_after: Vec<Mutex<Option<PieceLoads>>> = (0..n).map(|_| Mutex::new(None)).collect();
+        let handed: Vec<OnceLock<&Handover>> = (0..n).map(|_| OnceLock::new()).collect();
+        let (mass, inertia, blocked, clump, x_at_build) =
+            (&mass[..], &inertia[..], &blocked[..], &clump[..], &self.x_at_build[..]);
+        let travel = crate::par::run_pieces_then(
+            &bounds.reads_from,
+            |q| {
+                let Some(((sphere_pairs, wall_pairs), ((force, torque), handover))) = take(&contact_pieces[q]) else {
+                    return;
+                };
+                // The spheres of pieces reads_from[q]..=q: those of its pairs (a pair's second sphere
+                // lies before its first).
+                let read = starts[bounds.reads_from[q]]..starts[q + 1];
+                // SAFETY: run_pieces_then moves the spheres of a piece only once every contact
+                // piece that reads them has finished, and each read is checked against `read`.
+                let (xr, vr, wr) = unsafe { (x.reader(read.clone()), v.reader(read.clone()), w.reader(read)) };
+                let sp = Motions { x: xr, v: vr, w: wr, radius, cell, rotation };
+                let mut scratch = ScratchGuard::take();
+                let scratch = &mut *scratch;
+                handover.start(q);
+                let loads = Loads {
+                    first: starts[q],
+                    force: &mut *force,
+                    torque: &mut *torque,
+                    handover: &mut *handover,
+                    starts,
+                };
+                contact_job_wide(ContactJob { sp: &sp, walls, sphere_pairs, wall_pairs, laws, dt, scratch, loads });
+                *loads_after[q].lock().unwrap_or_else(|e| e.into_inner()) = Some((force, torque));
+                handed[q].set(handover).ok();
+            },
+            |p| {
+                let Some((force, torque)) = take(&loads_after[p]) else {
+                    panic!("the contacts of piece {p} ran before its spheres move");
+                };
+                // Only pieces that read this piece's spheres can have handed loads over to it.
+                let later: Vec<&Handover> = (p + 1..n)
+                    .filter(|&q| bounds.reads_from[q] <= p)
+                    .map(|q| *handed[q].get().expect("a piece that reads these spheres has finished"))
+                    .collect();
+                let range = starts[p]..starts[p + 1];
+                // SAFETY: pieces do not overlap, and run_pieces_then calls this once every contact
+                // piece that reads these spheres has finished.
+                let (x, v, w) = unsafe { (x.piece(range.clone()), v.piece(range.clone()), w.piece(range)) };
+                let moving = PieceState { x, v, w, force, torque };
+                let fixed = SphereConstants { mass, inertia, blocked, clump, x_at_build };
+                gather_piece_wide(GatherJob { first: starts[p], part: p, moving, fixed, later: &later, motion })
+            },
+        );
+        travel.into_iter().fold(Travel::default(), Travel::merge).largest()
     }
 
     /// Brings periodic positions back into the cell and fixes the shifts of their pairs.
@@ -554,9 +647,9 @@ impl Scratch {
 
 /// What the contact stage reads of the spheres.
 struct Motions<'a> {
-    x: &'a [Vec3],
-    v: &'a [Vec3],
-    w: &'a [Vec3],
+    x: ReadRows<'a, Vec3>,
+    v: ReadRows<'a, Vec3>,
+    w: ReadRows<'a, Vec3>,
     radius: &'a [f64],
     /// The periodic cell: images and the affine velocity field across it.
     cell: Option<&'a PeriodicCell>,
@@ -894,9 +987,7 @@ fn sphere_contacts(
 ) {
     let cell = sp.cell;
     let l = cell.map(|c| c.velocity_gradient);
-    // Sliced to one length: checking a sphere index against one array then covers the others.
-    let spheres = sp.x.len();
-    let (x, v, w, radius) = (&sp.x[..spheres], &sp.v[..spheres], &sp.w[..spheres], &sp.radius[..spheres]);
+    let (x, v, w, radius) = (sp.x, sp.v, sp.w, sp.radius);
     // Plain loops, no closures: all of this must inline into `contact_job_wide`'s AVX2 twin.
     let mut rest = Some(pairs);
     let mut run = Run::NONE;
@@ -910,7 +1001,7 @@ fn sphere_contacts(
         let (a, b, shift, law) = (&c.a[..m], &c.b[..m], &c.shift[..m], &c.law[..m]);
         for k in 0..m {
             let (i, j) = (a[k] as usize, b[k] as usize);
-            let d = branch(x, i, j, shift[k], cell);
+            let d = branch_between(x.get(i), x.get(j), shift[k], cell);
             let reach = radius[i] + radius[j];
             let dist2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
             if dist2 >= reach * reach {
@@ -928,8 +1019,9 @@ fn sphere_contacts(
             // Contact point velocities v_a + w_a x (la n) and v_b + w_b x (-lb n), lb = dist - la:
             // one cross product for both spins.
             let lb = dist - la;
-            let spins = [la * w[i][0] + lb * w[j][0], la * w[i][1] + lb * w[j][1], la * w[i][2] + lb * w[j][2]];
-            let mut rel_velocity = sub(sub(v[j], v[i]), cross(spins, n));
+            let (wi, wj) = (w.get(i), w.get(j));
+            let spins = [la * wi[0] + lb * wj[0], la * wi[1] + lb * wj[1], la * wi[2] + lb * wj[2]];
+            let mut rel_velocity = sub(sub(v.get(j), v.get(i)), cross(spins, n));
             if let Some(l) = &l {
                 // Affine part of the relative velocity: L (x_b + h n - x_a).
                 rel_velocity = add(rel_velocity, mat_vec(l, d));
@@ -942,7 +1034,7 @@ fn sphere_contacts(
             s.overlap[e] = overlap;
             s.rel_velocity[e] = rel_velocity;
             if sp.rotation {
-                s.rel_spin[e] = sub(w[j], w[i]);
+                s.rel_spin[e] = sub(wj, wi);
             }
             s.lever[e] = [la, lb];
             len += 1;
@@ -974,7 +1066,8 @@ fn wall_contacts(
         for k in 0..c.a.len() {
             let (i, w) = (c.a[k] as usize, c.b[k] as usize);
             let wall = &walls[w];
-            let geo = match wall.contact(sp.x[i], sp.radius[i], 0.0) {
+            let xi = sp.x.get(i);
+            let geo = match wall.contact(xi, sp.radius[i], 0.0) {
                 Some(g) if g.gap < 0.0 => g,
                 _ => {
                     open_contact(c, k);
@@ -982,8 +1075,9 @@ fn wall_contacts(
                 }
             };
             let overlap = -geo.gap;
-            let arm_a = sub(geo.point, sp.x[i]);
-            let va = add(sp.v[i], cross(sp.w[i], arm_a));
+            let arm_a = sub(geo.point, xi);
+            let wi = sp.w.get(i);
+            let va = add(sp.v.get(i), cross(wi, arm_a));
             c.touching[k] = true;
             let e = len;
             s.slot[e] = k as u32;
@@ -992,7 +1086,7 @@ fn wall_contacts(
             s.overlap[e] = overlap;
             s.rel_velocity[e] = sub(wall.velocity, va);
             if sp.rotation {
-                s.rel_spin[e] = [-sp.w[i][0], -sp.w[i][1], -sp.w[i][2]];
+                s.rel_spin[e] = [-wi[0], -wi[1], -wi[2]];
             }
             s.lever[e] = [dot3(arm_a, geo.normal), 0.0];
             len += 1;
@@ -1007,11 +1101,17 @@ fn wall_contacts(
 /// Branch vector from sphere `i` to sphere `j` (or its periodic image `shift`).
 #[inline(always)]
 pub(crate) fn branch(x: &[Vec3], i: usize, j: usize, shift: [i32; 3], cell: Option<&PeriodicCell>) -> Vec3 {
+    branch_between(x[i], x[j], shift, cell)
+}
+
+/// [`branch`] from the two positions.
+#[inline(always)]
+fn branch_between(xi: Vec3, xj: Vec3, shift: [i32; 3], cell: Option<&PeriodicCell>) -> Vec3 {
     let image = match (cell, shift) {
         (Some(cell), n) if n != [0; 3] => cell.shift_vector(n),
         _ => [0.0; 3],
     };
-    add(sub(x[j], x[i]), image)
+    add(sub(xj, xi), image)
 }
 
 /// Where the parallel stages cut the spheres and the pair lists: into pieces of consecutive
@@ -1027,6 +1127,9 @@ pub(crate) struct PieceBounds {
     /// Where each piece after the first starts in the pair lists.
     sphere_pairs: Vec<usize>,
     wall_pairs: Vec<usize>,
+    /// For each piece, the first piece holding a sphere it reads (the second spheres of its pairs
+    /// lie before their first): its contacts read the spheres of pieces `reads_from[q]..=q`.
+    reads_from: Vec<usize>,
 }
 
 impl PieceBounds {
@@ -1061,14 +1164,34 @@ impl PieceBounds {
             starts.push(lo);
         }
         starts.push(spheres);
-        let cuts = |list: &PairList| starts[1..pieces].iter().map(|&s| before(list, s)).collect();
-        *self = PieceBounds { key, sphere_pairs: cuts(pairs), wall_pairs: cuts(walls), spheres: starts };
+        let cuts = |list: &PairList| starts[1..pieces].iter().map(|&s| before(list, s)).collect::<Vec<_>>();
+        let sphere_pairs = cuts(pairs);
+        let piece_of = |sphere: usize| starts.partition_point(|&s| s <= sphere) - 1;
+        let reads_from = (0..pieces)
+            .map(|q| {
+                let (from, to) =
+                    (if q == 0 { 0 } else { sphere_pairs[q - 1] }, sphere_pairs.get(q).copied().unwrap_or(pairs.len()));
+                pairs.b[from..to].iter().map(|&b| piece_of(b as usize)).min().unwrap_or(q).min(q)
+            })
+            .collect();
+        *self = PieceBounds { key, sphere_pairs, wall_pairs: cuts(walls), spheres: starts, reads_from };
     }
 
     pub(crate) fn bytes(&self) -> usize {
-        (self.spheres.capacity() + self.sphere_pairs.capacity() + self.wall_pairs.capacity())
+        (self.spheres.capacity()
+            + self.sphere_pairs.capacity()
+            + self.wall_pairs.capacity()
+            + self.reads_from.capacity())
             * std::mem::size_of::<usize>()
     }
+}
+
+/// A piece's force and torque sums.
+type PieceLoads<'a> = (&'a mut [Vec3], &'a mut [Vec3]);
+
+/// What a slot holds, taken out of it.
+fn take<T>(slot: &Mutex<Option<T>>) -> Option<T> {
+    slot.lock().unwrap_or_else(|e| e.into_inner()).take()
 }
 
 /// `data` cut into the pieces that start at `starts` (then its length).
@@ -1110,8 +1233,8 @@ fn gather_and_integrate(
     let travel = crate::par::run_pieces(pieces, |(part, (((x, v), w), (force, torque)))| {
         let moving = PieceState { x, v, w, force, torque };
         let fixed = SphereConstants { mass, inertia, blocked, clump, x_at_build };
-        let later = &handovers.0[part + 1..];
-        gather_piece_wide(GatherJob { first: starts[part], part, moving, fixed, later, motion })
+        let later: Vec<&Handover> = handovers.0[part + 1..].iter().collect();
+        gather_piece_wide(GatherJob { first: starts[part], part, moving, fixed, later: &later, motion })
     });
     travel.into_iter().fold(Travel::default(), Travel::merge).largest()
 }
@@ -1124,7 +1247,7 @@ struct GatherJob<'j> {
     part: usize,
     moving: PieceState<'j>,
     fixed: SphereConstants<'j>,
-    later: &'j [Handover],
+    later: &'j [&'j Handover],
     motion: &'j Motion,
 }
 
@@ -1551,6 +1674,29 @@ mod tests {
         let cut_pairs: Vec<usize> = bounds.spheres[1..pieces].iter().map(|&s| work_before(s) - s).collect();
         assert_eq!(bounds.sphere_pairs, cut_pairs, "pair lists cut where their first spheres are");
         assert!(bounds.spheres[1] - bounds.spheres[0] > bounds.spheres[pieces] - bounds.spheres[pieces - 1]);
+    }
+
+    #[test]
+    fn each_piece_knows_the_first_piece_whose_spheres_its_contacts_read() {
+        // A chain (sphere i paired with i - 1) closed round a periodic cell: the last sphere's
+        // pair with sphere 0 wraps round, as in a periodic cell.
+        let (spheres, mut pairs) = (4000, PairList::default());
+        for i in 1..spheres {
+            if i == spheres - 1 {
+                pairs.a.push(i as u32);
+                pairs.b.push(0);
+            }
+            pairs.a.push(i as u32);
+            pairs.b.push(i as u32 - 1);
+        }
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(2).build().unwrap();
+        let mut bounds = PieceBounds::default();
+        pool.install(|| bounds.refresh(spheres, 0, &pairs, &PairList::default()));
+        let pieces = bounds.spheres.len() - 1;
+        assert!(pieces > 3, "{pieces} pieces");
+        let mut expected: Vec<usize> = (0..pieces).map(|q| q.saturating_sub(1)).collect();
+        expected[pieces - 1] = 0;
+        assert_eq!(bounds.reads_from, expected);
     }
 
     #[test]
