@@ -6,7 +6,7 @@ use crate::dem::cell::{shift_after_flip, AxisGoal, PeriodicCell};
 use crate::dem::clump::Clumps;
 use crate::dem::contacts::PairList;
 use crate::dem::particles::{dof, Spheres, FREE};
-use crate::dem::rows::{ReadRows, SharedRows};
+use crate::dem::rows::SharedRows;
 use crate::dem::sim::DemSim;
 use crate::dem::walls::Wall;
 use crate::error::{GraniteError, Result};
@@ -225,8 +225,7 @@ impl DemSim {
         let strides = (self.pairs.param_stride, self.pairs.history_stride);
         let Spheres { x, v, w, radius, force, torque, .. } = &mut self.spheres;
         let rotation = self.laws.iter().any(|l| l.resists_rotation());
-        let (x, v, w) = (ReadRows::new(x), ReadRows::new(v), ReadRows::new(w));
-        let sp = Motions { x, v, w, radius, cell: self.cell.as_ref(), rotation };
+        let sp = Motions { first: 0, x, v, w, radius, cell: self.cell.as_ref(), rotation };
         let (walls, laws, dt) = (&self.walls, &self.laws[..], self.dt);
         if !parallel {
             let mut scratch = ScratchGuard::take();
@@ -245,7 +244,7 @@ impl DemSim {
             return;
         }
         let bounds = &mut self.piece_bounds;
-        bounds.refresh(radius.len(), self.rebuilds, &self.pairs, &self.wall_pairs);
+        bounds.refresh(x.len(), self.rebuilds, &self.pairs, &self.wall_pairs);
         let starts = &bounds.spheres[..];
         let sphere_pieces = PairChunk::whole(&mut self.pairs, strides).cut_at(&bounds.sphere_pairs);
         let wall_pieces = PairChunk::whole(&mut self.wall_pairs, strides).cut_at(&bounds.wall_pairs);
@@ -300,10 +299,12 @@ impl DemSim {
                 // The spheres of pieces reads_from[q]..=q: those of its pairs (a pair's second sphere
                 // lies before its first).
                 let read = starts[bounds.reads_from[q]]..starts[q + 1];
+                let (first, radius) = (read.start, &radius[read.clone()]);
                 // SAFETY: run_pieces_then moves the spheres of a piece only once every contact
-                // piece that reads them has finished, and each read is checked against `read`.
-                let (xr, vr, wr) = unsafe { (x.reader(read.clone()), v.reader(read.clone()), w.reader(read)) };
-                let sp = Motions { x: xr, v: vr, w: wr, radius, cell, rotation };
+                // piece that reads them has finished, and these slices end with this closure. A
+                // pair outside `read` (a wrong reads_from) panics at its index, as any slice does.
+                let (x, v, w) = unsafe { (x.rows(read.clone()), v.rows(read.clone()), w.rows(read)) };
+                let sp = Motions { first, x, v, w, radius, cell, rotation };
                 let mut scratch = ScratchGuard::take();
                 let scratch = &mut *scratch;
                 handover.start(q);
@@ -647,9 +648,11 @@ impl Scratch {
 
 /// What the contact stage reads of the spheres.
 struct Motions<'a> {
-    x: ReadRows<'a, Vec3>,
-    v: ReadRows<'a, Vec3>,
-    w: ReadRows<'a, Vec3>,
+    /// The sphere in the first row of these arrays (sphere `i` is row `i - first`).
+    first: usize,
+    x: &'a [Vec3],
+    v: &'a [Vec3],
+    w: &'a [Vec3],
     radius: &'a [f64],
     /// The periodic cell: images and the affine velocity field across it.
     cell: Option<&'a PeriodicCell>,
@@ -987,7 +990,10 @@ fn sphere_contacts(
 ) {
     let cell = sp.cell;
     let l = cell.map(|c| c.velocity_gradient);
-    let (x, v, w, radius) = (sp.x, sp.v, sp.w, sp.radius);
+    // Sliced to one length: checking a row against one array then covers the others.
+    let rows = sp.x.len();
+    let (x, v, w, radius) = (&sp.x[..rows], &sp.v[..rows], &sp.w[..rows], &sp.radius[..rows]);
+    let first = sp.first;
     // Plain loops, no closures: all of this must inline into `contact_job_wide`'s AVX2 twin.
     let mut rest = Some(pairs);
     let mut run = Run::NONE;
@@ -1000,8 +1006,8 @@ fn sphere_contacts(
         let m = c.a.len();
         let (a, b, shift, law) = (&c.a[..m], &c.b[..m], &c.shift[..m], &c.law[..m]);
         for k in 0..m {
-            let (i, j) = (a[k] as usize, b[k] as usize);
-            let d = branch_between(x.get(i), x.get(j), shift[k], cell);
+            let (i, j) = ((a[k] as usize).wrapping_sub(first), (b[k] as usize).wrapping_sub(first));
+            let d = branch(x, i, j, shift[k], cell);
             let reach = radius[i] + radius[j];
             let dist2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
             if dist2 >= reach * reach {
@@ -1019,9 +1025,8 @@ fn sphere_contacts(
             // Contact point velocities v_a + w_a x (la n) and v_b + w_b x (-lb n), lb = dist - la:
             // one cross product for both spins.
             let lb = dist - la;
-            let (wi, wj) = (w.get(i), w.get(j));
-            let spins = [la * wi[0] + lb * wj[0], la * wi[1] + lb * wj[1], la * wi[2] + lb * wj[2]];
-            let mut rel_velocity = sub(sub(v.get(j), v.get(i)), cross(spins, n));
+            let spins = [la * w[i][0] + lb * w[j][0], la * w[i][1] + lb * w[j][1], la * w[i][2] + lb * w[j][2]];
+            let mut rel_velocity = sub(sub(v[j], v[i]), cross(spins, n));
             if let Some(l) = &l {
                 // Affine part of the relative velocity: L (x_b + h n - x_a).
                 rel_velocity = add(rel_velocity, mat_vec(l, d));
@@ -1034,7 +1039,7 @@ fn sphere_contacts(
             s.overlap[e] = overlap;
             s.rel_velocity[e] = rel_velocity;
             if sp.rotation {
-                s.rel_spin[e] = sub(wj, wi);
+                s.rel_spin[e] = sub(w[j], w[i]);
             }
             s.lever[e] = [la, lb];
             len += 1;
@@ -1064,10 +1069,9 @@ fn wall_contacts(
         let mut len = 0;
         s.rotation = sp.rotation;
         for k in 0..c.a.len() {
-            let (i, w) = (c.a[k] as usize, c.b[k] as usize);
+            let (i, w) = ((c.a[k] as usize).wrapping_sub(sp.first), c.b[k] as usize);
             let wall = &walls[w];
-            let xi = sp.x.get(i);
-            let geo = match wall.contact(xi, sp.radius[i], 0.0) {
+            let geo = match wall.contact(sp.x[i], sp.radius[i], 0.0) {
                 Some(g) if g.gap < 0.0 => g,
                 _ => {
                     open_contact(c, k);
@@ -1075,9 +1079,8 @@ fn wall_contacts(
                 }
             };
             let overlap = -geo.gap;
-            let arm_a = sub(geo.point, xi);
-            let wi = sp.w.get(i);
-            let va = add(sp.v.get(i), cross(wi, arm_a));
+            let arm_a = sub(geo.point, sp.x[i]);
+            let va = add(sp.v[i], cross(sp.w[i], arm_a));
             c.touching[k] = true;
             let e = len;
             s.slot[e] = k as u32;
@@ -1086,7 +1089,7 @@ fn wall_contacts(
             s.overlap[e] = overlap;
             s.rel_velocity[e] = sub(wall.velocity, va);
             if sp.rotation {
-                s.rel_spin[e] = [-wi[0], -wi[1], -wi[2]];
+                s.rel_spin[e] = [-sp.w[i][0], -sp.w[i][1], -sp.w[i][2]];
             }
             s.lever[e] = [dot3(arm_a, geo.normal), 0.0];
             len += 1;
@@ -1101,17 +1104,11 @@ fn wall_contacts(
 /// Branch vector from sphere `i` to sphere `j` (or its periodic image `shift`).
 #[inline(always)]
 pub(crate) fn branch(x: &[Vec3], i: usize, j: usize, shift: [i32; 3], cell: Option<&PeriodicCell>) -> Vec3 {
-    branch_between(x[i], x[j], shift, cell)
-}
-
-/// [`branch`] from the two positions.
-#[inline(always)]
-fn branch_between(xi: Vec3, xj: Vec3, shift: [i32; 3], cell: Option<&PeriodicCell>) -> Vec3 {
     let image = match (cell, shift) {
         (Some(cell), n) if n != [0; 3] => cell.shift_vector(n),
         _ => [0.0; 3],
     };
-    add(sub(xj, xi), image)
+    add(sub(x[j], x[i]), image)
 }
 
 /// Where the parallel stages cut the spheres and the pair lists: into pieces of consecutive
