@@ -246,6 +246,7 @@ mod tests {
                     owner
                 });
             assert!(owner.iter().all(|&r| r < runs), "every piece has one owner");
+            assert!((0..n).all(|p| deal.owner(p) == owner[p]), "{n} pieces on {runs} workers: owners");
             let (mut computes, mut receives) = (vec![0; runs], vec![0; runs]);
             for p in 0..n {
                 let (low, high) = (p, (p + 1) % n);
@@ -299,15 +300,29 @@ mod tests {
 
     #[test]
     fn a_panicking_piece_reaches_the_caller_instead_of_leaving_the_others_waiting() {
-        let (sender, receiver) = std::sync::mpsc::channel();
-        std::thread::spawn(move || {
-            let pool = rayon::ThreadPoolBuilder::new().num_threads(2).build().unwrap();
-            let outcome = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-                pool.install(|| run_pieces((0..8).collect(), |p: usize| assert!(p != 5, "piece {p} fails")))
-            }));
-            sender.send(outcome.is_err()).ok();
-        });
-        let outcome = receiver.recv_timeout(std::time::Duration::from_secs(30));
-        assert_eq!(outcome, Ok(true), "the panic must reach the caller, not leave the others waiting");
+        let fails = |p: usize| assert!(p != 5, "piece {p} fails");
+        let reads_from: Vec<usize> = (0..8usize).map(|q| q.saturating_sub(1)).collect();
+        type Stage = Box<dyn Fn() + Send + Sync>;
+        let stages: [(&str, Stage); 3] = [
+            ("one stage", Box::new(move || drop(run_pieces((0..8).collect(), fails)))),
+            (
+                "first of two",
+                Box::new({
+                    let reads_from = reads_from.clone();
+                    move || drop(run_pieces_then(&reads_from, fails, |_| ()))
+                }),
+            ),
+            ("second of two", Box::new(move || drop(run_pieces_then(&reads_from, |_| (), fails)))),
+        ];
+        for (stage, run) in stages {
+            let (sender, receiver) = std::sync::mpsc::channel();
+            std::thread::spawn(move || {
+                let pool = rayon::ThreadPoolBuilder::new().num_threads(2).build().unwrap();
+                let outcome = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| pool.install(&run)));
+                sender.send(outcome.is_err()).ok();
+            });
+            let outcome = receiver.recv_timeout(std::time::Duration::from_secs(30));
+            assert_eq!(outcome, Ok(true), "{stage}: the panic must reach the caller, not leave the others waiting");
+        }
     }
 }
