@@ -45,7 +45,7 @@ pub fn run_pieces<T: Send, R: Send>(pieces: Vec<T>, work: impl Fn(T) -> R + Sync
     let runs = Runs { pieces: n, runs: rayon::current_num_threads().min(n) };
     // What is left of each run: its owner takes from the front, helpers from the back, so the
     // owner's pieces stay its own from one step to the next wherever the two meet.
-    let left: Vec<AtomicU64> = (0..runs.runs).map(|r| AtomicU64::new(pack(runs.start(r), runs.start(r + 1)))).collect();
+    let left = runs.left();
     let done = AtomicUsize::new(0);
     rayon::broadcast(|ctx| {
         runs.claim_each(&left, ctx.index(), |t| {
@@ -83,7 +83,7 @@ pub fn run_pieces_then<R: Send>(
         return (0..n).map(second).collect();
     }
     let runs = Runs { pieces: n, runs: rayon::current_num_threads().min(n) };
-    let left: Vec<AtomicU64> = (0..runs.runs).map(|r| AtomicU64::new(pack(runs.start(r), runs.start(r + 1)))).collect();
+    let left = runs.left();
     let first_done: Vec<AtomicBool> = (0..n).map(|_| AtomicBool::new(false)).collect();
     let second_taken: Vec<AtomicBool> = (0..n).map(|_| AtomicBool::new(false)).collect();
     let results: Vec<Mutex<Option<R>>> = (0..n).map(|_| Mutex::new(None)).collect();
@@ -142,6 +142,11 @@ impl Runs {
     /// The first position of run `r` (of `runs`, then the count).
     fn start(&self, r: usize) -> usize {
         r * self.pieces / self.runs
+    }
+
+    /// What is left of each run to claim (see [`claim`]): all of it.
+    fn left(&self) -> Vec<AtomicU64> {
+        (0..self.runs).map(|r| AtomicU64::new(pack(self.start(r), self.start(r + 1)))).collect()
     }
 
     /// The worker whose run holds piece `p`.

@@ -73,38 +73,28 @@ impl DemSim {
         };
         // The cell deforms over the step; particles follow its affine field on top of their own
         // motion. The contacts of this step see the cell as it was at its start.
-        let deformed = match (&self.cell, &self.h_at_build) {
-            (Some(cell), Some(_)) => {
-                let mut cell = cell.clone();
-                cell.deform(self.dt);
-                Some(cell)
-            }
-            _ => None,
-        };
-        let (affine, strain_since_build) = match (&self.cell, &deformed, &self.h_at_build) {
-            (Some(cell), Some(next), Some(h0)) => {
+        let (deformed, affine, strain_since_build) = match (&self.cell, &self.h_at_build) {
+            (Some(cell), Some(h0)) => {
+                let mut next = cell.clone();
+                next.deform(self.dt);
                 let f = next.h * h0.try_inverse().unwrap_or_else(Matrix3::identity);
                 let growth = (f - Matrix3::identity()).norm();
-                (Some((cell.velocity_gradient, f)), growth)
+                (Some(next), Some((cell.velocity_gradient, f)), growth)
             }
-            _ => (None, 0.0),
+            _ => (None, None, 0.0),
         };
         let motion = Motion::new(self.gravity, self.damping, self.dt, affine);
         let mut moved = if parallel && !check {
             self.contacts_and_motion(&motion)
         } else {
             // The stability check reads this step's contacts before anything moves, so that a
-            // step it stops leaves the spheres where they were.
-            self.contacts(parallel);
+            // step it stops leaves the spheres where they were. It comes once in 1000 steps at
+            // most, so such a step runs on this thread alone (the same sums as in parallel).
+            self.contacts();
             if check {
                 self.check_time_step()?;
             }
-            if parallel {
-                let starts = &self.piece_bounds.spheres;
-                gather_and_integrate(&mut self.spheres, &self.handovers, starts, &self.x_at_build, &motion)
-            } else {
-                integrate_wide((&mut self.spheres, &self.x_at_build, &motion))
-            }
+            integrate_wide((&mut self.spheres, &self.x_at_build, &motion))
         };
         wall_forces(&mut self.walls, &self.wall_pairs);
         if deformed.is_some() {
@@ -218,56 +208,34 @@ impl DemSim {
         !self.sequential && self.spheres.len() >= MIN_SPHERES_IN_PARALLEL && rayon::current_num_threads() > 1
     }
 
-    /// Sphere-sphere and sphere-wall contact forces of this step, summed into the spheres'
-    /// loads. In parallel, both lists are cut into the pieces of the spheres they start from, so
-    /// one stage does them all; the loads of pairs across pieces are left for the gather.
-    fn contacts(&mut self, parallel: bool) {
+    /// Sphere-sphere and sphere-wall contact forces of this step, summed into the spheres' loads
+    /// on this thread (see [`DemSim::contacts_and_motion`] for the parallel step).
+    fn contacts(&mut self) {
         let strides = (self.pairs.param_stride, self.pairs.history_stride);
         let Spheres { x, v, w, radius, force, torque, .. } = &mut self.spheres;
         let rotation = self.laws.iter().any(|l| l.resists_rotation());
         let sp = Motions { first: 0, x, v, w, radius, cell: self.cell.as_ref(), rotation };
-        let (walls, laws, dt) = (&self.walls, &self.laws[..], self.dt);
-        if !parallel {
-            let mut scratch = ScratchGuard::take();
-            let mut none = Handover::default();
-            contact_job_wide(ContactJob {
-                sp: &sp,
-                walls,
-                sphere_pairs: PairChunk::whole(&mut self.pairs, strides),
-                wall_pairs: PairChunk::whole(&mut self.wall_pairs, strides),
-                laws,
-                dt,
-                scratch: &mut scratch,
-                loads: Loads { first: 0, force, torque, handover: &mut none, starts: &[] },
-            });
-            debug_assert!(none.0.is_empty(), "one piece holds every pair");
-            return;
-        }
-        let bounds = &mut self.piece_bounds;
-        bounds.refresh(x.len(), self.rebuilds, &self.pairs, &self.wall_pairs);
-        let starts = &bounds.spheres[..];
-        let sphere_pieces = PairChunk::whole(&mut self.pairs, strides).cut_at(&bounds.sphere_pairs);
-        let wall_pieces = PairChunk::whole(&mut self.wall_pairs, strides).cut_at(&bounds.wall_pairs);
-        let handovers = self.handovers.fit(sphere_pieces.len());
-        let load_pieces =
-            pieces_of(force, starts).into_iter().zip(pieces_of(torque, starts)).zip(handovers).enumerate();
-        // A piece's pairs are those whose first sphere is among its spheres.
-        debug_assert_eq!(sphere_pieces.len(), starts.len() - 1);
-        let pieces: Vec<_> = sphere_pieces.into_iter().zip(wall_pieces).zip(load_pieces).collect();
-        crate::par::run_pieces(pieces, |((sphere_pairs, wall_pairs), (part, ((force, torque), handover)))| {
-            let mut scratch = ScratchGuard::take();
-            let scratch = &mut *scratch;
-            handover.start(part);
-            let loads = Loads { first: starts[part], force, torque, handover: &mut *handover, starts };
-            contact_job_wide(ContactJob { sp: &sp, walls, sphere_pairs, wall_pairs, laws, dt, scratch, loads });
+        let mut scratch = ScratchGuard::take();
+        let mut none = Handover::default();
+        contact_job_wide(ContactJob {
+            sp: &sp,
+            walls: &self.walls,
+            sphere_pairs: PairChunk::whole(&mut self.pairs, strides),
+            wall_pairs: PairChunk::whole(&mut self.wall_pairs, strides),
+            laws: &self.laws,
+            dt: self.dt,
+            scratch: &mut scratch,
+            loads: Loads { first: 0, force, torque, handover: &mut none, starts: &[] },
         });
+        debug_assert!(none.0.is_empty(), "one piece holds every pair");
     }
 
     /// The contact stage and the gather with the integration of a parallel step, in one pass
     /// (`par::run_pieces_then`): a piece's spheres move as soon as no contact piece that reads
     /// them is still running, so a worker done with its contacts moves spheres instead of waiting
     /// for the other's. The same sums in the same order as [`DemSim::contacts`] then
-    /// [`gather_and_integrate`]. Returns the largest displacement (see `integrate`).
+    /// `integrate`: see `write_back` and `gather_piece`. Returns the largest displacement (see
+    /// `integrate`).
     fn contacts_and_motion(&mut self, motion: &Motion) -> f64 {
         let strides = (self.pairs.param_stride, self.pairs.history_stride);
         self.piece_bounds.refresh(self.spheres.len(), self.rebuilds, &self.pairs, &self.wall_pairs);
@@ -1201,39 +1169,6 @@ fn pieces_of<'a, T>(mut data: &'a mut [T], starts: &[usize]) -> Vec<&'a mut [T]>
             piece
         })
         .collect()
-}
-
-/// Adds to each sphere's loads those that later pieces handed over (see `write_back`) and moves
-/// it, in the parallel pieces of the contact stage. Runs after the whole contact stage: a piece
-/// reads the handovers and writes only its own spheres. Returns the largest displacement (see
-/// `integrate`).
-fn gather_and_integrate(
-    sp: &mut Spheres,
-    handovers: &Handovers,
-    starts: &[usize],
-    x_at_build: &[Vec3],
-    motion: &Motion,
-) -> f64 {
-    let Spheres { x, v, w, mass, inertia, force, torque, blocked, clump, .. } = sp;
-    if x.is_empty() {
-        return 0.0;
-    }
-    debug_assert_eq!(handovers.0.len(), starts.len() - 1, "the pieces of the contact stage");
-    let pieces: Vec<_> = pieces_of(x, starts)
-        .into_iter()
-        .zip(pieces_of(v, starts))
-        .zip(pieces_of(w, starts))
-        .zip(pieces_of(force, starts).into_iter().zip(pieces_of(torque, starts)))
-        .enumerate()
-        .collect();
-    let (mass, inertia, blocked, clump) = (&mass[..], &inertia[..], &blocked[..], &clump[..]);
-    let travel = crate::par::run_pieces(pieces, |(part, (((x, v), w), (force, torque)))| {
-        let moving = PieceState { x, v, w, force, torque };
-        let fixed = SphereConstants { mass, inertia, blocked, clump, x_at_build };
-        let later: Vec<&Handover> = handovers.0[part + 1..].iter().collect();
-        gather_piece_wide(GatherJob { first: starts[part], part, moving, fixed, later: &later, motion })
-    });
-    travel.into_iter().fold(Travel::default(), Travel::merge).largest()
 }
 
 /// One parallel piece of the force gather with the integration: consecutive spheres from
