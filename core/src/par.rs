@@ -33,6 +33,103 @@ pub fn piece_count(len: usize, min_per_piece: usize) -> usize {
     (len / min_per_piece.max(1)).clamp(1, workers * PIECES_PER_WORKER)
 }
 
+/// The worker of the current pool whose run holds each of `pieces` pieces (see [`Runs::piece_at`]).
+pub fn owners(pieces: usize) -> Vec<usize> {
+    let runs = Runs { pieces, runs: rayon::current_num_threads().clamp(1, pieces.max(1)) };
+    (0..pieces).map(|p| runs.owner(p)).collect()
+}
+
+/// Weight of the latest step in [`WorkerSpeeds`]: the last ten steps or so count.
+const SPEED_MEMORY: f64 = 0.1;
+/// The most a step's timing may differ from the estimate (as a factor) before it is learnt.
+const SPEED_STEP_AT_MOST: f64 = 1.5;
+
+/// How long each worker of a pool has lately taken per unit of work, learnt from the pieces it
+/// ran, so that the next cut gives a slower core less work: on a shared machine one core can run
+/// a third slower than the other for tens of milliseconds, longer than a stage of a small system
+/// (in the 1500-sphere RVE on two workers each holds two pieces of about 60 us, too few to take
+/// over one from the other in the middle of a stage).
+#[derive(Debug, Clone, Default)]
+pub struct WorkerSpeeds {
+    seconds_per_unit: Vec<f64>,
+}
+
+impl WorkerSpeeds {
+    /// Learns from one stage's pieces: `(worker, units of work, seconds)` for each, where
+    /// `worker` ran it. A worker that ran nothing keeps its estimate.
+    pub fn learn(&mut self, workers: usize, pieces: impl Iterator<Item = (usize, f64, f64)>) {
+        if self.seconds_per_unit.len() != workers {
+            self.seconds_per_unit = vec![f64::NAN; workers];
+        }
+        let mut sums = vec![(0.0, 0.0); workers];
+        for (w, units, seconds) in pieces {
+            if let Some(sum) = sums.get_mut(w) {
+                *sum = (sum.0 + seconds, sum.1 + units);
+            }
+        }
+        for (estimate, (seconds, units)) in self.seconds_per_unit.iter_mut().zip(sums) {
+            if units > 0.0 && seconds > 0.0 && seconds.is_finite() {
+                let now = seconds / units;
+                *estimate = if estimate.is_nan() {
+                    now
+                } else {
+                    // One stage in which the thread was put off its core for a millisecond
+                    // tells nothing of the next ones.
+                    let now = now.clamp(*estimate / SPEED_STEP_AT_MOST, *estimate * SPEED_STEP_AT_MOST);
+                    *estimate + SPEED_MEMORY * (now - *estimate)
+                };
+            }
+        }
+    }
+
+    /// How many workers it holds an estimate for.
+    pub fn workers(&self) -> usize {
+        self.seconds_per_unit.len()
+    }
+
+    /// The share of the work to give each of `workers` workers so that they finish together:
+    /// equal until every one has been timed, and never below half an equal share (a worker
+    /// stalled for a while must not be left out of the next stages).
+    pub fn shares(&self, workers: usize) -> Vec<f64> {
+        let equal = 1.0 / workers.max(1) as f64;
+        if self.seconds_per_unit.len() != workers || self.seconds_per_unit.iter().any(|s| !(s.is_finite() && *s > 0.0))
+        {
+            return vec![equal; workers];
+        }
+        let speeds: Vec<f64> = self.seconds_per_unit.iter().map(|s| 1.0 / s).collect();
+        let floor = 0.5 * equal;
+        // Workers held at the floor, and the rest shared in proportion to speed; holding one
+        // there lowers the others' shares, so repeat until none falls below it.
+        let mut held = vec![false; workers];
+        loop {
+            let free_speed: f64 = speeds.iter().zip(&held).filter(|(_, h)| !**h).map(|(v, _)| v).sum();
+            let left = 1.0 - floor * held.iter().filter(|h| **h).count() as f64;
+            let shares: Vec<f64> =
+                speeds.iter().zip(&held).map(|(v, h)| if *h { floor } else { v / free_speed * left }).collect();
+            let below: Vec<usize> = (0..workers).filter(|&w| !held[w] && shares[w] < floor).collect();
+            if below.is_empty() {
+                return shares;
+            }
+            below.into_iter().for_each(|w| held[w] = true);
+        }
+    }
+}
+
+/// Where each piece should start, as the fraction of the work before it, then 1: worker `w`
+/// gets `shares[w]` of the work, split equally between the pieces it owns (`owners`).
+pub fn piece_starts(owners: &[usize], shares: &[f64]) -> Vec<f64> {
+    let mut held = vec![0usize; shares.len()];
+    owners.iter().for_each(|&w| held[w] += 1);
+    let mut starts = Vec::with_capacity(owners.len() + 1);
+    let mut before = 0.0;
+    for &w in owners {
+        starts.push(before);
+        before += shares[w] / held[w] as f64;
+    }
+    starts.push(1.0);
+    starts
+}
+
 /// Runs `work` on every piece, spread over the workers of the current pool, and returns the
 /// results in piece order. A single piece, or a pool of one thread, runs on the calling thread.
 pub fn run_pieces<T: Send, R: Send>(pieces: Vec<T>, work: impl Fn(T) -> R + Sync) -> Vec<R> {
@@ -265,6 +362,27 @@ mod tests {
             assert_eq!(computes, vec![1; runs], "{n} pieces on {runs} workers: pair boundaries computed");
             assert_eq!(receives, vec![1; runs], "{n} pieces on {runs} workers: loads received");
         }
+    }
+
+    #[test]
+    fn shares_follow_the_workers_speeds_but_not_one_stalled_stage() {
+        let mut speeds = WorkerSpeeds::default();
+        assert_eq!(speeds.shares(2), vec![0.5, 0.5], "equal before any timing");
+        // Worker 1 ran 300 units in 0.9 ms, worker 0 twice as many in the same time.
+        speeds.learn(2, [(0, 400.0, 6e-4), (1, 300.0, 9e-4), (0, 200.0, 3e-4)].into_iter());
+        let shares = speeds.shares(2);
+        assert!((shares[0] - 2.0 / 3.0).abs() < 1e-12, "{shares:?}");
+        // A stage in which worker 1 was put off its core for 10 ms moves its estimate by at most
+        // SPEED_MEMORY * (SPEED_STEP_AT_MOST - 1).
+        speeds.learn(2, [(0, 600.0, 9e-4), (1, 300.0, 1e-2)].into_iter());
+        let after = speeds.shares(2);
+        let slower = 1.0 + SPEED_MEMORY * (SPEED_STEP_AT_MOST - 1.0);
+        let expected = 1.0 / (1.0 + 0.5 / slower);
+        assert!((after[0] - expected).abs() < 1e-12, "{after:?}, expected worker 0 at {expected}");
+        // Never below half an equal share.
+        let mut stalled = WorkerSpeeds::default();
+        stalled.learn(2, [(0, 1.0, 1e-9), (1, 1.0, 1e-3)].into_iter());
+        assert_eq!(stalled.shares(2), vec![0.75, 0.25]);
     }
 
     #[test]

@@ -15,6 +15,7 @@ use crate::math::{dot3, mat_vec, Vec3};
 use crate::simd::{self, add4, mat_vec4, mul4, narrow, scale4, sub4, widen, Lanes};
 use nalgebra::Matrix3;
 use std::sync::{Arc, Mutex, OnceLock};
+use std::time::Instant;
 
 /// Pairs per law call.
 const CHUNK: usize = 128;
@@ -258,9 +259,13 @@ impl DemSim {
         let handed: Vec<OnceLock<&Handover>> = (0..n).map(|_| OnceLock::new()).collect();
         let (mass, inertia, blocked, clump, x_at_build) =
             (&mass[..], &inertia[..], &blocked[..], &clump[..], &self.x_at_build[..]);
-        let travel = crate::par::run_pieces_then(
+        // Who ran each piece's contacts, and for how long (see `PieceBounds::learn`).
+        let contacts_timed: Vec<OnceLock<(usize, f64)>> = (0..n).map(|_| OnceLock::new()).collect();
+        let timed = |started: Instant| (rayon::current_thread_index().unwrap_or(0), started.elapsed().as_secs_f64());
+        let moved = crate::par::run_pieces_then(
             &bounds.reads_from,
             |q| {
+                let started = Instant::now();
                 let Some(((sphere_pairs, wall_pairs), ((force, torque), handover))) = take(&contact_pieces[q]) else {
                     return;
                 };
@@ -286,8 +291,10 @@ impl DemSim {
                 contact_job_wide(ContactJob { sp: &sp, walls, sphere_pairs, wall_pairs, laws, dt, scratch, loads });
                 *loads_after[q].lock().unwrap_or_else(|e| e.into_inner()) = Some((force, torque));
                 handed[q].set(handover).ok();
+                contacts_timed[q].set(timed(started)).ok();
             },
             |p| {
+                let started = Instant::now();
                 let Some((force, torque)) = take(&loads_after[p]) else {
                     panic!("the contacts of piece {p} ran before its spheres move");
                 };
@@ -302,10 +309,15 @@ impl DemSim {
                 let (x, v, w) = unsafe { (x.piece(range.clone()), v.piece(range.clone()), w.piece(range)) };
                 let moving = PieceState { x, v, w, force, torque };
                 let fixed = SphereConstants { mass, inertia, blocked, clump, x_at_build };
-                gather_piece_wide(GatherJob { first: starts[p], part: p, moving, fixed, later: &later, motion })
+                let travel =
+                    gather_piece_wide(GatherJob { first: starts[p], part: p, moving, fixed, later: &later, motion });
+                (travel, timed(started))
             },
         );
-        travel.into_iter().fold(Travel::default(), Travel::merge).largest()
+        let timings: Vec<[(usize, f64); 2]> =
+            contacts_timed.iter().zip(&moved).map(|(c, m)| [c.get().copied().unwrap_or_default(), m.1]).collect();
+        self.piece_bounds.learn(&timings);
+        moved.into_iter().map(|m| m.0).fold(Travel::default(), Travel::merge).largest()
     }
 
     /// Brings periodic positions back into the cell and fixes the shifts of their pairs.
@@ -1082,7 +1094,8 @@ pub(crate) fn branch(x: &[Vec3], i: usize, j: usize, shift: [i32; 3], cell: Opti
 /// Where the parallel stages cut the spheres and the pair lists: into pieces of consecutive
 /// spheres with the pairs whose first spheres fall in them (pairs are sorted by first sphere), so
 /// a worker mostly sums forces it computed itself, from its own cache. Found again when the lists
-/// are rebuilt or the piece count changes; any cuts give the same forces.
+/// are rebuilt, the piece count changes, or the workers' speeds drift apart; any cuts give the
+/// same forces.
 #[derive(Debug, Clone, Default)]
 pub(crate) struct PieceBounds {
     /// Sphere count, piece count, rebuild count and list lengths the cuts were found for.
@@ -1095,10 +1108,27 @@ pub(crate) struct PieceBounds {
     /// For each piece, the first piece holding a sphere it reads (the second spheres of its pairs
     /// lie before their first): its contacts read the spheres of pieces `reads_from[q]..=q`.
     reads_from: Vec<usize>,
+    /// Units of work of each piece (see [`PieceBounds::refresh`]).
+    units: Vec<usize>,
+    /// Each worker's share of the work the cuts were made for.
+    shares: Vec<f64>,
+    /// What the steps since taught of the workers' speeds, and how many steps ago the cuts were
+    /// made.
+    speeds: crate::par::WorkerSpeeds,
+    age: u64,
 }
 
+/// A worker's share of the work that has to drift this far from the one the pieces were cut for
+/// before they are cut again, and the steps that have to pass: recutting costs a pass over the
+/// pair list (a few microseconds in a 1500-sphere RVE), and the speeds' estimates are noisy.
+const RECUT_DRIFT: f64 = 0.01;
+const RECUT_AFTER_STEPS: u64 = 10;
+/// Most pieces a worker may hold for the cuts to follow the workers' speeds (see `refresh`).
+const BALANCE_UP_TO_PIECES_PER_WORKER: usize = 3;
+
 impl PieceBounds {
-    /// Cuts into pieces of about equal work, counting one unit for each candidate pair (the
+    /// Cuts into pieces that give each worker its share of the work (equal until the workers'
+    /// speeds are known, see `par::WorkerSpeeds`), counting one unit for each candidate pair (the
     /// contact stage) and one for each sphere (the gather): in the periodic RVE a candidate costs
     /// about 220 instructions a step and a sphere's integration 160 (callgrind). Equal sphere
     /// counts would not do: in a periodic cell the pairs that wrap round it belong to the last
@@ -1107,15 +1137,30 @@ impl PieceBounds {
     fn refresh(&mut self, spheres: usize, rebuilds: u64, pairs: &PairList, walls: &PairList) {
         let pieces = crate::par::piece_count(spheres, MIN_SPHERES_PER_PIECE);
         let key = (spheres, pieces, rebuilds, pairs.len(), walls.len());
-        if key == self.key {
+        let workers = rayon::current_num_threads().clamp(1, pieces);
+        // A worker that holds many pieces takes over others' when it is ahead: the stage balances
+        // itself (see `par`), and shares learnt from pieces of uneven cost would only move data
+        // between the cores (in the 10k-sphere deposition, 13 pieces a worker, they swung between
+        // 0.2 and 0.8 and made the step 3-10 % slower).
+        let shares = if pieces <= BALANCE_UP_TO_PIECES_PER_WORKER * workers {
+            self.speeds.shares(workers)
+        } else {
+            vec![1.0 / workers as f64; workers]
+        };
+        let drifted = shares.len() != self.shares.len()
+            || shares.iter().zip(&self.shares).any(|(now, cut)| (now - cut).abs() > RECUT_DRIFT);
+        self.age += 1;
+        if key == self.key && !(drifted && self.age >= RECUT_AFTER_STEPS) {
             return;
         }
+        let owners = crate::par::owners(pieces);
+        let fractions = crate::par::piece_starts(&owners, &shares);
         let before = |list: &PairList, s: usize| list.a.partition_point(|&a| (a as usize) < s);
         let work_before = |s: usize| s + before(pairs, s) + before(walls, s);
         let total = work_before(spheres);
         let mut starts = vec![0];
-        for k in 1..pieces {
-            let target = total * k / pieces;
+        for &fraction in &fractions[1..pieces] {
+            let target = (total as f64 * fraction).round() as usize;
             // The first sphere with at least `target` work before it (work grows with s).
             let (mut lo, mut hi) = (*starts.last().unwrap_or(&0), spheres);
             while lo < hi {
@@ -1136,18 +1181,43 @@ impl PieceBounds {
             .map(|q| {
                 let (from, to) =
                     (if q == 0 { 0 } else { sphere_pairs[q - 1] }, sphere_pairs.get(q).copied().unwrap_or(pairs.len()));
-                pairs.b[from..to].iter().map(|&b| piece_of(b as usize)).min().unwrap_or(q).min(q)
+                pairs.b[from..to].iter().min().map_or(q, |&b| piece_of(b as usize)).min(q)
             })
             .collect();
-        *self = PieceBounds { key, sphere_pairs, wall_pairs: cuts(walls), spheres: starts, reads_from };
+        let units = starts.windows(2).map(|w| work_before(w[1]) - work_before(w[0])).collect();
+        let speeds = std::mem::take(&mut self.speeds);
+        *self = PieceBounds {
+            key,
+            sphere_pairs,
+            wall_pairs: cuts(walls),
+            spheres: starts,
+            reads_from,
+            units,
+            shares,
+            speeds,
+            age: 0,
+        };
+    }
+
+    /// Learns the workers' speeds from the time each piece's two stages took, on the workers that
+    /// ran them (`(worker, seconds)` for the contacts, then for the motion of each piece).
+    fn learn(&mut self, timed: &[[(usize, f64); 2]]) {
+        let workers = self.shares.len();
+        let spheres = |p: usize| self.spheres[p + 1] - self.spheres[p];
+        let samples = timed.iter().enumerate().flat_map(|(p, [contacts, motion])| {
+            [(contacts.0, (self.units[p] - spheres(p)) as f64, contacts.1), (motion.0, spheres(p) as f64, motion.1)]
+        });
+        self.speeds.learn(workers, samples);
     }
 
     pub(crate) fn bytes(&self) -> usize {
         (self.spheres.capacity()
             + self.sphere_pairs.capacity()
             + self.wall_pairs.capacity()
-            + self.reads_from.capacity())
+            + self.reads_from.capacity()
+            + self.units.capacity())
             * std::mem::size_of::<usize>()
+            + (self.shares.capacity() + self.speeds.workers()) * std::mem::size_of::<f64>()
     }
 }
 
@@ -1576,8 +1646,22 @@ fn integrate_clumps(
 mod tests {
     use super::*;
 
+    /// The work (spheres and their pairs) of each piece of `bounds`, and what it should be when
+    /// the workers get `shares` of `total`, split equally between the pieces each owns.
+    fn work_and_targets(bounds: &PieceBounds, work_before: impl Fn(usize) -> usize, shares: &[f64]) -> Vec<(f64, f64)> {
+        let pieces = bounds.spheres.len() - 1;
+        let total = work_before(*bounds.spheres.last().unwrap()) as f64;
+        let starts = crate::par::piece_starts(&crate::par::owners(pieces), shares);
+        (0..pieces)
+            .map(|p| {
+                let work = (work_before(bounds.spheres[p + 1]) - work_before(bounds.spheres[p])) as f64;
+                (work, total * (starts[p + 1] - starts[p]))
+            })
+            .collect()
+    }
+
     #[test]
-    fn pieces_hold_equal_work_when_the_last_spheres_hold_most_pairs() {
+    fn workers_get_equal_work_when_the_last_spheres_hold_most_pairs() {
         // 2000 spheres: sphere i is the first of i / 500 pairs (the last quarter holds 3 a
         // sphere, the first none), as the wrap-round pairs of a periodic cell load its last slab.
         let (spheres, mut pairs) = (2000, PairList::default());
@@ -1595,17 +1679,136 @@ mod tests {
         let pieces = bounds.spheres.len() - 1;
         assert!(pieces > 2, "{pieces} pieces");
         let work_before = |s: usize| s + pairs.a.partition_point(|&a| (a as usize) < s);
-        let fair = work_before(spheres) as f64 / pieces as f64;
-        // A cut can only fall between spheres: a piece may be off by one sphere's work (itself
-        // and its pairs).
+        // Before any piece has been timed, each of the two workers gets half the work, split
+        // equally between its pieces. A cut can only fall between spheres: a piece may be off by
+        // one sphere's work (itself and its pairs).
         let one_sphere = (1 + pairs_of(spheres - 1)) as f64;
-        for w in bounds.spheres.windows(2) {
-            let work = (work_before(w[1]) - work_before(w[0])) as f64;
-            assert!((work - fair).abs() <= one_sphere, "piece {w:?}: {work} units of work, fair share {fair}");
+        for (p, (work, target)) in work_and_targets(&bounds, work_before, &[0.5, 0.5]).into_iter().enumerate() {
+            assert!((work - target).abs() <= one_sphere, "piece {p}: {work} units of work, its share {target}");
         }
         let cut_pairs: Vec<usize> = bounds.spheres[1..pieces].iter().map(|&s| work_before(s) - s).collect();
         assert_eq!(bounds.sphere_pairs, cut_pairs, "pair lists cut where their first spheres are");
         assert!(bounds.spheres[1] - bounds.spheres[0] > bounds.spheres[pieces] - bounds.spheres[pieces - 1]);
+    }
+
+    #[test]
+    fn cuts_give_a_slower_worker_less_work() {
+        // A chain of 1600 spheres: 4 pieces, two a worker.
+        let (spheres, mut pairs) = (1600, PairList::default());
+        for i in 1..spheres {
+            pairs.a.push(i as u32);
+            pairs.b.push(i as u32 - 1);
+        }
+        let walls = PairList::default();
+        let work_before = |s: usize| s + pairs.a.partition_point(|&a| (a as usize) < s);
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(2).build().unwrap();
+        let mut bounds = PieceBounds::default();
+        pool.install(|| bounds.refresh(spheres, 0, &pairs, &walls));
+        assert_eq!(bounds.spheres.len() - 1, 4);
+        // Worker 1 takes twice as long per unit of work as worker 0, step after step.
+        for _ in 0..RECUT_AFTER_STEPS {
+            let timed: Vec<[(usize, f64); 2]> = (0..4)
+                .map(|p| {
+                    let w = crate::par::owners(4)[p];
+                    let seconds_per_unit = if w == 0 { 1e-9 } else { 2e-9 };
+                    let spheres = (bounds.spheres[p + 1] - bounds.spheres[p]) as f64;
+                    let contacts = bounds.units[p] as f64 - spheres;
+                    [(w, contacts * seconds_per_unit), (w, spheres * seconds_per_unit)]
+                })
+                .collect();
+            pool.install(|| bounds.learn(&timed));
+            pool.install(|| bounds.refresh(spheres, 0, &pairs, &walls));
+        }
+        // Then the cuts give worker 0 two thirds of the work: both finish together.
+        let one_sphere = 2.0;
+        for (p, (work, target)) in
+            work_and_targets(&bounds, work_before, &[2.0 / 3.0, 1.0 / 3.0]).into_iter().enumerate()
+        {
+            assert!((work - target).abs() <= one_sphere, "piece {p}: {work} units of work, its share {target}");
+        }
+    }
+
+    /// A normal spring and a drag on the relative velocity: enough to make spheres spin and to
+    /// load both spheres of every pair (the laws proper are plugins).
+    struct SpringAndDrag(crate::params::Params);
+
+    impl ContactLaw for SpringAndDrag {
+        fn name(&self) -> &str {
+            "spring_and_drag"
+        }
+        fn params(&self) -> &crate::params::Params {
+            &self.0
+        }
+        fn param_count(&self) -> usize {
+            1
+        }
+        fn history_count(&self) -> usize {
+            0
+        }
+        fn init_pair(&self, _: &crate::ext::PairInfo, params: &mut [f64]) {
+            params[0] = 1e5;
+        }
+        fn max_normal_stiffness(&self, _: &crate::ext::PairInfo) -> f64 {
+            1e5
+        }
+        fn compute(&self, batch: ContactBatch<'_>) {
+            batch.for_each(&mut SpringAndDrag(Default::default()));
+        }
+    }
+
+    impl crate::ext::contact::ContactPhysics<1, 0> for SpringAndDrag {
+        fn contact(&mut self, c: crate::ext::contact::Contact<'_, 1, 0>) -> (Vec3, Vec3) {
+            let push = c.params[0] * c.overlap;
+            let drag = 0.05;
+            (std::array::from_fn(|a| -push * c.normal[a] + drag * c.rel_velocity[a]), [0.0; 3])
+        }
+    }
+
+    #[test]
+    fn any_cut_into_pieces_gives_the_same_motion() {
+        // A squeezed, sheared periodic lattice of 12^3 spheres, stepped on one thread and on two
+        // with the workers' shares forced to change every step: other cuts each time.
+        let run = |threads: usize, shares: &[f64]| {
+            let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+            pool.install(|| {
+                let mut sim = DemSim::new();
+                let m = sim.add_material("grains", 2650.0).unwrap();
+                sim.set_contact_law(Box::new(SpringAndDrag(Default::default())), None).unwrap();
+                let (r, side) = (1e-3, 12);
+                let spacing = 1.9 * r;
+                let width = side as f64 * spacing;
+                sim.set_cell(Some(PeriodicCell::new_box([width; 3])));
+                let hi = [width - 0.5 * spacing + r; 3];
+                let placed =
+                    crate::dem::generate::lattice([0.5 * spacing - r; 3], hi, spacing, 0.93 * r, 0.01 * r, 3).unwrap();
+                for (x, radius) in placed {
+                    sim.add_sphere(m, x, radius, [0.0; 3]).unwrap();
+                }
+                sim.set_dt(0.2 * sim.critical_dt().unwrap()).unwrap();
+                let l = &mut sim.cell.as_mut().unwrap().velocity_gradient;
+                for a in 0..3 {
+                    l[(a, a)] = -0.05 / (200.0 * sim.dt);
+                }
+                l[(0, 2)] = 0.1 / (200.0 * sim.dt);
+                let mut cuts = std::collections::BTreeSet::new();
+                for step in 0..200 {
+                    let share = shares[step % shares.len()];
+                    let mut taught = crate::par::WorkerSpeeds::default();
+                    taught.learn(2, [(0, 1.0, 1.0 - share), (1, 1.0, share)].into_iter());
+                    sim.piece_bounds.speeds = taught;
+                    sim.piece_bounds.age = RECUT_AFTER_STEPS;
+                    sim.step().unwrap();
+                    cuts.insert(sim.piece_bounds.spheres.clone());
+                }
+                (sim.spheres.x, sim.spheres.w, sim.pairs.touching_count(), cuts.len())
+            })
+        };
+        let one = run(1, &[0.5]);
+        let two = run(2, &[0.35, 0.5, 0.65]);
+        assert!(one.2 > 2000, "the lattice must be squeezed into contact ({} contacts)", one.2);
+        assert!(one.1.iter().any(|w| w.iter().any(|c| *c != 0.0)), "no sphere spins");
+        assert!(two.3 >= 3, "the shares must have cut the spheres in several ways ({} cuts)", two.3);
+        assert!(one.0 == two.0 && one.1 == two.1, "the cuts changed the motion");
     }
 
     #[test]
