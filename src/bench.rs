@@ -345,7 +345,62 @@ pub fn dem(counts: &[usize], steps: usize, threads: &[usize], repeat: usize) -> 
             t.best / steps as f64 * 1e3
         );
     }
+    for &n in threads.iter().filter(|&&n| n > 1) {
+        let w = rve_windows(&rve, n, RVE_WINDOWS, repeat)?;
+        println!(
+            "interleaved windows ({RVE_WINDOWS} x {WINDOW_STEPS} steps)  threads {n}  speed-up {:.2}x, one copy per thread {:.2}x: the parallel step gets {:.0} % of what this machine gives independent copies",
+            w.speedup,
+            w.ceiling,
+            100.0 * w.speedup / w.ceiling
+        );
+    }
     Ok(())
+}
+
+/// Windows timed by [`rve_windows`], and steps in each.
+const RVE_WINDOWS: usize = 10;
+const WINDOW_STEPS: usize = 100;
+
+/// What [`rve_windows`] measured: the speed-up of the parallel step, and that of one copy per
+/// thread (the ceiling), both against one thread.
+struct Windows {
+    speedup: f64,
+    ceiling: f64,
+}
+
+/// The speed-up of `rve` on `n` threads, set against the ceiling of the moment: from one state,
+/// the same window of steps is timed on one thread, on `n`, and as `n` copies at once (each the
+/// fastest of `repeat`), one right after the other, so that a slow spell of this shared machine
+/// slows all three; the state then moves on by a window. Speed-ups are ratios of summed times.
+fn rve_windows(rve: &granite_core::dem::DemSim, n: usize, windows: usize, repeat: usize) -> Result<Windows> {
+    let (one, many) = (pool(1)?, pool(n)?);
+    let window = |sim: &mut granite_core::dem::DemSim| -> Result<f64> {
+        // The first step of a copy touches its fresh memory: not timed.
+        sim.step()?;
+        let t = Instant::now();
+        for _ in 1..WINDOW_STEPS {
+            sim.step()?;
+        }
+        Ok(t.elapsed().as_secs_f64())
+    };
+    let mut state = rve.clone();
+    let mut sums = [0.0; 3];
+    for _ in 0..windows {
+        let mut best = [f64::INFINITY; 3];
+        for _ in 0..repeat.max(1) {
+            best[0] = best[0].min(one.install(|| window(&mut state.clone()))?);
+            best[1] = best[1].min(many.install(|| window(&mut state.clone()))?);
+            let copies = many.broadcast(|_| {
+                let mut copy = state.clone();
+                copy.set_sequential(true);
+                window(&mut copy)
+            });
+            best[2] = best[2].min(copies.into_iter().collect::<Result<Vec<f64>>>()?.into_iter().fold(0.0, f64::max));
+        }
+        sums.iter_mut().zip(best).for_each(|(sum, b)| *sum += b);
+        one.install(|| (0..WINDOW_STEPS).try_for_each(|_| state.step()))?;
+    }
+    Ok(Windows { speedup: sums[0] / sums[1], ceiling: n as f64 * sums[0] / sums[2] })
 }
 
 /// Benchmark (b) of the coupling issue: MPM steps, their time step, DEM steps per MPM step, and
