@@ -1,7 +1,7 @@
 //! Parallel loops over pieces of data, for stages run every time step.
 //!
 //! One stage is one `rayon::broadcast`. Worker `t` of the current pool owns the `t`-th run of
-//! consecutive pieces (the runs laid round the pieces as on a ring, see [`Runs::piece_at`]) and claims
+//! consecutive pieces (the runs laid round the pieces as on a ring, see `Runs::piece_at`) and claims
 //! them one by one from its front; when its run is done it claims what is left of the others'
 //! runs from their back. Balanced stages keep each piece on the same worker
 //! from one step to the next (its data stays in that core's cache); uneven ones, like the
@@ -9,7 +9,9 @@
 //! lasts tens of microseconds, this costs less than rayon's recursive splitting of zipped
 //! iterators. Results never depend on which worker ran a piece: each piece is computed on its own
 //! and results come back in piece order. Two stages over the same pieces, the second of which may
-//! change what the first reads, run in one broadcast with [`run_pieces_then`].
+//! change what the first reads, run in one broadcast with [`run_pieces_then`]. Where each worker
+//! holds too few pieces to take any over, the caller can cut them to the workers' speeds instead
+//! ([`WorkerSpeeds`], [`owners`], [`piece_starts`]).
 
 use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
 use std::sync::Mutex;
@@ -33,7 +35,7 @@ pub fn piece_count(len: usize, min_per_piece: usize) -> usize {
     (len / min_per_piece.max(1)).clamp(1, workers * PIECES_PER_WORKER)
 }
 
-/// The worker of the current pool whose run holds each of `pieces` pieces (see [`Runs::piece_at`]).
+/// The worker of the current pool whose run holds each of `pieces` pieces (see `Runs::piece_at`).
 pub fn owners(pieces: usize) -> Vec<usize> {
     let runs = Runs { pieces, runs: rayon::current_num_threads().clamp(1, pieces.max(1)) };
     (0..pieces).map(|p| runs.owner(p)).collect()
