@@ -309,9 +309,9 @@ impl DemSim {
                 let (x, v, w) = unsafe { (x.piece(range.clone()), v.piece(range.clone()), w.piece(range)) };
                 let moving = PieceState { x, v, w, force, torque };
                 let fixed = SphereConstants { mass, inertia, blocked, clump, x_at_build };
-                let travel =
+                let largest =
                     gather_piece(GatherJob { first: starts[p], part: p, moving, fixed, later: &later, motion });
-                (travel, timed(started))
+                (largest, timed(started))
             },
         );
         let timings: Vec<[(usize, f64); 2]> =
