@@ -1785,6 +1785,7 @@ mod tests {
                 }
                 l[(0, 2)] = 0.1 / (200.0 * sim.dt);
                 let mut cuts = std::collections::BTreeSet::new();
+                let mut shares_cut_for = std::collections::BTreeSet::new();
                 for step in 0..200 {
                     let share = shares[step % shares.len()];
                     let mut taught = crate::par::WorkerSpeeds::default();
@@ -1793,14 +1794,18 @@ mod tests {
                     sim.piece_bounds.age = RECUT_AFTER_STEPS;
                     sim.step().unwrap();
                     cuts.insert(sim.piece_bounds.spheres.clone());
+                    shares_cut_for
+                        .insert(sim.piece_bounds.shares.iter().map(|s| (s * 100.0).round() as i64).collect::<Vec<_>>());
                 }
-                (sim.spheres.x, sim.spheres.w, sim.pairs.touching_count(), cuts.len())
+                (sim.spheres.x, sim.spheres.w, sim.pairs.touching_count(), cuts.len(), shares_cut_for)
             })
         };
         let one = run(1, &[0.5]);
         let two = run(2, &[0.35, 0.5, 0.65]);
         assert!(one.2 > 2000, "the lattice must be squeezed into contact ({} contacts)", one.2);
         assert!(one.1.iter().any(|w| w.iter().any(|c| *c != 0.0)), "no sphere spins");
+        let forced = [35, 50, 65].map(|percent| vec![percent, 100 - percent]);
+        assert!(forced.iter().all(|f| two.4.contains(f)), "cuts for the forced shares {forced:?}: {:?}", two.4);
         assert!(two.3 >= 3, "the shares must have cut the spheres in several ways ({} cuts)", two.3);
         assert!(one.0 == two.0 && one.1 == two.1, "the cuts changed the motion");
     }
