@@ -43,7 +43,7 @@ pub fn owners(pieces: usize) -> Vec<usize> {
 
 /// Weight of the latest step in [`WorkerSpeeds`]: the last ten steps or so count.
 const SPEED_MEMORY: f64 = 0.1;
-/// The most a step's timing may differ from the estimate (as a factor) before it is learnt.
+/// A step's timing is clipped to within this factor of the estimate before it is learnt.
 const SPEED_STEP_AT_MOST: f64 = 1.5;
 
 /// How long each worker of a pool has lately taken per unit of work, learnt from the pieces it

@@ -1148,10 +1148,11 @@ impl PieceBounds {
         } else {
             vec![1.0 / workers as f64; workers]
         };
-        let drifted = shares.len() != self.shares.len()
-            || shares.iter().zip(&self.shares).any(|(now, cut)| (now - cut).abs() > RECUT_DRIFT);
+        let drifted = shares.iter().zip(&self.shares).any(|(now, cut)| (now - cut).abs() > RECUT_DRIFT);
         self.age += 1;
-        if key == self.key && !(drifted && self.age >= RECUT_AFTER_STEPS) {
+        let stale = key != self.key || shares.len() != self.shares.len();
+        let due = drifted && self.age >= RECUT_AFTER_STEPS;
+        if !(stale || due) {
             return;
         }
         let owners = crate::par::owners(pieces);
