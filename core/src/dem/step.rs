@@ -436,32 +436,48 @@ impl DemSim {
                 ca == FREE || ca != s.clump[b as usize]
             });
         }
-        let wall_candidates = wall_pairs(&s.x, &s.radius, &self.walls, self.skin);
-        let mut missing = None;
         let mut pairs = std::mem::take(&mut self.pairs);
         // An RVE (sequential) rebuilds rarely and is copied into every material point: no spare.
         let mut spare = if self.sequential { PairList::default() } else { std::mem::take(&mut self.spare_pairs) };
-        pairs.merge(&mut spare, &candidates, (p_stride, h_stride), |a, b, law, params| {
-            let (a, b) = (a as usize, b as usize);
-            match self.law_for(s.material[a], s.material[b]) {
-                Some(l) => {
-                    *law = l;
-                    self.laws[l as usize].init_pair(&self.info_for(a, b, false), params);
-                }
-                None => missing = Some((s.material[a], s.material[b])),
-            }
-        });
         let mut wall_list = std::mem::take(&mut self.wall_pairs);
-        wall_list.merge(&mut PairList::default(), &wall_candidates, (p_stride, h_stride), |a, w, law, params| {
-            let (a, w) = (a as usize, w as usize);
-            match self.law_for(s.material[a], self.walls[w].material) {
-                Some(l) => {
-                    *law = l;
-                    self.laws[l as usize].init_pair(&self.info_for(a, w, true), params);
+        // Each returns a pair of materials without a contact law, if it met one.
+        let mut merge_spheres = || {
+            let mut missing = None;
+            pairs.merge(&mut spare, &candidates, (p_stride, h_stride), |a, b, law, params| {
+                let (a, b) = (a as usize, b as usize);
+                match self.law_for(s.material[a], s.material[b]) {
+                    Some(l) => {
+                        *law = l;
+                        self.laws[l as usize].init_pair(&self.info_for(a, b, false), params);
+                    }
+                    None => missing = Some((s.material[a], s.material[b])),
                 }
-                None => missing = Some((s.material[a], self.walls[w].material)),
-            }
-        });
+            });
+            missing
+        };
+        let mut find_and_merge_walls = || {
+            let mut missing = None;
+            let wall_candidates = wall_pairs(&s.x, &s.radius, &self.walls, self.skin);
+            wall_list.merge(&mut PairList::default(), &wall_candidates, (p_stride, h_stride), |a, w, law, params| {
+                let (a, w) = (a as usize, w as usize);
+                match self.law_for(s.material[a], self.walls[w].material) {
+                    Some(l) => {
+                        *law = l;
+                        self.laws[l as usize].init_pair(&self.info_for(a, w, true), params);
+                    }
+                    None => missing = Some((s.material[a], self.walls[w].material)),
+                }
+            });
+            missing
+        };
+        // The two are independent and serial: side by side they take the time of the longer (in
+        // the 10k deposition, merging the sphere pairs' history took 0.8-0.9 ms, the walls 0.3).
+        let (missing_spheres, missing_walls) = if self.in_parallel() {
+            rayon::join(merge_spheres, find_and_merge_walls)
+        } else {
+            (merge_spheres(), find_and_merge_walls())
+        };
+        let missing = missing_walls.or(missing_spheres);
         if let Some((a, b)) = missing {
             let name = |m: u16| self.materials.get(m as usize).map(|m| m.name.clone()).unwrap_or_default();
             return Err(GraniteError::Setup(format!(
@@ -1809,6 +1825,30 @@ mod tests {
         assert!(forced.iter().all(|f| two.4.contains(f)), "cuts for the forced shares {forced:?}: {:?}", two.4);
         assert!(two.3 >= 3, "the shares must have cut the spheres in several ways ({} cuts)", two.3);
         assert!(one.0 == two.0 && one.1 == two.1, "the cuts changed the motion");
+    }
+
+    #[test]
+    fn a_pair_of_materials_without_a_contact_law_is_named() {
+        use crate::dem::walls::{Wall, WallShape};
+        // A law for sand on sand only: a sand sphere 1 mm from a glass sphere, then from a glass
+        // wall (the skin is 2 mm).
+        for near_wall in [false, true] {
+            let mut sim = DemSim::new();
+            let sand = sim.add_material("sand", 2650.0).unwrap();
+            let glass = sim.add_material("glass", 2500.0).unwrap();
+            sim.set_contact_law(Box::new(SpringAndDrag(Default::default())), Some((sand, sand))).unwrap();
+            sim.add_sphere(sand, [0.0, 0.0, 0.006], 0.005, [0.0; 3]).unwrap();
+            if near_wall {
+                sim.add_wall(Wall::new("floor", WallShape::Plane { normal: [0.0, 0.0, 1.0] }, [0.0; 3], glass));
+            } else {
+                sim.add_sphere(glass, [0.0, 0.0, -0.005], 0.005, [0.0; 3]).unwrap();
+            }
+            sim.skin = 0.002;
+            let Err(GraniteError::Setup(message)) = sim.rebuild_candidates() else {
+                panic!("near a wall: {near_wall}: a pair without a law must be refused");
+            };
+            assert!(message.contains("\"sand\"") && message.contains("\"glass\""), "{message}");
+        }
     }
 
     #[test]
