@@ -35,9 +35,15 @@ pub fn piece_count(len: usize, min_per_piece: usize) -> usize {
     (len / min_per_piece.max(1)).clamp(1, workers * PIECES_PER_WORKER)
 }
 
+/// How many workers of the current pool take part in a stage of `pieces` pieces: one run of
+/// pieces each.
+pub fn workers_for(pieces: usize) -> usize {
+    rayon::current_num_threads().clamp(1, pieces.max(1))
+}
+
 /// The worker of the current pool whose run holds each of `pieces` pieces (see `Runs::piece_at`).
 pub fn owners(pieces: usize) -> Vec<usize> {
-    let runs = Runs { pieces, runs: rayon::current_num_threads().clamp(1, pieces.max(1)) };
+    let runs = Runs::in_pool(pieces);
     (0..pieces).map(|p| runs.owner(p)).collect()
 }
 
@@ -141,7 +147,7 @@ pub fn run_pieces<T: Send, R: Send>(pieces: Vec<T>, work: impl Fn(T) -> R + Sync
     let n = pieces.len();
     let slots: Vec<Mutex<Option<T>>> = pieces.into_iter().map(|p| Mutex::new(Some(p))).collect();
     let results: Vec<Mutex<Option<R>>> = (0..n).map(|_| Mutex::new(None)).collect();
-    let runs = Runs { pieces: n, runs: rayon::current_num_threads().min(n) };
+    let runs = Runs::in_pool(n);
     // What is left of each run: its owner takes from the front, helpers from the back, so the
     // owner's pieces stay its own from one step to the next wherever the two meet.
     let left = runs.left();
@@ -181,7 +187,7 @@ pub fn run_pieces_then<R: Send>(
         (0..n).for_each(&first);
         return (0..n).map(second).collect();
     }
-    let runs = Runs { pieces: n, runs: rayon::current_num_threads().min(n) };
+    let runs = Runs::in_pool(n);
     let left = runs.left();
     let first_done: Vec<AtomicBool> = (0..n).map(|_| AtomicBool::new(false)).collect();
     let second_taken: Vec<AtomicBool> = (0..n).map(|_| AtomicBool::new(false)).collect();
@@ -238,6 +244,11 @@ struct Runs {
 }
 
 impl Runs {
+    /// The runs of the current pool's workers over `pieces` pieces.
+    fn in_pool(pieces: usize) -> Runs {
+        Runs { pieces, runs: workers_for(pieces) }
+    }
+
     /// The first position of run `r` (of `runs`, then the count).
     fn start(&self, r: usize) -> usize {
         r * self.pieces / self.runs

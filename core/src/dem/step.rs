@@ -1,7 +1,7 @@
 //! One DEM step as stages called in a fixed order; each is a free function that shows what it
 //! reads and writes.
 
-use crate::dem::broad_phase::{periodic_sphere_pairs, sphere_pairs, wall_pairs};
+use crate::dem::broad_phase::{periodic_sphere_pairs, sphere_pairs, wall_pairs, Candidate};
 use crate::dem::cell::{shift_after_flip, AxisGoal, PeriodicCell};
 use crate::dem::clump::Clumps;
 use crate::dem::contacts::PairList;
@@ -411,6 +411,33 @@ impl DemSim {
         self.spheres.permute(&order);
     }
 
+    /// Merges `candidates` into `list` (see `PairList::merge`), giving each new pair the law of
+    /// its two materials (the second a wall's if `wall`); returns a pair of materials without a
+    /// contact law, if it met one.
+    fn merge_pairs(
+        &self,
+        list: &mut PairList,
+        spare: &mut PairList,
+        candidates: &[Candidate],
+        strides: (usize, usize),
+        wall: bool,
+    ) -> Option<(u16, u16)> {
+        let material = &self.spheres.material;
+        let mut missing = None;
+        list.merge(spare, candidates, strides, |a, b, law, params| {
+            let (a, b) = (a as usize, b as usize);
+            let pair = (material[a], if wall { self.walls[b].material } else { material[b] });
+            match self.law_for(pair.0, pair.1) {
+                Some(l) => {
+                    *law = l;
+                    self.laws[l as usize].init_pair(&self.info_for(a, b, wall), params);
+                }
+                None => missing = Some(pair),
+            }
+        });
+        missing
+    }
+
     /// Rebuilds the candidate pair lists (keeping the history of pairs still present).
     pub fn rebuild_candidates(&mut self) -> Result<()> {
         let p_stride = self.laws.iter().map(|l| l.param_count()).max().unwrap_or(0).max(1);
@@ -440,35 +467,11 @@ impl DemSim {
         // An RVE (sequential) rebuilds rarely and is copied into every material point: no spare.
         let mut spare = if self.sequential { PairList::default() } else { std::mem::take(&mut self.spare_pairs) };
         let mut wall_list = std::mem::take(&mut self.wall_pairs);
-        // Each returns a pair of materials without a contact law, if it met one.
-        let mut merge_spheres = || {
-            let mut missing = None;
-            pairs.merge(&mut spare, &candidates, (p_stride, h_stride), |a, b, law, params| {
-                let (a, b) = (a as usize, b as usize);
-                match self.law_for(s.material[a], s.material[b]) {
-                    Some(l) => {
-                        *law = l;
-                        self.laws[l as usize].init_pair(&self.info_for(a, b, false), params);
-                    }
-                    None => missing = Some((s.material[a], s.material[b])),
-                }
-            });
-            missing
-        };
+        let strides = (p_stride, h_stride);
+        let mut merge_spheres = || self.merge_pairs(&mut pairs, &mut spare, &candidates, strides, false);
         let mut find_and_merge_walls = || {
-            let mut missing = None;
             let wall_candidates = wall_pairs(&s.x, &s.radius, &self.walls, self.skin);
-            wall_list.merge(&mut PairList::default(), &wall_candidates, (p_stride, h_stride), |a, w, law, params| {
-                let (a, w) = (a as usize, w as usize);
-                match self.law_for(s.material[a], self.walls[w].material) {
-                    Some(l) => {
-                        *law = l;
-                        self.laws[l as usize].init_pair(&self.info_for(a, w, true), params);
-                    }
-                    None => missing = Some((s.material[a], self.walls[w].material)),
-                }
-            });
-            missing
+            self.merge_pairs(&mut wall_list, &mut PairList::default(), &wall_candidates, strides, true)
         };
         // The two are independent and serial: side by side they take the time of the longer (in
         // the 10k deposition, merging the sphere pairs' history took 0.8-0.9 ms, the walls 0.3).
@@ -1154,7 +1157,7 @@ impl PieceBounds {
     fn refresh(&mut self, spheres: usize, rebuilds: u64, pairs: &PairList, walls: &PairList) {
         let pieces = crate::par::piece_count(spheres, MIN_SPHERES_PER_PIECE);
         let key = (spheres, pieces, rebuilds, pairs.len(), walls.len());
-        let workers = rayon::current_num_threads().clamp(1, pieces);
+        let workers = crate::par::workers_for(pieces);
         // A worker that holds many pieces takes over others' when it is ahead: the stage balances
         // itself (see `par`), and shares learnt from pieces of uneven cost would only move data
         // between the cores (in the 10k-sphere deposition, 13 pieces a worker, they swung between
