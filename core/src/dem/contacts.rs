@@ -1,7 +1,24 @@
 //! Candidate contact pairs with their per-pair parameters and history, kept across rebuilds of
 //! the candidate list.
 
+use crate::dem::broad_phase::Candidate;
 use crate::math::Vec3;
+use rayon::prelude::*;
+
+/// Pairs per parallel block of a merge (each block finds its start in the old list by bisection).
+const MERGE_BLOCK: usize = 4096;
+
+/// One block of a new list's entries, written by [`PairList::merge_block`].
+struct Merged<'a> {
+    a: &'a mut [u32],
+    b: &'a mut [u32],
+    shift: &'a mut [[i32; 3]],
+    law: &'a mut [u16],
+    params: &'a mut [f64],
+    history: &'a mut [f64],
+    touching: &'a mut [bool],
+    force: &'a mut [Vec3],
+}
 
 /// A list of pairs `(a, b)` sorted by `(a, b)`: sphere-sphere (b a sphere) or sphere-wall (b a wall).
 #[derive(Debug, Clone, Default, serde::Serialize, serde::Deserialize)]
@@ -74,59 +91,218 @@ impl PairList {
     }
 
     /// Replaces the candidates by `pairs` (sorted), keeping parameters and history of pairs present
-    /// in both, and calling `init(a, b, law_out, params_out)` for new ones. The new list is built
-    /// in `spare`'s storage, which gets the old list's (a simulation that rebuilds often then
-    /// reuses memory instead of faulting in fresh pages every time).
+    /// in both, and calling `init(a, b, law_out, params_out)` (params zeroed) for new ones; `init`
+    /// returns false where no law applies, and the first such pair is returned. The new list is
+    /// built in `spare`'s storage, which gets the old list's (a simulation that rebuilds often then
+    /// reuses memory instead of faulting in fresh pages every time). In `parallel`, blocks of
+    /// pairs are merged on the pool's workers: each pair's entry depends only on the pair and on
+    /// the old list, so the list is the same on any number of threads.
     pub fn merge(
         &mut self,
         spare: &mut PairList,
-        pairs: &[(u32, u32, [i32; 3])],
+        pairs: &[Candidate],
         (param_stride, history_stride): (usize, usize),
-        mut init: impl FnMut(u32, u32, &mut u16, &mut [f64]),
-    ) {
+        parallel: bool,
+        init: impl Fn(u32, u32, &mut u16, &mut [f64]) -> bool + Sync,
+    ) -> Option<(u32, u32)> {
         let n = pairs.len();
         let next = spare;
-        /// Empties `v` for `len` values, keeping its storage.
-        fn reuse<T>(v: &mut Vec<T>, len: usize) {
-            v.clear();
-            v.reserve(len);
-        }
-        reuse(&mut next.a, n);
-        reuse(&mut next.b, n);
-        reuse(&mut next.shift, n);
-        reuse(&mut next.law, n);
-        reuse(&mut next.params, n * param_stride);
-        reuse(&mut next.history, n * history_stride);
-        reuse(&mut next.touching, n);
-        (next.param_stride, next.history_stride) = (param_stride, history_stride);
-        // Forces are recomputed every step.
-        next.force.clear();
+        // Every entry below `n` is written by the merge: the storage's old contents are kept (not
+        // cleared and refilled), so that only growth is filled twice.
+        next.a.resize(n, 0);
+        next.b.resize(n, 0);
+        next.shift.resize(n, [0; 3]);
+        next.law.resize(n, 0);
+        next.params.resize(n * param_stride, 0.0);
+        next.history.resize(n * history_stride, 0.0);
+        next.touching.resize(n, false);
         next.force.resize(n, [0.0; 3]);
-        let same_layout = self.param_stride == param_stride && self.history_stride == history_stride;
-        let mut old = 0;
-        let mut scratch = vec![0.0; param_stride];
-        for &(a, b, shift) in pairs {
-            while old < self.a.len() && (self.a[old], self.b[old], self.shift[old]) < (a, b, shift) {
+        (next.param_stride, next.history_stride) = (param_stride, history_stride);
+        let old: &PairList = self;
+        let missing = if parallel && n > MERGE_BLOCK {
+            (
+                pairs.par_chunks(MERGE_BLOCK),
+                next.a.par_chunks_mut(MERGE_BLOCK),
+                next.b.par_chunks_mut(MERGE_BLOCK),
+                next.shift.par_chunks_mut(MERGE_BLOCK),
+                next.law.par_chunks_mut(MERGE_BLOCK),
+                next.params.par_chunks_mut(MERGE_BLOCK * param_stride),
+                next.history.par_chunks_mut(MERGE_BLOCK * history_stride),
+                next.touching.par_chunks_mut(MERGE_BLOCK),
+                next.force.par_chunks_mut(MERGE_BLOCK),
+            )
+                .into_par_iter()
+                .map(|(pairs, a, b, shift, law, params, history, touching, force)| {
+                    let out = Merged { a, b, shift, law, params, history, touching, force };
+                    old.merge_block(pairs, out, (param_stride, history_stride), &init)
+                })
+                .reduce(|| None, |first, later| first.or(later))
+        } else {
+            let out = Merged {
+                a: &mut next.a,
+                b: &mut next.b,
+                shift: &mut next.shift,
+                law: &mut next.law,
+                params: &mut next.params,
+                history: &mut next.history,
+                touching: &mut next.touching,
+                force: &mut next.force,
+            };
+            old.merge_block(pairs, out, (param_stride, history_stride), &init)
+        };
+        std::mem::swap(self, next);
+        missing
+    }
+
+    /// Writes the entries of `pairs` (a run of the sorted new list) into `out`, from the old
+    /// list (`self`) where a pair is in it.
+    fn merge_block(
+        &self,
+        pairs: &[Candidate],
+        out: Merged<'_>,
+        (ps, hs): (usize, usize),
+        init: &impl Fn(u32, u32, &mut u16, &mut [f64]) -> bool,
+    ) -> Option<(u32, u32)> {
+        let same_layout = self.param_stride == ps && self.history_stride == hs;
+        let key = |k: usize| (self.a[k], self.b[k], self.shift[k]);
+        // The first old pair not before this run's first pair.
+        let mut old = match pairs.first() {
+            Some(first) => {
+                let (mut lo, mut hi) = (0, self.len());
+                while lo < hi {
+                    let mid = (lo + hi) / 2;
+                    if key(mid) < *first {
+                        lo = mid + 1;
+                    } else {
+                        hi = mid;
+                    }
+                }
+                lo
+            }
+            None => 0,
+        };
+        let mut missing = None;
+        for (k, &(a, b, shift)) in pairs.iter().enumerate() {
+            while old < self.len() && key(old) < (a, b, shift) {
                 old += 1;
             }
-            next.a.push(a);
-            next.b.push(b);
-            next.shift.push(shift);
-            if same_layout && old < self.a.len() && (self.a[old], self.b[old], self.shift[old]) == (a, b, shift) {
-                next.law.push(self.law[old]);
-                next.params.extend_from_slice(&self.params[old * param_stride..(old + 1) * param_stride]);
-                next.history.extend_from_slice(&self.history[old * history_stride..(old + 1) * history_stride]);
-                next.touching.push(self.touching[old]);
+            (out.a[k], out.b[k], out.shift[k]) = (a, b, shift);
+            // Forces are recomputed every step.
+            out.force[k] = [0.0; 3];
+            let (params, history) = (&mut out.params[k * ps..(k + 1) * ps], &mut out.history[k * hs..(k + 1) * hs]);
+            if same_layout && old < self.len() && key(old) == (a, b, shift) {
+                out.law[k] = self.law[old];
+                params.copy_from_slice(&self.params[old * ps..(old + 1) * ps]);
+                history.copy_from_slice(&self.history[old * hs..(old + 1) * hs]);
+                out.touching[k] = self.touching[old];
             } else {
-                let mut law = 0;
-                scratch.iter_mut().for_each(|v| *v = 0.0);
-                init(a, b, &mut law, &mut scratch);
-                next.law.push(law);
-                next.params.extend_from_slice(&scratch);
-                next.history.extend(std::iter::repeat_n(0.0, history_stride));
-                next.touching.push(false);
+                params.fill(0.0);
+                history.fill(0.0);
+                out.law[k] = 0;
+                if !init(a, b, &mut out.law[k], params) && missing.is_none() {
+                    missing = Some((a, b));
+                }
+                out.touching[k] = false;
             }
         }
-        std::mem::swap(self, next);
+        missing
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// An old list of every third pair `(a, a - 1 - k)`, each with history and parameters that
+    /// name it, and a new candidate list of every second one: some pairs stay, some go, some come.
+    fn lists(pairs: u32) -> (PairList, Vec<Candidate>) {
+        let key = |k: u32| (k / 4 + 10, k / 4 + 6 + k % 4, [0, (k % 2) as i32, 0]);
+        let mut old = PairList { param_stride: 2, history_stride: 3, ..PairList::default() };
+        for k in (0..pairs).step_by(3) {
+            let (a, b, shift) = key(k);
+            old.a.push(a);
+            old.b.push(b);
+            old.shift.push(shift);
+            old.law.push(7);
+            old.params.extend([a as f64, b as f64]);
+            old.history.extend([a as f64, b as f64, shift[1] as f64 + 0.5]);
+            old.touching.push(k % 9 == 0);
+            old.force.push([1.0; 3]);
+        }
+        let new = (0..pairs).step_by(2).map(key).collect();
+        (old, new)
+    }
+
+    /// A sphere without a law, in the first block of pairs and in a later one.
+    fn lawless(sphere: u32) -> bool {
+        sphere % 5000 == 13
+    }
+
+    /// What a new pair gets: law 3 and parameters from its spheres, none for `lawless` ones.
+    fn init(a: u32, b: u32, law: &mut u16, params: &mut [f64]) -> bool {
+        *law = 3;
+        params[0] = -(a as f64);
+        params[1] = -(b as f64);
+        !lawless(a) && !lawless(b)
+    }
+
+    #[test]
+    fn a_merge_keeps_the_history_of_the_pairs_that_stay_on_any_number_of_threads() {
+        let pairs = 6 * MERGE_BLOCK as u32 + 5;
+        let (old, new) = lists(pairs);
+        let merged = |parallel: bool, threads: usize, spare: &mut PairList| {
+            let mut list = old.clone();
+            let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+            let missing = pool.install(|| list.merge(spare, &new, (2, 3), parallel, init));
+            (list, missing)
+        };
+        let (sequential, missing) = merged(false, 1, &mut PairList::default());
+        // Only new pairs meet `init`: the first new pair without a law is the one reported.
+        let in_old = |c: &Candidate| (0..old.len()).any(|o| (old.a[o], old.b[o], old.shift[o]) == *c);
+        let lawless_pairs: Vec<_> = new.iter().filter(|c| (lawless(c.0) || lawless(c.1)) && !in_old(c)).collect();
+        assert!(lawless_pairs.last().is_some_and(|c| c.0 > 5000));
+        let first_missing = lawless_pairs.first().map(|c| (c.0, c.1));
+        assert_eq!(missing, first_missing);
+        assert_eq!(sequential.len(), new.len());
+        let mut kept = 0;
+        for (k, &(a, b, shift)) in new.iter().enumerate() {
+            assert_eq!((sequential.a[k], sequential.b[k], sequential.shift[k]), (a, b, shift));
+            assert_eq!(sequential.force[k], [0.0; 3]);
+            let history = &sequential.history[3 * k..3 * k + 3];
+            let params = &sequential.params[2 * k..2 * k + 2];
+            match (0..old.len()).find(|&o| (old.a[o], old.b[o], old.shift[o]) == (a, b, shift)) {
+                Some(o) => {
+                    kept += 1;
+                    assert_eq!((sequential.law[k], sequential.touching[k]), (7, old.touching[o]));
+                    assert_eq!(history, &old.history[3 * o..3 * o + 3]);
+                    assert_eq!(params, &old.params[2 * o..2 * o + 2]);
+                }
+                None => {
+                    assert_eq!((sequential.law[k], sequential.touching[k]), (3, false));
+                    assert_eq!(history, &[0.0; 3]);
+                    assert_eq!(params, &[-(a as f64), -(b as f64)]);
+                }
+            }
+        }
+        // Every sixth pair is in both lists.
+        assert_eq!(kept, new.len().div_ceil(3));
+        // In parallel, into a spare list that holds stale entries of another layout.
+        let (stale, _) = lists(pairs / 2 + 17);
+        for threads in [1, 2, 3] {
+            let mut spare = PairList { param_stride: 1, history_stride: 1, ..stale.clone() };
+            let (parallel, missing) = merged(true, threads, &mut spare);
+            assert_eq!(missing, first_missing);
+            assert_eq!(
+                (&parallel.a, &parallel.b, &parallel.shift, &parallel.law, &parallel.touching),
+                (&sequential.a, &sequential.b, &sequential.shift, &sequential.law, &sequential.touching)
+            );
+            assert_eq!(
+                (&parallel.params, &parallel.history, &parallel.force),
+                (&sequential.params, &sequential.history, &sequential.force)
+            );
+            assert_eq!((parallel.param_stride, parallel.history_stride), (2, 3));
+            // The old list's storage is the next spare.
+            assert_eq!(spare.len(), old.len());
+        }
     }
 }

@@ -423,19 +423,16 @@ impl DemSim {
         wall: bool,
     ) -> Option<(u16, u16)> {
         let material = &self.spheres.material;
-        let mut missing = None;
-        list.merge(spare, candidates, strides, |a, b, law, params| {
+        let materials = |a: usize, b: usize| (material[a], if wall { self.walls[b].material } else { material[b] });
+        let missing = list.merge(spare, candidates, strides, self.in_parallel(), |a, b, law, params| {
             let (a, b) = (a as usize, b as usize);
-            let pair = (material[a], if wall { self.walls[b].material } else { material[b] });
-            match self.law_for(pair.0, pair.1) {
-                Some(l) => {
-                    *law = l;
-                    self.laws[l as usize].init_pair(&self.info_for(a, b, wall), params);
-                }
-                None => missing = Some(pair),
-            }
+            let pair = materials(a, b);
+            let Some(l) = self.law_for(pair.0, pair.1) else { return false };
+            *law = l;
+            self.laws[l as usize].init_pair(&self.info_for(a, b, wall), params);
+            true
         });
-        missing
+        missing.map(|(a, b)| materials(a as usize, b as usize))
     }
 
     /// Rebuilds the candidate pair lists (keeping the history of pairs still present).
