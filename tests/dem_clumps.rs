@@ -93,7 +93,7 @@ fn clump_settles_on_a_floor() {
     assert!(d.kinetic_energy < 1e-9, "still moving: Ek = {}", d.kinetic_energy);
     // At rest the floor carries the clump's weight (within the static overlap).
     let weight = s.clumps.mass[0] * 9.81;
-    let floor = s.walls[0].force[2];
+    let floor = s.wall_force(0)[2];
     assert!((-floor - weight).abs() < 1e-3 * weight, "floor force {floor} vs weight {weight}");
     // The lowest member touches the floor with a small overlap.
     let lowest = (0..4).map(|i| s.spheres.x[i][2] - s.spheres.radius[i]).fold(f64::INFINITY, f64::min);

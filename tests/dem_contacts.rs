@@ -265,3 +265,43 @@ fn different_laws_in_one_chunk_keep_their_own_restitution() {
         assert!((rebound - e).abs() < 0.01 * e, "{law} pair: e = {rebound}, expected {e}");
     }
 }
+
+/// A frictionless sphere at rest in the corner of a floor and a side wall, under a gravity that
+/// leans towards the side wall: each wall carries the weight's component along its own normal
+/// (frictionless contacts push along normals only), and a third wall, out of reach, carries none.
+#[test]
+fn each_wall_carries_the_weight_along_its_normal() {
+    let mut sim = DemSim::new();
+    let m = sim.add_material("glass", 2500.0).unwrap();
+    sim.set_contact_law(granite::registry().build_contact_law("linear", &params(&[("kn", 1e4)])).unwrap(), None)
+        .unwrap();
+    let r = 0.01;
+    sim.add_sphere(m, [r, 0.0, r], r, [0.0; 3]).unwrap();
+    sim.add_wall(Wall::new("far", WallShape::Plane { normal: [0.0, -1.0, 0.0] }, [0.0, 0.5, 0.0], m));
+    sim.add_wall(Wall::new("floor", WallShape::Plane { normal: [0.0, 0.0, 1.0] }, [0.0; 3], m));
+    sim.add_wall(Wall::new("side", WallShape::Plane { normal: [1.0, 0.0, 0.0] }, [0.0; 3], m));
+    let g = [-3.0, 0.0, -9.81];
+    sim.gravity = g;
+    sim.damping = 0.4;
+    sim.skin = 0.5 * r;
+    sim.set_dt(0.1 * (sim.spheres.mass[0] / 1e4).sqrt()).unwrap();
+    for _ in 0..20_000 {
+        sim.step().unwrap();
+    }
+    assert!(sim.diagnostics().kinetic_energy < 1e-18, "not at rest: Ek = {}", sim.diagnostics().kinetic_energy);
+    let weight = g.map(|c| sim.spheres.mass[0] * c);
+    // What the sphere exerts on each wall.
+    assert_eq!(sim.wall_force(0), [0.0; 3]);
+    let (floor, side) = (sim.wall_force(1), sim.wall_force(2));
+    let tolerance = 1e-9 * weight[2].abs();
+    assert!(
+        (floor[2] - weight[2]).abs() < tolerance && floor[0] == 0.0 && floor[1] == 0.0,
+        "floor {floor:?}, weight {weight:?}"
+    );
+    assert!(
+        (side[0] - weight[0]).abs() < tolerance && side[1] == 0.0 && side[2] == 0.0,
+        "side {side:?}, weight {weight:?}"
+    );
+    // Out of range: nothing.
+    assert_eq!(sim.wall_force(3), [0.0; 3]);
+}

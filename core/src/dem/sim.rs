@@ -407,6 +407,20 @@ impl DemSim {
         PairInfo { radius: [s.radius[i], r2], mass: [s.mass[i], m2], seed }
     }
 
+    /// Force the spheres exert on wall `w` in the last step: the opposite of the forces of its
+    /// pairs, summed in pair order. Worked out when asked (a pass over the wall pairs), not at
+    /// every step, where it was a serial pass of 8 us in a step of the 10k-sphere deposition
+    /// that any number of threads waited for. Zero for a wall index out of range.
+    pub fn wall_force(&self, w: usize) -> Vec3 {
+        let pairs = &self.wall_pairs;
+        pairs
+            .b
+            .iter()
+            .zip(&pairs.force)
+            .filter(|(&b, _)| b as usize == w)
+            .fold([0.0; 3], |sum, (_, f)| [sum[0] - f[0], sum[1] - f[1], sum[2] - f[2]])
+    }
+
     /// Info for a sphere-sphere pair or, with `wall` set, a sphere-wall pair.
     pub fn info_for(&self, i: usize, j: usize, wall: bool) -> PairInfo {
         if wall {

@@ -23,8 +23,6 @@ pub struct Wall {
     pub position: Vec3,
     pub velocity: Vec3,
     pub material: u16,
-    /// Total force the particles exert on the wall (last step).
-    pub force: Vec3,
 }
 
 /// Contact of a sphere with a wall: unit normal from the sphere's centre towards the wall, the gap
@@ -39,7 +37,7 @@ pub struct WallContact {
 impl Wall {
     /// A wall at rest, feeling no force yet.
     pub fn new(name: &str, shape: WallShape, position: Vec3, material: u16) -> Wall {
-        Wall { name: name.to_string(), shape, position, velocity: [0.0; 3], material, force: [0.0; 3] }
+        Wall { name: name.to_string(), shape, position, velocity: [0.0; 3], material }
     }
 
     /// Geometry against a sphere, or None when the sphere is out of the wall's reach
@@ -130,7 +128,6 @@ mod tests {
             position: [0.0; 3],
             velocity: [0.0; 3],
             material: 0,
-            force: [0.0; 3],
         };
         let c = floor.contact([1.0, 2.0, 0.09], 0.1, 0.0).unwrap();
         assert!((c.gap + 0.01).abs() < 1e-15 && c.normal == [0.0, 0.0, -1.0]);

@@ -562,7 +562,7 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
     });
     engine.register_fn("wall_force", |s: &mut DemHandle, w: i64| {
         let w = s.wall_index(w)?;
-        let f = s.lock().sim.dem.walls[w].force;
+        let f = s.lock().sim.dem.wall_force(w);
         Ok::<_, Box<rhai::EvalAltResult>>(f.iter().map(|&c| Dynamic::from(c)).collect::<Array>())
     });
     engine.register_fn("wall_position", |s: &mut DemHandle, w: i64| {
