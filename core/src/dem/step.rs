@@ -14,7 +14,8 @@ use crate::ext::{ContactBatch, ContactLaw};
 use crate::math::{dot3, mat_vec, Vec3};
 use crate::simd::{self, add4, mat_vec4, mul4, narrow, scale4, sub4, widen, Lanes};
 use nalgebra::Matrix3;
-use std::sync::{Arc, Mutex, OnceLock};
+use std::ops::Range;
+use std::sync::{Arc, OnceLock};
 use std::time::Instant;
 
 /// Pairs per law call.
@@ -246,26 +247,15 @@ impl DemSim {
         let (x, v, w) = (SharedRows::new(x), SharedRows::new(v), SharedRows::new(w));
         let (walls, laws, dt, cell) = (&self.walls, &self.laws[..], self.dt, self.cell.as_ref());
         let n = starts.len() - 1;
-        // Each piece is cut off the rest and moved once, into its slot: built through chained
-        // iterator adapters, every piece (a few hundred bytes) was copied over several times, a
-        // serial memmove of some 5 us a step in the 10k-sphere deposition.
-        let (mut sphere_rest, mut wall_rest) =
-            (Some(PairChunk::whole(&mut self.pairs, strides)), Some(PairChunk::whole(&mut self.wall_pairs, strides)));
-        let (mut force_rest, mut torque_rest) = (&mut force[..], &mut torque[..]);
-        let mut contact_pieces = Vec::with_capacity(n);
-        for (q, handover) in self.handovers.fit(n).iter_mut().enumerate() {
-            let sphere_pairs = PairChunk::cut_off(&mut sphere_rest, bounds.sphere_pairs.get(q).copied());
-            let wall_pairs = PairChunk::cut_off(&mut wall_rest, bounds.wall_pairs.get(q).copied());
-            let size = starts[q + 1] - starts[q];
-            let (force, rest) = std::mem::take(&mut force_rest).split_at_mut(size);
-            force_rest = rest;
-            let (torque, rest) = std::mem::take(&mut torque_rest).split_at_mut(size);
-            torque_rest = rest;
-            contact_pieces.push(Mutex::new(Some(((sphere_pairs, wall_pairs), ((force, torque), handover)))));
-        }
-        // What a piece's contact stage hands to its own integration, and to the earlier pieces'.
-        let loads_after: Vec<Mutex<Option<PieceLoads>>> = (0..n).map(|_| Mutex::new(None)).collect();
-        let handed: Vec<OnceLock<&Handover>> = (0..n).map(|_| OnceLock::new()).collect();
+        // Each piece borrows its own pairs, loads and handover in the worker that claims it. Cut
+        // and lent from here, in slots that the workers then emptied, each step's descriptors
+        // (some 350 bytes a piece) were written over cache lines the other core had last
+        // written: 5-8 us of this serial setup in the 10k-sphere deposition on two threads.
+        let (sphere_cuts, wall_cuts) = (&bounds.sphere_pairs[..], &bounds.wall_pairs[..]);
+        let (sphere_list, wall_list) =
+            (SharedPairs::new(&mut self.pairs, strides), SharedPairs::new(&mut self.wall_pairs, strides));
+        let (force, torque) = (SharedRows::new(force), SharedRows::new(torque));
+        let handovers = SharedRows::new(self.handovers.fit(n));
         let (mass, inertia, blocked, clump, x_at_build) =
             (&mass[..], &inertia[..], &blocked[..], &clump[..], &self.x_at_build[..]);
         // Who ran each piece's contacts, and for how long (see `PieceBounds::learn`).
@@ -275,8 +265,18 @@ impl DemSim {
             &bounds.reads_from,
             |q| {
                 let started = Instant::now();
-                let Some(((sphere_pairs, wall_pairs), ((force, torque), handover))) = take(&contact_pieces[q]) else {
-                    return;
+                let own = starts[q]..starts[q + 1];
+                // SAFETY: run_pieces_then runs first(q) once for each piece q, and second(q), which
+                // borrows its loads again, only after it; pieces hold disjoint pairs, spheres and
+                // handovers; later pieces read this handover only once first(q) has finished.
+                let (sphere_pairs, wall_pairs, force, torque, handover) = unsafe {
+                    (
+                        sphere_list.chunk(piece_range(sphere_cuts, sphere_list.len(), q)),
+                        wall_list.chunk(piece_range(wall_cuts, wall_list.len(), q)),
+                        force.piece(own.clone()),
+                        torque.piece(own),
+                        &mut handovers.piece(q..q + 1)[0],
+                    )
                 };
                 // The spheres of pieces reads_from[q]..=q: those of its pairs (a pair's second sphere
                 // lies before its first).
@@ -298,24 +298,21 @@ impl DemSim {
                     starts,
                 };
                 contact_job_wide(ContactJob { sp: &sp, walls, sphere_pairs, wall_pairs, laws, dt, scratch, loads });
-                *loads_after[q].lock().unwrap_or_else(|e| e.into_inner()) = Some((force, torque));
-                handed[q].set(handover).ok();
                 contacts_timed[q].set(timed(started)).ok();
             },
             |p| {
                 let started = Instant::now();
-                let Some((force, torque)) = take(&loads_after[p]) else {
-                    panic!("the contacts of piece {p} ran before its spheres move");
-                };
-                // Only pieces that read this piece's spheres can have handed loads over to it.
-                let later: Vec<&Handover> = (p + 1..n)
-                    .filter(|&q| bounds.reads_from[q] <= p)
-                    .map(|q| *handed[q].get().expect("a piece that reads these spheres has finished"))
-                    .collect();
                 let range = starts[p]..starts[p + 1];
-                // SAFETY: pieces do not overlap, and run_pieces_then calls this once every contact
-                // piece that reads these spheres has finished.
-                let (x, v, w) = unsafe { (x.piece(range.clone()), v.piece(range.clone()), w.piece(range)) };
+                // Only pieces that read this piece's spheres can have handed loads over to it.
+                let later = (p + 1..n).filter(|&q| bounds.reads_from[q] <= p);
+                // SAFETY: pieces do not overlap, and run_pieces_then calls this once, after first(p)
+                // and every contact piece that reads these spheres (and so every handover to them)
+                // have finished.
+                let (x, v, w, force, torque, later) = unsafe {
+                    let later: Vec<&Handover> = later.map(|q| &handovers.rows(q..q + 1)[0]).collect();
+                    let (force, torque) = (force.piece(range.clone()), torque.piece(range.clone()));
+                    (x.piece(range.clone()), v.piece(range.clone()), w.piece(range), force, torque, later)
+                };
                 let moving = PieceState { x, v, w, force, torque };
                 let fixed = SphereConstants { mass, inertia, blocked, clump, x_at_build };
                 let largest =
@@ -817,15 +814,6 @@ impl<'a> PairChunk<'a> {
         )
     }
 
-    /// Cuts the pairs before pair index `end` (all of them if `None`) off the front of `rest`.
-    fn cut_off(rest: &mut Option<PairChunk<'a>>, end: Option<usize>) -> PairChunk<'a> {
-        let all = rest.take().expect("a rest of pairs remains until the last piece");
-        let mid = end.map_or(all.len(), |end| end.saturating_sub(all.first).min(all.len()));
-        let (head, tail) = all.split_at(mid);
-        *rest = Some(tail);
-        head
-    }
-
     /// Takes the next run of at most `CHUNK` pairs off the front of `rest` (None when empty).
     #[inline(always)]
     fn next_chunk(rest: &mut Option<PairChunk<'a>>) -> Option<PairChunk<'a>> {
@@ -837,6 +825,69 @@ impl<'a> PairChunk<'a> {
         let (head, tail) = all.split_at(mid);
         *rest = Some(tail);
         Some(head)
+    }
+}
+
+/// The pairs of piece `q`: between the cuts before and after it (`cuts` holds the first pair of
+/// every piece after the first; the last piece ends at `total`).
+fn piece_range(cuts: &[usize], total: usize, q: usize) -> Range<usize> {
+    let start = if q == 0 { 0 } else { cuts[q - 1] };
+    start..cuts.get(q).copied().unwrap_or(total)
+}
+
+/// A pair list lent to a parallel pass: what the pass only reads, shared; what it writes (the
+/// history, the contact flags and the forces), as rows that each piece borrows for its own pairs.
+struct SharedPairs<'a> {
+    strides: (usize, usize),
+    a: &'a [u32],
+    b: &'a [u32],
+    shift: &'a [[i32; 3]],
+    law: &'a [u16],
+    params: &'a [f64],
+    history: SharedRows<'a, f64>,
+    touching: SharedRows<'a, bool>,
+    force: SharedRows<'a, Vec3>,
+}
+
+impl<'a> SharedPairs<'a> {
+    fn new(list: &'a mut PairList, strides: (usize, usize)) -> SharedPairs<'a> {
+        let PairList { a, b, shift, law, params, history, touching, force, .. } = list;
+        SharedPairs {
+            strides,
+            a,
+            b,
+            shift,
+            law,
+            params,
+            history: SharedRows::new(history),
+            touching: SharedRows::new(touching),
+            force: SharedRows::new(force),
+        }
+    }
+
+    fn len(&self) -> usize {
+        self.a.len()
+    }
+
+    /// The pairs `range`, their history, flags and forces to change; panics when out of range.
+    ///
+    /// # Safety
+    /// While the chunk is used, no other chunk of an overlapping range may be.
+    unsafe fn chunk(&self, range: Range<usize>) -> PairChunk<'a> {
+        let (ps, hs) = self.strides;
+        PairChunk {
+            first: range.start,
+            strides: self.strides,
+            a: &self.a[range.clone()],
+            b: &self.b[range.clone()],
+            shift: &self.shift[range.clone()],
+            law: &self.law[range.clone()],
+            params: &self.params[range.start * ps..range.end * ps],
+            // SAFETY: these rows are this chunk's alone, by the caller's promise.
+            history: unsafe { self.history.piece(range.start * hs..range.end * hs) },
+            touching: unsafe { self.touching.piece(range.clone()) },
+            force: unsafe { self.force.piece(range) },
+        }
     }
 }
 
@@ -1241,14 +1292,6 @@ impl PieceBounds {
             * std::mem::size_of::<usize>()
             + (self.shares.capacity() + self.speeds.workers()) * std::mem::size_of::<f64>()
     }
-}
-
-/// A piece's force and torque sums.
-type PieceLoads<'a> = (&'a mut [Vec3], &'a mut [Vec3]);
-
-/// What a slot holds, taken out of it.
-fn take<T>(slot: &Mutex<Option<T>>) -> Option<T> {
-    slot.lock().unwrap_or_else(|e| e.into_inner()).take()
 }
 
 /// One parallel piece of the force gather with the integration: consecutive spheres from
