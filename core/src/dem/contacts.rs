@@ -5,10 +5,7 @@ use crate::dem::broad_phase::Candidate;
 use crate::math::Vec3;
 use rayon::prelude::*;
 
-/// Pairs per parallel block of a merge (each block finds its start in the old list by bisection).
-const MERGE_BLOCK: usize = 4096;
-
-/// One block of a new list's entries, written by [`PairList::merge_block`].
+/// One piece of a new list's entries, written by [`PairList::merge_block`].
 struct Merged<'a> {
     a: &'a mut [u32],
     b: &'a mut [u32],
@@ -36,6 +33,33 @@ pub struct PairList {
     pub touching: Vec<bool>,
     /// Force on `a` (b gets the opposite).
     pub force: Vec<Vec3>,
+}
+
+impl<'a> Merged<'a> {
+    /// The first `mid` entries and the rest.
+    fn split_at(self, mid: usize, (ps, hs): (usize, usize)) -> (Merged<'a>, Merged<'a>) {
+        let (a, a2) = self.a.split_at_mut(mid);
+        let (b, b2) = self.b.split_at_mut(mid);
+        let (shift, shift2) = self.shift.split_at_mut(mid);
+        let (law, law2) = self.law.split_at_mut(mid);
+        let (params, params2) = self.params.split_at_mut(mid * ps);
+        let (history, history2) = self.history.split_at_mut(mid * hs);
+        let (touching, touching2) = self.touching.split_at_mut(mid);
+        let (force, force2) = self.force.split_at_mut(mid);
+        (
+            Merged { a, b, shift, law, params, history, touching, force },
+            Merged {
+                a: a2,
+                b: b2,
+                shift: shift2,
+                law: law2,
+                params: params2,
+                history: history2,
+                touching: touching2,
+                force: force2,
+            },
+        )
+    }
 }
 
 impl PairList {
@@ -90,22 +114,24 @@ impl PairList {
         self.touching.iter().filter(|t| **t).count()
     }
 
-    /// Replaces the candidates by `pairs` (sorted), keeping parameters and history of pairs present
-    /// in both, and calling `init(a, b, law_out, params_out)` (params zeroed) for new ones; `init`
-    /// returns false where no law applies, and the first such pair is returned. The new list is
-    /// built in `spare`'s storage, which gets the old list's (a simulation that rebuilds often then
-    /// reuses memory instead of faulting in fresh pages every time). In `parallel`, blocks of
-    /// pairs are merged on the pool's workers: each pair's entry depends only on the pair and on
-    /// the old list, so the list is the same on any number of threads.
+    /// Replaces the candidates by the sorted list that `pieces` make one after the other,
+    /// keeping parameters and history of pairs present in both, and calling
+    /// `init(a, b, law_out, params_out)` (params zeroed) for new ones; `init` returns false where no
+    /// law applies, and the first such pair is returned. The new list is built in `spare`'s
+    /// storage, which gets the old list's (a simulation that rebuilds often then reuses memory
+    /// instead of faulting in fresh pages every time). In `parallel`, the pieces are merged on the
+    /// pool's workers: each pair's entry depends only on the pair and on the old list, so the list
+    /// is the same on any number of threads and for any cut into pieces.
     pub fn merge(
         &mut self,
         spare: &mut PairList,
-        pairs: &[Candidate],
-        (param_stride, history_stride): (usize, usize),
+        pieces: &[&[Candidate]],
+        strides: (usize, usize),
         parallel: bool,
         init: impl Fn(u32, u32, &mut u16, &mut [f64]) -> bool + Sync,
     ) -> Option<(u32, u32)> {
-        let n = pairs.len();
+        let n = pieces.iter().map(|p| p.len()).sum();
+        let (param_stride, history_stride) = strides;
         let next = spare;
         // Every entry below `n` is written by the merge: the storage's old contents are kept (not
         // cleared and refilled), so that only growth is filled twice.
@@ -117,38 +143,29 @@ impl PairList {
         next.history.resize(n * history_stride, 0.0);
         next.touching.resize(n, false);
         next.force.resize(n, [0.0; 3]);
-        (next.param_stride, next.history_stride) = (param_stride, history_stride);
+        (next.param_stride, next.history_stride) = strides;
+        let mut rest = Merged {
+            a: &mut next.a,
+            b: &mut next.b,
+            shift: &mut next.shift,
+            law: &mut next.law,
+            params: &mut next.params,
+            history: &mut next.history,
+            touching: &mut next.touching,
+            force: &mut next.force,
+        };
+        let mut outs = Vec::with_capacity(pieces.len());
+        for piece in pieces {
+            let (out, after) = rest.split_at(piece.len(), strides);
+            outs.push(out);
+            rest = after;
+        }
         let old: &PairList = self;
-        let missing = if parallel && n > MERGE_BLOCK {
-            (
-                pairs.par_chunks(MERGE_BLOCK),
-                next.a.par_chunks_mut(MERGE_BLOCK),
-                next.b.par_chunks_mut(MERGE_BLOCK),
-                next.shift.par_chunks_mut(MERGE_BLOCK),
-                next.law.par_chunks_mut(MERGE_BLOCK),
-                next.params.par_chunks_mut(MERGE_BLOCK * param_stride),
-                next.history.par_chunks_mut(MERGE_BLOCK * history_stride),
-                next.touching.par_chunks_mut(MERGE_BLOCK),
-                next.force.par_chunks_mut(MERGE_BLOCK),
-            )
-                .into_par_iter()
-                .map(|(pairs, a, b, shift, law, params, history, touching, force)| {
-                    let out = Merged { a, b, shift, law, params, history, touching, force };
-                    old.merge_block(pairs, out, (param_stride, history_stride), &init)
-                })
-                .reduce(|| None, |first, later| first.or(later))
+        let merge = |(piece, out): (&&[Candidate], Merged<'_>)| old.merge_block(piece, out, strides, &init);
+        let missing = if parallel {
+            pieces.par_iter().zip(outs).map(merge).reduce(|| None, |first, later| first.or(later))
         } else {
-            let out = Merged {
-                a: &mut next.a,
-                b: &mut next.b,
-                shift: &mut next.shift,
-                law: &mut next.law,
-                params: &mut next.params,
-                history: &mut next.history,
-                touching: &mut next.touching,
-                force: &mut next.force,
-            };
-            old.merge_block(pairs, out, (param_stride, history_stride), &init)
+            pieces.iter().zip(outs).map(merge).fold(None, |first, later| first.or(later))
         };
         std::mem::swap(self, next);
         missing
@@ -247,16 +264,19 @@ mod tests {
     }
 
     #[test]
-    fn a_merge_keeps_the_history_of_the_pairs_that_stay_on_any_number_of_threads() {
-        let pairs = 6 * MERGE_BLOCK as u32 + 5;
+    fn a_merge_keeps_the_history_of_the_pairs_that_stay_on_any_number_of_threads_and_pieces() {
+        let pairs = 24_581;
         let (old, new) = lists(pairs);
-        let merged = |parallel: bool, threads: usize, spare: &mut PairList| {
+        let merged = |parallel: bool, threads: usize, piece: usize, spare: &mut PairList| {
             let mut list = old.clone();
+            // Pieces of `piece` pairs, and an empty one.
+            let mut pieces: Vec<&[Candidate]> = new.chunks(piece).collect();
+            pieces.insert(1, &[]);
             let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
-            let missing = pool.install(|| list.merge(spare, &new, (2, 3), parallel, init));
+            let missing = pool.install(|| list.merge(spare, &pieces, (2, 3), parallel, init));
             (list, missing)
         };
-        let (sequential, missing) = merged(false, 1, &mut PairList::default());
+        let (sequential, missing) = merged(false, 1, new.len(), &mut PairList::default());
         // Only new pairs meet `init`: the first new pair without a law is the one reported.
         let in_old = |c: &Candidate| (0..old.len()).any(|o| (old.a[o], old.b[o], old.shift[o]) == *c);
         let lawless_pairs: Vec<_> = new.iter().filter(|c| (lawless(c.0) || lawless(c.1)) && !in_old(c)).collect();
@@ -288,9 +308,9 @@ mod tests {
         assert_eq!(kept, new.len().div_ceil(3));
         // In parallel, into a spare list that holds stale entries of another layout.
         let (stale, _) = lists(pairs / 2 + 17);
-        for threads in [1, 2, 3] {
+        for (threads, piece) in [(1, 1000), (2, 1024), (2, 333), (3, 4096)] {
             let mut spare = PairList { param_stride: 1, history_stride: 1, ..stale.clone() };
-            let (parallel, missing) = merged(true, threads, &mut spare);
+            let (parallel, missing) = merged(true, threads, piece, &mut spare);
             assert_eq!(missing, first_missing);
             assert_eq!(
                 (&parallel.a, &parallel.b, &parallel.shift, &parallel.law, &parallel.touching),

@@ -20,6 +20,10 @@ use std::time::Instant;
 
 /// Pairs per law call.
 const CHUNK: usize = 128;
+
+/// Most pairs a parallel piece of a rebuild's merge holds (each finds its place in the old list by
+/// bisection, so pieces can be small enough for two workers to share the merge evenly).
+const MERGE_PIECE: usize = 1024;
 /// Fewest spheres worth a parallel piece of their own (with their pairs). Every piece boundary
 /// hands loads over (see `write_back`), which costs instructions: the 1500-sphere periodic RVE,
 /// stepped in the pieces of two workers on one thread, took 11 % more instructions than the
@@ -424,13 +428,15 @@ impl DemSim {
         &self,
         list: &mut PairList,
         spare: &mut PairList,
-        candidates: &[Candidate],
+        candidates: &[Vec<Candidate>],
         strides: (usize, usize),
         wall: bool,
     ) -> Option<(u16, u16)> {
+        // Pieces of at most MERGE_PIECE pairs (a periodic search hands over one sorted list).
+        let pieces: Vec<&[Candidate]> = candidates.iter().flat_map(|b| b.chunks(MERGE_PIECE)).collect();
         let material = &self.spheres.material;
         let materials = |a: usize, b: usize| (material[a], if wall { self.walls[b].material } else { material[b] });
-        let missing = list.merge(spare, candidates, strides, self.in_parallel(), |a, b, law, params| {
+        let missing = list.merge(spare, &pieces, strides, self.in_parallel(), |a, b, law, params| {
             let (a, b) = (a as usize, b as usize);
             let pair = materials(a, b);
             let Some(l) = self.law_for(pair.0, pair.1) else { return false };
@@ -461,10 +467,12 @@ impl DemSim {
         };
         if !self.clumps.is_empty() {
             // Members of one clump never touch each other.
-            candidates.retain(|&(a, b, _)| {
-                let ca = s.clump[a as usize];
-                ca == FREE || ca != s.clump[b as usize]
-            });
+            for block in candidates.iter_mut() {
+                block.retain(|&(a, b, _)| {
+                    let ca = s.clump[a as usize];
+                    ca == FREE || ca != s.clump[b as usize]
+                });
+            }
         }
         let mut pairs = std::mem::take(&mut self.pairs);
         // An RVE (sequential) rebuilds rarely and is copied into every material point: no spare.
