@@ -36,29 +36,23 @@ pub struct PairList {
 }
 
 impl<'a> Merged<'a> {
-    /// The first `mid` entries and the rest.
-    fn split_at(self, mid: usize, (ps, hs): (usize, usize)) -> (Merged<'a>, Merged<'a>) {
-        let (a, a2) = self.a.split_at_mut(mid);
-        let (b, b2) = self.b.split_at_mut(mid);
-        let (shift, shift2) = self.shift.split_at_mut(mid);
-        let (law, law2) = self.law.split_at_mut(mid);
-        let (params, params2) = self.params.split_at_mut(mid * ps);
-        let (history, history2) = self.history.split_at_mut(mid * hs);
-        let (touching, touching2) = self.touching.split_at_mut(mid);
-        let (force, force2) = self.force.split_at_mut(mid);
-        (
-            Merged { a, b, shift, law, params, history, touching, force },
-            Merged {
-                a: a2,
-                b: b2,
-                shift: shift2,
-                law: law2,
-                params: params2,
-                history: history2,
-                touching: touching2,
-                force: force2,
-            },
-        )
+    /// Cuts the entries of the next `len` pairs off the front of `rest`.
+    fn cut_front(rest: &mut Merged<'a>, len: usize, (ps, hs): (usize, usize)) -> Merged<'a> {
+        fn front<'a, T>(rest: &mut &'a mut [T], len: usize) -> &'a mut [T] {
+            let (head, tail) = std::mem::take(rest).split_at_mut(len);
+            *rest = tail;
+            head
+        }
+        Merged {
+            a: front(&mut rest.a, len),
+            b: front(&mut rest.b, len),
+            shift: front(&mut rest.shift, len),
+            law: front(&mut rest.law, len),
+            params: front(&mut rest.params, len * ps),
+            history: front(&mut rest.history, len * hs),
+            touching: front(&mut rest.touching, len),
+            force: front(&mut rest.force, len),
+        }
     }
 }
 
@@ -154,12 +148,8 @@ impl PairList {
             touching: &mut next.touching,
             force: &mut next.force,
         };
-        let mut outs = Vec::with_capacity(pieces.len());
-        for piece in pieces {
-            let (out, after) = rest.split_at(piece.len(), strides);
-            outs.push(out);
-            rest = after;
-        }
+        let outs: Vec<Merged<'_>> =
+            pieces.iter().map(|piece| Merged::cut_front(&mut rest, piece.len(), strides)).collect();
         let old: &PairList = self;
         let merge = |(piece, out): (&&[Candidate], Merged<'_>)| old.merge_block(piece, out, strides, &init);
         let missing = if parallel {

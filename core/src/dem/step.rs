@@ -115,7 +115,7 @@ impl DemSim {
                 self.dt,
                 affine,
             );
-            moved = if moved.is_nan() || clump_moved.is_nan() { f64::NAN } else { moved.max(clump_moved) };
+            moved = farther(moved, clump_moved);
         }
         let mut wall_moved: f64 = 0.0;
         for (w, at) in self.walls.iter_mut().zip(&self.walls_at_build) {
@@ -327,8 +327,7 @@ impl DemSim {
         let timings: Vec<[(usize, f64); 2]> =
             contacts_timed.iter().zip(&moved).map(|(c, m)| [c.get().copied().unwrap_or_default(), m.1]).collect();
         self.piece_bounds.learn(&timings);
-        // NaN, from any piece, must come through (f64::max would drop it).
-        moved.into_iter().map(|m| m.0).fold(0.0, |a: f64, b| if a.is_nan() || b.is_nan() { f64::NAN } else { a.max(b) })
+        moved.into_iter().map(|m| m.0).fold(0.0, farther)
     }
 
     /// Brings periodic positions back into the cell and fixes the shifts of their pairs.
@@ -1352,6 +1351,16 @@ fn gather_piece(job: GatherJob<'_>) -> f64 {
 #[inline(always)]
 fn all_free(blocked: &[u8], clump: &[u32]) -> bool {
     blocked.iter().fold(0, |any, &b| any | b) == 0 && clump.iter().all(|&c| c == FREE)
+}
+
+/// The larger of two displacements, NaN if either is (`f64::max` would drop a NaN, and with it
+/// the news that some state stopped being finite).
+fn farther(a: f64, b: f64) -> f64 {
+    if a.is_nan() || b.is_nan() {
+        f64::NAN
+    } else {
+        a.max(b)
+    }
 }
 
 /// Leapfrog integration with gravity and Cundall damping, on the calling thread. In a periodic
