@@ -226,37 +226,42 @@ impl Drop for Closing<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use std::collections::HashSet;
 
-    /// Runs a stage of `pieces` claimed pieces through `team` and returns which worker ran each.
-    fn stage(team: &Team, pieces: usize, micros: u64) -> Vec<usize> {
+    /// Runs a stage of `pieces` claimed pieces through `team` and returns, for each piece, the
+    /// index and the thread of the worker that ran it.
+    fn stage(team: &Team, pieces: usize, micros: u64) -> Vec<(usize, ThreadId)> {
         let next = AtomicUsize::new(0);
-        let ran: Vec<AtomicUsize> = (0..pieces).map(|_| AtomicUsize::new(usize::MAX)).collect();
+        let ran: Vec<Mutex<Option<(usize, ThreadId)>>> = (0..pieces).map(|_| Mutex::new(None)).collect();
         team.run(&|worker| {
             while let Some(p) = Some(next.fetch_add(1, Ordering::AcqRel)).filter(|&p| p < pieces) {
                 std::thread::sleep(Duration::from_micros(micros));
-                ran[p].store(worker, Ordering::Release);
+                *ran[p].lock().unwrap() = Some((worker, std::thread::current().id()));
             }
         });
-        ran.iter().map(|r| r.load(Ordering::Acquire)).collect()
+        ran.into_iter().map(|r| r.into_inner().unwrap().expect("every piece ran")).collect()
     }
 
     fn serving(team: &Team) -> usize {
         team.current.lock().unwrap().as_ref().map_or(0, |(_, s)| s.serving.load(Ordering::Acquire))
     }
 
+    fn threads_of(pool: &rayon::ThreadPool) -> HashSet<ThreadId> {
+        pool.broadcast(|_| std::thread::current().id()).into_iter().collect()
+    }
+
     #[test]
     fn helpers_join_stages_retire_when_idle_and_follow_their_leader_to_another_pool() {
         let pool = rayon::ThreadPoolBuilder::new().num_threads(3).build().unwrap();
+        let other = rayon::ThreadPoolBuilder::new().num_threads(2).build().unwrap();
+        let others = threads_of(&other);
         let team = Team::default();
         pool.install(|| {
             let mut shared = false;
             for _ in 0..50 {
                 let ran = stage(&team, 12, 100);
-                assert!(ran.iter().all(|&w| w < 3), "every piece ran once, on a worker of the pool: {ran:?}");
-                let mut workers = ran.clone();
-                workers.sort();
-                workers.dedup();
-                shared |= workers.len() > 1;
+                assert!(ran.iter().all(|&(w, _)| w < 3), "every piece ran on a worker of the pool: {ran:?}");
+                shared |= ran.iter().map(|r| r.1).collect::<HashSet<_>>().len() > 1;
             }
             assert!(shared, "the helpers took pieces in some stage");
             // Idle for longer than IDLE_BEFORE_RETIRING (as long as this machine's other work
@@ -268,19 +273,56 @@ mod tests {
             }
             assert_eq!(serving(&team), 0, "idle helpers retire");
             assert_eq!(rayon::broadcast(|ctx| ctx.index()), vec![0, 1, 2]);
-            assert!(stage(&team, 12, 10).iter().all(|&w| w < 3));
+            assert_eq!(stage(&team, 12, 10).len(), 12);
             team.dismiss();
             assert_eq!(rayon::broadcast(|ctx| ctx.index()), vec![0, 1, 2], "dismissed helpers are back in the pool");
+            // Led in turns from this pool and from another of two workers: each pool's helpers,
+            // still serving when the other leads, must not join its stages.
+            let ours = threads_of(&pool);
+            for _ in 0..20 {
+                let ran = stage(&team, 12, 50);
+                assert!(ran.iter().all(|(_, t)| ours.contains(t)), "only the first pool's workers: {ran:?}");
+                let ran = other.install(|| stage(&team, 6, 50));
+                assert!(
+                    ran.iter().all(|(w, t)| *w < 2 && others.contains(t)),
+                    "only the second pool's workers: {ran:?}"
+                );
+            }
         });
-        // The same team led from another pool, of two workers: the first pool's helpers go back.
-        let other = rayon::ThreadPoolBuilder::new().num_threads(2).build().unwrap();
-        for _ in 0..20 {
-            let ran = other.install(|| stage(&team, 6, 50));
-            assert!(ran.iter().all(|&w| w < 2), "only the second pool's workers: {ran:?}");
-        }
         assert_eq!(pool.install(|| rayon::broadcast(|ctx| ctx.index())), vec![0, 1, 2]);
         // Outside any pool's worker, the stage is one broadcast over the global pool.
-        let ran = stage(&team, 4, 10);
-        assert!(ran.iter().all(|&w| w < rayon::current_num_threads()));
+        assert_eq!(stage(&team, 4, 10).len(), 4);
+    }
+
+    #[test]
+    fn a_panic_on_a_helper_reaches_the_leader() {
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(2).build().unwrap();
+        let team = Team::default();
+        let (mut joined, mut reached) = (0, 0);
+        pool.install(|| {
+            let leader = rayon::current_thread_index();
+            for _ in 0..200 {
+                let helped = AtomicBool::new(false);
+                let outcome = catch_unwind(AssertUnwindSafe(|| {
+                    team.run(&|worker| {
+                        if Some(worker) == leader {
+                            // Long enough for a serving helper to join.
+                            std::thread::sleep(Duration::from_micros(200));
+                        } else {
+                            helped.store(true, Ordering::Release);
+                            panic!("a helper fails");
+                        }
+                    })
+                }));
+                if helped.load(Ordering::Acquire) {
+                    joined += 1;
+                    reached += outcome.is_err() as usize;
+                } else {
+                    assert!(outcome.is_ok(), "no helper, no panic");
+                }
+            }
+        });
+        assert!(joined > 0, "a helper joined some stage");
+        assert_eq!(reached, joined, "every helper's panic reached the leader");
     }
 }
