@@ -16,9 +16,6 @@
 use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
 use std::sync::Mutex;
 
-mod team;
-pub use team::Team;
-
 /// Pieces per worker at most: enough for a worker that finishes early to find pieces to take
 /// over, few enough that cutting a stage up, which the calling thread does alone every time
 /// step, costs little (about 0.15 us a piece).
@@ -141,10 +138,9 @@ pub fn piece_starts(owners: &[usize], shares: &[f64]) -> Vec<f64> {
     starts
 }
 
-/// Runs `work` on every piece, spread over the workers of the current pool (through `team` when
-/// given), and returns the results in piece order. A single piece, or a pool of one thread, runs
-/// on the calling thread.
-pub fn run_pieces<T: Send, R: Send>(team: Option<&Team>, pieces: Vec<T>, work: impl Fn(T) -> R + Sync) -> Vec<R> {
+/// Runs `work` on every piece, spread over the workers of the current pool, and returns the
+/// results in piece order. A single piece, or a pool of one thread, runs on the calling thread.
+pub fn run_pieces<T: Send, R: Send>(pieces: Vec<T>, work: impl Fn(T) -> R + Sync) -> Vec<R> {
     if pieces.len() <= 1 || rayon::current_num_threads() == 1 {
         return pieces.into_iter().map(work).collect();
     }
@@ -156,8 +152,8 @@ pub fn run_pieces<T: Send, R: Send>(team: Option<&Team>, pieces: Vec<T>, work: i
     // owner's pieces stay its own from one step to the next wherever the two meet.
     let left = runs.left();
     let done = AtomicUsize::new(0);
-    on_every_worker(team, |worker| {
-        runs.claim_each(&left, worker, |t| {
+    rayon::broadcast(|ctx| {
+        runs.claim_each(&left, ctx.index(), |t| {
             let _counted = Finished(&done);
             let piece = slots[t].lock().unwrap_or_else(|e| e.into_inner()).take();
             if let Some(piece) = piece {
@@ -182,7 +178,6 @@ pub fn run_pieces<T: Send, R: Send>(team: Option<&Team>, pieces: Vec<T>, work: i
 /// (on two workers whose speeds differ, as a shared machine's cores do from moment to moment, one
 /// of them always waited for the other); and the join and start between two broadcasts go.
 pub fn run_pieces_then<R: Send>(
-    team: Option<&Team>,
     reads_from: &[usize],
     first: impl Fn(usize) + Sync,
     second: impl Fn(usize) -> R + Sync,
@@ -201,14 +196,14 @@ pub fn run_pieces_then<R: Send>(
     // No unfinished first(q) reads piece p. Every first-stage piece has been claimed before any
     // worker waits on this, and a first-stage piece waits for nothing, so the wait ends.
     let ready = |p: usize| (p..n).all(|q| reads_from[q] > p || first_done[q].load(Ordering::Acquire));
-    on_every_worker(team, |worker| {
-        runs.claim_each(&left, worker, |t| {
+    rayon::broadcast(|ctx| {
+        runs.claim_each(&left, ctx.index(), |t| {
             let _finished = Flag(&first_done[t]);
             first(t);
         });
         // Own pieces first (their data is in this core's cache), from the last: in the DEM stages
         // a piece's first stage reads the pieces before it, so the last pieces are ready first.
-        let own = (0..n).rev().filter(|&p| runs.owner(p) == worker);
+        let own = (0..n).rev().filter(|&p| runs.owner(p) == ctx.index());
         for p in own.chain((0..n).rev()) {
             if second_taken[p].swap(true, Ordering::AcqRel) {
                 continue;
@@ -221,18 +216,6 @@ pub fn run_pieces_then<R: Send>(
         wait_until(|| done.load(Ordering::Acquire) == n);
     });
     in_piece_order(results)
-}
-
-/// Runs `body(worker)` on the workers of the current pool: through `team`'s helpers, or one
-/// `rayon::broadcast`. Stages run this way must come to an end with any subset of the workers
-/// taking part (pieces are claimed), since a helper may join late or not at all.
-fn on_every_worker(team: Option<&Team>, body: impl Fn(usize) + Sync) {
-    match team {
-        Some(team) => team.run(&body),
-        None => {
-            rayon::broadcast(|ctx| body(ctx.index()));
-        }
-    }
 }
 
 fn in_piece_order<R>(results: Vec<Mutex<Option<R>>>) -> Vec<R> {
@@ -352,18 +335,12 @@ fn claim(range: &AtomicU64, own: bool) -> Option<usize> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use std::sync::Arc;
 
     #[test]
     fn every_piece_runs_once_and_results_keep_piece_order() {
         let pool = rayon::ThreadPoolBuilder::new().num_threads(2).build().unwrap();
-        let team = Team::default();
-        for team in [None, Some(&team)] {
-            for _ in 0..20 {
-                let out = pool.install(|| run_pieces(team, (0..50).collect(), |p: usize| p * 10));
-                assert_eq!(out, (0..50).map(|p| p * 10).collect::<Vec<_>>());
-            }
-        }
+        let out = pool.install(|| run_pieces((0..50).collect(), |p: usize| p * 10));
+        assert_eq!(out, (0..50).map(|p| p * 10).collect::<Vec<_>>());
         assert_eq!(pool.install(|| piece_count(1000, 300)), 3);
         assert_eq!(pool.install(|| piece_count(100, 300)), 1);
         let single = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap();
@@ -430,12 +407,9 @@ mod tests {
         reads_from[n - 1] = 0;
         let finished: Vec<AtomicBool> = (0..n).map(|_| AtomicBool::new(false)).collect();
         let pool = rayon::ThreadPoolBuilder::new().num_threads(2).build().unwrap();
-        let team = Team::default();
-        for round in 0..40 {
-            let team = (round % 2 == 1).then_some(&team);
+        for round in 0..20 {
             let out = pool.install(|| {
                 run_pieces_then(
-                    team,
                     &reads_from,
                     |q| {
                         // Uneven first stages, so that the second stage of the other worker's
@@ -464,39 +438,25 @@ mod tests {
     fn a_panicking_piece_reaches_the_caller_instead_of_leaving_the_others_waiting() {
         let fails = |p: usize| assert!(p != 5, "piece {p} fails");
         let reads_from: Vec<usize> = (0..8usize).map(|q| q.saturating_sub(1)).collect();
-        type Stage = Box<dyn Fn(Option<&Team>) + Send + Sync>;
+        type Stage = Box<dyn Fn() + Send + Sync>;
         let stages: [(&str, Stage); 3] = [
-            ("one stage", Box::new(move |team| drop(run_pieces(team, (0..8).collect(), fails)))),
+            ("one stage", Box::new(move || drop(run_pieces((0..8).collect(), fails)))),
             (
                 "first of two",
                 Box::new({
                     let reads_from = reads_from.clone();
-                    move |team| drop(run_pieces_then(team, &reads_from, fails, |_| ()))
+                    move || drop(run_pieces_then(&reads_from, fails, |_| ()))
                 }),
             ),
-            ("second of two", Box::new(move |team| drop(run_pieces_then(team, &reads_from, |_| (), fails)))),
+            ("second of two", Box::new(move || drop(run_pieces_then(&reads_from, |_| (), fails)))),
         ];
-        let stages = stages.into_iter().map(Arc::new).flat_map(|s| [(s.clone(), false), (s, true)]);
-        for (stage, with_team) in stages {
+        for (stage, run) in stages {
             let (sender, receiver) = std::sync::mpsc::channel();
-            let run = stage.clone();
             std::thread::spawn(move || {
                 let pool = rayon::ThreadPoolBuilder::new().num_threads(2).build().unwrap();
-                let team = Team::default();
-                // The team's first stage may run on the leader alone: panic in several, so that
-                // the failing piece also falls to a helper.
-                let outcomes: Vec<bool> = (0..10)
-                    .map(|_| {
-                        let team = with_team.then_some(&team);
-                        std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| pool.install(|| (run.1)(team))))
-                            .is_err()
-                    })
-                    .collect();
-                // Afterwards the pool still works.
-                let after = pool.install(|| run_pieces(with_team.then_some(&team), (0..8).collect(), |p: usize| p));
-                sender.send(outcomes.iter().all(|&failed| failed) && after == (0..8).collect::<Vec<_>>()).ok();
+                let outcome = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| pool.install(&run)));
+                sender.send(outcome.is_err()).ok();
             });
-            let stage = format!("{}{}", stage.0, if with_team { ", with a team" } else { "" });
             let outcome = receiver.recv_timeout(std::time::Duration::from_secs(30));
             assert_eq!(outcome, Ok(true), "{stage}: the panic must reach the caller, not leave the others waiting");
         }

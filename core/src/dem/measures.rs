@@ -206,9 +206,7 @@ impl DemSim {
         };
         let zero = ([0.0; 9], [0.0; 3]);
         let (s, k) = if self.in_parallel() {
-            crate::par::run_pieces(Some(&self.team), blocks.collect(), |b| self.pair_sums(b))
-                .into_iter()
-                .fold(zero, add)
+            crate::par::run_pieces(blocks.collect(), |b| self.pair_sums(b)).into_iter().fold(zero, add)
         } else {
             blocks.map(|b| self.pair_sums(b)).fold(zero, add)
         };

@@ -53,8 +53,6 @@ pub struct DemSim {
     pub(crate) piece_bounds: crate::dem::step::PieceBounds,
     /// What each parallel contact piece leaves for the gather (see `Handover`).
     pub(crate) handovers: crate::dem::step::Handovers,
-    /// The pool's other workers, kept at hand between the parallel stages of plain steps.
-    pub(crate) team: crate::par::Team,
     /// Positions (spheres) and wall positions when the candidate lists were built.
     pub(crate) x_at_build: Vec<Vec3>,
     pub(crate) walls_at_build: Vec<Vec3>,
@@ -113,7 +111,6 @@ impl DemSim {
             radius_max_at_build: 0.0,
             radius_min_at_build: f64::INFINITY,
             handovers: Default::default(),
-            team: Default::default(),
             piece_bounds: Default::default(),
             walls_at_build: Vec::new(),
             h_at_build: None,

@@ -266,7 +266,6 @@ impl DemSim {
         let contacts_timed: Vec<OnceLock<(usize, f64)>> = (0..n).map(|_| OnceLock::new()).collect();
         let timed = |started: Instant| (rayon::current_thread_index().unwrap_or(0), started.elapsed().as_secs_f64());
         let moved = crate::par::run_pieces_then(
-            Some(&self.team),
             &bounds.reads_from,
             |q| {
                 let started = Instant::now();
@@ -449,8 +448,6 @@ impl DemSim {
 
     /// Rebuilds the candidate pair lists (keeping the history of pairs still present).
     pub fn rebuild_candidates(&mut self) -> Result<()> {
-        // The search and the merge are parallel loops of other kinds: they need the whole pool.
-        self.team.dismiss();
         let p_stride = self.laws.iter().map(|l| l.param_count()).max().unwrap_or(0).max(1);
         let h_stride = self.laws.iter().map(|l| l.history_count()).max().unwrap_or(0).max(1);
         if p_stride > MAX_PARAMS || h_stride > MAX_HISTORY {
