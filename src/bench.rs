@@ -294,6 +294,9 @@ pub fn dem(counts: &[usize], steps: usize, threads: &[usize], repeat: usize) -> 
                 rate / 1e6 / n as f64
             );
         }
+        let mut state = gravity_deposition(count)?;
+        pool(1)?.install(|| (0..200).try_for_each(|_| state.step()))?;
+        print_windows(&format!("N = {:>6}  ", state.spheres.len()), &state, threads, repeat)?;
     }
     println!("granite bench dem: 1500-sphere periodic RVE at 100 kPa, constant-volume simple shear, best of {repeat}");
     let mut rve = periodic_rve(1500, 1e5)?;
@@ -345,10 +348,15 @@ pub fn dem(counts: &[usize], steps: usize, threads: &[usize], repeat: usize) -> 
             t.best / steps as f64 * 1e3
         );
     }
+    print_windows("", &rve, threads, repeat)
+}
+
+/// Prints the speed-ups that [`windows`] measures from `state` on each thread count above one.
+fn print_windows(label: &str, state: &granite_core::dem::DemSim, threads: &[usize], repeat: usize) -> Result<()> {
     for &n in threads.iter().filter(|&&n| n > 1) {
-        let w = rve_windows(&rve, n, RVE_WINDOWS, repeat)?;
+        let w = windows(state, n, WINDOWS, repeat)?;
         println!(
-            "interleaved windows ({RVE_WINDOWS} x {WINDOW_STEPS} steps)  threads {n}  speed-up {:.2}x, one copy per thread {:.2}x: the parallel step gets {:.0} % of what this machine gives independent copies",
+            "{label}interleaved windows ({WINDOWS} x {WINDOW_STEPS} steps)  threads {n}  speed-up {:.2}x, one copy per thread {:.2}x: the parallel step gets {:.0} % of what this machine gives independent copies",
             w.speedup,
             w.ceiling,
             100.0 * w.speedup / w.ceiling
@@ -357,22 +365,23 @@ pub fn dem(counts: &[usize], steps: usize, threads: &[usize], repeat: usize) -> 
     Ok(())
 }
 
-/// Windows timed by [`rve_windows`], and steps in each.
-const RVE_WINDOWS: usize = 10;
+/// Windows timed by [`windows`], and steps in each.
+const WINDOWS: usize = 10;
 const WINDOW_STEPS: usize = 100;
 
-/// What [`rve_windows`] measured: the speed-up of the parallel step, and that of one copy per
+/// What [`windows`] measured: the speed-up of the parallel step, and that of one copy per
 /// thread (the ceiling), both against one thread.
 struct Windows {
     speedup: f64,
     ceiling: f64,
 }
 
-/// The speed-up of `rve` on `n` threads, set against the ceiling of the moment: from one state,
-/// the same window of steps is timed on one thread, on `n`, and as `n` copies at once (each the
-/// fastest of `repeat`), one right after the other, so that a slow spell of this shared machine
-/// slows all three; the state then moves on by a window. Speed-ups are ratios of summed times.
-fn rve_windows(rve: &granite_core::dem::DemSim, n: usize, windows: usize, repeat: usize) -> Result<Windows> {
+/// The speed-up of a simulation on `n` threads from state `from`, set against the ceiling of the
+/// moment: from one state, the same window of steps is timed on one thread, on `n`, and as `n`
+/// copies at once (each the fastest of `repeat`), one right after the other, so that a slow spell
+/// of this shared machine slows all three; the state then moves on by a window. Speed-ups are
+/// ratios of summed times.
+fn windows(from: &granite_core::dem::DemSim, n: usize, windows: usize, repeat: usize) -> Result<Windows> {
     let (one, many) = (pool(1)?, pool(n)?);
     let window = |sim: &mut granite_core::dem::DemSim| -> Result<f64> {
         // The first step of a copy touches its fresh memory: not timed.
@@ -383,7 +392,7 @@ fn rve_windows(rve: &granite_core::dem::DemSim, n: usize, windows: usize, repeat
         }
         Ok(t.elapsed().as_secs_f64())
     };
-    let mut state = rve.clone();
+    let mut state = from.clone();
     let mut sums = [0.0; 3];
     for _ in 0..windows {
         let mut best = [f64::INFINITY; 3];
