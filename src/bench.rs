@@ -267,7 +267,8 @@ pub fn machine_reference(threads: &[usize], repeat: usize) -> Result<()> {
 
 /// `granite bench dem`: particle-steps per second of gravity deposition (2000 timed steps after
 /// 200 of warm-up, as in the protocol) and time per step of a sheared periodic RVE; each
-/// the fastest of `repeat` runs, with the slowest in brackets (this machine is shared).
+/// the fastest of `repeat` runs, with the slowest in brackets (this machine is shared). Each is
+/// also timed in interleaved windows against the ceiling of the moment (see [`windows`]).
 pub fn dem(counts: &[usize], steps: usize, threads: &[usize], repeat: usize) -> Result<()> {
     machine_reference(threads, repeat)?;
     println!("granite bench dem: gravity deposition (linear law, Cundall 0.4, skin 0.5 r), best of {repeat}");
@@ -294,9 +295,11 @@ pub fn dem(counts: &[usize], steps: usize, threads: &[usize], repeat: usize) -> 
                 rate / 1e6 / n as f64
             );
         }
-        let mut state = gravity_deposition(count)?;
-        pool(1)?.install(|| (0..200).try_for_each(|_| state.step()))?;
-        print_windows(&format!("N = {:>6}  ", state.spheres.len()), &state, threads, repeat)?;
+        if threads.iter().any(|&n| n > 1) {
+            let mut state = gravity_deposition(count)?;
+            pool(1)?.install(|| (0..200).try_for_each(|_| state.step()))?;
+            print_windows(&format!("N = {:>6}  ", state.spheres.len()), &state, threads, repeat)?;
+        }
     }
     println!("granite bench dem: 1500-sphere periodic RVE at 100 kPa, constant-volume simple shear, best of {repeat}");
     let mut rve = periodic_rve(1500, 1e5)?;
@@ -376,12 +379,12 @@ struct Windows {
     ceiling: f64,
 }
 
-/// The speed-up of a simulation on `n` threads from state `from`, set against the ceiling of the
-/// moment: from one state, the same window of steps is timed on one thread, on `n`, and as `n`
-/// copies at once (each the fastest of `repeat`), one right after the other, so that a slow spell
-/// of this shared machine slows all three; the state then moves on by a window. Speed-ups are
+/// The speed-up of a simulation on `n` threads, set against the ceiling of the moment: from state
+/// `from`, the same window of steps is timed on one thread, on `n`, and as `n` copies at once
+/// (each the fastest of `repeat`), one right after the other, so that a slow spell of this shared
+/// machine slows all three; the state then moves on by a window, `count` times. Speed-ups are
 /// ratios of summed times.
-fn windows(from: &granite_core::dem::DemSim, n: usize, windows: usize, repeat: usize) -> Result<Windows> {
+fn windows(from: &granite_core::dem::DemSim, n: usize, count: usize, repeat: usize) -> Result<Windows> {
     let (one, many) = (pool(1)?, pool(n)?);
     let window = |sim: &mut granite_core::dem::DemSim| -> Result<f64> {
         // The first step of a copy touches its fresh memory: not timed.
@@ -394,7 +397,7 @@ fn windows(from: &granite_core::dem::DemSim, n: usize, windows: usize, repeat: u
     };
     let mut state = from.clone();
     let mut sums = [0.0; 3];
-    for _ in 0..windows {
+    for _ in 0..count {
         let mut best = [f64::INFINITY; 3];
         for _ in 0..repeat.max(1) {
             best[0] = best[0].min(one.install(|| window(&mut state.clone()))?);
