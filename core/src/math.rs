@@ -118,9 +118,39 @@ pub fn all_finite(v: &[f64]) -> bool {
     v.iter().all(|x| x.is_finite())
 }
 
+/// The first index of `range` where `before` turns false, by bisection: `slice::partition_point`
+/// for a predicate on indices (`before` must hold on a front part of the range and nowhere after).
+pub fn partition_index(range: std::ops::Range<usize>, before: impl Fn(usize) -> bool) -> usize {
+    let (mut lo, mut hi) = (range.start, range.end);
+    while lo < hi {
+        let mid = lo + (hi - lo) / 2;
+        if before(mid) {
+            lo = mid + 1;
+        } else {
+            hi = mid;
+        }
+    }
+    lo
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn partition_index_finds_where_a_slices_partition_point_does() {
+        let values: Vec<u32> = (0..37).map(|k| k / 3).collect();
+        for start in [0, 5, 37] {
+            for target in 0..15 {
+                let found = partition_index(start..values.len(), |k| values[k] < target);
+                assert_eq!(
+                    found,
+                    start + values[start..].partition_point(|&v| v < target),
+                    "from {start}, below {target}"
+                );
+            }
+        }
+    }
 
     #[test]
     fn pure_shear_deviatoric_norm() {

@@ -173,21 +173,7 @@ impl PairList {
         let same_layout = self.param_stride == ps && self.history_stride == hs;
         let key = |k: usize| (self.a[k], self.b[k], self.shift[k]);
         // The first old pair not before this run's first pair.
-        let mut old = match pairs.first() {
-            Some(first) => {
-                let (mut lo, mut hi) = (0, self.len());
-                while lo < hi {
-                    let mid = (lo + hi) / 2;
-                    if key(mid) < *first {
-                        lo = mid + 1;
-                    } else {
-                        hi = mid;
-                    }
-                }
-                lo
-            }
-            None => 0,
-        };
+        let mut old = pairs.first().map_or(0, |first| crate::math::partition_index(0..self.len(), |k| key(k) < *first));
         let mut missing = None;
         for (k, &(a, b, shift)) in pairs.iter().enumerate() {
             while old < self.len() && key(old) < (a, b, shift) {

@@ -7,7 +7,7 @@ use crate::dem::particles::Spheres;
 use crate::dem::walls::Wall;
 use crate::error::{GraniteError, Result};
 use crate::ext::{ContactLaw, PairInfo};
-use crate::math::Vec3;
+use crate::math::{add3, scale3, Vec3};
 use std::collections::HashMap;
 use std::sync::Arc;
 
@@ -418,7 +418,7 @@ impl DemSim {
             .iter()
             .zip(&pairs.force)
             .filter(|(&b, _)| b as usize == w)
-            .fold([0.0; 3], |sum, (_, f)| [sum[0] - f[0], sum[1] - f[1], sum[2] - f[2]])
+            .fold([0.0; 3], |sum, (_, f)| add3(sum, scale3(*f, -1.0)))
     }
 
     /// Info for a sphere-sphere pair or, with `wall` set, a sphere-wall pair.

@@ -1243,16 +1243,8 @@ impl PieceBounds {
         for &fraction in &fractions[1..pieces] {
             let target = (total as f64 * fraction).round() as usize;
             // The first sphere with at least `target` work before it (work grows with s).
-            let (mut lo, mut hi) = (*starts.last().unwrap_or(&0), spheres);
-            while lo < hi {
-                let mid = (lo + hi) / 2;
-                if work_before(mid) < target {
-                    lo = mid + 1;
-                } else {
-                    hi = mid;
-                }
-            }
-            starts.push(lo);
+            let from = *starts.last().unwrap_or(&0);
+            starts.push(crate::math::partition_index(from..spheres, |s| work_before(s) < target));
         }
         starts.push(spheres);
         let cuts = |list: &PairList| starts[1..pieces].iter().map(|&s| before(list, s)).collect::<Vec<_>>();

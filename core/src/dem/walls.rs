@@ -35,7 +35,7 @@ pub struct WallContact {
 }
 
 impl Wall {
-    /// A wall at rest, feeling no force yet.
+    /// A wall at rest.
     pub fn new(name: &str, shape: WallShape, position: Vec3, material: u16) -> Wall {
         Wall { name: name.to_string(), shape, position, velocity: [0.0; 3], material }
     }
