@@ -47,6 +47,7 @@ fn collide(law: &str, law_params: &[(&str, f64)], against_wall: bool, speed: f64
         radius: [r, if against_wall { f64::INFINITY } else { r }],
         mass: [m1, if against_wall { f64::INFINITY } else { m1 }],
         seed: 0,
+        elastic: [None; 2],
     });
     let w0 = (kn / m_eff).sqrt();
     sim.skin = 0.5 * r;

@@ -104,6 +104,66 @@ impl PairList {
         self.force.shrink_to_fit();
     }
 
+    /// Lays the per-pair values out with `ps` parameters and `hs` history values per pair,
+    /// keeping each pair's leading values (the law's own; the rest is padding).
+    pub fn relayout(&mut self, ps: usize, hs: usize) {
+        fn restride(v: &mut Vec<f64>, from: usize, to: usize, pairs: usize) {
+            if from == to {
+                return;
+            }
+            let keep = from.min(to);
+            let mut out = vec![0.0; pairs * to];
+            for k in 0..pairs {
+                out[k * to..k * to + keep].copy_from_slice(&v[k * from..k * from + keep]);
+            }
+            *v = out;
+        }
+        let n = self.len();
+        restride(&mut self.params, self.param_stride, ps, n);
+        restride(&mut self.history, self.history_stride, hs, n);
+        (self.param_stride, self.history_stride) = (ps, hs);
+    }
+
+    /// Drops the pairs of spheres whose `keep` flag is false and renumbers the others' spheres
+    /// as `Spheres::retain` does (the order of the list is kept: renumbering keeps the order).
+    /// `b` is a sphere index for sphere pairs (`spheres`), a wall index otherwise.
+    pub fn retain_spheres(&mut self, keep: &[bool], spheres: bool) {
+        let mut new_index = vec![u32::MAX; keep.len()];
+        let mut next = 0u32;
+        for (i, &k) in keep.iter().enumerate() {
+            if k {
+                new_index[i] = next;
+                next += 1;
+            }
+        }
+        let (ps, hs) = (self.param_stride, self.history_stride);
+        let mut kept = 0;
+        for k in 0..self.len() {
+            let (a, b) = (self.a[k] as usize, self.b[k] as usize);
+            let stays = keep.get(a).copied().unwrap_or(false) && (!spheres || keep.get(b).copied().unwrap_or(false));
+            if !stays {
+                continue;
+            }
+            self.a[kept] = new_index[a];
+            self.b[kept] = if spheres { new_index[b] } else { b as u32 };
+            self.shift[kept] = self.shift[k];
+            self.law[kept] = self.law[k];
+            self.touching[kept] = self.touching[k];
+            self.force[kept] = self.force[k];
+            self.params.copy_within(k * ps..(k + 1) * ps, kept * ps);
+            self.history.copy_within(k * hs..(k + 1) * hs, kept * hs);
+            kept += 1;
+        }
+        self.a.truncate(kept);
+        self.b.truncate(kept);
+        self.shift.truncate(kept);
+        self.law.truncate(kept);
+        self.touching.truncate(kept);
+        self.force.truncate(kept);
+        self.params.truncate(kept * ps);
+        self.history.truncate(kept * hs);
+    }
+
     pub fn touching_count(&self) -> usize {
         self.touching.iter().filter(|t| **t).count()
     }

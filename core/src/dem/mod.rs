@@ -4,12 +4,14 @@
 //! half the skin) -> contact geometry -> contact law, per contact in parallel -> forces gathered per
 //! particle in a fixed order -> integration (gravity, Cundall damping, leapfrog).
 
+pub mod bodies;
 pub mod broad_phase;
 pub mod cell;
 pub mod clump;
 pub mod contacts;
 pub mod delaunay;
 pub mod generate;
+pub mod inspect;
 pub mod measures;
 pub mod particles;
 pub mod repose;

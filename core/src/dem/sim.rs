@@ -15,6 +15,17 @@ use std::sync::Arc;
 pub struct DemMaterial {
     pub name: String,
     pub density: f64,
+    /// Elastic constants, for laws that take them from the two materials in contact (Hertz's
+    /// `E*`); an infinite modulus is a rigid body. None: the law's own values apply.
+    #[serde(default)]
+    pub elastic: Option<Elastic>,
+}
+
+/// Young's modulus (Pa, infinite for a rigid body) and Poisson's ratio of a material.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Elastic {
+    pub young: f64,
+    pub poisson: f64,
 }
 
 #[derive(Clone)]
@@ -75,7 +86,9 @@ pub struct DemSim {
     /// Number of candidate-list rebuilds so far.
     pub rebuilds: u64,
     pub events: Vec<String>,
-    next_id: u64,
+    /// Lasting external loads on single spheres, by id (see `bodies.rs`).
+    pub external: Vec<crate::dem::bodies::ExternalLoad>,
+    pub(crate) next_id: u64,
 }
 
 impl Default for DemSim {
@@ -121,6 +134,7 @@ impl DemSim {
             stop_on_unstable_dt: true,
             rebuilds: 0,
             events: Vec::new(),
+            external: Vec::new(),
             next_id: 0,
         }
     }
@@ -132,12 +146,41 @@ impl DemSim {
         if self.materials.len() >= u16::MAX as usize {
             return Err(GraniteError::Setup("too many materials".into()));
         }
-        self.materials.push(DemMaterial { name: name.into(), density });
+        self.materials.push(DemMaterial { name: name.into(), density, elastic: None });
         Ok((self.materials.len() - 1) as u16)
     }
 
+    /// Gives material `m` elastic constants (a modulus of infinity: rigid), for contact laws
+    /// that combine the two materials of a pair. Contacts already made take them at once.
+    pub fn set_material_elastic(&mut self, m: u16, elastic: Option<Elastic>) -> Result<()> {
+        if let Some(e) = elastic {
+            if !(e.young > 0.0) || e.young.is_nan() {
+                return Err(GraniteError::param("young", e.young, "must be > 0 (inf: rigid)"));
+            }
+            if !(0.0..0.5).contains(&e.poisson) {
+                return Err(GraniteError::param("poisson", e.poisson, "must lie in [0, 0.5)"));
+            }
+        }
+        let material = self
+            .materials
+            .get_mut(m as usize)
+            .ok_or_else(|| GraniteError::Setup(format!("no material with index {m}")))?;
+        material.elastic = elastic;
+        let laws = self.laws.clone();
+        self.refresh_pair_laws(&laws);
+        self.recheck_time_step();
+        Ok(())
+    }
+
+    /// The id the next sphere gets.
+    pub fn next_sphere_id(&self) -> u64 {
+        self.next_id
+    }
+
     /// Uses `law` for contacts between materials `a` and `b` (either order), or for every pair
-    /// without a law of its own when `pair` is None.
+    /// without a law of its own when `pair` is None, from the next step on. Contacts that exist
+    /// keep their history (tangential spring, rolling...) when their law stays of the same kind,
+    /// and get their parameters from the new law; a contact whose law changes kind starts afresh.
     pub fn set_contact_law(&mut self, law: Box<dyn ContactLaw>, pair: Option<(u16, u16)>) -> Result<()> {
         if let Some((a, b)) = pair {
             for m in [a, b] {
@@ -146,19 +189,94 @@ impl DemSim {
                 }
             }
         }
-        self.laws.push(Arc::from(law));
-        let idx = (self.laws.len() - 1) as u16;
-        match pair {
-            Some((a, b)) => {
-                self.law_of.insert((a.min(b), a.max(b)), idx);
+        use crate::dem::step::{MAX_HISTORY, MAX_PARAMS};
+        if law.param_count() > MAX_PARAMS || law.history_count() > MAX_HISTORY {
+            return Err(GraniteError::Setup(format!(
+                "contact law `{}` uses more than {MAX_PARAMS} parameters or {MAX_HISTORY} history values per contact",
+                law.name()
+            )));
+        }
+        let old_laws = self.laws.clone();
+        let key = pair.map(|(a, b)| (a.min(b), a.max(b)));
+        let current = match key {
+            Some(k) => self.law_of.get(&k).copied(),
+            None => self.default_law,
+        };
+        let users =
+            |idx: u16| self.law_of.values().filter(|&&v| v == idx).count() + usize::from(self.default_law == Some(idx));
+        // A law of this key alone is replaced where it is; one shared (split off by a change of
+        // one pair's parameters) stays for the others.
+        let idx = match current {
+            Some(idx) if users(idx) == 1 => {
+                self.laws[idx as usize] = Arc::from(law);
+                idx
+            }
+            _ => {
+                if self.laws.len() >= u16::MAX as usize {
+                    return Err(GraniteError::Setup("too many contact laws".into()));
+                }
+                self.laws.push(Arc::from(law));
+                (self.laws.len() - 1) as u16
+            }
+        };
+        match key {
+            Some(k) => {
+                self.law_of.insert(k, idx);
             }
             None => self.default_law = Some(idx),
         }
-        // Every pair must be re-initialised with the new parameters.
-        self.pairs = PairList::default();
-        self.wall_pairs = PairList::default();
-        self.needs_rebuild = true;
+        self.refresh_pair_laws(&old_laws);
+        self.recheck_time_step();
         Ok(())
+    }
+
+    /// The law index a key uses: a material pair's own law or, with None, the default law.
+    pub fn law_index(&self, pair: Option<(u16, u16)>) -> Option<u16> {
+        match pair {
+            Some((a, b)) => self.law_for(a, b),
+            None => self.default_law,
+        }
+    }
+
+    /// Gives every candidate pair the law of its two materials now and sets its parameters again
+    /// from that law. A pair whose law keeps its kind (same name as in `old_laws`) keeps its
+    /// history; another starts with none. The pair lists are laid out again when the laws need
+    /// more values per pair.
+    pub(crate) fn refresh_pair_laws(&mut self, old_laws: &[Arc<dyn ContactLaw>]) {
+        let ps = self.laws.iter().map(|l| l.param_count()).max().unwrap_or(0).max(1);
+        let hs = self.laws.iter().map(|l| l.history_count()).max().unwrap_or(0).max(1);
+        let mut lists = [std::mem::take(&mut self.pairs), std::mem::take(&mut self.wall_pairs)];
+        for (list, wall) in lists.iter_mut().zip([false, true]) {
+            if list.is_empty() {
+                list.param_stride = ps;
+                list.history_stride = hs;
+                continue;
+            }
+            list.relayout(ps, hs);
+            for k in 0..list.len() {
+                let (a, b) = (list.a[k] as usize, list.b[k] as usize);
+                let mb = if wall { self.walls[b].material } else { self.spheres.material[b] };
+                let Some(law) = self.law_for(self.spheres.material[a], mb) else {
+                    // No law for this pair any more: the next rebuild says so.
+                    self.needs_rebuild = true;
+                    continue;
+                };
+                let same_kind = old_laws.get(list.law[k] as usize).is_some_and(|old| {
+                    let new = &self.laws[law as usize];
+                    old.name() == new.name() && old.history_count() == new.history_count()
+                });
+                list.law[k] = law;
+                let params = &mut list.params[k * ps..(k + 1) * ps];
+                params.fill(0.0);
+                self.laws[law as usize].init_pair(&self.info_for(a, b, wall), params);
+                if !same_kind {
+                    list.history[k * hs..(k + 1) * hs].fill(0.0);
+                    list.touching[k] = false;
+                }
+            }
+        }
+        [self.pairs, self.wall_pairs] = lists;
+        // The spare list is storage for the next rebuild: its layout is set there.
     }
 
     pub fn law_for(&self, a: u16, b: u16) -> Option<u16> {
@@ -175,7 +293,7 @@ impl DemSim {
 
     /// A sphere a step can move: finite position and velocity, a radius whose mass at the
     /// material's density is finite and > 0. Returns that density.
-    fn check_sphere(&self, material: u16, x: Vec3, radius: f64, v: Vec3) -> Result<f64> {
+    pub(crate) fn check_sphere(&self, material: u16, x: Vec3, radius: f64, v: Vec3) -> Result<f64> {
         if !(radius > 0.0 && radius.is_finite()) {
             return Err(GraniteError::param("radius", radius, "must be > 0"));
         }
@@ -390,9 +508,12 @@ impl DemSim {
                 }
             }
         }
+        let gone: Vec<u64> = (0..keep.len()).filter(|&i| !keep[i]).map(|i| self.spheres.id[i]).collect();
+        self.external.retain(|l| !gone.contains(&l.id));
         self.spheres.retain(&keep);
-        self.pairs = PairList::default();
-        self.wall_pairs = PairList::default();
+        // Contacts between spheres that stay keep their history.
+        self.pairs.retain_spheres(&keep, true);
+        self.wall_pairs.retain_spheres(&keep, false);
         self.needs_rebuild = true;
     }
 
@@ -404,7 +525,9 @@ impl DemSim {
         };
         let (lo, hi) = (s.id[i].min(id2), s.id[i].max(id2));
         let seed = crate::ext::contact::uniform(self.seed ^ lo.wrapping_mul(0x100_0000_01B3), hi).to_bits();
-        PairInfo { radius: [s.radius[i], r2], mass: [s.mass[i], m2], seed }
+        let elastic = |m: u16| self.materials.get(m as usize).and_then(|m| m.elastic);
+        let e2 = j.and_then(|j| elastic(s.material[j]));
+        PairInfo { radius: [s.radius[i], r2], mass: [s.mass[i], m2], seed, elastic: [elastic(s.material[i]), e2] }
     }
 
     /// Force the spheres exert on wall `w` in the last step: the opposite of the forces of its
@@ -426,6 +549,7 @@ impl DemSim {
         if wall {
             let mut info = self.pair_info(i, None);
             info.seed ^= (j as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15);
+            info.elastic[1] = self.materials.get(self.walls[j].material as usize).and_then(|m| m.elastic);
             info
         } else {
             self.pair_info(i, Some(j))
@@ -450,8 +574,8 @@ impl DemSim {
             let mut self_pair = self.pair_info(i, Some(i));
             self_pair.seed = 0;
             consider(self.law_for(mi, mi), self_pair);
-            for w in &self.walls {
-                consider(self.law_for(mi, w.material), self.pair_info(i, None));
+            for (w, wall) in self.walls.iter().enumerate() {
+                consider(self.law_for(mi, wall.material), self.info_for(i, w, true));
             }
         }
         best
@@ -476,9 +600,41 @@ impl DemSim {
 
     /// Has the time step checked against the contacts' limit after the next contact stage, and
     /// said again if above it.
-    fn recheck_time_step(&mut self) {
+    pub(crate) fn recheck_time_step(&mut self) {
         self.stability_warned = false;
         self.last_check = None;
+    }
+
+    /// Asks each law whether it can make the contacts it may meet: between the materials of the
+    /// spheres, and between those and the walls' materials.
+    fn check_pairs_of_materials(&self) -> Result<()> {
+        let mut sphere_materials: Vec<u16> = self.spheres.material.clone();
+        sphere_materials.sort_unstable();
+        sphere_materials.dedup();
+        let mut wall_materials: Vec<u16> = self.walls.iter().map(|w| w.material).collect();
+        wall_materials.sort_unstable();
+        wall_materials.dedup();
+        let elastic = |m: u16| self.materials.get(m as usize).and_then(|m| m.elastic);
+        let name = |m: u16| self.materials.get(m as usize).map_or(String::new(), |m| m.name.clone());
+        for &a in &sphere_materials {
+            let others =
+                sphere_materials.iter().map(|&b| (b, 1.0)).chain(wall_materials.iter().map(|&w| (w, f64::INFINITY)));
+            for (b, r2) in others {
+                let Some(law) = self.law_for(a, b) else { continue };
+                let info = PairInfo { radius: [1.0, r2], mass: [1.0, r2], seed: 0, elastic: [elastic(a), elastic(b)] };
+                let law = &self.laws[law as usize];
+                law.check_pair(&info).map_err(|why| {
+                    GraniteError::Setup(format!(
+                        "contact law `{}` between materials \"{}\" and \"{}\"{}: {why}",
+                        law.name(),
+                        name(a),
+                        name(b),
+                        if r2.is_infinite() { " (a wall)" } else { "" }
+                    ))
+                })?;
+            }
+        }
+        Ok(())
     }
 
     pub fn validate(&self) -> Result<()> {
@@ -486,6 +642,7 @@ impl DemSim {
         if !self.spheres.is_empty() && self.laws.is_empty() {
             return Err(GraniteError::Setup("no contact law: call contact_law(...) before running".into()));
         }
+        self.check_pairs_of_materials()?;
         if let Some(crit) = self.critical_dt() {
             if self.dt > crit {
                 return Err(GraniteError::param(

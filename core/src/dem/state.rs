@@ -52,6 +52,8 @@ pub(crate) struct DemState {
     h_at_build: Option<nalgebra::Matrix3<f64>>,
     needs_rebuild: bool,
     rebuilds: u64,
+    #[serde(default)]
+    external: Vec<crate::dem::bodies::ExternalLoad>,
 }
 
 impl DemSim {
@@ -92,6 +94,7 @@ impl DemSim {
             h_at_build: self.h_at_build,
             needs_rebuild: self.needs_rebuild,
             rebuilds: self.rebuilds,
+            external: self.external.clone(),
         }
     }
 
@@ -158,6 +161,8 @@ impl DemSim {
         sim.radius_min_at_build = sim.spheres.smallest_radius();
         sim.needs_rebuild = st.needs_rebuild;
         sim.rebuilds = st.rebuilds;
+        sim.external = st.external;
+        sim.next_id = sim.spheres.id.iter().max().map_or(0, |m| m + 1);
         check_consistent(&sim).map_err(|e| GraniteError::Other(format!("{source}: not a usable DEM state: {e}")))?;
         // The parallel stages' cuts of the pair lists are found again on the first step, not saved.
         // Reading grows arrays by doubling; copies hold just their contents (a loaded RVE is the

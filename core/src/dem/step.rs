@@ -90,13 +90,16 @@ impl DemSim {
             _ => (None, None, 0.0),
         };
         let motion = Motion::new(self.gravity, self.damping, self.dt, affine);
-        let mut moved = if parallel && !check {
+        let mut moved = if parallel && !check && self.external.is_empty() {
             self.contacts_and_motion(&motion)
         } else {
             // The stability check reads this step's contacts before anything moves, so that a
             // step it stops leaves the spheres where they were. It comes once in 1000 steps at
             // most, so such a step runs on this thread alone (the same sums as in parallel).
+            // External loads on single spheres (a console's experiment, not a production run)
+            // are added between the contact stage and the motion, so they take this path too.
             self.contacts();
+            self.apply_external_loads();
             if check {
                 self.check_time_step()?;
             }

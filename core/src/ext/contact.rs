@@ -19,6 +19,9 @@ pub struct PairInfo {
     pub mass: [f64; 2],
     /// A reproducible seed for this pair (from the particle ids and the simulation seed).
     pub seed: u64,
+    /// Elastic constants of the two materials, where they were given (`sim.material(#{ young,
+    /// poisson })`); a law that combines them (Hertz's `E*`) reads them here.
+    pub elastic: [Option<crate::dem::sim::Elastic>; 2],
 }
 
 impl PairInfo {
@@ -159,6 +162,16 @@ pub trait ContactLaw: Send + Sync {
     fn init_pair(&self, info: &PairInfo, params: &mut [f64]);
     /// Forces of a batch of touching contacts.
     fn compute(&self, batch: ContactBatch<'_>);
+    /// Names of the values `init_pair` stores per contact (shown when contacts are listed); a
+    /// law that does not name them shows `p0`, `p1`...
+    fn pair_param_names(&self) -> &[&'static str] {
+        &[]
+    }
+    /// Why this law cannot make a contact between these two bodies (a modulus neither the law nor
+    /// the materials give), checked before a run for every pair of materials that may meet.
+    fn check_pair(&self, _info: &PairInfo) -> std::result::Result<(), String> {
+        Ok(())
+    }
     /// Whether the law reads relative spins or returns moments (rolling/twisting resistance).
     /// When no law of a simulation does, the engine computes neither.
     fn resists_rotation(&self) -> bool {

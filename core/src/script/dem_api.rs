@@ -35,6 +35,15 @@ pub struct DemMaterialHandle {
     name: String,
 }
 
+impl DemMaterialHandle {
+    pub(super) fn index(&self) -> u16 {
+        self.index
+    }
+    pub(super) fn name(&self) -> &str {
+        &self.name
+    }
+}
+
 /// Everything a whole-state snapshot needs.
 pub struct DemSnapshot {
     spheres: crate::dem::Spheres,
@@ -274,14 +283,16 @@ impl Handle<DemScene> {
     }
 
     fn material(&mut self, opts: Map) -> RhaiResult<DemMaterialHandle> {
-        only_keys(&opts, &["name", "density"], "DEM material")?;
+        only_keys(&opts, &["name", "density", "young", "poisson", "rigid"], "DEM material")?;
         let mut st = self.lock();
         let density = number(get(&opts, "density").unwrap_or(&Dynamic::UNIT), "density")?;
         let name = match get(&opts, "name") {
             Some(n) => string(n, "name")?,
             None => format!("material_{}", st.sim.dem.materials.len() + 1),
         };
+        let elastic = super::dem_console::elastic_from(&opts, &format!("material \"{name}\""))?;
         let index = st.sim.dem.add_material(&name, density).or_rhai()?;
+        st.sim.dem.set_material_elastic(index, elastic).or_rhai()?;
         Ok(DemMaterialHandle { index, name })
     }
 
@@ -364,11 +375,17 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
         let mut st = s.lock();
         let i = st.sim.dem.add_sphere(m.index, x, r, v).or_rhai()?;
         if let Some(f) = get(&opts, "fixed") {
-            if f.as_bool().unwrap_or(false) {
-                st.sim.dem.spheres.blocked[i] = dof::ALL;
-            }
+            st.sim.dem.spheres.blocked[i] = if f.is_bool() {
+                if f.as_bool().unwrap_or(false) {
+                    dof::ALL
+                } else {
+                    0
+                }
+            } else {
+                crate::dem::bodies::parse_dofs(&string(f, "fixed")?).or_rhai()?
+            };
         }
-        Ok(i as i64)
+        Ok(st.sim.dem.spheres.id[i] as i64)
     }
     engine.register_fn("sphere", sphere);
     engine.register_fn("sphere", |s: &mut DemHandle, m: DemMaterialHandle, x: Dynamic, r: Dynamic| {
@@ -617,6 +634,7 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
     engine.register_get("clumps", |s: &mut DemHandle| s.lock().sim.dem.clumps.len() as i64);
     register_cell(engine);
     register_measures(engine);
+    super::dem_console::register(engine);
 }
 
 fn cell_axis(name: &str) -> Option<usize> {

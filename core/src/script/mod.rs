@@ -5,6 +5,7 @@
 
 pub mod convert;
 mod dem_api;
+mod dem_console;
 pub mod driver;
 mod limits;
 mod mpm_api;

@@ -117,6 +117,9 @@ impl ContactLaw for Linear {
     fn history_count(&self) -> usize {
         3
     }
+    fn pair_param_names(&self) -> &[&'static str] {
+        &["kn", "kt", "mu"]
+    }
     fn init_pair(&self, info: &PairInfo, out: &mut [f64]) {
         let (kn, kt) = self.springs.of(info);
         out[0] = kn;

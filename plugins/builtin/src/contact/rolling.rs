@@ -82,6 +82,9 @@ impl ContactLaw for RollingResistance {
     fn history_count(&self) -> usize {
         HISTORY
     }
+    fn pair_param_names(&self) -> &[&'static str] {
+        &["kn", "kt", "mu", "k_rolling", "k_twisting", "moment_arm"]
+    }
     fn init_pair(&self, info: &PairInfo, out: &mut [f64]) {
         let (r1, r2) = Self::radii(info);
         let kn = 2.0 * self.young * r1 * r2 / (r1 + r2);

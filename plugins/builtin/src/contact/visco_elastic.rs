@@ -65,6 +65,9 @@ impl ContactLaw for ViscoElastic {
     fn history_count(&self) -> usize {
         3
     }
+    fn pair_param_names(&self) -> &[&'static str] {
+        &["kn", "kt", "mu", "cn"]
+    }
     fn init_pair(&self, info: &PairInfo, out: &mut [f64]) {
         let (kn, kt) = self.springs.of(info);
         let m = info.effective_mass();

@@ -1,0 +1,160 @@
+//! Contacts as a user inspects them between two steps (YADE's `O.interactions`): geometry of the
+//! present positions, forces of the last step, the law and its values for the pair.
+
+use crate::dem::sim::DemSim;
+use crate::dem::step::branch;
+use crate::math::Vec3;
+
+/// The other body of a contact.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Other {
+    /// A sphere, by index.
+    Sphere(usize),
+    /// A wall, by index.
+    Wall(usize),
+}
+
+/// One touching contact. `normal` points from the first sphere towards the other body; `force` is
+/// the force on the first sphere (the other gets its opposite).
+#[derive(Debug, Clone)]
+pub struct ContactView {
+    /// Index of the first sphere.
+    pub sphere: usize,
+    pub other: Other,
+    /// Periodic image of the other sphere (zero without a periodic cell).
+    pub shift: [i32; 3],
+    pub point: Vec3,
+    pub normal: Vec3,
+    /// Positive when the bodies overlap.
+    pub overlap: f64,
+    pub force: Vec3,
+    /// Normal force, positive in compression (the bodies pushed apart): `-force . normal`.
+    pub normal_force: f64,
+    /// Part of `force` in the contact plane.
+    pub shear_force: Vec3,
+    /// Index of the contact law in `DemSim::laws`.
+    pub law: u16,
+    /// The law's values for this pair (`ContactLaw::init_pair`).
+    pub params: Vec<f64>,
+}
+
+fn dot(a: Vec3, b: Vec3) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+impl DemSim {
+    /// Every contact touching in the last step: sphere pairs in list order, then wall contacts.
+    pub fn touching_contacts(&self) -> Vec<ContactView> {
+        let mut out = Vec::new();
+        for k in 0..self.pairs.len() {
+            if self.pairs.touching[k] {
+                out.push(self.sphere_contact(k));
+            }
+        }
+        for k in 0..self.wall_pairs.len() {
+            if self.wall_pairs.touching[k] {
+                out.push(self.wall_contact(k));
+            }
+        }
+        out
+    }
+
+    /// The touching contact between spheres `i` and `j` (indices), if any.
+    pub fn contact_between(&self, i: usize, j: usize) -> Option<ContactView> {
+        let (a, b) = (i.max(j) as u32, i.min(j) as u32);
+        let p = &self.pairs;
+        let start = crate::math::partition_index(0..p.len(), |k| (p.a[k], p.b[k]) < (a, b));
+        (start..p.len()).take_while(|&k| (p.a[k], p.b[k]) == (a, b)).find(|&k| p.touching[k]).map(|k| {
+            let mut c = self.sphere_contact(k);
+            if c.sphere != i {
+                // Seen from sphere i: the other side of the same contact.
+                c.sphere = i;
+                c.other = Other::Sphere(j);
+                c.normal = c.normal.map(|n| -n);
+                c.force = c.force.map(|f| -f);
+                c.shear_force = c.shear_force.map(|f| -f);
+            }
+            c
+        })
+    }
+
+    /// The touching contact between sphere `i` and wall `w`, if any.
+    pub fn wall_contact_of(&self, i: usize, w: usize) -> Option<ContactView> {
+        let p = &self.wall_pairs;
+        (0..p.len())
+            .find(|&k| p.touching[k] && p.a[k] as usize == i && p.b[k] as usize == w)
+            .map(|k| self.wall_contact(k))
+    }
+
+    fn view(&self, list_is_walls: bool, k: usize, point: Vec3, normal: Vec3, overlap: f64) -> ContactView {
+        let p = if list_is_walls { &self.wall_pairs } else { &self.pairs };
+        let force = p.force[k];
+        let fn_along = dot(force, normal);
+        let shear_force = [0, 1, 2].map(|a| force[a] - fn_along * normal[a]);
+        let law = p.law[k];
+        let count = self.laws.get(law as usize).map_or(0, |l| l.param_count());
+        let ps = p.param_stride;
+        ContactView {
+            sphere: p.a[k] as usize,
+            other: if list_is_walls { Other::Wall(p.b[k] as usize) } else { Other::Sphere(p.b[k] as usize) },
+            shift: p.shift[k],
+            point,
+            normal,
+            overlap,
+            force,
+            normal_force: -fn_along,
+            shear_force,
+            law,
+            params: p.params[k * ps..k * ps + count.min(ps)].to_vec(),
+        }
+    }
+
+    fn sphere_contact(&self, k: usize) -> ContactView {
+        let (i, j) = (self.pairs.a[k] as usize, self.pairs.b[k] as usize);
+        let s = &self.spheres;
+        let d = branch(&s.x, i, j, self.pairs.shift[k], self.cell.as_ref());
+        let dist = dot(d, d).sqrt();
+        let n = if dist > 0.0 { d.map(|c| c / dist) } else { [0.0; 3] };
+        let overlap = s.radius[i] + s.radius[j] - dist;
+        let la = s.radius[i] - 0.5 * overlap;
+        let point = [0, 1, 2].map(|a| s.x[i][a] + la * n[a]);
+        self.view(false, k, point, n, overlap)
+    }
+
+    fn wall_contact(&self, k: usize) -> ContactView {
+        let (i, w) = (self.wall_pairs.a[k] as usize, self.wall_pairs.b[k] as usize);
+        let s = &self.spheres;
+        match self.walls[w].contact(s.x[i], s.radius[i], f64::INFINITY) {
+            Some(g) => self.view(true, k, g.point, g.normal, -g.gap),
+            None => self.view(true, k, s.x[i], [0.0; 3], f64::NAN),
+        }
+    }
+
+    /// Fabric tensor of the sphere contacts, `(1/N) sum n n^T` over the N contacts touching in the
+    /// last step (Oda 1982): symmetric, trace 1; one third of the identity for an isotropic
+    /// network. Zero without contacts.
+    pub fn fabric_tensor(&self) -> [[f64; 3]; 3] {
+        let mut f = [[0.0; 3]; 3];
+        let mut count = 0usize;
+        for k in 0..self.pairs.len() {
+            if !self.pairs.touching[k] {
+                continue;
+            }
+            let n = self.sphere_contact(k).normal;
+            for (a, row) in f.iter_mut().enumerate() {
+                for (b, entry) in row.iter_mut().enumerate() {
+                    *entry += n[a] * n[b];
+                }
+            }
+            count += 1;
+        }
+        if count > 0 {
+            for row in f.iter_mut() {
+                for entry in row.iter_mut() {
+                    *entry /= count as f64;
+                }
+            }
+        }
+        f
+    }
+}
