@@ -2,7 +2,10 @@
 //! each run in its own process and output folder, N at a time; failures do not stop the others.
 //!
 //! The TOML file holds `[grid]` (every combination of the listed values) and/or `[[set]]`
-//! entries (explicit sets); with both, each set is combined with every grid point.
+//! entries (explicit sets); with both, each set is combined with every grid point, and a name
+//! may not be in both (one of the two values would be silently dropped). Every set is checked
+//! against the script's `param` declarations before the first run starts; each run keeps its
+//! `stdout.log` and `stderr.log` in its folder.
 
 use granite_core::{GraniteError, Result};
 use std::path::{Path, PathBuf};
@@ -87,7 +90,31 @@ pub fn parameter_sets(text: &str, file: &Path) -> Result<Vec<Vec<(String, String
             .collect::<Result<_>>()?,
         Some(_) => return Err(GraniteError::Setup("use [[set]] for explicit parameter sets".into())),
     };
+    if let (Some(first_grid), true) = (grid.first(), doc.contains_key("set")) {
+        for (k, set) in sets.iter().enumerate() {
+            if let Some((name, _)) = set.iter().find(|(name, _)| first_grid.iter().any(|(g, _)| g == name)) {
+                return Err(GraniteError::Setup(format!(
+                    "{}: `{name}` is given both in [grid] and in [[set]] number {}: give each parameter in one \
+                     place (a set's value would replace the grid's, or the reverse, and the summary would not say)",
+                    file.display(),
+                    k + 1
+                )));
+            }
+        }
+    }
     Ok(sets.iter().flat_map(|s| grid.iter().map(move |g| s.iter().chain(g).cloned().collect())).collect())
+}
+
+/// Checks every set's values against the script's `param(...)` declarations (names, types,
+/// limits) before anything runs: a batch whose tenth run has a misspelt name fails at once.
+pub fn check_sets(script: &Path, sets: &[Vec<(String, String)>]) -> Result<()> {
+    for (k, set) in sets.iter().enumerate() {
+        crate::describe_params(script, set.clone(), Vec::new()).map_err(|e| {
+            let params: Vec<String> = set.iter().map(|(k, v)| format!("{k}={v}")).collect();
+            GraniteError::Setup(format!("run {k} [{}] would fail before it starts: {e}", params.join(" ")))
+        })?;
+    }
+    Ok(())
 }
 
 /// Runs every set with the `granite` executable `exe`, `jobs` at a time, and writes
@@ -102,6 +129,7 @@ pub fn run(
 ) -> Result<Vec<Outcome>> {
     let text = std::fs::read_to_string(params_file).map_err(|e| GraniteError::io(params_file, e))?;
     let sets = parameter_sets(&text, params_file)?;
+    check_sets(script, &sets)?;
     std::fs::create_dir_all(out).map_err(|e| GraniteError::io(out, e))?;
     let queue: Vec<Job> = sets
         .into_iter()
@@ -127,14 +155,21 @@ pub fn run(
                     cmd.arg("--set").arg(format!("{k}={v}"));
                 }
                 let outcome = match cmd.output() {
-                    Ok(o) => Outcome {
-                        exit_code: o.status.code(),
-                        summary: std::fs::read_to_string(job.out_dir.join("summary.json"))
-                            .ok()
-                            .and_then(|t| serde_json::from_str(&t).ok()),
-                        error: String::from_utf8_lossy(&o.stderr).trim().to_string(),
-                        job,
-                    },
+                    Ok(o) => {
+                        // The run's own output, kept beside its results (a failed run's folder
+                        // then says why).
+                        let _ = std::fs::create_dir_all(&job.out_dir);
+                        let _ = std::fs::write(job.out_dir.join("stdout.log"), &o.stdout);
+                        let _ = std::fs::write(job.out_dir.join("stderr.log"), &o.stderr);
+                        Outcome {
+                            exit_code: o.status.code(),
+                            summary: std::fs::read_to_string(job.out_dir.join("summary.json"))
+                                .ok()
+                                .and_then(|t| serde_json::from_str(&t).ok()),
+                            error: String::from_utf8_lossy(&o.stderr).trim().to_string(),
+                            job,
+                        }
+                    }
                     Err(e) => Outcome {
                         exit_code: None,
                         summary: None,
@@ -219,5 +254,12 @@ mod tests {
             sets[0],
             vec![("update".into(), "PIC".into()), ("duration".into(), "0.1".into()), ("scheme".into(), "USF".into())]
         );
+    }
+
+    #[test]
+    fn a_name_in_both_grid_and_set_is_refused() {
+        let text = "[grid]\nupdate = [\"PIC\", \"FLIP\"]\n[[set]]\nscheme = \"USL\"\n[[set]]\nupdate = \"APIC\"\n";
+        let e = parameter_sets(text, Path::new("x.toml")).unwrap_err().to_string();
+        assert!(e.contains("`update` is given both in [grid] and in [[set]] number 2"), "{e}");
     }
 }

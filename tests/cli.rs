@@ -111,10 +111,11 @@ fn batch_runs_every_set_and_reports_a_failure() {
     let dir = common::out_dir("cli_batch");
     std::fs::create_dir_all(&dir).unwrap();
     let params = dir.join("params.toml");
-    // Three runs; the last asks for a scheme that does not exist.
+    // Three runs; the last asks for a velocity update that does not exist (the script declares
+    // no limits for it, so the run itself finds out).
     std::fs::write(
         &params,
-        "[grid]\nduration = 0.02\n[[set]]\nscheme = \"USF\"\n[[set]]\nscheme = \"USL\"\n[[set]]\nscheme = \"XYZ\"\n",
+        "[grid]\nduration = 0.02\n[[set]]\nupdate = \"FLIP\"\n[[set]]\nupdate = \"PIC\"\n[[set]]\nupdate = \"XYZ\"\n",
     )
     .unwrap();
     let out = granite()
@@ -139,7 +140,31 @@ fn batch_runs_every_set_and_reports_a_failure() {
     common::column(&h, "final_total_energy");
     for k in 0..3 {
         assert!(dir.join(format!("runs/run_{k:03}/summary.json")).exists());
+        assert!(dir.join(format!("runs/run_{k:03}/stdout.log")).exists());
     }
+    let log = std::fs::read_to_string(dir.join("runs/run_002/stderr.log")).unwrap();
+    assert!(log.contains("XYZ"), "the failed run's stderr.log says why: {log}");
+}
+
+/// A value outside a parameter's declared limits is found before any run starts, naming the run.
+#[test]
+fn batch_checks_every_set_before_running() {
+    let dir = common::out_dir("cli_batch_check");
+    std::fs::create_dir_all(&dir).unwrap();
+    let params = dir.join("params.toml");
+    std::fs::write(&params, "[grid]\nduration = 0.02\n[[set]]\nscheme = \"USF\"\n[[set]]\nscheme = \"XYZ\"\n").unwrap();
+    let out = granite()
+        .args(["batch", "scripts/mpm/bouncing_cube.rhai", "--quiet", "--params"])
+        .arg(&params)
+        .arg("--out")
+        .arg(dir.join("runs"))
+        .current_dir(common::root())
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("run 1 [scheme=XYZ duration=0.02] would fail before it starts"), "{err}");
+    assert!(!dir.join("runs/run_000").exists(), "no run started");
 }
 
 #[test]
