@@ -105,14 +105,23 @@ pub fn get<'a>(map: &'a Map, key: &str) -> Option<&'a Dynamic> {
     map.get(key)
 }
 
-/// Rejects keys of an options map that the function does not know.
+/// Rejects keys of an options map that the function does not know, suggesting the closest.
 pub fn only_keys(map: &Map, allowed: &[&str], function: &str) -> RhaiResult<()> {
     for k in map.keys() {
         if !allowed.contains(&k.as_str()) {
-            return err(format!("unknown option `{k}` of {function}; allowed: {}", allowed.join(", ")));
+            let near = super::api_doc::closest(k, allowed.iter().copied());
+            let hint = near.first().map(|n| format!(" (did you mean `{n}`?)")).unwrap_or_default();
+            return err(format!("unknown option `{k}` of {function}{hint}; allowed: {}", allowed.join(", ")));
         }
     }
     Ok(())
+}
+
+/// Rejects keys of an options map that the API table (`api_doc.rs`) does not list for
+/// `on.name`: the keys a function checks and those `:help` and completion show are one list.
+pub fn api_options(map: &Map, on: &str, name: &str) -> RhaiResult<()> {
+    let shown = if on.is_empty() { format!("{name}(...)") } else { format!("sim.{name}(...)") };
+    only_keys(map, super::api_doc::options_of(on, name), &shown)
 }
 
 pub fn string(d: &Dynamic, name: &str) -> RhaiResult<String> {

@@ -1,7 +1,7 @@
 //! The `dem(...)` simulation object of scripts and its methods.
 
 use super::convert::{
-    err, finite, get, integer, number, numbers, only_keys, param_map, string, vector, OrRhai, RhaiResult,
+    api_options, err, finite, get, integer, number, numbers, only_keys, param_map, string, vector, OrRhai, RhaiResult,
 };
 use super::driver::{register_common, Handle, ScriptSim};
 use super::ScriptContext;
@@ -264,7 +264,7 @@ fn psd_from(opts: &Map) -> RhaiResult<Psd> {
 impl Handle<DemScene> {
     fn create(ctx: Arc<ScriptContext>, opts: Map) -> RhaiResult<DemHandle> {
         ctx.before_simulation()?;
-        only_keys(&opts, &["seed", "skin"], "dem options")?;
+        api_options(&opts, "", "dem")?;
         let mut dem = DemSim::new();
         if let Some(s) = get(&opts, "seed") {
             dem.seed = integer(s, "seed")? as u64;
@@ -283,7 +283,7 @@ impl Handle<DemScene> {
     }
 
     fn material(&mut self, opts: Map) -> RhaiResult<DemMaterialHandle> {
-        only_keys(&opts, &["name", "density", "young", "poisson", "rigid"], "DEM material")?;
+        api_options(&opts, "DemSim", "material")?;
         let mut st = self.lock();
         let density = number(get(&opts, "density").unwrap_or(&Dynamic::UNIT), "density")?;
         let name = match get(&opts, "name") {
@@ -365,7 +365,7 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
         },
     );
     fn sphere(s: &mut DemHandle, m: DemMaterialHandle, x: Dynamic, r: Dynamic, opts: Map) -> RhaiResult<i64> {
-        only_keys(&opts, &["velocity", "fixed"], "sphere options")?;
+        api_options(&opts, "DemSim", "sphere")?;
         let x = vector(&x, 3, "position")?;
         let r = finite(&r, "radius")?;
         let v = match get(&opts, "velocity") {
@@ -392,7 +392,7 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
         sphere(s, m, x, r, Map::new())
     });
     engine.register_fn("cloud", |s: &mut DemHandle, m: DemMaterialHandle, lo: Dynamic, hi: Dynamic, opts: Map| {
-        only_keys(&opts, &["count", "radius", "psd", "seed"], "cloud options")?;
+        api_options(&opts, "DemSim", "cloud")?;
         let (lo, hi) = (vector(&lo, 3, "lower corner")?, vector(&hi, 3, "upper corner")?);
         let count = integer(get(&opts, "count").unwrap_or(&Dynamic::UNIT), "count")?;
         if count < 0 {
@@ -470,7 +470,7 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
         },
     );
     engine.register_fn("lattice", |s: &mut DemHandle, m: DemMaterialHandle, lo: Dynamic, hi: Dynamic, opts: Map| {
-        only_keys(&opts, &["spacing", "radius", "jitter", "seed"], "lattice options")?;
+        api_options(&opts, "DemSim", "lattice")?;
         let (lo, hi) = (vector(&lo, 3, "lower corner")?, vector(&hi, 3, "upper corner")?);
         let spacing = finite(get(&opts, "spacing").unwrap_or(&Dynamic::UNIT), "spacing")?;
         let radius = finite(get(&opts, "radius").unwrap_or(&Dynamic::UNIT), "radius")?;
@@ -530,7 +530,7 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
         },
     );
     engine.register_fn("box_walls", |s: &mut DemHandle, m: DemMaterialHandle, lo: Dynamic, hi: Dynamic, opts: Map| {
-        only_keys(&opts, &["open_top"], "box_walls options")?;
+        api_options(&opts, "DemSim", "box_walls")?;
         let (lo, hi) = (vector(&lo, 3, "lower corner")?, vector(&hi, 3, "upper corner")?);
         let open_top = get(&opts, "open_top").and_then(|d| d.as_bool().ok()).unwrap_or(false);
         let mut out = Array::new();
@@ -692,7 +692,7 @@ fn register_cell(engine: &mut Engine) {
     });
     engine.register_fn("cell_control", |s: &mut DemHandle, opts: Map| {
         cell_of(s)?;
-        only_keys(&opts, &["x", "y", "z", "xy", "xz", "yz", "yx", "zx", "zy", "relax_steps"], "cell_control")?;
+        api_options(&opts, "DemSim", "cell_control")?;
         let mut axes = [AxisGoal::Rate(0.0); 3];
         let mut shear = Vec::new();
         let mut relax_steps = 200.0;
@@ -783,11 +783,7 @@ fn register_measures(engine: &mut Engine) {
     use crate::dem::repose::{measure, Heap};
     use crate::dem::voids::{grains, void_ratio_bounding_box, void_ratio_sub_volume, void_ratio_tetrahedra, SubVolume};
     engine.register_fn("angle_of_repose", |s: &mut DemHandle, opts: Map| {
-        only_keys(
-            &opts,
-            &["heap", "x_range", "y_range", "open_x", "centre", "radius", "z_range", "d", "x_min", "x_max"],
-            "angle_of_repose",
-        )?;
+        api_options(&opts, "DemSim", "angle_of_repose")?;
         let kind = string(get(&opts, "heap").unwrap_or(&Dynamic::from("plane_strain")), "heap")?;
         let d = finite(get(&opts, "d").unwrap_or(&Dynamic::UNIT), "d (grain diameter)")?;
         let heap = match kind.as_str() {
@@ -822,7 +818,7 @@ fn register_measures(engine: &mut Engine) {
         Ok(m)
     });
     engine.register_fn("void_ratio_sub_volume", |s: &mut DemHandle, opts: Map| {
-        only_keys(&opts, &["c", "n_mc", "shape", "seed"], "void_ratio_sub_volume")?;
+        api_options(&opts, "DemSim", "void_ratio_sub_volume")?;
         let c = finite(get(&opts, "c").unwrap_or(&Dynamic::from(0.8)), "c")?;
         if !(c > 0.5 && c <= 1.0) {
             return err(format!("`c` must be in ]0.5, 1], got {c}"));
@@ -842,7 +838,7 @@ fn register_measures(engine: &mut Engine) {
         Ok(void_ratio_sub_volume(&g, &sub, n_mc, seed))
     });
     engine.register_fn("void_ratio_tetrahedra", |s: &mut DemHandle, opts: Map| {
-        only_keys(&opts, &["n_mc", "seed"], "void_ratio_tetrahedra")?;
+        api_options(&opts, "DemSim", "void_ratio_tetrahedra")?;
         let n_mc = integer(get(&opts, "n_mc").unwrap_or(&Dynamic::from(100_i64)), "n_mc")?.max(1) as usize;
         let seed = integer(get(&opts, "seed").unwrap_or(&Dynamic::from(1_i64)), "seed")? as u64;
         let g = grains(&s.lock().sim.dem);

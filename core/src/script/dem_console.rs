@@ -2,7 +2,7 @@
 //! `O.interactions`, `O.forces`), and live changes of contact laws and materials that keep the
 //! contacts' history. Every call acts between two steps, also on a run going in the background.
 
-use super::convert::{err, finite, get, integer, number, only_keys, string, vector, OrRhai, RhaiResult};
+use super::convert::{api_options, err, finite, get, integer, number, string, vector, OrRhai, RhaiResult};
 use super::dem_api::{DemHandle, DemMaterialHandle};
 use crate::dem::bodies::{dofs_name, parse_dofs, SphereEdit};
 use crate::dem::inspect::{ContactView, Other};
@@ -86,7 +86,7 @@ fn contact_map(dem: &DemSim, c: &ContactView) -> Map {
 
 /// Reads the changes of `sim.set_body` from its options.
 fn sphere_edit(opts: &Map, material: Option<u16>) -> RhaiResult<SphereEdit> {
-    only_keys(opts, &["position", "velocity", "spin", "radius", "material", "fixed", "force", "torque"], "set_body")?;
+    api_options(opts, "DemSim", "set_body")?;
     let v3 = |k: &str| get(opts, k).map(|d| vector(d, 3, k)).transpose();
     let fixed = match get(opts, "fixed") {
         None => None,
@@ -275,7 +275,7 @@ fn register_live_changes(engine: &mut Engine) {
         },
     );
     engine.register_fn("set_material", |s: &mut DemHandle, m: DemMaterialHandle, opts: Map| {
-        only_keys(&opts, &["young", "poisson", "rigid"], "DEM set_material")?;
+        api_options(&opts, "DemSim", "set_material")?;
         let elastic = elastic_from(&opts, &format!("material \"{}\"", m.name()))?;
         if elastic.is_none() {
             return err("set_material: give `young` and `poisson`, or `rigid: true`");

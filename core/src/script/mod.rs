@@ -3,6 +3,7 @@
 //!
 //! Rhai is called at set-up and from callbacks every N steps, never per material point.
 
+pub mod api_doc;
 pub mod convert;
 mod dem_api;
 mod dem_console;

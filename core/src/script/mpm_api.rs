@@ -1,7 +1,7 @@
 //! The `mpm(...)` simulation object of scripts and its methods.
 
 use super::convert::{
-    counts, err, finite, get, integer, number, numbers, only_keys, param_map, string, vector, OrRhai, RhaiResult,
+    api_options, counts, err, finite, get, integer, number, numbers, param_map, string, vector, OrRhai, RhaiResult,
 };
 use super::driver::{register_common, Handle, ScriptSim};
 use super::ScriptContext;
@@ -223,10 +223,8 @@ impl ScriptSim for MpmScene {
     }
 }
 
-const MESH_KEYS: &[&str] = &["dim", "origin", "cell", "cells"];
-
 fn parse_mesh(opts: &Map, dim_hint: Option<usize>) -> RhaiResult<Mesh> {
-    only_keys(opts, MESH_KEYS, "mesh options")?;
+    api_options(opts, "MpmSim", "mesh")?;
     let dim = match (get(opts, "dim"), dim_hint) {
         (Some(d), _) => integer(d, "dim")? as usize,
         (None, Some(d)) => d,
@@ -416,7 +414,7 @@ impl Handle<MpmScene> {
         region: Region,
         opts: Map,
     ) -> RhaiResult<i64> {
-        only_keys(&opts, &["per_cell", "layout", "velocity", "stress"], "fill options")?;
+        api_options(&opts, "MpmSim", "fill_box")?;
         let mut st = self.lock();
         let dim = st.sim.mpm.dim();
         let per_dir = match get(&opts, "per_cell") {

@@ -163,3 +163,43 @@ mod tests {
         assert_eq!(readable("param(_: &str, _: f64) -> value"), "param(&str, float) -> value");
     }
 }
+
+#[cfg(test)]
+mod api_table {
+    use super::*;
+
+    /// (receiver, name) of every registered function, as the table names them.
+    fn registered() -> Vec<(String, String)> {
+        let (_, engine) = prepare(Registry::new(), RunOptions::default()).unwrap();
+        api_signatures(&engine)
+            .iter()
+            .map(|s| {
+                let head = s.split(['(', ' ']).next().unwrap_or(s);
+                match head.split_once('.') {
+                    Some((on, name)) => (on.to_string(), name.to_string()),
+                    None => (String::new(), head.to_string()),
+                }
+            })
+            .collect()
+    }
+
+    #[test]
+    fn the_table_names_every_registered_function_and_no_other() {
+        let registered = registered();
+        for (on, name) in &registered {
+            let query = if on.is_empty() { name.clone() } else { format!("{on}.{name}") };
+            let found = super::super::api_doc::lookup(&query);
+            assert!(found.iter().any(|d| d.on == on || (d.on == "sim" && on.ends_with("Sim"))), "{query} is not in api_doc::API");
+        }
+        for d in super::super::api_doc::API {
+            let receivers: Vec<&str> = if d.on == "sim" { vec!["MpmSim", "DemSim"] } else { vec![d.on] };
+            for on in receivers {
+                assert!(
+                    registered.iter().any(|(o, n)| o == on && n == d.name),
+                    "api_doc::API lists {on}.{} but no such function is registered",
+                    d.name
+                );
+            }
+        }
+    }
+}

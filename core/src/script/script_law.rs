@@ -3,7 +3,7 @@
 //! Meant for trying ideas on small problems: a call costs microseconds where a built-in law
 //! costs nanoseconds (see docs/scripting.md for the measured figures).
 
-use super::convert::{get, number, only_keys, string, OrRhai, RhaiResult};
+use super::convert::{api_options, get, number, string, OrRhai, RhaiResult};
 use super::driver::Handle;
 use super::mpm_api::MpmScene;
 use super::ScriptContext;
@@ -106,7 +106,7 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
               f: FnPtr,
               opts: Map|
               -> RhaiResult<super::mpm_api::MaterialHandle> {
-            only_keys(&opts, &["density", "state"], "script_material")?;
+            api_options(&opts, "MpmSim", "script_material")?;
             let density = number(get(&opts, "density").unwrap_or(&Dynamic::UNIT), "density")?;
             let names: Vec<String> = match get(&opts, "state") {
                 Some(d) => d

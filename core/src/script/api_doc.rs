@@ -1,0 +1,284 @@
+//! The script API described once: every function and property scripts can call, with its
+//! argument names, the option keys it accepts and one line of documentation. `:help`, `:api`,
+//! tab completion and "did you mean" in `granite repl`, and `docs/api.md` (`granite api`), all
+//! read this table; a test checks that it names exactly the functions the engine registers, and
+//! the functions that take options check their keys against it.
+
+/// One function (all its overloads) or property of the script API.
+#[derive(Debug, Clone, Copy)]
+pub struct ApiDoc {
+    /// What it is called on: `""` (a global function), `"sim"` (both simulations), `"MpmSim"`,
+    /// `"DemSim"`, `"Material"` (an MPM material), `"DemMaterial"`.
+    pub on: &'static str,
+    pub name: &'static str,
+    /// How it is called, with argument names; a property has no parentheses.
+    pub forms: &'static [&'static str],
+    /// Keys of its options map (`#{ ... }`), if it takes one.
+    pub options: &'static [&'static str],
+    pub doc: &'static str,
+}
+
+const fn f(
+    on: &'static str,
+    name: &'static str,
+    forms: &'static [&'static str],
+    options: &'static [&'static str],
+    doc: &'static str,
+) -> ApiDoc {
+    ApiDoc { on, name, forms, options, doc }
+}
+
+const NONE: &[&str] = &[];
+const FILL: &[&str] = &["per_cell", "layout", "velocity", "stress"];
+const MESH: &[&str] = &["dim", "origin", "cell", "cells"];
+const LIMITS: &[&str] = &["min", "max", "above", "below", "one_of"];
+
+/// The whole API, grouped as docs/api.md shows it.
+pub static API: &[ApiDoc] = &[
+    // Global functions.
+    f("", "param", &["param(name, default)", "param(name, default, #{ limits })"], LIMITS, "a script parameter that `--set name=value` overrides, parsed like its default; the limits are checked at this line"),
+    f("", "summary", &["summary(name, value)"], NONE, "a result written to summary.json"),
+    f("", "out_dir", &["out_dir()"], NONE, "this run's output folder"),
+    f("", "print_line", &["print_line(text)"], NONE, "prints a line on standard output"),
+    f("", "plot", &["plot(csv, x, [ys], file)"], NONE, "an SVG line plot of columns of a CSV of the output folder"),
+    f("", "load_plugin", &["load_plugin(path)"], NONE, "loads a native constitutive-law plugin (a .so); returns the laws it adds"),
+    f("", "mpm", &["mpm(#{ dim, origin, cell, cells, velocity_update })"], &["dim", "origin", "cell", "cells", "velocity_update"], "a new MPM simulation on a regular mesh: `cell` a size or one per axis, `cells` a count per axis"),
+    f("", "mpm_load", &["mpm_load(path)"], NONE, "an MPM simulation from a checkpoint written by `sim.save` (path from the working directory)"),
+    f("", "dem", &["dem()", "dem(#{ seed, skin })"], &["seed", "skin"], "a new DEM simulation; the Verlet skin defaults to half the smallest radius"),
+    f("", "dem_load", &["dem_load(path)"], NONE, "a DEM simulation from a state written by `sim.save` (path from the working directory)"),
+    // Both simulations: running and output.
+    f("sim", "run", &["sim.run()", "sim.run(steps)"], NONE, "runs in the background (until paused, or for `steps`) and returns at once"),
+    f("sim", "run_steps", &["sim.run_steps(steps)"], NONE, "runs `steps` steps at the prompt (Ctrl-C pauses)"),
+    f("sim", "run_until", &["sim.run_until(time)"], NONE, "runs until the simulated time reaches `time` (s)"),
+    f("sim", "step", &["sim.step()", "sim.step"], NONE, "one step; as a property, the number of steps done"),
+    f("sim", "pause", &["sim.pause()"], NONE, "stops a background run after the step under way"),
+    f("sim", "wait", &["sim.wait()"], NONE, "waits for a background run to end; passes on its error"),
+    f("sim", "running", &["sim.running"], NONE, "whether a background run goes on"),
+    f("sim", "every", &["sim.every(steps, |sim| ...)"], NONE, "calls a function every `steps` steps of a run"),
+    f("sim", "series_every", &["sim.series_every(steps)"], NONE, "a series.csv row every `steps` steps"),
+    f("sim", "vtk_every", &["sim.vtk_every(steps)"], NONE, "a VTK frame every `steps` steps"),
+    f("sim", "series_column", &["sim.series_column(name, |sim| value)"], NONE, "an extra series.csv column computed by a function"),
+    f("sim", "diagnostics", &["sim.diagnostics()"], NONE, "a map of global measures: energies, counts, unbalanced force..."),
+    f("sim", "write_points", &["sim.write_points(file)"], NONE, "a CSV of every point or sphere in the output folder"),
+    f("sim", "write_series", &["sim.write_series()"], NONE, "a series.csv row now"),
+    f("sim", "write_vtk", &["sim.write_vtk()"], NONE, "a VTK frame now"),
+    f("sim", "time", &["sim.time"], NONE, "simulated time, s"),
+    f("sim", "dt", &["sim.dt(seconds)", "sim.dt"], NONE, "sets the time step; as a property, reads it"),
+    f("sim", "critical_dt", &["sim.critical_dt()"], NONE, "the stability limit of the time step (MPM: P-wave cell crossing; DEM: sqrt(m/k_n) of one contact)"),
+    f("sim", "gravity", &["sim.gravity([gx, gy, gz])"], NONE, "body acceleration, m/s^2"),
+    f("sim", "damping", &["sim.damping(d)"], NONE, "Cundall local damping in [0, 1)"),
+    f("sim", "save", &["sim.save(file)"], NONE, "the whole state, to continue bit for bit (file in the output folder); returns the path"),
+    // MPM.
+    f("MpmSim", "material", &["sim.material(law, #{ density, name, ...law parameters })"], &["density", "name"], "a material of a registered law (`granite plugins` lists them and their parameters)"),
+    f("MpmSim", "script_material", &["sim.script_material(name, |stress, dstrain, state| ..., #{ density, state })"], &["density", "state"], "a material whose law is a script function"),
+    f("MpmSim", "set_material", &["sim.set_material(material, #{ ...law parameters })"], NONE, "new values of some law parameters from the next step on; points keep stress and state"),
+    f("MpmSim", "memory_per_point", &["sim.memory_per_point(material)"], NONE, "bytes a point of this material holds (its law's object included)"),
+    f("MpmSim", "fill_box", &["sim.fill_box(material, lower, upper)", "sim.fill_box(material, lower, upper, #{ per_cell, layout, velocity, stress })"], FILL, "material points in every cell of a box"),
+    f("MpmSim", "fill_region", &["sim.fill_region(material, |x| bool, #{ per_cell, layout, velocity, stress })"], FILL, "material points where a function of the position is true"),
+    f("MpmSim", "add_points", &["sim.add_points(material, [[x, y], ...], volume)"], NONE, "explicit material points"),
+    f("MpmSim", "initial_stress", &["sim.initial_stress([sxx, syy, szz, sxy, syz, sxz])"], NONE, "a uniform stress on every point (tension positive)"),
+    f("MpmSim", "geostatic_stress", &["sim.geostatic_stress(surface, k0)"], NONE, "vertical stress -rho g (surface - height), horizontal k0 times it"),
+    f("MpmSim", "scheme", &["sim.scheme(\"USF\" | \"USL\" | \"MUSL\")"], NONE, "stress update scheme"),
+    f("MpmSim", "velocity_update", &["sim.velocity_update(name)", "sim.velocity_update(name, #{ flip_ratio })"], &["flip_ratio"], "PIC, FLIP, NFLIP, FLIPX, NFLIPX or APIC"),
+    f("MpmSim", "mesh", &["sim.mesh(#{ origin, cell, cells })"], MESH, "replaces the mesh; points stay, boundary conditions are cleared"),
+    f("MpmSim", "on_leave", &["sim.on_leave(\"delete\" | \"stop\")"], NONE, "what happens to points leaving the mesh"),
+    f("MpmSim", "fix", &["sim.fix(selector, axis)", "sim.fix(selector, axis, value)"], NONE, "zero (or prescribed: number, [[t, v], ...] table or |t| function) velocity of nodes along an axis"),
+    f("MpmSim", "friction", &["sim.friction(face, mu)"], NONE, "Coulomb friction on a mesh face"),
+    f("MpmSim", "traction", &["sim.traction(face, [tx, ty])", "sim.traction(face, t, factor)"], NONE, "a uniform traction (Pa) on a mesh face"),
+    f("MpmSim", "nodal_force", &["sim.nodal_force(selector, [fx, fy])", "sim.nodal_force(selector, f, factor)"], NONE, "the same force on each selected node"),
+    f("MpmSim", "track_runout", &["sim.track_runout(width0, height0)"], NONE, "runout columns in the series from now (thesis 5.6-5.9)"),
+    f("MpmSim", "points", &["sim.points"], NONE, "number of material points"),
+    f("MpmSim", "point_stress", &["sim.point_stress(i)"], NONE, "stress of point i, [sxx, syy, szz, sxy, syz, sxz], tension positive"),
+    f("MpmSim", "point_strain", &["sim.point_strain(i)"], NONE, "strain of point i"),
+    f("MpmSim", "point_state", &["sim.point_state(i, name)"], NONE, "a state variable of point i's law"),
+    f("MpmSim", "point_position", &["sim.point_position(i)"], NONE, "position of point i"),
+    f("MpmSim", "write_point_object", &["sim.write_point_object(i, file)"], NONE, "a VTU of point i's own object (the RVE of dem_rve)"),
+    f("Material", "name", &["material.name"], NONE, "the material's name"),
+    // DEM: set-up.
+    f("DemSim", "material", &["sim.material(#{ name, density, young, poisson, rigid })"], &["name", "density", "young", "poisson", "rigid"], "a DEM material; `young` and `poisson` (or `rigid: true`) serve laws that combine two materials"),
+    f("DemSim", "set_material", &["sim.set_material(material, #{ young, poisson, rigid })"], &["young", "poisson", "rigid"], "new moduli of a material, reaching existing contacts at the next step"),
+    f("DemSim", "contact_law", &["sim.contact_law(law, #{ ...parameters })", "sim.contact_law(law, material1, material2, #{ ...parameters })"], NONE, "the default contact law, or that of one material pair; existing contacts keep their history"),
+    f("DemSim", "contact_law_params", &["sim.contact_law_params()", "sim.contact_law_params(material1, material2)"], NONE, "the law in force and its parameters"),
+    f("DemSim", "set_contact_params", &["sim.set_contact_params(#{ ...parameters })", "sim.set_contact_params(material1, material2, #{ ...parameters })"], NONE, "changes some parameters of a law from the next step on, keeping every contact and its history"),
+    f("DemSim", "sphere", &["sim.sphere(material, [x, y, z], radius)", "sim.sphere(material, [x, y, z], radius, #{ velocity, fixed })"], &["velocity", "fixed"], "one sphere; returns its id"),
+    f("DemSim", "cloud", &["sim.cloud(material, lower, upper, #{ count, radius, psd, seed })"], &["count", "radius", "psd", "seed"], "random non-overlapping spheres in a box"),
+    f("DemSim", "lattice", &["sim.lattice(material, lower, upper, #{ spacing, radius, jitter, seed })"], &["spacing", "radius", "jitter", "seed"], "spheres on a cubic lattice"),
+    f("DemSim", "clump", &["sim.clump(material, [[x, y, z, r], ...])"], NONE, "a rigid clump of spheres"),
+    f("DemSim", "tetra_clump", &["sim.tetra_clump(material, centre, r_sphere, r_clump)"], NONE, "a clump of four spheres on a tetrahedron (thesis table 2.3)"),
+    f("DemSim", "clump_cloud", &["sim.clump_cloud(material, lower, upper, #{ count, shape, seed, ...shape parameters })"], &["count", "shape", "seed"], "random grains of a registered shape model, random orientations"),
+    f("DemSim", "wall_plane", &["sim.wall_plane(material, point, normal)"], NONE, "an infinite plane wall; returns its index"),
+    f("DemSim", "wall_rect", &["sim.wall_rect(material, centre, u, v, [half_u, half_v])"], NONE, "a rectangular wall"),
+    f("DemSim", "wall_disk", &["sim.wall_disk(material, centre, normal, radius)"], NONE, "a disk wall"),
+    f("DemSim", "wall_cylinder", &["sim.wall_cylinder(material, base, axis, radius, length)"], NONE, "a cylindrical shell wall"),
+    f("DemSim", "box_walls", &["sim.box_walls(material, lower, upper)", "sim.box_walls(material, lower, upper, #{ open_top })"], &["open_top"], "six (or five) plane walls around a box; returns their indices"),
+    f("DemSim", "wall_velocity", &["sim.wall_velocity(wall, [vx, vy, vz])", "sim.wall_velocity(wall, axis, |t| v)"], NONE, "moves a wall"),
+    f("DemSim", "wall_force", &["sim.wall_force(wall)"], NONE, "the force the spheres exerted on a wall in the last step"),
+    f("DemSim", "wall_position", &["sim.wall_position(wall)"], NONE, "where a wall is"),
+    f("DemSim", "skin", &["sim.skin(distance)", "sim.skin"], NONE, "the Verlet skin of the candidate lists"),
+    f("DemSim", "stable_dt", &["sim.stable_dt()"], NONE, "a time step below the stability limit of the present contacts"),
+    f("DemSim", "stop_on_unstable_dt", &["sim.stop_on_unstable_dt(on)"], NONE, "whether a time step proved unstable stops the run (default true)"),
+    f("DemSim", "erase_outside", &["sim.erase_outside(lower, upper)"], NONE, "erases the particles outside a box; returns how many"),
+    f("DemSim", "particles", &["sim.particles"], NONE, "number of spheres"),
+    f("DemSim", "clumps", &["sim.clumps"], NONE, "number of clumps"),
+    f("DemSim", "memory_bytes", &["sim.memory_bytes"], NONE, "memory held by the scene's arrays"),
+    // DEM: bodies and contacts.
+    f("DemSim", "body", &["sim.body(id)"], NONE, "one sphere: position, velocity, spin, force, torque, mass, radius, material, clump, fixed..."),
+    f("DemSim", "set_body", &["sim.set_body(id, #{ position, velocity, spin, radius, material, fixed, force, torque })"], &["position", "velocity", "spin", "radius", "material", "fixed", "force", "torque"], "changes one sphere between steps; force and torque are lasting external loads"),
+    f("DemSim", "erase", &["sim.erase(id)", "sim.erase([ids])"], NONE, "erases spheres (a clump member takes its clump); other contacts keep their history"),
+    f("DemSim", "ids", &["sim.ids()"], NONE, "the spheres' ids, in the order of the bulk arrays"),
+    f("DemSim", "positions", &["sim.positions()"], NONE, "every sphere's position"),
+    f("DemSim", "velocities", &["sim.velocities()"], NONE, "every sphere's velocity"),
+    f("DemSim", "spins", &["sim.spins()"], NONE, "every sphere's angular velocity"),
+    f("DemSim", "forces", &["sim.forces()"], NONE, "every sphere's force of the last step"),
+    f("DemSim", "torques", &["sim.torques()"], NONE, "every sphere's torque of the last step"),
+    f("DemSim", "radii", &["sim.radii()"], NONE, "every sphere's radius"),
+    f("DemSim", "contact_counts", &["sim.contact_counts()"], NONE, "every sphere's number of touching contacts"),
+    f("DemSim", "contacts", &["sim.contacts()"], NONE, "every touching contact: ids, point, normal, overlap, force, normal_force, shear_force, law, params"),
+    f("DemSim", "contact", &["sim.contact(id1, id2)"], NONE, "the contact of two spheres, or ()"),
+    f("DemSim", "wall_contact", &["sim.wall_contact(id, wall)"], NONE, "the contact of a sphere with a wall, or ()"),
+    f("DemSim", "fabric", &["sim.fabric()"], NONE, "fabric tensor (1/N) sum n n of the sphere contacts"),
+    // DEM: periodic cell and measures.
+    f("DemSim", "periodic", &["sim.periodic([lx, ly, lz])"], NONE, "makes the domain a periodic cell"),
+    f("DemSim", "cell_velocity_gradient", &["sim.cell_velocity_gradient([[Lxx, Lxy, Lxz], ...])"], NONE, "a prescribed velocity gradient of the cell"),
+    f("DemSim", "cell_control", &["sim.cell_control(#{ x: #{ stress, max_rate } or #{ rate }, y, z, xy, ..., relax_steps })"], &["x", "y", "z", "xy", "xz", "yz", "yx", "zx", "zy", "relax_steps"], "stress or strain-rate control of the cell per axis"),
+    f("DemSim", "cell_stress", &["sim.cell_stress()"], NONE, "Love-Weber stress of the cell"),
+    f("DemSim", "stress_reached", &["sim.stress_reached(tolerance)"], NONE, "whether the controlled stresses are within a relative tolerance"),
+    f("DemSim", "cell_size", &["sim.cell_size()"], NONE, "lengths of the cell's base vectors"),
+    f("DemSim", "cell_volume", &["sim.cell_volume()"], NONE, "volume of the cell"),
+    f("DemSim", "cell_strain", &["sim.cell_strain()"], NONE, "logarithmic strains of the cell since its reference"),
+    f("DemSim", "reset_cell_strain", &["sim.reset_cell_strain()"], NONE, "makes the present cell the strains' reference"),
+    f("DemSim", "void_ratio", &["sim.void_ratio()"], NONE, "void ratio of the periodic cell"),
+    f("DemSim", "love_weber_stress", &["sim.love_weber_stress(volume)"], NONE, "Love-Weber stress of the contacts over a volume"),
+    f("DemSim", "global_stress", &["sim.global_stress(volume)"], NONE, "stress from walls and gravity (thesis appendix A)"),
+    f("DemSim", "angle_of_repose", &["sim.angle_of_repose(#{ heap, x_range, y_range, open_x, centre, radius, z_range, d, x_min, x_max })"], &["heap", "x_range", "y_range", "open_x", "centre", "radius", "z_range", "d", "x_min", "x_max"], "angle of repose of a heap (thesis 2.3.2)"),
+    f("DemSim", "void_ratio_sub_volume", &["sim.void_ratio_sub_volume(#{ c, n_mc, shape, seed })"], &["c", "n_mc", "shape", "seed"], "void ratio in a homothetic sub-volume (thesis 2.3.3)"),
+    f("DemSim", "void_ratio_tetrahedra", &["sim.void_ratio_tetrahedra(#{ n_mc, seed })"], &["n_mc", "seed"], "void ratio from a Delaunay tetrahedralisation (thesis 2.3.3)"),
+    f("DemSim", "void_ratio_bounding_box", &["sim.void_ratio_bounding_box()"], NONE, "void ratio of the particles' bounding box"),
+    f("DemMaterial", "name", &["material.name"], NONE, "the material's name"),
+];
+
+/// The option keys a function accepts, from the table (empty for an unknown function).
+pub fn options_of(on: &str, name: &str) -> &'static [&'static str] {
+    API.iter()
+        .find(|d| d.name == name && (d.on == on || (d.on == "sim" && on.ends_with("Sim"))))
+        .map_or(NONE, |d| d.options)
+}
+
+/// Entries for a name as a user types it: `sphere`, `sim.sphere`, `DemSim.sphere`.
+pub fn lookup(query: &str) -> Vec<&'static ApiDoc> {
+    let (on, name) = match query.rsplit_once('.') {
+        Some((on, name)) => (Some(on), name),
+        None => (None, query),
+    };
+    API.iter()
+        .filter(|d| d.name == name)
+        .filter(|d| match on {
+            None | Some("sim") => true,
+            Some(on) => d.on == on || (d.on == "sim" && on.ends_with("Sim")),
+        })
+        .collect()
+}
+
+/// What `:help NAME` prints for one entry.
+pub fn help_text(d: &ApiDoc) -> String {
+    let on = match d.on {
+        "" => "global function".to_string(),
+        "sim" => "MpmSim and DemSim".to_string(),
+        other => other.to_string(),
+    };
+    let mut out = format!("{} ({on}): {}\n", d.name, d.doc);
+    for form in d.forms {
+        out.push_str(&format!("  {form}\n"));
+    }
+    if !d.options.is_empty() {
+        out.push_str(&format!("  options: {}\n", d.options.join(", ")));
+    }
+    out
+}
+
+/// Levenshtein distance, for "did you mean".
+fn distance(a: &str, b: &str) -> usize {
+    let b: Vec<char> = b.chars().collect();
+    let mut row: Vec<usize> = (0..=b.len()).collect();
+    for (i, ca) in a.chars().enumerate() {
+        let mut previous = row[0];
+        row[0] = i + 1;
+        for (j, &cb) in b.iter().enumerate() {
+            let here = row[j + 1];
+            row[j + 1] = (previous + usize::from(ca != cb)).min(row[j] + 1).min(here + 1);
+            previous = here;
+        }
+    }
+    row[b.len()]
+}
+
+/// The candidates closest to `word` (at most a third of its letters wrong, and at least one
+/// letter right), closest first.
+pub fn closest<'a>(word: &str, candidates: impl IntoIterator<Item = &'a str>) -> Vec<&'a str> {
+    let limit = (word.chars().count() / 3).max(1);
+    let mut scored: Vec<(usize, &str)> =
+        candidates.into_iter().map(|c| (distance(word, c), c)).filter(|(d, _)| *d <= limit).collect();
+    scored.sort();
+    scored.dedup_by(|a, b| a.1 == b.1);
+    let best = scored.first().map_or(0, |s| s.0);
+    scored.into_iter().take_while(|s| s.0 == best).map(|s| s.1).collect()
+}
+
+/// "did you mean" for a misspelt function or method name (empty when nothing is close).
+pub fn did_you_mean(name: &str) -> String {
+    let names = API.iter().map(|d| d.name);
+    let found = closest(name, names);
+    match found.as_slice() {
+        [] => String::new(),
+        [one] => format!("; did you mean `{one}`?"),
+        many => {
+            format!("; did you mean one of {}?", many.iter().map(|n| format!("`{n}`")).collect::<Vec<_>>().join(", "))
+        }
+    }
+}
+
+/// The API as a Markdown reference (docs/api.md).
+pub fn markdown() -> String {
+    let mut out = String::from(
+        "# Script API reference\n\nGenerated from the table the REPL's `:help` reads \
+         (`core/src/script/api_doc.rs`); regenerate with `granite api > docs/api.md`.\n\
+         `sim` is an `MpmSim` or a `DemSim`; `#{ ... }` is an options map whose keys are listed.\n",
+    );
+    let sections = [
+        ("", "Global functions"),
+        ("sim", "Both simulations"),
+        ("MpmSim", "MPM simulations (`mpm(...)`)"),
+        ("Material", "MPM materials"),
+        ("DemSim", "DEM simulations (`dem(...)`)"),
+        ("DemMaterial", "DEM materials"),
+    ];
+    for (on, title) in sections {
+        out.push_str(&format!("\n## {title}\n\n| call | options | what it does |\n|---|---|---|\n"));
+        for d in API.iter().filter(|d| d.on == on) {
+            let forms = d.forms.iter().map(|f| format!("`{}`", f.replace('|', "\\|"))).collect::<Vec<_>>().join("<br>");
+            out.push_str(&format!("| {forms} | {} | {} |\n", d.options.join(", "), d.doc.replace('|', "\\|")));
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn close_names_are_suggested() {
+        assert_eq!(closest("gravty", ["gravity", "damping", "grain"]), vec!["gravity"]);
+        assert!(closest("xyz", ["gravity"]).is_empty());
+        assert!(did_you_mean("gravty").contains("`gravity`"));
+    }
+
+    #[test]
+    fn names_look_up_with_or_without_receiver() {
+        assert_eq!(lookup("sphere").len(), 1);
+        assert_eq!(lookup("DemSim.sphere").len(), 1);
+        assert_eq!(lookup("sim.material").len(), 2);
+        assert_eq!(lookup("MpmSim.run").len(), 1);
+        assert!(lookup("MpmSim.sphere").is_empty());
+    }
+}
