@@ -81,6 +81,11 @@ enum Command {
     },
     /// List the registered plugins (constitutive laws, velocity updates) and their parameters.
     Plugins,
+    /// Print the script API reference (Markdown; docs/api.md is this output), or one call's help.
+    Api {
+        /// A function or property name (`sphere`, `DemSim.sphere`): its help only.
+        name: Option<String>,
+    },
     /// Run a script over many parameter sets (a TOML file of [grid] lists and/or [[set]] tables).
     Batch {
         script: PathBuf,
@@ -228,6 +233,25 @@ fn main() -> ExitCode {
                     ExitCode::FAILURE
                 }
             }
+        }
+        Command::Api { name: None } => {
+            print!("{}", granite_core::script::api_doc::markdown());
+            ExitCode::SUCCESS
+        }
+        Command::Api { name: Some(name) } => {
+            let found = granite_core::script::api_doc::lookup(&name);
+            if found.is_empty() {
+                let word = name.rsplit('.').next().unwrap_or(&name);
+                eprintln!(
+                    "granite: no function or property `{name}` in the API{}",
+                    granite_core::script::api_doc::did_you_mean(word)
+                );
+                return ExitCode::FAILURE;
+            }
+            for d in found {
+                print!("{}", granite_core::script::api_doc::help_text(d));
+            }
+            ExitCode::SUCCESS
         }
         Command::Plugins => {
             print!("{}", granite::plugin_listing());

@@ -5,7 +5,7 @@ use granite_core::error::Result;
 use granite_core::script::repl::{Outcome, ReplSession};
 use granite_core::script::RunOptions;
 use std::io::{BufRead, IsTerminal};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 const HELP: &str = "granite repl: the script API one input at a time (variables and functions are kept).
   sim.run(), sim.run(n)   run in the background (until paused, or n steps); the prompt stays usable
@@ -15,10 +15,14 @@ const HELP: &str = "granite repl: the script API one input at a time (variables 
   sim.diagnostics(), sim.time, sim.step   inspect (between two steps, also while running)
   sim.gravity([..]), sim.damping(d), sim.vtk_every(n) ...   change (between two steps, also while running)
   a line ending inside { ( [ continues on the next line; an empty line ends it
-  :api [text] the API's functions (those whose signature holds text), e.g. :api wall
-  :help this text, :quit or Ctrl-D leaves";
+  Tab completes functions, a variable's methods (sim.gra<Tab>) and option keys (#{ co<Tab>)
+  :help NAME  a call's forms with argument names, option keys and what it does, e.g. :help sphere
+  :api [text] every call whose name, form or description holds text, e.g. :api wall
+  :help this text, :quit or Ctrl-D leaves; history is kept in ~/.granite_history ($GRANITE_HISTORY)";
 
-/// Runs the session; returns the number of inputs that failed.
+/// Runs the session; returns the number of inputs that failed when the inputs came from a pipe
+/// (a session driven by a file should fail when its inputs did), zero after an interactive one
+/// (a mistyped line at the prompt was answered there).
 pub fn run(script: Option<&Path>, options: RunOptions) -> Result<usize> {
     let mut session = ReplSession::new(crate::registry(), options)?;
     if let Err(e) = ctrlc::set_handler(session.pause_handle()) {
@@ -38,12 +42,14 @@ pub fn run(script: Option<&Path>, options: RunOptions) -> Result<usize> {
     }
     let interactive = std::io::stdin().is_terminal();
     let mut reader = Input::new(interactive, Box::new(session.pause_handle()));
+    reader.load_history();
     if interactive {
         println!("{HELP}");
     }
     let mut pending = String::new();
     loop {
         let prompt = if pending.is_empty() { "granite> " } else { "     ... " };
+        reader.know(session.variables());
         // At the end of the input, what is pending is evaluated as it stands.
         let line = match reader.read(prompt) {
             Some(line) => line,
@@ -51,6 +57,9 @@ pub fn run(script: Option<&Path>, options: RunOptions) -> Result<usize> {
             None => break,
         };
         let trimmed = line.trim();
+        if pending.is_empty() && trimmed.starts_with(':') {
+            reader.remember(trimmed);
+        }
         if pending.is_empty() {
             match trimmed {
                 "" => continue,
@@ -59,21 +68,27 @@ pub fn run(script: Option<&Path>, options: RunOptions) -> Result<usize> {
                     println!("{HELP}");
                     continue;
                 }
-                _ if trimmed.starts_with(':') && !(trimmed == ":api" || trimmed.starts_with(":api ")) => {
-                    // No Rhai input starts with a colon: a mistyped command.
-                    failures += 1;
-                    eprintln!("error: unknown command `{trimmed}`; the commands are :api [text], :help and :quit");
+                _ if trimmed.starts_with(":help ") => {
+                    print!("{}", ensure_newline(session.help(trimmed[":help".len()..].trim())));
                     continue;
                 }
                 _ if trimmed == ":api" || trimmed.starts_with(":api ") => {
                     let filter = trimmed[":api".len()..].trim();
                     let found = session.api(filter);
                     if found.is_empty() {
-                        println!("no function of the API matches `{filter}`");
+                        println!("no call of the API matches `{filter}`");
                     }
-                    for signature in found {
-                        println!("  {signature}");
+                    for line in found {
+                        println!("  {line}");
                     }
+                    continue;
+                }
+                _ if trimmed.starts_with(':') => {
+                    // No Rhai input starts with a colon: a mistyped command.
+                    failures += 1;
+                    eprintln!(
+                        "error: unknown command `{trimmed}`; the commands are :help [NAME], :api [text] and :quit"
+                    );
                     continue;
                 }
                 _ => {}
@@ -96,24 +111,78 @@ pub fn run(script: Option<&Path>, options: RunOptions) -> Result<usize> {
         pending.clear();
     }
     session.finish();
-    Ok(failures)
+    Ok(if interactive { 0 } else { failures })
 }
 
-/// A terminal with line editing and history, or plain lines from a pipe.
+fn ensure_newline(text: String) -> String {
+    if text.ends_with('\n') {
+        text
+    } else {
+        text + "\n"
+    }
+}
+
+/// Where the history is kept between sessions: `$GRANITE_HISTORY`, else `~/.granite_history`.
+fn history_path() -> Option<PathBuf> {
+    if let Some(p) = std::env::var_os("GRANITE_HISTORY") {
+        return Some(PathBuf::from(p));
+    }
+    std::env::var_os("HOME").map(|home| PathBuf::from(home).join(".granite_history"))
+}
+
+/// Completion from the API table and the session's variables (see `api_doc::complete`).
+#[derive(Default)]
+struct Completion {
+    variables: Vec<(String, String)>,
+}
+
+impl rustyline::completion::Completer for Completion {
+    type Candidate = String;
+    fn complete(&self, line: &str, pos: usize, _: &rustyline::Context<'_>) -> rustyline::Result<(usize, Vec<String>)> {
+        Ok(granite_core::script::api_doc::complete(line, pos, &self.variables))
+    }
+}
+
+impl rustyline::hint::Hinter for Completion {
+    type Hint = String;
+}
+impl rustyline::highlight::Highlighter for Completion {}
+impl rustyline::validate::Validator for Completion {}
+impl rustyline::Helper for Completion {}
+
+type Editor = rustyline::Editor<Completion, rustyline::history::DefaultHistory>;
+
+/// A terminal with line editing, completion and history, or plain lines from a pipe.
 enum Input {
     /// The editor, and what Ctrl-C at its prompt does (the terminal then sends no signal).
-    Editor(Box<rustyline::DefaultEditor>, Box<dyn Fn()>),
+    Editor(Box<Editor>, Box<dyn Fn()>),
     Plain(std::io::StdinLock<'static>),
 }
 
 impl Input {
     fn new(interactive: bool, on_ctrl_c: Box<dyn Fn()>) -> Input {
         if interactive {
-            if let Ok(editor) = rustyline::DefaultEditor::new() {
+            if let Ok(mut editor) = Editor::new() {
+                editor.set_helper(Some(Completion::default()));
                 return Input::Editor(Box::new(editor), on_ctrl_c);
             }
         }
         Input::Plain(std::io::stdin().lock())
+    }
+
+    fn load_history(&mut self) {
+        if let (Input::Editor(editor, _), Some(path)) = (self, history_path()) {
+            let _ = editor.load_history(&path);
+        }
+    }
+
+    /// The variables completion offers, and their types (for their methods).
+    fn know(&mut self, variables: Vec<(String, String)>) {
+        if let Input::Editor(editor, _) = self {
+            if let Some(helper) = editor.helper_mut() {
+                helper.variables = variables;
+            }
+        }
     }
 
     fn read(&mut self, prompt: &str) -> Option<String> {
@@ -138,9 +207,14 @@ impl Input {
         }
     }
 
+    /// Adds an input to the history, and to the history file at once (a session that ends
+    /// badly keeps what was typed).
     fn remember(&mut self, entry: &str) {
         if let Input::Editor(editor, _) = self {
             let _ = editor.add_history_entry(entry);
+            if let Some(path) = history_path() {
+                let _ = editor.append_history(&path);
+            }
         }
     }
 }

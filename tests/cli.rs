@@ -214,3 +214,18 @@ fn a_loop_of_short_runs_does_not_flood_the_output() {
     // Still a full run's worth: every doubling writes some.
     assert!(frames >= 20.0 * doublings / 2.0, "only {frames} frames");
 }
+
+/// docs/api.md is what `granite api` prints: the reference and the REPL's `:help` come from one
+/// table, so the reference cannot go stale without this test failing.
+#[test]
+fn the_api_reference_is_generated_from_the_table() {
+    let out = granite().arg("api").output().unwrap();
+    assert!(out.status.success());
+    let written = std::fs::read_to_string(common::root().join("docs/api.md")).unwrap();
+    assert!(
+        written == String::from_utf8_lossy(&out.stdout),
+        "docs/api.md differs from `granite api`: regenerate it with `granite api > docs/api.md`"
+    );
+    let help = granite().args(["api", "sim.gravty"]).output().unwrap();
+    assert!(String::from_utf8_lossy(&help.stderr).contains("did you mean `gravity`?"));
+}

@@ -282,3 +282,128 @@ mod tests {
         assert!(lookup("MpmSim.sphere").is_empty());
     }
 }
+
+fn is_word(c: char) -> bool {
+    c.is_ascii_alphanumeric() || c == '_'
+}
+
+/// Tab completion of `line` up to `pos`: where the word being typed starts and what it may
+/// become. After `x.` the methods of `x`'s type (from `variables`, name and type), inside an
+/// options map `#{ ... }` given to a call the keys that call accepts, elsewhere global functions
+/// and variables.
+pub fn complete(line: &str, pos: usize, variables: &[(String, String)]) -> (usize, Vec<String>) {
+    let before = &line[..pos.min(line.len())];
+    let start = before.rfind(|c: char| !is_word(c)).map_or(0, |i| i + 1);
+    let word = &before[start..];
+    let mut found: Vec<String> = Vec::new();
+    let head = &before[..start];
+    if let Some(receiver_end) = head.strip_suffix('.') {
+        let receiver_start = receiver_end.rfind(|c: char| !is_word(c)).map_or(0, |i| i + 1);
+        let receiver = &receiver_end[receiver_start..];
+        let on = variables.iter().find(|(name, _)| name == receiver).map(|(_, ty)| ty.as_str());
+        for d in API.iter().filter(|d| !d.on.is_empty()) {
+            let fits = match on {
+                Some(ty) => d.on == ty || (d.on == "sim" && ty.ends_with("Sim")),
+                None => true,
+            };
+            if fits {
+                found.push(d.name.to_string());
+            }
+        }
+    } else if let Some((on, name)) = open_options_call(head, variables) {
+        found.extend(options_of(&on, &name).iter().map(|k| k.to_string()));
+    } else {
+        found.extend(API.iter().filter(|d| d.on.is_empty()).map(|d| d.name.to_string()));
+        found.extend(variables.iter().map(|(name, _)| name.clone()));
+    }
+    found.retain(|c| c.starts_with(word));
+    found.sort();
+    found.dedup();
+    (start, found)
+}
+
+/// The call whose options map is open at the end of `text` (`sim.cloud(m, a, b, #{ count: 3, `):
+/// the receiver's type (or "" for a global function) and the function's name.
+fn open_options_call(text: &str, variables: &[(String, String)]) -> Option<(String, String)> {
+    let map_at = text.rfind("#{")?;
+    // The map is still open: no `}` closes it before the end.
+    let mut depth = 0i32;
+    for c in text[map_at + 2..].chars() {
+        match c {
+            '{' => depth += 1,
+            '}' if depth == 0 => return None,
+            '}' => depth -= 1,
+            _ => {}
+        }
+    }
+    // The innermost call still open before the map.
+    let mut depth = 0i32;
+    let mut paren = None;
+    for (i, c) in text[..map_at].char_indices().rev() {
+        match c {
+            ')' => depth += 1,
+            '(' if depth == 0 => {
+                paren = Some(i);
+                break;
+            }
+            '(' => depth -= 1,
+            _ => {}
+        }
+    }
+    let callee = text[..paren?].trim_end();
+    let name_start = callee.rfind(|c: char| !is_word(c)).map_or(0, |i| i + 1);
+    let name = &callee[name_start..];
+    let on = match callee[..name_start].strip_suffix('.') {
+        Some(receiver_end) => {
+            let receiver_start = receiver_end.rfind(|c: char| !is_word(c)).map_or(0, |i| i + 1);
+            let receiver = &receiver_end[receiver_start..];
+            variables.iter().find(|(n, _)| n == receiver).map(|(_, ty)| ty.clone()).unwrap_or_else(|| {
+                // An unknown receiver: the first type that has this function with options.
+                API.iter().find(|d| d.name == name && !d.options.is_empty()).map_or(String::new(), |d| d.on.to_string())
+            })
+        }
+        None => String::new(),
+    };
+    Some((on, name.to_string()))
+}
+
+#[cfg(test)]
+mod completion_tests {
+    use super::complete;
+
+    fn vars() -> Vec<(String, String)> {
+        vec![
+            ("sim".into(), "DemSim".into()),
+            ("mpm_sim".into(), "MpmSim".into()),
+            ("glass".into(), "DemMaterial".into()),
+        ]
+    }
+
+    #[test]
+    fn methods_of_the_variables_type() {
+        let (start, found) = complete("sim.gra", 7, &vars());
+        assert_eq!((start, found), (4, vec!["gravity".to_string()]));
+        let (_, found) = complete("sim.wall_", 9, &vars());
+        assert!(found.contains(&"wall_plane".to_string()) && found.contains(&"wall_velocity".to_string()));
+        // fill_box is an MpmSim method, not a DemSim one.
+        assert!(complete("sim.fill", 8, &vars()).1.is_empty());
+        assert_eq!(complete("mpm_sim.fill", 12, &vars()).1, vec!["fill_box", "fill_region"]);
+    }
+
+    #[test]
+    fn option_keys_of_the_open_call() {
+        let line = "sim.cloud(glass, [0.0, 0.0, 0.0], [1.0, 1.0, 1.0], #{ count: 10, ra";
+        assert_eq!(complete(line, line.len(), &vars()).1, vec!["radius"]);
+        let line = "let s = dem(#{ se";
+        assert_eq!(complete(line, line.len(), &vars()).1, vec!["seed"]);
+        // A closed map completes functions and variables again.
+        let line = "sim.cloud(glass, a, b, #{ count: 1 }); gl";
+        assert_eq!(complete(line, line.len(), &vars()).1, vec!["glass"]);
+    }
+
+    #[test]
+    fn global_functions_and_variables() {
+        assert_eq!(complete("dem_l", 5, &vars()).1, vec!["dem_load"]);
+        assert_eq!(complete("mp", 2, &vars()).1, vec!["mpm", "mpm_load", "mpm_sim"]);
+    }
+}

@@ -262,6 +262,22 @@ fn psd_from(opts: &Map) -> RhaiResult<Psd> {
 }
 
 impl Handle<DemScene> {
+    /// `DemSim(1500 spheres, 5 walls, t = 0.12 s, step 4000, paused)`: what printing a simulation shows.
+    pub fn describe(&self) -> String {
+        let running = if self.running() { "running" } else { "paused" };
+        let st = self.lock();
+        let d = &st.sim.dem;
+        let clumps = if d.clumps.is_empty() { String::new() } else { format!(" in {} clumps", d.clumps.len()) };
+        let cell = if d.cell.is_some() { ", periodic" } else { "" };
+        format!(
+            "DemSim({} spheres{clumps}, {} walls{cell}, t = {:.6} s, step {}, {running})",
+            d.spheres.len(),
+            d.walls.len(),
+            d.time,
+            d.step
+        )
+    }
+
     fn create(ctx: Arc<ScriptContext>, opts: Map) -> RhaiResult<DemHandle> {
         ctx.before_simulation()?;
         api_options(&opts, "", "dem")?;
@@ -328,6 +344,10 @@ impl Handle<DemScene> {
 pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
     engine.register_type_with_name::<DemHandle>("DemSim");
     engine.register_type_with_name::<DemMaterialHandle>("DemMaterial");
+    engine.register_fn("to_string", |s: &mut DemHandle| s.describe());
+    engine.register_fn("to_debug", |s: &mut DemHandle| s.describe());
+    engine.register_fn("to_string", |m: &mut DemMaterialHandle| format!("DemMaterial(\"{}\")", m.name));
+    engine.register_fn("to_debug", |m: &mut DemMaterialHandle| format!("DemMaterial(\"{}\")", m.name));
     register_common::<DemScene>(engine);
     engine.register_get("name", |m: &mut DemMaterialHandle| m.name.clone());
     let c = ctx.clone();

@@ -524,7 +524,10 @@ fn function_not_found(call: &str, engine: &Engine) -> String {
         .collect();
     if forms.is_empty() {
         // A script function or one of Rhai's own: its text says enough.
-        return format!("Function not found: {call} (`:api` in `granite repl` lists granite's functions)");
+        let hint = api_doc::did_you_mean(name);
+        return format!(
+            "Function not found: {call}{hint} (`:help NAME` and `:api` in `granite repl` describe granite's functions)"
+        );
     }
     // An `int` argument, not "int" inside a name such as `point_stress`.
     let takes_int =

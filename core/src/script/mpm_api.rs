@@ -61,6 +61,9 @@ pub struct MaterialHandle {
 }
 
 impl MaterialHandle {
+    pub(super) fn name(&self) -> &str {
+        &self.name
+    }
     pub(super) fn new(index: usize, name: String) -> MaterialHandle {
         MaterialHandle { index, name }
     }
@@ -311,6 +314,14 @@ enum Region {
 }
 
 impl Handle<MpmScene> {
+    /// `MpmSim(2D, 400 points, t = 0.31 s, step 1200, running)`: what printing a simulation shows.
+    pub fn describe(&self) -> String {
+        let running = if self.running() { "running" } else { "paused" };
+        let st = self.lock();
+        let m = &st.sim.mpm;
+        format!("MpmSim({}D, {} points, t = {:.6} s, step {}, {running})", m.dim(), m.points.len(), m.time, m.step)
+    }
+
     fn create(ctx: Arc<ScriptContext>, opts: Map) -> RhaiResult<SimHandle> {
         ctx.before_simulation()?;
         let mut opts = opts;
@@ -580,6 +591,10 @@ impl Handle<MpmScene> {
 pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
     engine.register_type_with_name::<SimHandle>("MpmSim");
     engine.register_type_with_name::<MaterialHandle>("Material");
+    engine.register_fn("to_string", |s: &mut SimHandle| s.describe());
+    engine.register_fn("to_debug", |s: &mut SimHandle| s.describe());
+    engine.register_fn("to_string", |m: &mut MaterialHandle| format!("Material(\"{}\")", m.name));
+    engine.register_fn("to_debug", |m: &mut MaterialHandle| format!("Material(\"{}\")", m.name));
     register_common::<MpmScene>(engine);
     engine.register_get("name", |m: &mut MaterialHandle| m.name.clone());
     let c = ctx.clone();

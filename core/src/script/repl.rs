@@ -60,7 +60,7 @@ impl ReplSession {
         self.functions = self.functions.merge(&ast.clone_functions_only());
         match result {
             Ok(v) if v.is_unit() => Outcome::Value(None),
-            Ok(v) => Outcome::Value(Some(v.to_string())),
+            Ok(v) => Outcome::Value(Some(show(&v))),
             Err(e) if matches!(*e, rhai::EvalAltResult::ErrorTerminated(..)) => {
                 Outcome::Interrupted(describe(&e, &self.engine))
             }
@@ -68,10 +68,32 @@ impl ReplSession {
         }
     }
 
-    /// The script API's functions whose signature contains `filter` (all for an empty one),
-    /// sorted: what `:api` prints.
+    /// The script API's calls whose name, forms or documentation contain `filter` (all for an
+    /// empty one), one line each: what `:api` prints.
     pub fn api(&self, filter: &str) -> Vec<String> {
-        api_signatures(&self.engine).into_iter().filter(|s| s.contains(filter)).collect()
+        super::api_doc::API
+            .iter()
+            .filter(|d| d.name.contains(filter) || d.doc.contains(filter) || d.forms.iter().any(|f| f.contains(filter)))
+            .map(|d| format!("{:<60} {}", d.forms[0], d.doc))
+            .collect()
+    }
+
+    /// What `:help NAME` prints: every entry of that name, or the closest names.
+    pub fn help(&self, name: &str) -> String {
+        let found = super::api_doc::lookup(name);
+        if !found.is_empty() {
+            return found.iter().map(|d| super::api_doc::help_text(d)).collect::<Vec<_>>().join("\n");
+        }
+        let word = name.rsplit('.').next().unwrap_or(name);
+        format!("no function or property `{name}` in granite's API{}", super::api_doc::did_you_mean(word))
+    }
+
+    /// The session's variables and their types (script terms: `DemSim`, `map`...), for completion.
+    pub fn variables(&self) -> Vec<(String, String)> {
+        self.scope
+            .iter()
+            .map(|(name, _, value)| (name.to_string(), self.engine.map_type_name(value.type_name()).to_string()))
+            .collect()
     }
 
     /// Makes every run, in the background or not, pause at its next step, keeping the state (Ctrl-C).
@@ -86,9 +108,33 @@ impl ReplSession {
     }
 }
 
+/// A value as the REPL prints it: simulations and materials by what they hold, the rest as Rhai
+/// writes it.
+pub(crate) fn show(v: &Dynamic) -> String {
+    if let Some(sim) = v.clone().try_cast::<super::dem_api::DemHandle>() {
+        return sim.describe();
+    }
+    if let Some(sim) = v.clone().try_cast::<super::mpm_api::SimHandle>() {
+        return sim.describe();
+    }
+    if let Some(m) = v.clone().try_cast::<super::dem_api::DemMaterialHandle>() {
+        return format!("DemMaterial(\"{}\")", m.name());
+    }
+    if let Some(m) = v.clone().try_cast::<super::mpm_api::MaterialHandle>() {
+        return format!("Material(\"{}\")", m.name());
+    }
+    v.to_string()
+}
+
 /// Every function of the script API in the script's terms (see [`readable`]), sorted.
 pub(crate) fn api_signatures(engine: &rhai::Engine) -> Vec<String> {
-    let mut found: Vec<String> = engine.gen_fn_signatures(false).iter().map(|s| readable(s)).collect();
+    // `to_string` and `to_debug` are how Rhai prints granite's objects, not calls of the API.
+    let mut found: Vec<String> = engine
+        .gen_fn_signatures(false)
+        .iter()
+        .filter(|s| !(s.starts_with("to_string(") || s.starts_with("to_debug(")))
+        .map(|s| readable(s))
+        .collect();
     found.sort();
     found.dedup();
     found
@@ -189,7 +235,10 @@ mod api_table {
         for (on, name) in &registered {
             let query = if on.is_empty() { name.clone() } else { format!("{on}.{name}") };
             let found = super::super::api_doc::lookup(&query);
-            assert!(found.iter().any(|d| d.on == on || (d.on == "sim" && on.ends_with("Sim"))), "{query} is not in api_doc::API");
+            assert!(
+                found.iter().any(|d| d.on == on || (d.on == "sim" && on.ends_with("Sim"))),
+                "{query} is not in api_doc::API"
+            );
         }
         for d in super::super::api_doc::API {
             let receivers: Vec<&str> = if d.on == "sim" { vec!["MpmSim", "DemSim"] } else { vec![d.on] };
