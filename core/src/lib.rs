@@ -9,6 +9,7 @@
 #![allow(clippy::needless_range_loop, clippy::neg_cmp_op_on_partial_ord)]
 
 pub mod dem;
+pub mod element_test;
 pub mod error;
 pub mod ext;
 pub mod io;

@@ -45,6 +45,7 @@ pub static API: &[ApiDoc] = &[
     f("", "mpm", &["mpm(#{ dim, origin, cell, cells, velocity_update })"], &["dim", "origin", "cell", "cells", "velocity_update"], "a new MPM simulation on a regular mesh: `cell` a size or one per axis, `cells` a count per axis"),
     f("", "mpm_load", &["mpm_load(path)"], NONE, "an MPM simulation from a checkpoint written by `sim.save` (path from the working directory)"),
     f("", "dem", &["dem()", "dem(#{ seed, skin })"], &["seed", "skin"], "a new DEM simulation; the Verlet skin defaults to half the smallest radius"),
+    f("", "element_test", &["element_test(law, #{ ...law parameters }, #{ stress, strain, hold, steps })"], &["stress", "strain", "hold", "steps"], "drives a law on one point without a mesh: from `stress`, the `strain` increment [xx, yy, zz, xy, yz, xz] in `steps` equal parts, the components of `hold` (#{ xx: -1e5 }) kept at those stresses; returns #{ stress, strain, p, q, state } per step"),
     f("", "dem_load", &["dem_load(path)"], NONE, "a DEM simulation from a state written by `sim.save` (path from the working directory)"),
     // Both simulations: running and output.
     f("sim", "run", &["sim.run()", "sim.run(steps)"], NONE, "runs in the background (until paused, or for `steps`) and returns at once"),

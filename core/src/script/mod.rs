@@ -8,6 +8,7 @@ pub mod convert;
 mod dem_api;
 mod dem_console;
 pub mod driver;
+mod element;
 mod limits;
 mod mpm_api;
 mod output;
@@ -316,6 +317,7 @@ fn build_engine(ctx: &Arc<ScriptContext>) -> Engine {
     });
     mpm_api::register(&mut engine, ctx);
     dem_api::register(&mut engine, ctx);
+    element::register(&mut engine, ctx);
     script_law::register(&mut engine, ctx);
     engine
 }
