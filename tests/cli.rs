@@ -36,7 +36,8 @@ fn run_writes_the_output_contract() {
     assert_eq!(summary["status"], "ok");
     let pvd = std::fs::read_to_string(dir.join("vtk/points.pvd")).unwrap();
     assert!(pvd.contains("points_000000.vtu"));
-    let vtu = std::fs::read_to_string(dir.join("vtk/points_000000.vtu")).unwrap();
+    // Binary appended data after the XML header: read as bytes.
+    let vtu = String::from_utf8_lossy(&std::fs::read(dir.join("vtk/points_000000.vtu")).unwrap()).to_string();
     assert!(vtu.contains("NumberOfPoints=\"27\"") && vtu.contains("Name=\"stress\""));
     let prov: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(dir.join("provenance.json")).unwrap()).unwrap();

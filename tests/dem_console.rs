@@ -283,3 +283,44 @@ summary("overlap", sim.contact(a, b).overlap);
     let hertz = 4.0 / 3.0 * e_star * r_star.sqrt() * delta.powf(1.5);
     assert!((number(&s, "force_after") - hertz).abs() < 1e-9 * hertz);
 }
+
+/// A DEM frame for ParaView: the spheres (ids as integers), the walls as polygons and the contact
+/// network as one line per touching contact, binary by default, text when asked.
+#[test]
+fn vtk_frames_show_walls_and_force_chains() {
+    let source = format!(
+        "{PACKING}
+sim.vtk_format(\"ascii\");
+sim.step();
+sim.write_vtk();
+summary(\"contacts\", sim.contacts().len());
+"
+    );
+    let s = run("console_vtk", &source);
+    let vtk = s.out_dir.join("vtk");
+    let last = |stem: &str, ext: &str| {
+        let mut files: Vec<_> = std::fs::read_dir(&vtk)
+            .unwrap()
+            .filter_map(|e| e.ok().map(|e| e.path()))
+            .filter(|p| p.file_name().unwrap().to_string_lossy().starts_with(stem) && p.extension().unwrap() == ext)
+            .collect();
+        files.sort();
+        String::from_utf8_lossy(&std::fs::read(files.last().unwrap()).unwrap()).to_string()
+    };
+    let contacts = last("contacts_", "vtp");
+    assert!(contacts.contains(&format!("NumberOfLines=\"{}\"", number(&s, "contacts"))), "{}", &contacts[..400]);
+    assert!(contacts.contains("Name=\"normal_force\"") && contacts.contains("type=\"Int64\" Name=\"id1\""));
+    // Five plane walls of the open box.
+    assert!(last("walls_", "vtp").contains("NumberOfPolys=\"5\""));
+    let points = last("points_", "vtu");
+    assert!(points.contains("type=\"Int64\" Name=\"id\""));
+    assert!(points.contains("format=\"ascii\""));
+    // Frames written during the run, before `vtk_format`, are binary.
+    let first = String::from_utf8_lossy(&std::fs::read(vtk.join("contacts_000000.vtp")).unwrap()).to_string();
+    assert!(
+        first.contains("compressor=\"vtkZLibDataCompressor\"") && first.contains("<AppendedData encoding=\"raw\">")
+    );
+    for series in ["points.pvd", "walls.pvd", "contacts.pvd"] {
+        assert!(vtk.join(series).exists(), "{series}");
+    }
+}

@@ -14,6 +14,7 @@ pub mod generate;
 pub mod inspect;
 pub mod measures;
 pub mod particles;
+pub mod picture;
 pub mod repose;
 mod rows;
 pub mod sim;

@@ -1,39 +1,104 @@
-//! ParaView output: one `.vtu` (XML unstructured grid of vertices) per frame and a `.pvd` index.
+//! ParaView output: one XML VTK file per frame and a `.pvd` index per series. Points (material
+//! points, spheres) are `.vtu` files of vertices; walls and contact networks are `.vtp` poly data.
+//!
+//! Arrays are written appended and zlib-compressed by default (`header_type="UInt64"`, one
+//! block per array: the header `[1, n, n, compressed size]` before the compressed bytes), or as
+//! ASCII text when asked. Integer fields (ids, materials, counts) are `Int64` arrays.
 
 use crate::error::{GraniteError, Result};
 use crate::math::Vec3;
 use std::fmt::Write as _;
+use std::io::Write as _;
 use std::path::{Path, PathBuf};
 
-/// A named per-point field with 1, 3, 6 or 9 components.
+/// A named field with 1, 3, 6 or 9 components per point (or per cell of poly data).
 pub struct Field {
     pub name: String,
     pub components: usize,
     pub values: Vec<f64>,
+    /// Written as `Int64` (the values are whole numbers below 2^53: ids, materials, counts).
+    pub integer: bool,
 }
 
+impl Field {
+    pub fn float(name: &str, components: usize, values: Vec<f64>) -> Field {
+        Field { name: name.into(), components, values, integer: false }
+    }
+    pub fn int(name: &str, values: impl IntoIterator<Item = i64>) -> Field {
+        Field {
+            name: name.into(),
+            components: 1,
+            values: values.into_iter().map(|v| v as f64).collect(),
+            integer: true,
+        }
+    }
+}
+
+/// Lines (contacts) or polygons (walls) with data per point and per cell.
+#[derive(Default)]
+pub struct PolyData {
+    pub points: Vec<Vec3>,
+    pub lines: Vec<[u32; 2]>,
+    pub polygons: Vec<Vec<u32>>,
+    pub point_fields: Vec<Field>,
+    /// One value per line, then one per polygon (VTK's cell order).
+    pub cell_fields: Vec<Field>,
+}
+
+/// How arrays are written.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Encoding {
+    /// Appended raw data, zlib-compressed: an MPM frame of 800 Mohr-Coulomb points takes 94 bytes
+    /// a point against 490 in ASCII.
+    #[default]
+    Binary,
+    Ascii,
+}
+
+impl Encoding {
+    pub fn parse(name: &str) -> Result<Encoding> {
+        match name {
+            "binary" => Ok(Encoding::Binary),
+            "ascii" => Ok(Encoding::Ascii),
+            other => Err(GraniteError::param("vtk format", format!("\"{other}\""), "\"binary\" or \"ascii\"")),
+        }
+    }
+}
+
+/// A frame series: numbered files and their `.pvd` index.
 pub struct VtkWriter {
     dir: PathBuf,
     stem: String,
     frames: Vec<(f64, String)>,
+    pub encoding: Encoding,
 }
 
 impl VtkWriter {
     pub fn new(dir: &Path, stem: &str) -> Result<VtkWriter> {
         std::fs::create_dir_all(dir).map_err(|e| GraniteError::io(dir, e))?;
-        Ok(VtkWriter { dir: dir.to_path_buf(), stem: stem.into(), frames: Vec::new() })
+        Ok(VtkWriter { dir: dir.to_path_buf(), stem: stem.into(), frames: Vec::new(), encoding: Encoding::default() })
     }
 
     pub fn frames(&self) -> usize {
         self.frames.len()
     }
 
-    /// Writes one frame and rewrites the `.pvd` index.
+    /// Writes one frame of points and rewrites the `.pvd` index.
     pub fn write_frame(&mut self, time: f64, positions: &[Vec3], fields: &[Field]) -> Result<PathBuf> {
-        let name = format!("{}_{:06}.vtu", self.stem, self.frames.len());
+        let bytes = vtu(positions, fields, self.encoding);
+        self.write(time, "vtu", &bytes)
+    }
+
+    /// Writes one frame of poly data and rewrites the `.pvd` index.
+    pub fn write_poly_frame(&mut self, time: f64, data: &PolyData) -> Result<PathBuf> {
+        let bytes = vtp(data, self.encoding);
+        self.write(time, "vtp", &bytes)
+    }
+
+    fn write(&mut self, time: f64, extension: &str, bytes: &[u8]) -> Result<PathBuf> {
+        let name = format!("{}_{:06}.{extension}", self.stem, self.frames.len());
         let path = self.dir.join(&name);
-        let text = vtu_text(positions, fields);
-        std::fs::write(&path, text).map_err(|e| GraniteError::io(&path, e))?;
+        std::fs::write(&path, bytes).map_err(|e| GraniteError::io(&path, e))?;
         self.frames.push((time, name));
         let mut pvd =
             String::from("<?xml version=\"1.0\"?>\n<VTKFile type=\"Collection\" version=\"0.1\">\n<Collection>\n");
@@ -52,47 +117,239 @@ pub fn write_vtu(path: &Path, positions: &[Vec3], fields: &[Field]) -> Result<()
     if let Some(dir) = path.parent() {
         std::fs::create_dir_all(dir).map_err(|e| GraniteError::io(dir, e))?;
     }
-    std::fs::write(path, vtu_text(positions, fields)).map_err(|e| GraniteError::io(path, e))
+    std::fs::write(path, vtu(positions, fields, Encoding::default())).map_err(|e| GraniteError::io(path, e))
 }
 
-fn vtu_text(positions: &[Vec3], fields: &[Field]) -> String {
-    let n = positions.len();
-    let mut s = String::with_capacity(64 * n * (1 + fields.len()));
-    let _ = write!(
-        s,
-        "<?xml version=\"1.0\"?>\n<VTKFile type=\"UnstructuredGrid\" version=\"0.1\" byte_order=\"LittleEndian\">\n\
-         <UnstructuredGrid>\n<Piece NumberOfPoints=\"{n}\" NumberOfCells=\"{n}\">\n<PointData>\n"
-    );
-    for f in fields {
-        let _ = writeln!(
-            s,
-            "<DataArray type=\"Float64\" Name=\"{}\" NumberOfComponents=\"{}\" format=\"ascii\">",
-            f.name, f.components
+/// The XML text of a file, and its appended binary data.
+struct Document {
+    xml: String,
+    appended: Vec<u8>,
+    encoding: Encoding,
+}
+
+impl Document {
+    fn new(kind: &str, encoding: Encoding) -> Document {
+        let compressor = match encoding {
+            Encoding::Binary => " header_type=\"UInt64\" compressor=\"vtkZLibDataCompressor\"",
+            Encoding::Ascii => "",
+        };
+        let xml = format!(
+            "<?xml version=\"1.0\"?>\n<VTKFile type=\"{kind}\" version=\"1.0\" byte_order=\"LittleEndian\"{compressor}>\n<{kind}>\n"
         );
-        for chunk in f.values.chunks(f.components.max(1)) {
-            for v in chunk {
-                let _ = write!(s, "{v} ");
+        Document { xml, appended: Vec::new(), encoding }
+    }
+
+    /// One `DataArray` of `type` (`Float64`, `Int64`, `UInt8`) from its little-endian bytes and
+    /// its values as text.
+    fn array(
+        &mut self,
+        ty: &str,
+        name: Option<&str>,
+        components: usize,
+        bytes: Vec<u8>,
+        text: impl FnOnce() -> String,
+    ) {
+        let name = name.map(|n| format!(" Name=\"{n}\"")).unwrap_or_default();
+        match self.encoding {
+            Encoding::Ascii => {
+                let _ = writeln!(
+                    self.xml,
+                    "<DataArray type=\"{ty}\"{name} NumberOfComponents=\"{components}\" format=\"ascii\">\n{}\n</DataArray>",
+                    text()
+                );
             }
-            s.push('\n');
+            Encoding::Binary => {
+                let _ = writeln!(
+                    self.xml,
+                    "<DataArray type=\"{ty}\"{name} NumberOfComponents=\"{components}\" format=\"appended\" offset=\"{}\"/>",
+                    self.appended.len()
+                );
+                let header: [u64; 3] = [1, bytes.len() as u64, bytes.len() as u64];
+                if bytes.is_empty() {
+                    // No block at all.
+                    self.appended.extend_from_slice(&0u64.to_le_bytes());
+                    self.appended.extend_from_slice(&0u64.to_le_bytes());
+                    self.appended.extend_from_slice(&0u64.to_le_bytes());
+                    return;
+                }
+                let mut z = flate2::write::ZlibEncoder::new(Vec::new(), flate2::Compression::fast());
+                // Writing into memory cannot fail.
+                let _ = z.write_all(&bytes);
+                let compressed = z.finish().unwrap_or_default();
+                for h in header {
+                    self.appended.extend_from_slice(&h.to_le_bytes());
+                }
+                self.appended.extend_from_slice(&(compressed.len() as u64).to_le_bytes());
+                self.appended.extend_from_slice(&compressed);
+            }
         }
-        s.push_str("</DataArray>\n");
     }
-    s.push_str("</PointData>\n<Points>\n<DataArray type=\"Float64\" NumberOfComponents=\"3\" format=\"ascii\">\n");
-    for x in positions {
-        let _ = writeln!(s, "{} {} {}", x[0], x[1], x[2]);
+
+    fn floats(&mut self, name: Option<&str>, components: usize, values: &[f64]) {
+        let bytes = values.iter().flat_map(|v| v.to_le_bytes()).collect();
+        self.array("Float64", name, components, bytes, || join(values.iter().map(|v| v.to_string())));
     }
-    s.push_str("</DataArray>\n</Points>\n<Cells>\n<DataArray type=\"Int64\" Name=\"connectivity\" format=\"ascii\">\n");
-    for i in 0..n {
-        let _ = write!(s, "{i} ");
+
+    fn ints(&mut self, name: Option<&str>, components: usize, values: &[i64]) {
+        let bytes = values.iter().flat_map(|v| v.to_le_bytes()).collect();
+        self.array("Int64", name, components, bytes, || join(values.iter().map(|v| v.to_string())));
     }
-    s.push_str("\n</DataArray>\n<DataArray type=\"Int64\" Name=\"offsets\" format=\"ascii\">\n");
-    for i in 0..n {
-        let _ = write!(s, "{} ", i + 1);
+
+    fn bytes(&mut self, name: Option<&str>, values: &[u8]) {
+        self.array("UInt8", name, 1, values.to_vec(), || join(values.iter().map(|v| v.to_string())));
     }
-    s.push_str("\n</DataArray>\n<DataArray type=\"UInt8\" Name=\"types\" format=\"ascii\">\n");
-    for _ in 0..n {
-        s.push_str("1 ");
+
+    fn field(&mut self, f: &Field) {
+        if f.integer {
+            let values: Vec<i64> = f.values.iter().map(|&v| v as i64).collect();
+            self.ints(Some(&f.name), f.components, &values);
+        } else {
+            self.floats(Some(&f.name), f.components, &f.values);
+        }
     }
-    s.push_str("\n</DataArray>\n</Cells>\n</Piece>\n</UnstructuredGrid>\n</VTKFile>\n");
-    s
+
+    fn points(&mut self, positions: &[Vec3]) {
+        self.xml.push_str("<Points>\n");
+        let flat: Vec<f64> = positions.iter().flatten().copied().collect();
+        self.floats(None, 3, &flat);
+        self.xml.push_str("</Points>\n");
+    }
+
+    fn finish(mut self, kind: &str) -> Vec<u8> {
+        let _ = writeln!(self.xml, "</{kind}>");
+        let mut out = self.xml.into_bytes();
+        if self.encoding == Encoding::Binary {
+            out.extend_from_slice(b"<AppendedData encoding=\"raw\">\n_");
+            out.extend_from_slice(&self.appended);
+            out.extend_from_slice(b"\n</AppendedData>\n");
+        }
+        out.extend_from_slice(b"</VTKFile>\n");
+        out
+    }
+}
+
+fn join(items: impl Iterator<Item = String>) -> String {
+    items.collect::<Vec<_>>().join(" ")
+}
+
+/// An unstructured grid of one vertex per point.
+fn vtu(positions: &[Vec3], fields: &[Field], encoding: Encoding) -> Vec<u8> {
+    let n = positions.len();
+    let mut d = Document::new("UnstructuredGrid", encoding);
+    let _ = writeln!(d.xml, "<Piece NumberOfPoints=\"{n}\" NumberOfCells=\"{n}\">\n<PointData>");
+    for f in fields {
+        d.field(f);
+    }
+    d.xml.push_str("</PointData>\n");
+    d.points(positions);
+    d.xml.push_str("<Cells>\n");
+    let ids: Vec<i64> = (0..n as i64).collect();
+    d.ints(Some("connectivity"), 1, &ids);
+    let offsets: Vec<i64> = (1..=n as i64).collect();
+    d.ints(Some("offsets"), 1, &offsets);
+    d.bytes(Some("types"), &vec![1u8; n]);
+    d.xml.push_str("</Cells>\n</Piece>\n");
+    d.finish("UnstructuredGrid")
+}
+
+/// Poly data: lines and polygons.
+fn vtp(p: &PolyData, encoding: Encoding) -> Vec<u8> {
+    let mut d = Document::new("PolyData", encoding);
+    let _ = writeln!(
+        d.xml,
+        "<Piece NumberOfPoints=\"{}\" NumberOfVerts=\"0\" NumberOfLines=\"{}\" NumberOfStrips=\"0\" NumberOfPolys=\"{}\">",
+        p.points.len(),
+        p.lines.len(),
+        p.polygons.len()
+    );
+    d.xml.push_str("<PointData>\n");
+    for f in &p.point_fields {
+        d.field(f);
+    }
+    d.xml.push_str("</PointData>\n<CellData>\n");
+    for f in &p.cell_fields {
+        d.field(f);
+    }
+    d.xml.push_str("</CellData>\n");
+    d.points(&p.points);
+    d.xml.push_str("<Lines>\n");
+    let connectivity: Vec<i64> = p.lines.iter().flatten().map(|&i| i as i64).collect();
+    d.ints(Some("connectivity"), 1, &connectivity);
+    let offsets: Vec<i64> = (1..=p.lines.len() as i64).map(|k| 2 * k).collect();
+    d.ints(Some("offsets"), 1, &offsets);
+    d.xml.push_str("</Lines>\n<Polys>\n");
+    let connectivity: Vec<i64> = p.polygons.iter().flatten().map(|&i| i as i64).collect();
+    d.ints(Some("connectivity"), 1, &connectivity);
+    let offsets: Vec<i64> = p
+        .polygons
+        .iter()
+        .scan(0i64, |end, poly| {
+            *end += poly.len() as i64;
+            Some(*end)
+        })
+        .collect();
+    d.ints(Some("offsets"), 1, &offsets);
+    d.xml.push_str("</Polys>\n</Piece>\n");
+    d.finish("PolyData")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::io::Read;
+
+    /// Reads back the arrays of a binary file by the layout the module doc gives.
+    fn arrays(bytes: &[u8]) -> Vec<Vec<u8>> {
+        let start = bytes.windows(2).position(|w| w == b"\n_").unwrap() + 2;
+        let text = String::from_utf8_lossy(&bytes[..start]);
+        let offsets: Vec<usize> =
+            text.split("offset=\"").skip(1).map(|s| s.split('"').next().unwrap().parse().unwrap()).collect();
+        offsets
+            .iter()
+            .map(|&o| {
+                let at = start + o;
+                let word =
+                    |k: usize| u64::from_le_bytes(bytes[at + 8 * k..at + 8 * k + 8].try_into().unwrap()) as usize;
+                if word(0) == 0 {
+                    return Vec::new();
+                }
+                let (size, compressed) = (word(1), word(3));
+                let mut out = Vec::new();
+                flate2::read::ZlibDecoder::new(&bytes[at + 32..at + 32 + compressed]).read_to_end(&mut out).unwrap();
+                assert_eq!(out.len(), size);
+                out
+            })
+            .collect()
+    }
+
+    #[test]
+    fn binary_arrays_read_back() {
+        let fields = [Field::int("id", [7, -3]), Field::float("v", 3, vec![1.5, 2.0, -3.0, 0.25, 1e300, 0.0])];
+        let bytes = vtu(&[[1.0, 2.0, 3.0], [4.0, 5.0, 6.0]], &fields, Encoding::Binary);
+        let a = arrays(&bytes);
+        let ints = |b: &[u8]| b.chunks(8).map(|c| i64::from_le_bytes(c.try_into().unwrap())).collect::<Vec<_>>();
+        let floats = |b: &[u8]| b.chunks(8).map(|c| f64::from_le_bytes(c.try_into().unwrap())).collect::<Vec<_>>();
+        assert_eq!(ints(&a[0]), vec![7, -3]);
+        assert_eq!(floats(&a[1]), fields[1].values);
+        assert_eq!(floats(&a[2]), vec![1.0, 2.0, 3.0, 4.0, 5.0, 6.0]);
+        assert_eq!(ints(&a[3]), vec![0, 1]);
+        let text = String::from_utf8_lossy(&bytes);
+        assert!(text.contains("type=\"Int64\" Name=\"id\""));
+    }
+
+    #[test]
+    fn ascii_stays_available() {
+        let bytes = vtp(
+            &PolyData {
+                points: vec![[0.0; 3], [1.0, 0.0, 0.0]],
+                lines: vec![[0, 1]],
+                cell_fields: vec![Field::float("normal_force", 1, vec![2.5])],
+                ..Default::default()
+            },
+            Encoding::Ascii,
+        );
+        let text = String::from_utf8(bytes).unwrap();
+        assert!(text.contains("NumberOfLines=\"1\"") && text.contains(">\n2.5\n</DataArray>"));
+        assert!(!text.contains("AppendedData"));
+    }
 }

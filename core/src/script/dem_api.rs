@@ -153,17 +153,23 @@ impl ScriptSim for DemScene {
     fn vtk_frame(&self) -> (Vec<Vec3>, Vec<Field>) {
         let s = &self.dem.spheres;
         let counts = self.dem.contact_counts();
-        let field = |name: &str, components: usize, values: Vec<f64>| Field { name: name.into(), components, values };
         let fields = vec![
-            field("id", 1, s.id.iter().map(|&i| i as f64).collect()),
-            field("radius", 1, s.radius.clone()),
-            field("material", 1, s.material.iter().map(|&m| m as f64).collect()),
-            field("velocity", 3, s.v.iter().flatten().copied().collect()),
-            field("angular_velocity", 3, s.w.iter().flatten().copied().collect()),
-            field("force", 3, s.force.iter().flatten().copied().collect()),
-            field("contacts", 1, counts.iter().map(|&c| c as f64).collect()),
+            Field::int("id", s.id.iter().map(|&i| i as i64)),
+            Field::float("radius", 1, s.radius.clone()),
+            Field::int("material", s.material.iter().map(|&m| m as i64)),
+            Field::float("velocity", 3, s.v.iter().flatten().copied().collect()),
+            Field::float("angular_velocity", 3, s.w.iter().flatten().copied().collect()),
+            Field::float("force", 3, s.force.iter().flatten().copied().collect()),
+            Field::int("contacts", counts.iter().map(|&c| c as i64)),
         ];
         (s.x.clone(), fields)
+    }
+    fn vtk_poly(&self) -> Vec<(&'static str, crate::io::vtk::PolyData)> {
+        let mut out = vec![("contacts", self.dem.contacts_picture())];
+        if !self.dem.walls.is_empty() {
+            out.push(("walls", self.dem.walls_picture()));
+        }
+        out
     }
     fn write_points(&self, path: &Path) -> Result<()> {
         let f = std::fs::File::create(path).map_err(|e| GraniteError::io(path, e))?;

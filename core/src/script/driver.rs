@@ -33,6 +33,10 @@ pub trait ScriptSim: Send + 'static {
     }
     /// Positions and per-point fields of one VTK frame.
     fn vtk_frame(&self) -> (Vec<Vec3>, Vec<Field>);
+    /// Poly data written beside each frame, by series name (DEM walls and contact network).
+    fn vtk_poly(&self) -> Vec<(&'static str, crate::io::vtk::PolyData)> {
+        Vec::new()
+    }
     /// A CSV table of every point or particle.
     fn write_points(&self, path: &Path) -> Result<()>;
     /// Global measures by name, for `sim.diagnostics()`.
@@ -82,7 +86,8 @@ impl<S: ScriptSim> State<S> {
     fn write_vtk(&mut self) -> Result<()> {
         self.claim_output();
         let (x, fields) = self.sim.vtk_frame();
-        self.output.write_vtk(self.sim.steps(), self.sim.time(), &x, &fields)
+        let poly = self.sim.vtk_poly();
+        self.output.write_vtk(self.sim.steps(), self.sim.time(), &x, &fields, &poly)
     }
 
     pub fn points_path(&self, file: &str) -> std::path::PathBuf {
@@ -611,6 +616,11 @@ pub fn register_common<S: ScriptSim>(engine: &mut Engine) {
         Ok(())
     });
     engine.register_fn("write_vtk", |s: &mut Handle<S>| s.lock().write_vtk().or_rhai());
+    engine.register_fn("vtk_format", |s: &mut Handle<S>, format: &str| {
+        let encoding = crate::io::vtk::Encoding::parse(format).or_rhai()?;
+        s.lock().output.vtk_encoding = encoding;
+        Ok::<_, Box<rhai::EvalAltResult>>(())
+    });
     engine.register_get("time", |s: &mut Handle<S>| s.lock().sim.time());
     engine.register_get("step", |s: &mut Handle<S>| s.lock().sim.steps() as i64);
     engine.register_get("dt", |s: &mut Handle<S>| s.lock().sim.dt());

@@ -130,10 +130,10 @@ impl ScriptSim for MpmScene {
         let sim = &self.mpm;
         let p = &sim.points;
         let n = p.len();
-        let field = |name: &str, components: usize, values: Vec<f64>| Field { name: name.into(), components, values };
+        let field = Field::float;
         let mut fields = vec![
-            field("id", 1, p.id.iter().map(|&i| i as f64).collect()),
-            field("material", 1, p.material.iter().map(|&m| m as f64).collect()),
+            Field::int("id", p.id.iter().map(|&i| i as i64)),
+            Field::int("material", p.material.iter().map(|&m| m as i64)),
             field("velocity", 3, p.v.iter().flatten().copied().collect()),
             field("stress", 6, p.stress.iter().flatten().copied().collect()),
             field("strain", 6, p.strain.iter().flatten().copied().collect()),

@@ -1,7 +1,7 @@
 //! The files one simulation writes: series rows and VTK frames, whatever the engine.
 
 use crate::error::Result;
-use crate::io::vtk::Field;
+use crate::io::vtk::{Encoding, Field, PolyData};
 use crate::io::{SeriesWriter, VtkWriter};
 use crate::math::Vec3;
 use std::path::PathBuf;
@@ -12,6 +12,10 @@ pub struct Output {
     pub prefix: String,
     series: Option<SeriesWriter>,
     vtk: Option<VtkWriter>,
+    /// Poly-data series beside the points (DEM walls, contact network), by name.
+    poly: Vec<(String, VtkWriter)>,
+    /// How VTK arrays are written (binary unless the script asks for ASCII).
+    pub vtk_encoding: Encoding,
     /// Steps between series rows / VTK frames; None = chosen per run call.
     pub series_every: Option<u64>,
     pub vtk_every: Option<u64>,
@@ -26,6 +30,8 @@ impl Output {
             prefix,
             series: None,
             vtk: None,
+            poly: Vec::new(),
+            vtk_encoding: Encoding::default(),
             series_every: None,
             vtk_every: None,
             last_series_step: None,
@@ -58,15 +64,38 @@ impl Output {
         Ok(())
     }
 
-    pub fn write_vtk(&mut self, step: u64, time: f64, positions: &[Vec3], fields: &[Field]) -> Result<()> {
+    /// One frame: the points, and each poly-data series (`vtk/<prefix><name>_N.vtp`, its own
+    /// `.pvd`) at the same time.
+    pub fn write_vtk(
+        &mut self,
+        step: u64,
+        time: f64,
+        positions: &[Vec3],
+        fields: &[Field],
+        poly: &[(&str, PolyData)],
+    ) -> Result<()> {
         if self.last_vtk_step == Some(step) {
             return Ok(());
         }
+        let dir = self.dir.join("vtk");
         if self.vtk.is_none() {
-            self.vtk = Some(VtkWriter::new(&self.dir.join("vtk"), &format!("{}points", self.prefix))?);
+            self.vtk = Some(VtkWriter::new(&dir, &format!("{}points", self.prefix))?);
         }
         if let Some(w) = self.vtk.as_mut() {
+            w.encoding = self.vtk_encoding;
             w.write_frame(time, positions, fields)?;
+        }
+        for (name, data) in poly {
+            let k = match self.poly.iter().position(|(n, _)| n == name) {
+                Some(k) => k,
+                None => {
+                    self.poly.push((name.to_string(), VtkWriter::new(&dir, &format!("{}{name}", self.prefix))?));
+                    self.poly.len() - 1
+                }
+            };
+            let writer = &mut self.poly[k].1;
+            writer.encoding = self.vtk_encoding;
+            writer.write_poly_frame(time, data)?;
         }
         self.last_vtk_step = Some(step);
         Ok(())

@@ -289,13 +289,11 @@ impl ConstitutiveLaw for DemRve {
                     particle_p[k] += 0.5 * work / (3.0 * v);
                 }
             }
-            let field =
-                |name: &str, components: usize, values: Vec<f64>| Field { name: name.into(), components, values };
             let fields = vec![
-                field("radius", 1, s.radius.clone()),
-                field("velocity", 3, s.v.iter().flatten().copied().collect()),
-                field("contacts", 1, counts.iter().map(|&c| c as f64).collect()),
-                field("mean_stress", 1, particle_p),
+                Field::float("radius", 1, s.radius.clone()),
+                Field::float("velocity", 3, s.v.iter().flatten().copied().collect()),
+                Field::int("contacts", counts.iter().map(|&c| c as i64)),
+                Field::float("mean_stress", 1, particle_p),
             ];
             (s.x.clone(), fields)
         })
