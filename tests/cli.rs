@@ -60,6 +60,9 @@ fn unknown_parameter_fails_with_the_declared_list() {
     assert!(!out.status.success());
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("sceme") && err.contains("scheme, update, flip_ratio, duration"), "{err}");
+    // Said at the line of the script's first simulation (bouncing_cube.rhai line 18: `mpm(...)`),
+    // where its parameters are all declared, with the closest name.
+    assert!(err.contains("line 18: --set sceme") && err.contains("did you mean `scheme`?"), "{err}");
 }
 
 #[test]

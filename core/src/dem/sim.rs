@@ -581,9 +581,26 @@ impl DemSim {
         best
     }
 
+    /// A new time step, checked at once against `critical_dt` of the spheres and laws present
+    /// (and again before each run, as spheres and laws may come later).
     pub fn set_dt(&mut self, dt: f64) -> Result<()> {
-        self.dt = crate::params::time_step(dt)?;
+        let dt = crate::params::time_step(dt)?;
+        self.check_dt(dt)?;
+        self.dt = dt;
         self.recheck_time_step();
+        Ok(())
+    }
+
+    fn check_dt(&self, dt: f64) -> Result<()> {
+        if let Some(crit) = self.critical_dt() {
+            if dt > crit {
+                return Err(GraniteError::param(
+                    "dt",
+                    format!("{dt:e}"),
+                    &format!("must not exceed sqrt(m/k_n) = {crit:.4e} s of the stiffest, lightest contact"),
+                ));
+            }
+        }
         Ok(())
     }
 
@@ -643,15 +660,7 @@ impl DemSim {
             return Err(GraniteError::Setup("no contact law: call contact_law(...) before running".into()));
         }
         self.check_pairs_of_materials()?;
-        if let Some(crit) = self.critical_dt() {
-            if self.dt > crit {
-                return Err(GraniteError::param(
-                    "dt",
-                    format!("{:e}", self.dt),
-                    &format!("must not exceed sqrt(m/k_n) = {crit:.4e} s of the stiffest, lightest contact"),
-                ));
-            }
-        }
+        self.check_dt(self.dt)?;
         if !(0.0..1.0).contains(&self.damping) {
             return Err(GraniteError::param("damping", self.damping, "must be in [0, 1)"));
         }

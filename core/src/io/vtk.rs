@@ -74,8 +74,21 @@ pub struct VtkWriter {
 }
 
 impl VtkWriter {
+    /// A new series in `dir`. Frames of an earlier run with the same stem are removed first: a
+    /// shorter new run would otherwise leave the old run's later frames beside its own.
     pub fn new(dir: &Path, stem: &str) -> Result<VtkWriter> {
         std::fs::create_dir_all(dir).map_err(|e| GraniteError::io(dir, e))?;
+        let entries = std::fs::read_dir(dir).map_err(|e| GraniteError::io(dir, e))?;
+        for entry in entries.flatten() {
+            let name = entry.file_name().to_string_lossy().to_string();
+            let frame = name.strip_prefix(stem).and_then(|rest| rest.strip_prefix('_')).is_some_and(|rest| {
+                let (digits, ext) = rest.split_once('.').unwrap_or((rest, ""));
+                digits.len() == 6 && digits.bytes().all(|b| b.is_ascii_digit()) && (ext == "vtu" || ext == "vtp")
+            });
+            if frame {
+                let _ = std::fs::remove_file(entry.path());
+            }
+        }
         Ok(VtkWriter { dir: dir.to_path_buf(), stem: stem.into(), frames: Vec::new(), encoding: Encoding::default() })
     }
 

@@ -221,23 +221,32 @@ impl MpmSim {
             .reduce(f64::min)
     }
 
+    /// A new time step, checked at once against the stability limit of the points present (and
+    /// again before each run, as points and materials may come later).
     pub fn set_dt(&mut self, dt: f64) -> Result<()> {
-        self.dt = crate::params::time_step(dt)?;
+        let dt = crate::params::time_step(dt)?;
+        self.check_dt(dt)?;
+        self.dt = dt;
+        Ok(())
+    }
+
+    fn check_dt(&self, dt: f64) -> Result<()> {
+        if let Some(crit) = self.critical_dt() {
+            if dt > crit {
+                return Err(GraniteError::param(
+                    "dt",
+                    format!("{dt:e}"),
+                    &format!("must not exceed the stability limit cell/c_p = {crit:.4e} s of this mesh and material"),
+                ));
+            }
+        }
         Ok(())
     }
 
     /// Checks everything a run needs; called before stepping.
     pub fn validate(&self) -> Result<()> {
         crate::params::require_time_step(self.dt)?;
-        if let Some(crit) = self.critical_dt() {
-            if self.dt > crit {
-                return Err(GraniteError::param(
-                    "dt",
-                    format!("{:e}", self.dt),
-                    &format!("must not exceed the stability limit cell/c_p = {crit:.4e} s of this mesh and material"),
-                ));
-            }
-        }
+        self.check_dt(self.dt)?;
         if !(self.damping >= 0.0 && self.damping < 1.0) {
             return Err(GraniteError::param("damping", self.damping, "must be in [0, 1)"));
         }

@@ -214,10 +214,10 @@ fn distance(a: &str, b: &str) -> usize {
     row[b.len()]
 }
 
-/// The candidates closest to `word` (at most a third of its letters wrong, and at least one
-/// letter right), closest first.
+/// The candidates closest to `word` (at most about a third of its letters wrong: two swapped
+/// letters count two), the closest ones only.
 pub fn closest<'a>(word: &str, candidates: impl IntoIterator<Item = &'a str>) -> Vec<&'a str> {
-    let limit = (word.chars().count() / 3).max(1);
+    let limit = (word.chars().count() + 2) / 3;
     let mut scored: Vec<(usize, &str)> =
         candidates.into_iter().map(|c| (distance(word, c), c)).filter(|(d, _)| *d <= limit).collect();
     scored.sort();

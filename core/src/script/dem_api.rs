@@ -273,12 +273,14 @@ impl Handle<DemScene> {
         let running = if self.running() { "running" } else { "paused" };
         let st = self.lock();
         let d = &st.sim.dem;
-        let clumps = if d.clumps.is_empty() { String::new() } else { format!(" in {} clumps", d.clumps.len()) };
+        let count = |n: usize, what: &str| format!("{n} {what}{}", if n == 1 { "" } else { "s" });
+        let clumps =
+            if d.clumps.is_empty() { String::new() } else { format!(" in {}", count(d.clumps.len(), "clump")) };
         let cell = if d.cell.is_some() { ", periodic" } else { "" };
         format!(
-            "DemSim({} spheres{clumps}, {} walls{cell}, t = {:.6} s, step {}, {running})",
-            d.spheres.len(),
-            d.walls.len(),
+            "DemSim({}{clumps}, {}{cell}, t = {:.6} s, step {}, {running})",
+            count(d.spheres.len(), "sphere"),
+            count(d.walls.len(), "wall"),
             d.time,
             d.step
         )
@@ -362,22 +364,20 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
     engine.register_fn("dem", move || DemHandle::create(c.clone(), Map::new()));
     engine.register_fn("material", |s: &mut DemHandle, opts: Map| s.material(opts));
     engine.register_fn("save", |s: &mut DemHandle, file: &str| {
-        let st = s.lock();
+        let mut st = s.lock();
         let path = st.points_path(file);
         st.sim.prepared().save(&path).map(|_| path.display().to_string()).or_rhai()
     });
     let c = ctx.clone();
     engine.register_fn("dem_load", move |file: &str| {
         c.before_simulation()?;
-        let path = std::path::Path::new(file);
-        if !path.is_file() {
-            return err(format!(
-                "dem_load: no saved DEM state at `{file}`; `sim.save(file)` writes one into a run's output \
-                 folder (a prepared RVE: `granite run scripts/mpmxdem/prepare_rve.rhai` writes \
-                 out/prepare_rve/rve.json)"
-            ));
-        }
-        let dem = DemSim::load(path, &c.registry()).or_rhai()?;
+        let path = c.input_path(file).map_err(|why| {
+            super::convert::to_rhai(GraniteError::Setup(format!(
+                "dem_load: {why}; `sim.save(file)` writes a state into a run's output folder (a prepared \
+                 RVE: `granite run scripts/mpmxdem/prepare_rve.rhai` writes out/prepare_rve/rve.json)"
+            )))
+        })?;
+        let dem = DemSim::load(&path, &c.registry()).or_rhai()?;
         Ok::<_, Box<rhai::EvalAltResult>>(Handle::new(
             DemScene { dem, driven: Vec::new(), auto_skin: false },
             c.clone(),

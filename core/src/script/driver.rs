@@ -63,12 +63,15 @@ pub struct State<S: ScriptSim> {
 }
 
 impl<S: ScriptSim> State<S> {
-    /// Claims this simulation's output file prefix on its first write: the first simulation of a
-    /// script that writes gets the plain names (series.csv, vtk/points...).
+    /// Claims this simulation's output folder on its first write: the first simulation of a
+    /// script that writes gets the run's folder itself (series.csv, vtk/...), the N-th one
+    /// `simN/` in it; in a REPL session every simulation gets its own `simN/`.
     fn claim_output(&mut self) {
         if !self.output_claimed {
             let index = self.ctx.next_sim_index();
-            self.output.prefix = if index == 1 { String::new() } else { format!("sim{index}_") };
+            if index > 1 || self.ctx.options.folder_per_simulation {
+                self.output.dir = self.output.dir.join(format!("sim{index}"));
+            }
             self.output_claimed = true;
         }
     }
@@ -90,8 +93,15 @@ impl<S: ScriptSim> State<S> {
         self.output.write_vtk(self.sim.steps(), self.sim.time(), &x, &fields, &poly)
     }
 
-    pub fn points_path(&self, file: &str) -> std::path::PathBuf {
-        self.output.dir.join(file)
+    /// Where a file the script names is written: relative paths in this simulation's output
+    /// folder (made if missing).
+    pub fn points_path(&mut self, file: &str) -> std::path::PathBuf {
+        self.claim_output();
+        let path = self.output.dir.join(file);
+        if let Some(dir) = path.parent() {
+            let _ = std::fs::create_dir_all(dir);
+        }
+        path
     }
 
     /// Restores the last good state, writes it out, and turns the failure into a script error.
@@ -206,7 +216,7 @@ impl<S: ScriptSim> Handle<S> {
     pub fn new(sim: S, ctx: Arc<ScriptContext>) -> Handle<S> {
         // The file prefix is chosen when the simulation first writes: a simulation that only
         // serves as a template (e.g. a loaded RVE) does not take the main output names.
-        let output = Output::new(ctx.options.out_dir.clone(), String::new());
+        let output = Output::new(ctx.options.out_dir.clone());
         let state = State {
             sim,
             ctx,
@@ -602,7 +612,7 @@ pub fn register_common<S: ScriptSim>(engine: &mut Engine) {
         m
     });
     engine.register_fn("write_points", |s: &mut Handle<S>, file: &str| {
-        let st = s.lock();
+        let mut st = s.lock();
         let path = st.points_path(file);
         st.sim.write_points(&path).map(|_| path.display().to_string()).or_rhai()
     });

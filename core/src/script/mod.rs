@@ -49,6 +49,39 @@ pub struct RunOptions {
     /// Only list the parameters (`granite run --list-params`): the script stops where it makes its
     /// first simulation, and nothing is written.
     pub list_params: bool,
+    /// Every simulation writes into a folder of its own, `simN/` (a REPL session, where one
+    /// simulation follows another); otherwise the first one writing uses the folder itself.
+    pub folder_per_simulation: bool,
+}
+
+impl ScriptContext {
+    /// A file a script reads (`mpm_load`, `dem_load`): a relative path from the working
+    /// directory, else from the output folder or one of its simulation folders (where
+    /// `sim.save` wrote it).
+    pub(crate) fn input_path(&self, file: &str) -> std::result::Result<PathBuf, String> {
+        let given = Path::new(file);
+        if given.is_file() || given.is_absolute() {
+            return Ok(given.to_path_buf());
+        }
+        let out = &self.options.out_dir;
+        let mut looked = vec![out.join(file)];
+        if let Ok(entries) = std::fs::read_dir(out) {
+            let mut sims: Vec<PathBuf> = entries
+                .flatten()
+                .map(|e| e.path())
+                .filter(|p| p.is_dir() && p.file_name().is_some_and(|n| n.to_string_lossy().starts_with("sim")))
+                .collect();
+            sims.sort();
+            looked.extend(sims.into_iter().map(|d| d.join(file)));
+        }
+        looked.iter().find(|p| p.is_file()).cloned().ok_or_else(|| {
+            format!(
+                "no file `{file}` in the working directory ({}) nor in the output folder {} or its simulation folders",
+                std::env::current_dir().map(|d| d.display().to_string()).unwrap_or_default(),
+                out.display()
+            )
+        })
+    }
 }
 
 /// A parameter as the script declared it, for `granite run --list-params`.
@@ -195,16 +228,23 @@ impl ScriptContext {
     }
 
     /// Called where a script makes a simulation: when only listing parameters, stops it there.
+    /// Called where a script makes a simulation. Parameters are declared before the first one
+    /// (`--list-params` stops there), so a `--set` name not declared by then is reported here, at
+    /// the line of the first simulation, and not at a later, unrelated call.
     pub(crate) fn before_simulation(&self) -> RhaiResult<()> {
         if self.options.list_params {
             self.listing_done.store(true, std::sync::atomic::Ordering::SeqCst);
             return err("stopped at the first simulation: listing the parameters only");
         }
-        Ok(())
+        self.check_overrides_with(" before its first simulation (this line): declare parameters at the top")
     }
 
     /// Every `--set` name must be declared by the script.
     pub fn check_overrides(&self) -> RhaiResult<()> {
+        self.check_overrides_with("")
+    }
+
+    fn check_overrides_with(&self, when: &str) -> RhaiResult<()> {
         let declared = self.declared.lock().unwrap();
         for (k, _) in &self.options.overrides {
             if !declared.contains_key(k) {
@@ -213,7 +253,9 @@ impl ScriptContext {
                 } else {
                     declared.keys().cloned().collect::<Vec<_>>().join(", ")
                 };
-                return err(format!("--set {k}: the script declares no parameter `{k}`; declared: {list}"));
+                let near = api_doc::closest(k, declared.keys().map(|s| s.as_str()));
+                let hint = near.first().map(|n| format!(" (did you mean `{n}`?)")).unwrap_or_default();
+                return err(format!("--set {k}: the script declares no parameter `{k}`{when}{hint}; declared: {list}"));
             }
         }
         Ok(())

@@ -610,14 +610,17 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
         }
     });
     engine.register_fn("save", |s: &mut SimHandle, file: &str| {
-        let st = s.lock();
+        let mut st = s.lock();
         let path = st.points_path(file);
         st.sim.mpm.save(&path).map(|_| path.display().to_string()).or_rhai()
     });
     let c = ctx.clone();
     engine.register_fn("mpm_load", move |file: &str| {
         c.before_simulation()?;
-        let mpm = MpmSim::load(std::path::Path::new(file), &c.registry()).or_rhai()?;
+        let path = c
+            .input_path(file)
+            .map_err(|why| super::convert::to_rhai(GraniteError::Setup(format!("mpm_load: {why}"))))?;
+        let mpm = MpmSim::load(&path, &c.registry()).or_rhai()?;
         Ok::<_, Box<rhai::EvalAltResult>>(Handle::new(MpmScene { mpm, runout: None, driven: Vec::new() }, c.clone()))
     });
     engine.register_fn("fill_box", |s: &mut SimHandle, m: MaterialHandle, lo: Dynamic, hi: Dynamic, opts: Map| {
@@ -749,7 +752,7 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
         }
     });
     engine.register_fn("write_point_object", |s: &mut SimHandle, i: i64, file: &str| -> RhaiResult<String> {
-        let st = s.lock();
+        let mut st = s.lock();
         let sim = &st.sim.mpm;
         let i = point_index(sim, i)? as i64;
         let m = sim.points.material[i as usize] as usize;

@@ -8,8 +8,6 @@ use std::path::PathBuf;
 
 pub struct Output {
     pub dir: PathBuf,
-    /// File name prefix: empty for the first simulation of a script, `sim2_`... for others.
-    pub prefix: String,
     series: Option<SeriesWriter>,
     vtk: Option<VtkWriter>,
     /// Poly-data series beside the points (DEM walls, contact network), by name.
@@ -24,10 +22,9 @@ pub struct Output {
 }
 
 impl Output {
-    pub fn new(dir: PathBuf, prefix: String) -> Output {
+    pub fn new(dir: PathBuf) -> Output {
         Output {
             dir,
-            prefix,
             series: None,
             vtk: None,
             poly: Vec::new(),
@@ -51,8 +48,8 @@ impl Output {
         };
         if needs_new {
             let name = match &self.series {
-                None => format!("{}series.csv", self.prefix),
-                Some(_) => format!("{}series_{tag}.csv", self.prefix),
+                None => "series.csv".to_string(),
+                Some(_) => format!("series_{tag}.csv"),
             };
             self.series =
                 Some(SeriesWriter::create(&self.dir.join(name), cols.iter().map(|s| s.to_string()).collect())?);
@@ -79,7 +76,7 @@ impl Output {
         }
         let dir = self.dir.join("vtk");
         if self.vtk.is_none() {
-            self.vtk = Some(VtkWriter::new(&dir, &format!("{}points", self.prefix))?);
+            self.vtk = Some(VtkWriter::new(&dir, "points")?);
         }
         if let Some(w) = self.vtk.as_mut() {
             w.encoding = self.vtk_encoding;
@@ -89,7 +86,7 @@ impl Output {
             let k = match self.poly.iter().position(|(n, _)| n == name) {
                 Some(k) => k,
                 None => {
-                    self.poly.push((name.to_string(), VtkWriter::new(&dir, &format!("{}{name}", self.prefix))?));
+                    self.poly.push((name.to_string(), VtkWriter::new(&dir, name)?));
                     self.poly.len() - 1
                 }
             };

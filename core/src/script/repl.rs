@@ -31,7 +31,9 @@ pub enum Outcome {
 }
 
 impl ReplSession {
+    /// A session; each simulation it makes writes into its own `simN/` folder of the output folder.
     pub fn new(registry: Registry, options: RunOptions) -> Result<ReplSession> {
+        let options = RunOptions { folder_per_simulation: true, ..options };
         let (ctx, engine) = prepare(registry, options)?;
         Ok(ReplSession { engine, scope: Scope::new(), functions: AST::empty(), ctx })
     }
