@@ -125,10 +125,14 @@ pub fn parse_strain(s: &str) -> std::result::Result<f64, String> {
     }
 }
 
-/// Human-readable list of the registered plugins and their parameters.
-pub fn plugin_listing() -> String {
+/// Human-readable list of the registered plugins and their parameters, with the laws of the
+/// native plugin libraries `libraries` loaded first.
+pub fn plugin_listing(libraries: &[PathBuf]) -> Result<String> {
     use std::fmt::Write;
-    let reg = registry();
+    let mut reg = registry();
+    for lib in libraries {
+        granite_core::plugin::load_plugin(lib, &mut reg)?;
+    }
     let mut out = String::from("constitutive laws (sim.material(NAME, #{ density: ..., PARAMS })):\n");
     for name in reg.law_names() {
         if let Ok(f) = reg.law_factory(&name) {
@@ -180,5 +184,5 @@ pub fn plugin_listing() -> String {
             );
         }
     }
-    out
+    Ok(out)
 }

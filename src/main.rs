@@ -79,8 +79,13 @@ enum Command {
         #[arg(long, default_value_t = 3, value_parser = granite::parse_at_least::<1>)]
         repeat: usize,
     },
-    /// List the registered plugins (constitutive laws, velocity updates) and their parameters.
-    Plugins,
+    /// List the registered plugins (constitutive laws, contact laws, shapes, velocity updates)
+    /// and their parameters, with the laws of native plugin libraries given with --plugin.
+    Plugins {
+        /// A native constitutive-law plugin (a granite-plugin-abi cdylib) to list; repeatable.
+        #[arg(long = "plugin", value_name = "LIBRARY")]
+        plugins: Vec<PathBuf>,
+    },
     /// Print the script API reference (Markdown; docs/api.md is this output), or one call's help.
     Api {
         /// A function or property name (`sphere`, `DemSim.sphere`): its help only.
@@ -253,9 +258,15 @@ fn main() -> ExitCode {
             }
             ExitCode::SUCCESS
         }
-        Command::Plugins => {
-            print!("{}", granite::plugin_listing());
-            ExitCode::SUCCESS
-        }
+        Command::Plugins { plugins } => match granite::plugin_listing(&plugins) {
+            Ok(listing) => {
+                print!("{listing}");
+                ExitCode::SUCCESS
+            }
+            Err(e) => {
+                eprintln!("granite: error: {e}");
+                ExitCode::FAILURE
+            }
+        },
     }
 }

@@ -96,3 +96,57 @@ fn bad_plugins_are_refused_with_the_library_named() {
     );
     assert!(e.contains("drucker_prager") && e.contains("poisson = 0.7") && e.contains("line 3"), "{e}");
 }
+
+/// A plugin law reports its P-wave speed (ABI version 2), so `critical_dt()` gives the cell
+/// crossing time cell / c_p, c_p = sqrt((lambda + 2G) / rho); a plugin of ABI version 1 still
+/// loads and runs, and `critical_dt()` then says that no law reports a wave speed.
+#[test]
+fn plugin_laws_give_the_time_step_limit() {
+    let (e, nu, rho, cell): (f64, f64, f64, f64) = (1e7, 0.25, 2000.0, 0.5);
+    let src = |lib: &PathBuf| {
+        format!(
+            r#"
+let name = load_plugin("{lib}");
+let sim = mpm(#{{ dim: 2, cell: {cell:?}, cells: [2, 2] }});
+let m = sim.material(name, #{{ density: {rho:?}, young: {e:?}, poisson: {nu:?}, alpha: 0.2, k: 2e3 }});
+sim.fill_box(m, [0.0, 0.0], [0.5, 0.5]);
+let limit = "";
+try {{ summary("critical_dt", sim.critical_dt()); }} catch (e) {{ limit = e; }}
+summary("refused", limit);
+sim.dt(1e-5);
+sim.run_steps(3);
+"#,
+            lib = lib.display()
+        )
+    };
+    let lib = build_plugin(&[], "plugin-test");
+    let out = common::run_text("plugin_dt", &src(&lib));
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    let lambda = e * nu / ((1.0 + nu) * (1.0 - 2.0 * nu));
+    let g = e / (2.0 * (1.0 + nu));
+    let expected = cell / ((lambda + 2.0 * g) / rho).sqrt();
+    let got = summary["critical_dt"].as_f64().unwrap();
+    assert!((got - expected).abs() < 1e-12 * expected, "critical_dt {got}, cell / c_p = {expected}");
+
+    let old = build_plugin(&["abi_v1"], "plugin-test-abi-v1");
+    let out = common::run_text("plugin_dt_v1", &src(&old));
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    let refused = summary["refused"].as_str().unwrap();
+    assert!(refused.contains("reports a wave speed") && refused.contains("drucker_prager"), "{refused}");
+    assert_eq!(summary["status"], "ok");
+}
+
+/// `granite plugins --plugin LIB` lists the library's law and its parameters.
+#[test]
+fn plugins_command_lists_a_library() {
+    let lib = build_plugin(&[], "plugin-test");
+    let out = Command::new(env!("CARGO_BIN_EXE_granite")).args(["plugins", "--plugin"]).arg(&lib).output().unwrap();
+    assert!(out.status.success());
+    let text = String::from_utf8_lossy(&out.stdout);
+    let law = text.lines().position(|l| l.trim_start().starts_with("drucker_prager:")).expect("the plugin's law");
+    let params: Vec<&str> =
+        text.lines().skip(law + 1).take(4).map(|l| l.split_whitespace().next().unwrap_or("")).collect();
+    assert_eq!(params, ["young", "poisson", "alpha", "k"], "{text}");
+}

@@ -6,7 +6,7 @@ use crate::error::{GraniteError, Result};
 use crate::ext::{ConstitutiveLaw, ConstitutiveLawFactory, LawBatch};
 use crate::params::{ParamSpec, Params};
 use crate::registry::Registry;
-use granite_plugin_abi::{ErrorBuffer, LawTable, ABI_VERSION};
+use granite_plugin_abi::{ErrorBuffer, LawTable, LawTableV1, ABI_VERSION};
 use std::ffi::{c_void, CStr};
 use std::path::Path;
 use std::sync::Arc;
@@ -20,9 +20,19 @@ unsafe fn text(p: granite_plugin_abi::CStrPtr) -> &'static str {
     s.to_str().unwrap_or("")
 }
 
+/// The functions of a plugin table, whatever its ABI version.
+#[derive(Clone, Copy)]
+struct Functions {
+    create: unsafe extern "C" fn(*const f64, usize, *mut ErrorBuffer) -> *mut c_void,
+    update: unsafe extern "C" fn(*const c_void, usize, *mut f64, *const f64, *mut f64, *mut ErrorBuffer) -> i32,
+    destroy: unsafe extern "C" fn(*mut c_void),
+    /// Absent from version-1 tables.
+    wave_speed: Option<unsafe extern "C" fn(*const c_void, f64) -> f64>,
+}
+
 /// A loaded law plugin: its table and where it came from.
 pub struct NativeLawFactory {
-    table: &'static LawTable,
+    table: Functions,
     name: String,
     version: String,
     library: String,
@@ -47,20 +57,40 @@ pub fn load_plugin(path: &Path, registry: &mut Registry) -> Result<(String, Stri
     if table.is_null() {
         return Err(GraniteError::Other(format!("plugin {library}: `granite_law_table` returned null")));
     }
-    let table: &'static LawTable = unsafe { &*table };
-    if table.abi_version != ABI_VERSION {
+    // The header (version and size) leads every version's table; the rest is read as the layout
+    // of the version it declares.
+    let (abi, size) = unsafe { ((*table).abi_version, (*table).table_size as usize) };
+    let expected = match abi {
+        1 => std::mem::size_of::<LawTableV1>(),
+        ABI_VERSION => std::mem::size_of::<LawTable>(),
+        _ => {
+            return Err(GraniteError::Other(format!(
+                "plugin {library}: built for plugin ABI version {abi}, this granite reads versions 1 to {ABI_VERSION}: rebuild it against granite-plugin-abi"
+            )))
+        }
+    };
+    if size != expected {
         return Err(GraniteError::Other(format!(
-            "plugin {library}: built for plugin ABI version {}, this granite speaks version {ABI_VERSION}: rebuild it against granite-plugin-abi",
-            table.abi_version
+            "plugin {library}: its law table (ABI version {abi}) has {size} bytes, granite expects {expected}"
         )));
     }
-    if table.table_size as usize != std::mem::size_of::<LawTable>() {
-        return Err(GraniteError::Other(format!(
-            "plugin {library}: its law table has {} bytes, granite expects {}",
-            table.table_size,
-            std::mem::size_of::<LawTable>()
-        )));
-    }
+    let (table, functions): (&'static LawTableV1, Functions) = if abi == 1 {
+        let t: &'static LawTableV1 = unsafe { &*(table as *const LawTableV1) };
+        (t, Functions { create: t.create, update: t.update, destroy: t.destroy, wave_speed: None })
+    } else {
+        let full: &'static LawTable = unsafe { &*table };
+        // The leading fields of both layouts are the same (repr(C), same types in the same order).
+        let t: &'static LawTableV1 = unsafe { &*(table as *const LawTableV1) };
+        (
+            t,
+            Functions {
+                create: full.create,
+                update: full.update,
+                destroy: full.destroy,
+                wave_speed: Some(full.wave_speed),
+            },
+        )
+    };
     let name = unsafe { text(table.name) }.to_string();
     let version = unsafe { text(table.version) }.to_string();
     if name.is_empty() {
@@ -75,7 +105,7 @@ pub fn load_plugin(path: &Path, registry: &mut Registry) -> Result<(String, Stri
         .collect();
     let state_names = list(table.state_names, table.state_count);
     registry.add_law(Arc::new(NativeLawFactory {
-        table,
+        table: functions,
         name: name.clone(),
         version: version.clone(),
         library,
@@ -120,7 +150,7 @@ unsafe impl Send for LawPtr {}
 unsafe impl Sync for LawPtr {}
 
 struct NativeLaw {
-    table: &'static LawTable,
+    table: Functions,
     law: LawPtr,
     name: String,
     library: String,
@@ -143,6 +173,11 @@ impl ConstitutiveLaw for NativeLaw {
     }
     fn state_names(&self) -> &[&'static str] {
         &self.state_names
+    }
+    fn wave_speed(&self, density: f64) -> Option<f64> {
+        let f = self.table.wave_speed?;
+        let c = unsafe { f(self.law.0, density) };
+        (c > 0.0 && c.is_finite()).then_some(c)
     }
     fn update(&self, batch: LawBatch<'_>) -> Result<()> {
         let n = batch.len();

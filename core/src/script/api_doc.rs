@@ -217,7 +217,7 @@ fn distance(a: &str, b: &str) -> usize {
 /// The candidates closest to `word` (at most about a third of its letters wrong: two swapped
 /// letters count two), the closest ones only.
 pub fn closest<'a>(word: &str, candidates: impl IntoIterator<Item = &'a str>) -> Vec<&'a str> {
-    let limit = (word.chars().count() + 2) / 3;
+    let limit = word.chars().count().div_ceil(3);
     let mut scored: Vec<(usize, &str)> =
         candidates.into_iter().map(|c| (distance(word, c), c)).filter(|(d, _)| *d <= limit).collect();
     scored.sort();

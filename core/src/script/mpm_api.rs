@@ -673,7 +673,27 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
     engine.register_fn("velocity_update", set_update);
     engine.register_fn("velocity_update", |s: &mut SimHandle, name: &str| set_update(s, name, Map::new()));
     engine.register_fn("dt", |s: &mut SimHandle, dt: Dynamic| s.lock().sim.mpm.set_dt(number(&dt, "dt")?).or_rhai());
-    engine.register_fn("critical_dt", |s: &mut SimHandle| s.lock().sim.mpm.critical_dt().unwrap_or(f64::INFINITY));
+    engine.register_fn("critical_dt", |s: &mut SimHandle| -> RhaiResult<f64> {
+        let st = s.lock();
+        let sim = &st.sim.mpm;
+        if let Some(dt) = sim.critical_dt() {
+            return Ok(dt);
+        }
+        let silent: Vec<String> = sim
+            .materials
+            .iter()
+            .filter(|m| m.count > 0)
+            .map(|m| format!("\"{}\" (law {})", m.name, m.law.name()))
+            .collect();
+        if silent.is_empty() {
+            return err("critical_dt(): no material points yet: the limit is that of the points' materials");
+        }
+        err(format!(
+            "critical_dt(): no material with points reports a wave speed ({}): a plugin law gives one through \
+             NativeLaw::wave_speed (ABI version 2); set dt from your own estimate of cell / c_p",
+            silent.join(", ")
+        ))
+    });
     engine.register_fn("fix", |ctx: NativeCallContext, s: &mut SimHandle, sel: Dynamic, axis: &str, v: Dynamic| {
         s.fix(&ctx, sel, axis, v)
     });

@@ -34,6 +34,11 @@ impl NativeLaw for DruckerPrager {
         Ok(DruckerPrager { lambda, shear: young / (2.0 * (1.0 + poisson)), alpha, k })
     }
 
+    /// P-wave speed of the elastic part, sqrt((lambda + 2G) / rho): granite's time-step limit.
+    fn wave_speed(&self, density: f64) -> Option<f64> {
+        Some(((self.lambda + 2.0 * self.shear) / density).sqrt())
+    }
+
     fn update(&self, stress: &mut [[f64; 6]], dstrain: &[[f64; 6]], state: &mut [f64]) -> Result<(), String> {
         for ((s, de), gp) in stress.iter_mut().zip(dstrain).zip(state.iter_mut()) {
             let tr = de[0] + de[1] + de[2];
@@ -61,7 +66,7 @@ impl NativeLaw for DruckerPrager {
     }
 }
 
-#[cfg(not(feature = "wrong_abi"))]
+#[cfg(not(any(feature = "wrong_abi", feature = "abi_v1")))]
 granite_plugin_abi::export_law!(
     DruckerPrager,
     name = "drucker_prager",
@@ -89,6 +94,9 @@ mod wrong {
         1
     }
     unsafe extern "C" fn destroy(_: *mut c_void) {}
+    unsafe extern "C" fn wave_speed(_: *const c_void, _: f64) -> f64 {
+        f64::NAN
+    }
     static TABLE: LawTable = LawTable {
         abi_version: granite_plugin_abi::ABI_VERSION + 100,
         table_size: std::mem::size_of::<LawTable>() as u32,
@@ -101,9 +109,71 @@ mod wrong {
         create,
         update,
         destroy,
+        wave_speed,
     };
     #[no_mangle]
     pub extern "C" fn granite_law_table() -> *const LawTable {
+        &TABLE
+    }
+}
+
+/// The same law through a table of ABI version 1 (before `wave_speed`), for granite's test of
+/// its loading path for older plugins.
+#[cfg(feature = "abi_v1")]
+mod version_1 {
+    use super::DruckerPrager;
+    use granite_plugin_abi::{CStrPtr, ErrorBuffer, LawTableV1, NativeLaw};
+    use std::ffi::c_void;
+    unsafe extern "C" fn create(p: *const f64, n: usize, err: *mut ErrorBuffer) -> *mut c_void {
+        match DruckerPrager::new(unsafe { std::slice::from_raw_parts(p, n) }) {
+            Ok(law) => Box::into_raw(Box::new(law)) as *mut c_void,
+            Err(e) => {
+                unsafe { (*err).set(&e) };
+                std::ptr::null_mut()
+            }
+        }
+    }
+    unsafe extern "C" fn update(
+        law: *const c_void,
+        n: usize,
+        stress: *mut f64,
+        dstrain: *const f64,
+        state: *mut f64,
+        err: *mut ErrorBuffer,
+    ) -> i32 {
+        let law = unsafe { &*(law as *const DruckerPrager) };
+        let stress = unsafe { std::slice::from_raw_parts_mut(stress as *mut [f64; 6], n) };
+        let dstrain = unsafe { std::slice::from_raw_parts(dstrain as *const [f64; 6], n) };
+        let state = unsafe { std::slice::from_raw_parts_mut(state, n) };
+        match law.update(stress, dstrain, state) {
+            Ok(()) => 0,
+            Err(e) => {
+                unsafe { (*err).set(&e) };
+                1
+            }
+        }
+    }
+    unsafe extern "C" fn destroy(law: *mut c_void) {
+        drop(unsafe { Box::from_raw(law as *mut DruckerPrager) });
+    }
+    static PARAMS: [CStrPtr; 4] =
+        [CStrPtr(c"young".as_ptr()), CStrPtr(c"poisson".as_ptr()), CStrPtr(c"alpha".as_ptr()), CStrPtr(c"k".as_ptr())];
+    static STATE: [CStrPtr; 1] = [CStrPtr(c"gamma_p".as_ptr())];
+    static TABLE: LawTableV1 = LawTableV1 {
+        abi_version: 1,
+        table_size: std::mem::size_of::<LawTableV1>() as u32,
+        name: CStrPtr(c"drucker_prager".as_ptr()),
+        version: CStrPtr(c"0.1.0".as_ptr()),
+        param_count: 4,
+        param_names: PARAMS.as_ptr(),
+        state_count: 1,
+        state_names: STATE.as_ptr(),
+        create,
+        update,
+        destroy,
+    };
+    #[no_mangle]
+    pub extern "C" fn granite_law_table() -> *const LawTableV1 {
         &TABLE
     }
 }

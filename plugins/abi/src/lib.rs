@@ -12,8 +12,9 @@
 
 use std::ffi::{c_char, c_void};
 
-/// Bumped whenever [`LawTable`] changes.
-pub const ABI_VERSION: u32 = 1;
+/// Bumped whenever [`LawTable`] changes. 2 added `wave_speed`; granite still loads version-1
+/// tables ([`LawTableV1`]), whose laws report no wave speed.
+pub const ABI_VERSION: u32 = 2;
 
 /// Where a function writes an error message (UTF-8, truncated to the buffer).
 #[repr(C)]
@@ -65,9 +66,37 @@ pub struct LawTable {
         err: *mut ErrorBuffer,
     ) -> i32,
     pub destroy: unsafe extern "C" fn(law: *mut c_void),
+    /// Speed of the fastest (P) wave of the law at a density, m/s, for the time-step limit
+    /// (`sim.critical_dt()`); NaN when the law does not know it.
+    pub wave_speed: unsafe extern "C" fn(law: *const c_void, density: f64) -> f64,
 }
 
 unsafe impl Sync for LawTable {}
+
+/// The table of ABI version 1: [`LawTable`] without `wave_speed` (the same leading fields).
+#[repr(C)]
+pub struct LawTableV1 {
+    pub abi_version: u32,
+    pub table_size: u32,
+    pub name: CStrPtr,
+    pub version: CStrPtr,
+    pub param_count: usize,
+    pub param_names: *const CStrPtr,
+    pub state_count: usize,
+    pub state_names: *const CStrPtr,
+    pub create: unsafe extern "C" fn(params: *const f64, count: usize, err: *mut ErrorBuffer) -> *mut c_void,
+    pub update: unsafe extern "C" fn(
+        law: *const c_void,
+        n: usize,
+        stress: *mut f64,
+        dstrain: *const f64,
+        state: *mut f64,
+        err: *mut ErrorBuffer,
+    ) -> i32,
+    pub destroy: unsafe extern "C" fn(law: *mut c_void),
+}
+
+unsafe impl Sync for LawTableV1 {}
 
 /// A constitutive law written in safe Rust, exported with [`export_law!`].
 pub trait NativeLaw: Sized + Send + Sync + 'static {
@@ -75,6 +104,13 @@ pub trait NativeLaw: Sized + Send + Sync + 'static {
     fn new(params: &[f64]) -> Result<Self, String>;
     /// Updates the stress and state of points from their strain increments.
     fn update(&self, stress: &mut [[f64; 6]], dstrain: &[[f64; 6]], state: &mut [f64]) -> Result<(), String>;
+    /// Speed of the fastest (P) wave at `density`, m/s: `sqrt((K + 4G/3) / rho)` for isotropic
+    /// elasticity. granite's time-step limit (`sim.critical_dt()`) needs it; None leaves the
+    /// time step to the user.
+    fn wave_speed(&self, density: f64) -> Option<f64> {
+        let _ = density;
+        None
+    }
 }
 
 /// Exports a [`NativeLaw`] as `granite_law_table`:
@@ -136,6 +172,14 @@ macro_rules! export_law {
             let _ = ::std::panic::catch_unwind(|| unsafe { drop(Box::from_raw(law as *mut $ty)) });
         }
 
+        unsafe extern "C" fn granite_wave_speed(law: *const ::std::ffi::c_void, density: f64) -> f64 {
+            ::std::panic::catch_unwind(|| {
+                let law = unsafe { &*(law as *const $ty) };
+                <$ty as $crate::NativeLaw>::wave_speed(law, density).unwrap_or(f64::NAN)
+            })
+            .unwrap_or(f64::NAN)
+        }
+
         static GRANITE_TABLE: $crate::LawTable = $crate::LawTable {
             abi_version: $crate::ABI_VERSION,
             table_size: ::std::mem::size_of::<$crate::LawTable>() as u32,
@@ -148,6 +192,7 @@ macro_rules! export_law {
             create: granite_create,
             update: granite_update,
             destroy: granite_destroy,
+            wave_speed: granite_wave_speed,
         };
 
         /// The entry point granite looks for.
