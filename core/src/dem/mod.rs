@@ -10,6 +10,7 @@ pub mod cell;
 pub mod clump;
 pub mod contacts;
 pub mod delaunay;
+pub mod energy;
 pub mod generate;
 pub mod inspect;
 pub mod measures;

@@ -88,6 +88,8 @@ pub struct DemSim {
     pub events: Vec<String>,
     /// Lasting external loads on single spheres, by id (see `bodies.rs`).
     pub external: Vec<crate::dem::bodies::ExternalLoad>,
+    /// The energy balance, when tracked (see `energy.rs`).
+    pub energy: Option<crate::dem::energy::EnergyTracker>,
     pub(crate) next_id: u64,
 }
 
@@ -135,6 +137,7 @@ impl DemSim {
             rebuilds: 0,
             events: Vec::new(),
             external: Vec::new(),
+            energy: None,
             next_id: 0,
         }
     }
@@ -581,17 +584,15 @@ impl DemSim {
         best
     }
 
-    /// A new time step, checked at once against `critical_dt` of the spheres and laws present
-    /// (and again before each run, as spheres and laws may come later).
     pub fn set_dt(&mut self, dt: f64) -> Result<()> {
-        let dt = crate::params::time_step(dt)?;
-        self.check_dt(dt)?;
-        self.dt = dt;
+        self.dt = crate::params::time_step(dt)?;
         self.recheck_time_step();
         Ok(())
     }
 
-    fn check_dt(&self, dt: f64) -> Result<()> {
+    /// Whether `dt` is within `critical_dt` of the spheres and laws present (a script's `sim.dt`
+    /// checks it at once; a run checks it again, as spheres and laws may come later).
+    pub fn check_dt(&self, dt: f64) -> Result<()> {
         if let Some(crit) = self.critical_dt() {
             if dt > crit {
                 return Err(GraniteError::param(

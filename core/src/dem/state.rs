@@ -54,6 +54,8 @@ pub(crate) struct DemState {
     rebuilds: u64,
     #[serde(default)]
     external: Vec<crate::dem::bodies::ExternalLoad>,
+    #[serde(default)]
+    energy: Option<crate::dem::energy::EnergyTracker>,
 }
 
 impl DemSim {
@@ -95,6 +97,7 @@ impl DemSim {
             needs_rebuild: self.needs_rebuild,
             rebuilds: self.rebuilds,
             external: self.external.clone(),
+            energy: self.energy.clone(),
         }
     }
 
@@ -162,6 +165,7 @@ impl DemSim {
         sim.needs_rebuild = st.needs_rebuild;
         sim.rebuilds = st.rebuilds;
         sim.external = st.external;
+        sim.energy = st.energy;
         sim.next_id = sim.spheres.id.iter().max().map_or(0, |m| m + 1);
         check_consistent(&sim).map_err(|e| GraniteError::Other(format!("{source}: not a usable DEM state: {e}")))?;
         // The parallel stages' cuts of the pair lists are found again on the first step, not saved.

@@ -90,20 +90,28 @@ impl DemSim {
             _ => (None, None, 0.0),
         };
         let motion = Motion::new(self.gravity, self.damping, self.dt, affine);
-        let mut moved = if parallel && !check && self.external.is_empty() {
+        let tracking = self.energy.is_some();
+        let mut moved = if parallel && !check && self.external.is_empty() && !tracking {
             self.contacts_and_motion(&motion)
         } else {
             // The stability check reads this step's contacts before anything moves, so that a
             // step it stops leaves the spheres where they were. It comes once in 1000 steps at
             // most, so such a step runs on this thread alone (the same sums as in parallel).
-            // External loads on single spheres (a console's experiment, not a production run)
-            // are added between the contact stage and the motion, so they take this path too.
+            // External loads on single spheres and the energy tracker (a console's experiments,
+            // not production runs) work between the contact stage and the motion, so they take
+            // this path too.
+            let history = tracking.then(|| (self.pairs.history.clone(), self.wall_pairs.history.clone()));
             self.contacts();
             self.apply_external_loads();
             if check {
                 self.check_time_step()?;
             }
-            integrate(&mut self.spheres, &self.x_at_build, &motion)
+            let before = history.map(|history| self.energy_before_motion(history));
+            let moved = integrate(&mut self.spheres, &self.x_at_build, &motion);
+            if let Some(before) = before {
+                self.energy_after_motion(before);
+            }
+            moved
         };
         if deformed.is_some() {
             self.cell = deformed;

@@ -146,6 +146,23 @@ impl ContactBatch<'_> {
     }
 }
 
+/// One touching contact over one step, as the energy tracker hands it to its law: the geometry
+/// and relative velocity the step's force was computed from, the pair's values and its history
+/// before and after the step, and the force on particle 1.
+pub struct ContactStep<'a> {
+    pub normal: Vec3,
+    pub overlap: f64,
+    pub rel_velocity: Vec3,
+    /// Relative velocity over the step, the mean of the half-step velocities before and after
+    /// it: the force's work on the bodies is `force . mean_rel_velocity dt`.
+    pub mean_rel_velocity: Vec3,
+    pub dt: f64,
+    pub params: &'a [f64],
+    pub history_before: &'a [f64],
+    pub history_after: &'a [f64],
+    pub force: Vec3,
+}
+
 /// The physics of one contact: force and extra moment on particle 1 (see [`ContactBatch`]).
 pub trait ContactPhysics<const P: usize, const H: usize> {
     fn contact(&mut self, c: Contact<'_, P, H>) -> (Vec3, Vec3);
@@ -192,6 +209,18 @@ pub trait ContactLaw: Send + Sync {
     /// Elastic energy stored in one contact (for energy balances).
     fn elastic_energy(&self, _overlap: f64, _params: &[f64], _history: &[f64]) -> f64 {
         0.0
+    }
+    /// Whether [`ContactLaw::dissipation`] accounts for every loss of the law (the energy tracker
+    /// refuses a law that does not: its balance could not close).
+    fn tracks_dissipation(&self) -> bool {
+        false
+    }
+    /// Energy the contact dissipated in one step: `(friction, viscous)`, J. Friction: the
+    /// tangential force times the slip of the step (the part of the tangential displacement the
+    /// Coulomb limit took off the spring); viscous: the dashpot's force times the overlap's change
+    /// over the step (`-mean_rel_velocity . n dt`).
+    fn dissipation(&self, _step: &ContactStep<'_>) -> (f64, f64) {
+        (0.0, 0.0)
     }
 }
 

@@ -221,16 +221,14 @@ impl MpmSim {
             .reduce(f64::min)
     }
 
-    /// A new time step, checked at once against the stability limit of the points present (and
-    /// again before each run, as points and materials may come later).
     pub fn set_dt(&mut self, dt: f64) -> Result<()> {
-        let dt = crate::params::time_step(dt)?;
-        self.check_dt(dt)?;
-        self.dt = dt;
+        self.dt = crate::params::time_step(dt)?;
         Ok(())
     }
 
-    fn check_dt(&self, dt: f64) -> Result<()> {
+    /// Whether `dt` is within the stability limit of the points present (a script's `sim.dt`
+    /// checks it at once; a run checks it again, as points and materials may come later).
+    pub fn check_dt(&self, dt: f64) -> Result<()> {
         if let Some(crit) = self.critical_dt() {
             if dt > crit {
                 return Err(GraniteError::param(

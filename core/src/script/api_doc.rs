@@ -138,6 +138,8 @@ pub static API: &[ApiDoc] = &[
     f("DemSim", "contacts", &["sim.contacts()"], NONE, "every touching contact: ids, point, normal, overlap, force, normal_force, shear_force, law, params"),
     f("DemSim", "contact", &["sim.contact(id1, id2)"], NONE, "the contact of two spheres, or ()"),
     f("DemSim", "wall_contact", &["sim.wall_contact(id, wall)"], NONE, "the contact of a sphere with a wall, or ()"),
+    f("DemSim", "track_energy", &["sim.track_energy(on)"], NONE, "tracks the energy balance from the next step on (series columns energy_*)"),
+    f("DemSim", "energy", &["sim.energy()"], NONE, "kinetic, gravitational, elastic, friction, viscous, damping, boundary_work, total, initial_total (J)"),
     f("DemSim", "fabric", &["sim.fabric()"], NONE, "fabric tensor (1/N) sum n n of the sphere contacts"),
     // DEM: periodic cell and measures.
     f("DemSim", "periodic", &["sim.periodic([lx, ly, lz])"], NONE, "makes the domain a periodic cell"),

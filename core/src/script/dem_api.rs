@@ -125,6 +125,22 @@ impl ScriptSim for DemScene {
             d.particles as f64,
             d.max_height,
         ];
+        if let Some(energy) = &self.dem.energy {
+            const COLUMNS: [&str; 8] = [
+                "energy_kinetic",
+                "energy_gravitational",
+                "energy_elastic",
+                "energy_friction",
+                "energy_viscous",
+                "energy_damping",
+                "energy_boundary_work",
+                "energy_total",
+            ];
+            cols.extend(COLUMNS);
+            // Nothing is measured before the first tracked step.
+            let measured = energy.initial_total.is_some();
+            vals.extend(energy.entries()[..8].iter().map(|(_, v)| if measured { *v } else { f64::NAN }));
+        }
         if let (Some(volume), Some(e), Some((strain, vol_strain))) =
             (self.dem.cell_volume(), self.dem.void_ratio(), self.dem.cell_strain())
         {
@@ -621,7 +637,12 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
         let d = number(&d, "damping")?;
         s.lock().sim.dem.set_damping(d).or_rhai()
     });
-    engine.register_fn("dt", |s: &mut DemHandle, dt: Dynamic| s.lock().sim.dem.set_dt(number(&dt, "dt")?).or_rhai());
+    engine.register_fn("dt", |s: &mut DemHandle, dt: Dynamic| {
+        let dt = number(&dt, "dt")?;
+        let mut st = s.lock();
+        st.sim.dem.check_dt(dt).or_rhai()?;
+        st.sim.dem.set_dt(dt).or_rhai()
+    });
     engine.register_fn("critical_dt", |s: &mut DemHandle| s.lock().sim.dem.critical_dt().unwrap_or(f64::INFINITY));
     engine.register_fn("stable_dt", |s: &mut DemHandle| {
         s.lock().sim.dem.stable_dt().map(|limit| limit.dt).unwrap_or(f64::INFINITY)

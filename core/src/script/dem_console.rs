@@ -175,6 +175,7 @@ pub(super) fn register(engine: &mut Engine) {
     register_bodies(engine);
     register_contacts(engine);
     register_live_changes(engine);
+    register_energy(engine);
 }
 
 fn register_bodies(engine: &mut Engine) {
@@ -255,6 +256,21 @@ fn register_contacts(engine: &mut Engine) {
     engine.register_fn("fabric", |s: &mut DemHandle| {
         let f = s.lock().sim.dem.fabric_tensor();
         f.iter().map(|row| vec3(*row)).collect::<Array>()
+    });
+}
+
+fn register_energy(engine: &mut Engine) {
+    engine.register_fn("track_energy", |s: &mut DemHandle, on: bool| s.lock().sim.dem.track_energy(on).or_rhai());
+    engine.register_fn("energy", |s: &mut DemHandle| {
+        let st = s.lock();
+        let Some(e) = st.sim.dem.energy.as_ref() else {
+            return err("energy(): call sim.track_energy(true) first (from the next step on)");
+        };
+        let mut m = Map::new();
+        for (k, v) in e.entries() {
+            m.insert(k.into(), Dynamic::from(v));
+        }
+        Ok(m)
     });
 }
 

@@ -672,7 +672,12 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
     }
     engine.register_fn("velocity_update", set_update);
     engine.register_fn("velocity_update", |s: &mut SimHandle, name: &str| set_update(s, name, Map::new()));
-    engine.register_fn("dt", |s: &mut SimHandle, dt: Dynamic| s.lock().sim.mpm.set_dt(number(&dt, "dt")?).or_rhai());
+    engine.register_fn("dt", |s: &mut SimHandle, dt: Dynamic| {
+        let dt = number(&dt, "dt")?;
+        let mut st = s.lock();
+        st.sim.mpm.check_dt(dt).or_rhai()?;
+        st.sim.mpm.set_dt(dt).or_rhai()
+    });
     engine.register_fn("critical_dt", |s: &mut SimHandle| -> RhaiResult<f64> {
         let st = s.lock();
         let sim = &st.sim.mpm;

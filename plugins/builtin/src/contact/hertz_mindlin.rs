@@ -190,6 +190,24 @@ impl ContactLaw for HertzMindlin {
         let ft2 = h[0] * h[0] + h[1] * h[1] + h[2] * h[2];
         normal + if kt > 0.0 { 0.5 * ft2 / kt } else { 0.0 }
     }
+    fn tracks_dissipation(&self) -> bool {
+        true
+    }
+    fn dissipation(&self, c: &granite_core::ext::contact::ContactStep<'_>) -> (f64, f64) {
+        let (e_star, g_star, r_star) = (c.params[0], c.params[1], c.params[2]);
+        let a = (r_star * c.overlap.max(0.0)).sqrt();
+        let kt = 8.0 * g_star * a;
+        // The history is a force: the slip is the force the cap took off, over k_t.
+        let friction = if kt > 0.0 {
+            let before: Vec<f64> = c.history_before.iter().map(|f| f / kt).collect();
+            let after: Vec<f64> = c.history_after.iter().map(|f| f / kt).collect();
+            super::tangential::spring_slip_work(&before, &after, c.normal, c.rel_velocity, c.dt, kt)
+        } else {
+            0.0
+        };
+        let elastic = 4.0 / 3.0 * e_star * a * c.overlap;
+        (friction, super::tangential::dashpot_work(c.force, c.normal, elastic, c.mean_rel_velocity, c.dt))
+    }
 }
 
 // The law on every contact of a batch, compiled for AVX2 where the CPU has it.

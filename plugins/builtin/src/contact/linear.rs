@@ -145,6 +145,16 @@ impl ContactLaw for Linear {
         let u = [h[0], h[1], h[2]];
         0.5 * p[0] * overlap * overlap + 0.5 * p[1] * dot(u, u)
     }
+    fn tracks_dissipation(&self) -> bool {
+        true
+    }
+    fn dissipation(&self, c: &granite_core::ext::contact::ContactStep<'_>) -> (f64, f64) {
+        let kt = c.params[1];
+        (
+            super::tangential::spring_slip_work(c.history_before, c.history_after, c.normal, c.rel_velocity, c.dt, kt),
+            0.0,
+        )
+    }
 }
 
 // The law on every contact of a batch, compiled for AVX2 where the CPU has it.

@@ -82,3 +82,26 @@ pub fn rotational_spring(theta: &mut Vec3, omega: Vec3, dt: f64, k: f64, limit: 
     *theta = t;
     m
 }
+
+/// Energy an incremental tangential spring lost to slip in one step: the spring went from `before`
+/// (turned into the contact plane) to `after` by `v_t dt` less the slip `trial - after`, `trial`
+/// being `before + v_t dt`. Over the step its force is the mean of its two ends (the trapezoid
+/// rule, exact for a linear spring), so the slip took `kt (before + after)/2 . slip`.
+pub fn spring_slip_work(before: &[f64], after: &[f64], n: Vec3, rel_velocity: Vec3, dt: f64, kt: f64) -> f64 {
+    let r = rotate_into_plane([before[0], before[1], before[2]], n);
+    let vn = dot(rel_velocity, n);
+    let vt = minus_along(rel_velocity, vn, n);
+    let kept = [after[0], after[1], after[2]];
+    let slip = [r[0] + vt[0] * dt - kept[0], r[1] + vt[1] * dt - kept[1], r[2] + vt[2] * dt - kept[2]];
+    let mean = [0.5 * (r[0] + kept[0]), 0.5 * (r[1] + kept[1]), 0.5 * (r[2] + kept[2])];
+    kt * dot(mean, slip)
+}
+
+/// Viscous work of a normal dashpot over one step: the normal force beyond the elastic one
+/// (`fn - f_elastic`, the dashpot's share after the clamp at zero) times the overlap's change
+/// `-v_n dt` (`rel_velocity` the step's mean relative velocity).
+pub fn dashpot_work(force: Vec3, n: Vec3, elastic: f64, rel_velocity: Vec3, dt: f64) -> f64 {
+    // The force on particle 1 is -fn n + ft.
+    let fn_ = -dot(force, n);
+    (fn_ - elastic) * -dot(rel_velocity, n) * dt
+}

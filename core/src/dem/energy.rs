@@ -1,0 +1,239 @@
+//! The energy tracker (YADE's `O.trackEnergy`): the energy in the system and every way it came
+//! in or went out, step by step, so that their balance can be checked.
+//!
+//! At step n (forces from the positions `x_n`, velocities stored at half steps):
+//! - kinetic `1/2 m v_(n-1/2) . v_(n+1/2)` (and the same for rotations): the kinetic energy that,
+//!   with the elastic energy at `x_n`, leapfrog conserves exactly for linear springs;
+//! - gravitational `-m g . x_n`, elastic: the contact laws' `elastic_energy` at `x_n`;
+//! - friction and viscous: what each contact's law says it dissipated in the step
+//!   (`ContactLaw::dissipation`), summed;
+//! - damping: the work Cundall's damping took, `-m (a - F/m - g) . v_n dt` per free degree of
+//!   freedom, `a = (v_(n+1/2) - v_(n-1/2))/dt` and `v_n` the mean of the two;
+//! - boundary work: done on the spheres by moving walls (each wall contact's force times the
+//!   wall's velocity), by blocked degrees of freedom (the force that kept their velocity), and by
+//!   external loads.
+//!
+//! `kinetic + gravitational + elastic + friction + viscous + damping - boundary` stays constant.
+
+use crate::dem::particles::{dof, FREE};
+use crate::dem::sim::DemSim;
+use crate::dem::step::branch;
+use crate::error::{GraniteError, Result};
+use crate::ext::contact::ContactStep;
+use crate::math::Vec3;
+
+/// What the tracker holds: the accumulated exchanges and the last step's energies.
+#[derive(Debug, Clone, Default, serde::Serialize, serde::Deserialize)]
+pub struct EnergyTracker {
+    pub kinetic: f64,
+    pub gravitational: f64,
+    pub elastic: f64,
+    pub friction: f64,
+    pub viscous: f64,
+    pub damping: f64,
+    pub boundary_work: f64,
+    /// The balance at the first tracked step.
+    pub initial_total: Option<f64>,
+}
+
+impl EnergyTracker {
+    /// `kinetic + gravitational + elastic + dissipated - boundary work`: constant.
+    pub fn total(&self) -> f64 {
+        self.kinetic + self.gravitational + self.elastic + self.friction + self.viscous + self.damping
+            - self.boundary_work
+    }
+
+    pub fn entries(&self) -> [(&'static str, f64); 9] {
+        [
+            ("kinetic", self.kinetic),
+            ("gravitational", self.gravitational),
+            ("elastic", self.elastic),
+            ("friction", self.friction),
+            ("viscous", self.viscous),
+            ("damping", self.damping),
+            ("boundary_work", self.boundary_work),
+            ("total", self.total()),
+            ("initial_total", self.initial_total.unwrap_or(f64::NAN)),
+        ]
+    }
+}
+
+/// The state before a step's motion that the tracker compares with the state after.
+pub(crate) struct BeforeMotion {
+    x: Vec<Vec3>,
+    v: Vec<Vec3>,
+    w: Vec<Vec3>,
+    /// History of the sphere pairs and of the wall pairs before the contact stage.
+    history: (Vec<f64>, Vec<f64>),
+}
+
+fn dot(a: Vec3, b: Vec3) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+fn cross(a: Vec3, b: Vec3) -> Vec3 {
+    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+}
+
+impl DemSim {
+    /// Starts (or stops) tracking energy from the next step. Periodic cells and clumps are not
+    /// covered, nor laws that do not account for their losses.
+    pub fn track_energy(&mut self, on: bool) -> Result<()> {
+        if !on {
+            self.energy = None;
+            return Ok(());
+        }
+        if self.cell.is_some() {
+            return Err(GraniteError::Setup("energy tracking covers open domains, not periodic cells".into()));
+        }
+        if !self.clumps.is_empty() {
+            return Err(GraniteError::Setup("energy tracking covers spheres, not clumps".into()));
+        }
+        if let Some(law) = self.laws.iter().find(|l| !l.tracks_dissipation()) {
+            return Err(GraniteError::Setup(format!(
+                "contact law `{}` does not account for its losses: energy cannot be tracked with it",
+                law.name()
+            )));
+        }
+        self.energy = Some(EnergyTracker::default());
+        Ok(())
+    }
+
+    /// What the tracker keeps of a step before its motion (called after the contact stage).
+    pub(crate) fn energy_before_motion(&self, history: (Vec<f64>, Vec<f64>)) -> BeforeMotion {
+        let s = &self.spheres;
+        BeforeMotion { x: s.x.clone(), v: s.v.clone(), w: s.w.clone(), history }
+    }
+
+    /// Contact energies of the step, at the positions its forces came from: the elastic energy,
+    /// what each contact dissipated, and the work of moving walls.
+    fn contact_energies(&self, b: &BeforeMotion) -> (f64, f64, f64, f64) {
+        let s = &self.spheres;
+        let (mut elastic, mut friction, mut viscous, mut walls) = (0.0, 0.0, 0.0, 0.0);
+        let mean = |i: usize| {
+            ([0, 1, 2].map(|a| 0.5 * (b.v[i][a] + s.v[i][a])), [0, 1, 2].map(|a| 0.5 * (b.w[i][a] + s.w[i][a])))
+        };
+        let mut add = |law: u16, normal: Vec3, overlap: f64, rel: (Vec3, Vec3), k: usize, wall: bool| {
+            let list = if wall { &self.wall_pairs } else { &self.pairs };
+            let before = if wall { &b.history.1 } else { &b.history.0 };
+            let (ps, hs) = (list.param_stride, list.history_stride);
+            let law = &self.laws[law as usize];
+            let params = &list.params[k * ps..(k + 1) * ps];
+            let after = &list.history[k * hs..(k + 1) * hs];
+            elastic += law.elastic_energy(overlap, params, after);
+            let step = ContactStep {
+                normal,
+                overlap,
+                rel_velocity: rel.0,
+                mean_rel_velocity: rel.1,
+                dt: self.dt,
+                params,
+                history_before: &before[k * hs..(k + 1) * hs],
+                history_after: after,
+                force: list.force[k],
+            };
+            let (f, v) = law.dissipation(&step);
+            friction += f;
+            viscous += v;
+        };
+        // The geometry the contact stage used (see `sphere_contacts` and `wall_contacts`), with
+        // the velocities it used and the step's mean ones.
+        for k in 0..self.pairs.len() {
+            if !self.pairs.touching[k] {
+                continue;
+            }
+            let (i, j) = (self.pairs.a[k] as usize, self.pairs.b[k] as usize);
+            let d = branch(&b.x, i, j, self.pairs.shift[k], self.cell.as_ref());
+            let dist = dot(d, d).sqrt();
+            let n = d.map(|c| c / dist);
+            let overlap = s.radius[i] + s.radius[j] - dist;
+            let la = s.radius[i] - 0.5 * overlap;
+            let lb = dist - la;
+            let relative = |vi: Vec3, wi: Vec3, vj: Vec3, wj: Vec3| {
+                let spins = [0, 1, 2].map(|a| la * wi[a] + lb * wj[a]);
+                let c = cross(spins, n);
+                [0, 1, 2].map(|a| (vj[a] - vi[a]) - c[a])
+            };
+            let ((vi, wi), (vj, wj)) = (mean(i), mean(j));
+            let rel = (relative(b.v[i], b.w[i], b.v[j], b.w[j]), relative(vi, wi, vj, wj));
+            add(self.pairs.law[k], n, overlap, rel, k, false);
+        }
+        for k in 0..self.wall_pairs.len() {
+            if !self.wall_pairs.touching[k] {
+                continue;
+            }
+            let (i, w) = (self.wall_pairs.a[k] as usize, self.wall_pairs.b[k] as usize);
+            let wall = &self.walls[w];
+            // The wall as it was at the contact stage (it moved with the spheres).
+            let mut then = wall.clone();
+            then.position = [0, 1, 2].map(|a| wall.position[a] - wall.velocity[a] * self.dt);
+            let Some(geo) = then.contact(b.x[i], s.radius[i], 0.0) else { continue };
+            let arm = [0, 1, 2].map(|a| geo.point[a] - b.x[i][a]);
+            let relative = |v: Vec3, w: Vec3| {
+                let spin = cross(w, arm);
+                [0, 1, 2].map(|a| wall.velocity[a] - (v[a] + spin[a]))
+            };
+            let (vm, wm) = mean(i);
+            add(self.wall_pairs.law[k], geo.normal, -geo.gap, (relative(b.v[i], b.w[i]), relative(vm, wm)), k, true);
+            // A moving wall works on the sphere through the contact.
+            walls += dot(self.wall_pairs.force[k], wall.velocity) * self.dt;
+        }
+        (elastic, friction, viscous, walls)
+    }
+
+    /// Closes a tracked step after the motion.
+    pub(crate) fn energy_after_motion(&mut self, before: BeforeMotion) {
+        let (elastic, friction, viscous, walls) = self.contact_energies(&before);
+        let dt = self.dt;
+        let g = self.gravity;
+        let s = &self.spheres;
+        let (mut kinetic, mut gravitational, mut damping, mut boundary) = (0.0, 0.0, 0.0, walls);
+        for i in 0..s.len() {
+            if s.clump[i] != FREE {
+                continue;
+            }
+            let m = s.mass[i];
+            let inertia = s.inertia[i];
+            gravitational -= m * dot(g, before.x[i]);
+            for a in 0..3 {
+                // Translation and rotation of one axis: the force that changed the velocity
+                // beyond the applied ones is damping on a free axis, a constraint on a blocked one.
+                let mut account = |mass: f64, old: f64, new: f64, applied_acc: f64, blocked: bool| {
+                    kinetic += 0.5 * mass * old * new;
+                    let extra = mass * ((new - old) / dt - applied_acc);
+                    let work = extra * 0.5 * (old + new) * dt;
+                    if blocked {
+                        boundary += work;
+                    } else {
+                        damping -= work;
+                    }
+                };
+                let blocked = s.blocked[i];
+                account(m, before.v[i][a], s.v[i][a], s.force[i][a] / m + g[a], blocked & (dof::X << a) != 0);
+                account(inertia, before.w[i][a], s.w[i][a], s.torque[i][a] / inertia, blocked & (dof::RX << a) != 0);
+            }
+        }
+        // External loads are in the spheres' forces: their work, over the step's mean velocities.
+        for load in &self.external {
+            if let Some(i) = self.sphere_index(load.id) {
+                let mean = |old: Vec3, new: Vec3| [0, 1, 2].map(|a| 0.5 * (old[a] + new[a]));
+                boundary += dot(load.force, mean(before.v[i], s.v[i])) * dt;
+                boundary += dot(load.torque, mean(before.w[i], s.w[i])) * dt;
+            }
+        }
+        if let Some(e) = self.energy.as_mut() {
+            e.kinetic = kinetic;
+            e.gravitational = gravitational;
+            e.elastic = elastic;
+            // The losses of this step come after the state at x_n that the totals compare.
+            let total = e.total();
+            if e.initial_total.is_none() {
+                e.initial_total = Some(total);
+            }
+            e.friction += friction;
+            e.viscous += viscous;
+            e.damping += damping;
+            e.boundary_work += boundary;
+        }
+    }
+}
