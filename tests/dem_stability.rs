@@ -269,7 +269,8 @@ fn a_script_is_stopped_below_critical_dt_when_the_packing_cannot_follow_and_may_
     // shears its four contacts around the axis by 2 l theta, omega^2 = 8 k_t l^2 / I, about
     // 20 k_n / m: leapfrog needs dt < 0.45 sqrt(m/k_n), below critical_dt = 0.71 sqrt(m/k_n).
     let src = format!(
-        "let sim = dem(#{{ seed: 1 }});\n\
+        "let stop = param(\"stop\", true);\n\
+         let sim = dem(#{{ seed: 1 }});\n\
          let m = sim.material(#{{ name: \"glass\", density: {DENSITY:?} }});\n\
          sim.contact_law(\"linear\", #{{ kn: {KN:?}, kt_ratio: 1.0, friction: 80.0 }});\n\
          let r = {RADIUS:?}; let d = 2.0 * r - {OVERLAP:?} * r;\n\
@@ -277,7 +278,7 @@ fn a_script_is_stopped_below_critical_dt_when_the_packing_cannot_follow_and_may_
          for i in 0..4 {{ for j in 0..4 {{ for k in 0..4 {{\n\
              sim.sphere(m, [(i.to_float() + 0.5) * d, (j.to_float() + 0.5) * d, (k.to_float() + 0.5) * d], r, #{{}});\n\
          }} }} }}\n\
-         sim.stop_on_unstable_dt(param(\"stop\", true));\n\
+         sim.stop_on_unstable_dt(stop);\n\
          sim.dt(0.9 * sim.critical_dt());\n\
          sim.run_steps(10);\n"
     );

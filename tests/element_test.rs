@@ -91,7 +91,7 @@ rve.periodic([8.0 * r, 8.0 * r, 8.0 * r]);
 for i in 0..4 { for j in 0..4 { for k in 0..4 {
     rve.sphere(g, [(2 * i + 1).to_float() * r, (2 * j + 1).to_float() * r, (2 * k + 1).to_float() * r], r);
 } } }
-rve.dt(1e-5);
+rve.dt(5e-6);
 let t = element_test("dem_rve", #{ rve: rve, dem_steps: 50 }, #{ strain: [-1e-4, -1e-4, -1e-4, 0.0, 0.0, 0.0], steps: 10 });
 summary("sxx", t.stress[10][0]);
 summary("szz", t.stress[10][2]);

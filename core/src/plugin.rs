@@ -57,9 +57,10 @@ pub fn load_plugin(path: &Path, registry: &mut Registry) -> Result<(String, Stri
     if table.is_null() {
         return Err(GraniteError::Other(format!("plugin {library}: `granite_law_table` returned null")));
     }
-    // The header (version and size) leads every version's table; the rest is read as the layout
-    // of the version it declares.
-    let (abi, size) = unsafe { ((*table).abi_version, (*table).table_size as usize) };
+    // Every version's table starts with version 1's fields (the version and size first); what
+    // came later is read only from a table that declares its version.
+    let head: &'static LawTableV1 = unsafe { &*(table as *const LawTableV1) };
+    let (abi, size) = (head.abi_version, head.table_size as usize);
     let expected = match abi {
         1 => std::mem::size_of::<LawTableV1>(),
         ABI_VERSION => std::mem::size_of::<LawTable>(),
@@ -74,23 +75,9 @@ pub fn load_plugin(path: &Path, registry: &mut Registry) -> Result<(String, Stri
             "plugin {library}: its law table (ABI version {abi}) has {size} bytes, granite expects {expected}"
         )));
     }
-    let (table, functions): (&'static LawTableV1, Functions) = if abi == 1 {
-        let t: &'static LawTableV1 = unsafe { &*(table as *const LawTableV1) };
-        (t, Functions { create: t.create, update: t.update, destroy: t.destroy, wave_speed: None })
-    } else {
-        let full: &'static LawTable = unsafe { &*table };
-        // The leading fields of both layouts are the same (repr(C), same types in the same order).
-        let t: &'static LawTableV1 = unsafe { &*(table as *const LawTableV1) };
-        (
-            t,
-            Functions {
-                create: full.create,
-                update: full.update,
-                destroy: full.destroy,
-                wave_speed: Some(full.wave_speed),
-            },
-        )
-    };
+    let wave_speed = (abi >= 2).then(|| unsafe { (*table).wave_speed });
+    let functions = Functions { create: head.create, update: head.update, destroy: head.destroy, wave_speed };
+    let table = head;
     let name = unsafe { text(table.name) }.to_string();
     let version = unsafe { text(table.version) }.to_string();
     if name.is_empty() {

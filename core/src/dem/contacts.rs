@@ -128,14 +128,7 @@ impl PairList {
     /// as `Spheres::retain` does (the order of the list is kept: renumbering keeps the order).
     /// `b` is a sphere index for sphere pairs (`spheres`), a wall index otherwise.
     pub fn retain_spheres(&mut self, keep: &[bool], spheres: bool) {
-        let mut new_index = vec![u32::MAX; keep.len()];
-        let mut next = 0u32;
-        for (i, &k) in keep.iter().enumerate() {
-            if k {
-                new_index[i] = next;
-                next += 1;
-            }
-        }
+        let new_index = crate::dem::particles::compacted_indices(keep);
         let (ps, hs) = (self.param_stride, self.history_stride);
         let mut kept = 0;
         for k in 0..self.len() {

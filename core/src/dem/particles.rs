@@ -39,6 +39,20 @@ pub fn sphere_mass(density: f64, radius: f64) -> f64 {
     density * 4.0 / 3.0 * std::f64::consts::PI * radius.powi(3)
 }
 
+/// The index each kept item gets once those whose `keep` flag is false are removed (in order),
+/// `u32::MAX` for the removed ones.
+pub fn compacted_indices(keep: &[bool]) -> Vec<u32> {
+    let mut new_index = vec![u32::MAX; keep.len()];
+    let mut next = 0u32;
+    for (i, &k) in keep.iter().enumerate() {
+        if k {
+            new_index[i] = next;
+            next += 1;
+        }
+    }
+    new_index
+}
+
 /// `clump` value of a sphere that belongs to no clump.
 pub const FREE: u32 = u32::MAX;
 

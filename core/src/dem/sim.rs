@@ -472,14 +472,7 @@ impl DemSim {
                 }
             }
             // New sphere indices after compaction, then the clumps that remain.
-            let mut new_index = vec![u32::MAX; keep.len()];
-            let mut next = 0u32;
-            for (i, &k) in keep.iter().enumerate() {
-                if k {
-                    new_index[i] = next;
-                    next += 1;
-                }
-            }
+            let new_index = crate::dem::particles::compacted_indices(&keep);
             let old = std::mem::take(&mut self.clumps);
             let mut new_clump = vec![u32::MAX; old.len()];
             for c in 0..old.len() {

@@ -1,7 +1,7 @@
 //! `element_test(law, #{ parameters }, #{ path })`: a law on one material point, without a mesh
 //! (see `crate::element_test`).
 
-use super::convert::{api_options, err, finite, get, integer, numbers, param_map, OrRhai, RhaiResult};
+use super::convert::{api_options, err, finite, get, integer, numbers, OrRhai, RhaiResult};
 use super::ScriptContext;
 use crate::element_test::{run, Path};
 use rhai::{Array, Dynamic, Engine, Map};
@@ -47,18 +47,7 @@ fn element_test(ctx: &ScriptContext, law: &str, params: Map, path: Map) -> RhaiR
         hold,
         steps: steps as usize,
     };
-    // As sim.material takes them: a DEM simulation given as a value is the law's object (the
-    // RVE of dem_rve); `density` and `name` have no part in a point's update.
-    let mut objects = crate::ext::constitutive::ObjectMap::new();
-    let mut skip = vec!["density", "name"];
-    for (k, v) in &params {
-        if let Some(h) = v.clone().try_cast::<super::dem_api::DemHandle>() {
-            let dem = h.lock().sim.prepared();
-            objects.insert(k.to_string(), Arc::new(dem));
-            skip.push(k.as_str());
-        }
-    }
-    let given = param_map(&params, &skip, law)?;
+    let (given, objects) = super::mpm_api::law_inputs(&params, law)?;
     let law_obj = ctx.registry().build_law_with(law, &given, &objects).or_rhai()?;
     law_obj.points_added(1).or_rhai()?;
     let record = run(law_obj.as_ref(), &path).or_rhai()?;

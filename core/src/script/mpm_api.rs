@@ -308,6 +308,25 @@ pub(super) fn time_function(value: &Dynamic, name: &str) -> RhaiResult<(TimeFunc
     Ok((TimeFunction::Constant(finite(value, name)?), None))
 }
 
+/// A law's inputs from the options of `sim.material` or `element_test`: its numbers, and as
+/// objects the values that are simulations (a prepared DEM sample for `dem_rve`); `density` and
+/// `name` are the material's, not the law's.
+pub(super) fn law_inputs(
+    opts: &Map,
+    law: &str,
+) -> RhaiResult<(crate::registry::ParamMap, crate::ext::constitutive::ObjectMap)> {
+    let mut objects = crate::ext::constitutive::ObjectMap::new();
+    let mut skip = vec!["density", "name"];
+    for (k, v) in opts {
+        if let Some(h) = v.clone().try_cast::<super::dem_api::DemHandle>() {
+            let dem = h.lock().sim.prepared();
+            objects.insert(k.to_string(), Arc::new(dem));
+            skip.push(k.as_str());
+        }
+    }
+    Ok((param_map(opts, &skip, law)?, objects))
+}
+
 enum Region {
     Box(Vec3, Vec3),
     Closure(FnPtr),
@@ -343,17 +362,7 @@ impl Handle<MpmScene> {
             Some(n) => string(n, "name")?,
             None => format!("{law}_{}", st.sim.mpm.materials.len() + 1),
         };
-        // Values that are simulations (a prepared DEM sample for `dem_rve`) go to the law as objects.
-        let mut objects = crate::ext::constitutive::ObjectMap::new();
-        let mut skip = vec!["density", "name"];
-        for (k, v) in &opts {
-            if let Some(h) = v.clone().try_cast::<super::dem_api::DemHandle>() {
-                let dem = h.lock().sim.prepared();
-                objects.insert(k.to_string(), Arc::new(dem));
-                skip.push(k.as_str());
-            }
-        }
-        let params = param_map(&opts, &skip, law)?;
+        let (params, objects) = law_inputs(&opts, law)?;
         let law_obj = st.ctx.registry().build_law_with(law, &params, &objects).or_rhai()?;
         let index = st.sim.mpm.add_material(&name, density, law_obj).or_rhai()?;
         Ok(MaterialHandle { index, name })

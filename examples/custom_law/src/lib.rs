@@ -78,7 +78,7 @@ granite_plugin_abi::export_law!(
 /// A table claiming another ABI version, for granite's rejection test.
 #[cfg(feature = "wrong_abi")]
 mod wrong {
-    use granite_plugin_abi::{CStrPtr, ErrorBuffer, LawTable};
+    use granite_plugin_abi::{CStrPtr, ErrorBuffer, LawTable, LawTableV1};
     use std::ffi::c_void;
     unsafe extern "C" fn create(_: *const f64, _: usize, _: *mut ErrorBuffer) -> *mut c_void {
         std::ptr::null_mut()
@@ -98,17 +98,19 @@ mod wrong {
         f64::NAN
     }
     static TABLE: LawTable = LawTable {
-        abi_version: granite_plugin_abi::ABI_VERSION + 100,
-        table_size: std::mem::size_of::<LawTable>() as u32,
-        name: CStrPtr(c"drucker_prager".as_ptr()),
-        version: CStrPtr(c"0.0.0".as_ptr()),
-        param_count: 0,
-        param_names: std::ptr::null(),
-        state_count: 0,
-        state_names: std::ptr::null(),
-        create,
-        update,
-        destroy,
+        head: LawTableV1 {
+            abi_version: granite_plugin_abi::ABI_VERSION + 100,
+            table_size: std::mem::size_of::<LawTable>() as u32,
+            name: CStrPtr(c"drucker_prager".as_ptr()),
+            version: CStrPtr(c"0.0.0".as_ptr()),
+            param_count: 0,
+            param_names: std::ptr::null(),
+            state_count: 0,
+            state_names: std::ptr::null(),
+            create,
+            update,
+            destroy,
+        },
         wave_speed,
     };
     #[no_mangle]

@@ -41,11 +41,24 @@ impl ErrorBuffer {
 pub struct CStrPtr(pub *const c_char);
 unsafe impl Sync for CStrPtr {}
 
-/// The table a plugin exports. Strings are NUL-terminated and static.
+/// The table a plugin exports: the fields of version 1 ([`LawTableV1`]) first, then those added
+/// since. Strings are NUL-terminated and static.
 #[repr(C)]
 pub struct LawTable {
+    pub head: LawTableV1,
+    /// Speed of the fastest (P) wave of the law at a density, m/s, for the time-step limit
+    /// (`sim.critical_dt()`); NaN when the law does not know it.
+    pub wave_speed: unsafe extern "C" fn(law: *const c_void, density: f64) -> f64,
+}
+
+unsafe impl Sync for LawTable {}
+
+/// The table of ABI version 1, and the leading fields of every later one. Strings are
+/// NUL-terminated and static.
+#[repr(C)]
+pub struct LawTableV1 {
     pub abi_version: u32,
-    /// `size_of::<LawTable>()` as the plugin saw it.
+    /// The size of the whole table as the plugin saw it (`size_of::<LawTable>()` of its version).
     pub table_size: u32,
     pub name: CStrPtr,
     pub version: CStrPtr,
@@ -57,34 +70,6 @@ pub struct LawTable {
     pub create: unsafe extern "C" fn(params: *const f64, count: usize, err: *mut ErrorBuffer) -> *mut c_void,
     /// Updates `n` points: `stress` and `dstrain` hold 6 values per point, `state` holds
     /// `state_count` per point. Returns 0, or non-zero with a message.
-    pub update: unsafe extern "C" fn(
-        law: *const c_void,
-        n: usize,
-        stress: *mut f64,
-        dstrain: *const f64,
-        state: *mut f64,
-        err: *mut ErrorBuffer,
-    ) -> i32,
-    pub destroy: unsafe extern "C" fn(law: *mut c_void),
-    /// Speed of the fastest (P) wave of the law at a density, m/s, for the time-step limit
-    /// (`sim.critical_dt()`); NaN when the law does not know it.
-    pub wave_speed: unsafe extern "C" fn(law: *const c_void, density: f64) -> f64,
-}
-
-unsafe impl Sync for LawTable {}
-
-/// The table of ABI version 1: [`LawTable`] without `wave_speed` (the same leading fields).
-#[repr(C)]
-pub struct LawTableV1 {
-    pub abi_version: u32,
-    pub table_size: u32,
-    pub name: CStrPtr,
-    pub version: CStrPtr,
-    pub param_count: usize,
-    pub param_names: *const CStrPtr,
-    pub state_count: usize,
-    pub state_names: *const CStrPtr,
-    pub create: unsafe extern "C" fn(params: *const f64, count: usize, err: *mut ErrorBuffer) -> *mut c_void,
     pub update: unsafe extern "C" fn(
         law: *const c_void,
         n: usize,
@@ -181,17 +166,19 @@ macro_rules! export_law {
         }
 
         static GRANITE_TABLE: $crate::LawTable = $crate::LawTable {
-            abi_version: $crate::ABI_VERSION,
-            table_size: ::std::mem::size_of::<$crate::LawTable>() as u32,
-            name: $crate::CStrPtr(concat!($name, "\0").as_ptr() as *const ::std::ffi::c_char),
-            version: $crate::CStrPtr(concat!($version, "\0").as_ptr() as *const ::std::ffi::c_char),
-            param_count: [$($p),*].len(),
-            param_names: GRANITE_PARAMS.as_ptr(),
-            state_count: [$($s),*].len(),
-            state_names: GRANITE_STATE.as_ptr(),
-            create: granite_create,
-            update: granite_update,
-            destroy: granite_destroy,
+            head: $crate::LawTableV1 {
+                abi_version: $crate::ABI_VERSION,
+                table_size: ::std::mem::size_of::<$crate::LawTable>() as u32,
+                name: $crate::CStrPtr(concat!($name, "\0").as_ptr() as *const ::std::ffi::c_char),
+                version: $crate::CStrPtr(concat!($version, "\0").as_ptr() as *const ::std::ffi::c_char),
+                param_count: [$($p),*].len(),
+                param_names: GRANITE_PARAMS.as_ptr(),
+                state_count: [$($s),*].len(),
+                state_names: GRANITE_STATE.as_ptr(),
+                create: granite_create,
+                update: granite_update,
+                destroy: granite_destroy,
+            },
             wave_speed: granite_wave_speed,
         };
 
