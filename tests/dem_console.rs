@@ -36,8 +36,8 @@ sim.series_every(1000000);
 sim.run_steps(6000);
 "#;
 
-/// A constant external force and torque on a free sphere, no gravity: the leapfrog gives
-/// v = F t / m and w = T t / I exactly (to rounding), whatever the time step.
+/// A constant external force and torque on a free sphere given a mass of its own, no gravity:
+/// the leapfrog gives v = F t / m and w = T t / I exactly (to rounding), whatever the time step.
 #[test]
 fn an_external_load_accelerates_a_sphere_as_newton_says() {
     let source = r#"
@@ -45,7 +45,7 @@ let sim = dem();
 let steel = sim.material(#{ density: 7800.0 });
 sim.contact_law("linear", #{ kn: 1e6 });
 let id = sim.sphere(steel, [0.0, 0.0, 0.0], 0.01);
-sim.set_body(id, #{ force: [0.5, 0.0, -0.25], torque: [0.0, 1e-4, 0.0] });
+sim.set_body(id, #{ force: [0.5, 0.0, -0.25], torque: [0.0, 1e-4, 0.0], mass: 2.0 });
 sim.dt(1e-4);
 sim.series_every(1000000);
 sim.run_steps(1000);
@@ -60,6 +60,9 @@ summary("external", b.external_force[0]);
 "#;
     let s = run("console_external_load", source);
     let (m, i, t) = (number(&s, "mass"), number(&s, "inertia"), number(&s, "time"));
+    // A mass of its own, the moment of inertia following.
+    assert_eq!(m, 2.0);
+    assert!((i - 0.4 * 2.0 * 0.01 * 0.01).abs() < 1e-15);
     assert!((number(&s, "vx") - 0.5 * t / m).abs() < 1e-9 * 0.5 * t / m);
     assert!((number(&s, "vz") + 0.25 * t / m).abs() < 1e-9 * 0.25 * t / m);
     assert!((number(&s, "wy") - 1e-4 * t / i).abs() < 1e-9 * 1e-4 * t / i);

@@ -27,6 +27,9 @@ pub struct SphereEdit {
     pub spin: Option<Vec3>,
     pub radius: Option<f64>,
     pub material: Option<u16>,
+    /// A mass of its own (kg), instead of the material's density times the volume; the moment of
+    /// inertia follows (`2/5 m r^2`).
+    pub mass: Option<f64>,
     /// Blocked degrees of freedom, [`dof`] flags.
     pub blocked: Option<u8>,
     pub force: Option<Vec3>,
@@ -111,7 +114,7 @@ impl DemSim {
         let clump = s.clump[index];
         if clump != FREE {
             let moves = [edit.position.is_some(), edit.velocity.is_some(), edit.spin.is_some()];
-            let shape = [edit.radius.is_some(), edit.material.is_some(), edit.blocked.is_some()];
+            let shape = [edit.radius.is_some(), edit.material.is_some(), edit.blocked.is_some(), edit.mass.is_some()];
             if moves.iter().chain(&shape).any(|&b| b) {
                 return Err(GraniteError::Setup(format!(
                     "sphere {id} is a member of clump {clump}: its position, velocity, spin, radius, material \
@@ -132,6 +135,11 @@ impl DemSim {
         let material = edit.material.unwrap_or(s.material[index]);
         // The same checks as a new sphere: finite, positive radius, a mass that a step can use.
         let density = self.check_sphere(material, x, radius, v)?;
+        if let Some(m) = edit.mass {
+            if !(m > 0.0 && m.is_finite()) {
+                return Err(GraniteError::param("mass", m, "must be > 0 and finite"));
+            }
+        }
         let force = edit.force.map(|f| finite3(f, "force")).transpose()?;
         let torque = edit.torque.map(|t| finite3(t, "torque")).transpose()?;
         if let Some(b) = edit.blocked {
@@ -158,10 +166,14 @@ impl DemSim {
             s.mass[index] = mass;
             s.inertia[index] = 0.4 * mass * radius * radius;
         }
+        if let Some(m) = edit.mass {
+            s.mass[index] = m;
+            s.inertia[index] = 0.4 * m * radius * radius;
+        }
         if moved || resized {
             self.needs_rebuild = true;
         }
-        if new_material || resized {
+        if new_material || resized || edit.mass.is_some() {
             // Contact parameters depend on the materials and the radii: set them again.
             let laws = self.laws.clone();
             self.refresh_pair_laws(&laws);

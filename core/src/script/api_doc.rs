@@ -125,7 +125,7 @@ pub static API: &[ApiDoc] = &[
     f("DemSim", "memory_bytes", &["sim.memory_bytes"], NONE, "memory held by the scene's arrays"),
     // DEM: bodies and contacts.
     f("DemSim", "body", &["sim.body(id)"], NONE, "one sphere: position, velocity, spin, force, torque, mass, radius, material, clump, fixed..."),
-    f("DemSim", "set_body", &["sim.set_body(id, #{ position, velocity, spin, radius, material, fixed, force, torque })"], &["position", "velocity", "spin", "radius", "material", "fixed", "force", "torque"], "changes one sphere between steps; force and torque are lasting external loads"),
+    f("DemSim", "set_body", &["sim.set_body(id, #{ position, velocity, spin, radius, material, mass, fixed, force, torque })"], &["position", "velocity", "spin", "radius", "material", "mass", "fixed", "force", "torque"], "changes one sphere between steps; force and torque are lasting external loads"),
     f("DemSim", "erase", &["sim.erase(id)", "sim.erase([ids])"], NONE, "erases spheres (a clump member takes its clump); other contacts keep their history"),
     f("DemSim", "ids", &["sim.ids()"], NONE, "the spheres' ids, in the order of the bulk arrays"),
     f("DemSim", "positions", &["sim.positions()"], NONE, "every sphere's position"),

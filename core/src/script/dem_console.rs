@@ -94,12 +94,14 @@ fn sphere_edit(opts: &Map, material: Option<u16>) -> RhaiResult<SphereEdit> {
         Some(d) => Some(parse_dofs(&string(d, "fixed")?).or_rhai()?),
     };
     let radius = get(opts, "radius").map(|d| finite(d, "radius")).transpose()?;
+    let mass = get(opts, "mass").map(|d| finite(d, "mass")).transpose()?;
     Ok(SphereEdit {
         position: v3("position")?,
         velocity: v3("velocity")?,
         spin: v3("spin")?,
         radius,
         material,
+        mass,
         blocked: fixed,
         force: v3("force")?,
         torque: v3("torque")?,
