@@ -203,6 +203,7 @@ fn api_help_and_suggestions() {
         ":help sphere\n:help sim.gravty\n",
         "let sim = dem();\nsim\nlet m = sim.material(#{ name: \"glass\", density: 2500.0 });\nm\n",
         "sim.gravty([0.0, 0.0, -9.81]);\n",
+        "sim.tme\n",
         "sim.sphere(m, [0.0, 0.0, 0.0], 0.01, #{ velocty: [1.0, 0.0, 0.0] });\n",
         "print_line(\"end\");\n"
     ));
@@ -230,6 +231,7 @@ fn api_help_and_suggestions() {
     assert!(has("DemMaterial(\"glass\")"), "{lines:?}");
     // Misspelt names and keys get a suggestion.
     assert!(errors.contains("did you mean `gravity`?"), "{errors}");
+    assert!(errors.contains("Unknown property 'tme'") && errors.contains("did you mean `time`?"), "{errors}");
     assert!(errors.contains("unknown option `velocty` of sim.sphere(...) (did you mean `velocity`?)"), "{errors}");
 }
 

@@ -542,16 +542,34 @@ pub(crate) fn describe(e: &EvalAltResult, engine: &Engine) -> String {
         }
         other => {
             let s = other.to_string();
-            match s.find(" (line ") {
+            let s = match s.find(" (line ") {
                 Some(i) => s[..i].to_string(),
                 None => s,
-            }
+            };
+            property_hint(s)
         }
     };
     let p = if inner.position().is_none() { pos } else { inner.position() };
     match p.line() {
         Some(line) => format!("line {line}: {msg}"),
         None => msg,
+    }
+}
+
+/// Rhai's "Unknown property 'tme' - a getter is not registered for type 'DemSim'" with the
+/// closest names that type has.
+fn property_hint(message: String) -> String {
+    let quoted = |after: &str| {
+        let start = message.find(after)? + after.len();
+        let end = message[start..].find('\'')? + start;
+        Some(message[start..end].to_string())
+    };
+    let (Some(name), Some(ty)) = (quoted("Unknown property '"), quoted("for type '")) else { return message };
+    let names = api_doc::API.iter().filter(|d| d.on == ty || (d.on == "sim" && ty.ends_with("Sim"))).map(|d| d.name);
+    let near = api_doc::closest(&name, names);
+    match near.first() {
+        Some(n) => format!("{message}; did you mean `{n}`?"),
+        None => message,
     }
 }
 
