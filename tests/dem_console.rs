@@ -327,3 +327,22 @@ summary(\"contacts\", sim.contacts().len());
         assert!(vtk.join(series).exists(), "{series}");
     }
 }
+
+/// Parameters changed for one material reach every pair that material is in, and no other.
+#[test]
+fn contact_parameters_change_per_material() {
+    let source = r#"
+let sim = dem();
+let a = sim.material(#{ name: "a", density: 1000.0 });
+let b = sim.material(#{ name: "b", density: 1000.0 });
+sim.contact_law("linear", #{ kn: 1e4, kt_ratio: 0.5, friction: 30.0 });
+sim.set_contact_params(a, #{ friction: 10.0 });
+summary("aa", sim.contact_law_params(a, a).friction);
+summary("ab", sim.contact_law_params(a, b).friction);
+summary("bb", sim.contact_law_params(b, b).friction);
+summary("kn", sim.contact_law_params(a, b).kn);
+"#;
+    let s = run("console_per_material", source);
+    assert_eq!((number(&s, "aa"), number(&s, "ab"), number(&s, "bb")), (10.0, 10.0, 30.0));
+    assert_eq!(number(&s, "kn"), 1e4);
+}

@@ -286,6 +286,17 @@ fn register_live_changes(engine: &mut Engine) {
         Ok::<_, Box<rhai::EvalAltResult>>(law_map(name, params))
     });
     engine.register_fn("set_contact_params", |s: &mut DemHandle, changes: Map| s.set_contact_params(None, changes));
+    // Every pair of materials that one material is in (walls' materials included).
+    engine.register_fn("set_contact_params", |s: &mut DemHandle, m: DemMaterialHandle, changes: Map| {
+        let count = s.lock().sim.dem.materials.len() as u16;
+        for other in 0..count {
+            let pair = Some((m.index(), other));
+            if s.lock().sim.dem.law_index(pair).is_some() {
+                s.set_contact_params(pair, changes.clone())?;
+            }
+        }
+        Ok::<_, Box<rhai::EvalAltResult>>(())
+    });
     engine.register_fn(
         "set_contact_params",
         |s: &mut DemHandle, a: DemMaterialHandle, b: DemMaterialHandle, changes: Map| {
