@@ -67,3 +67,35 @@ fn inconsistent_state_files_are_refused_with_the_reason() {
         assert!(e.contains("not a usable DEM state") && e.contains(&says), "{what}: {e}");
     }
 }
+
+/// A state written when `hertz_mindlin` kept four values a pair (before its dashpot) loads: its
+/// pairs are laid out for five and their values set again from the law, keeping their tangential
+/// forces, and the run continues bit for bit as the state it was saved from.
+#[test]
+fn a_state_with_fewer_values_a_pair_is_widened() {
+    let mut sim = granite::bench::gravity_deposition(300).unwrap();
+    let params: granite_core::registry::ParamMap =
+        [("young", 1e8), ("poisson", 0.25), ("friction", 30.0)].iter().map(|(k, v)| (k.to_string(), *v)).collect();
+    sim.set_contact_law(granite::registry().build_contact_law("hertz_mindlin", &params).unwrap(), None).unwrap();
+    for _ in 0..1500 {
+        sim.step().unwrap();
+    }
+    assert!(sim.pairs.touching_count() > 50, "the state must hold touching contacts");
+    let mut json = sim.to_json().unwrap();
+    for list in ["pairs", "wall_pairs"] {
+        let l = &mut json[list];
+        assert_eq!(l["param_stride"], 5);
+        // The layout of the earlier law: e_star, g_star, r_star, mu (no damping).
+        let old: Vec<serde_json::Value> =
+            l["params"].as_array().unwrap().chunks(5).flat_map(|c| c[..4].to_vec()).collect();
+        l["params"] = serde_json::Value::from(old);
+        l["param_stride"] = serde_json::Value::from(4);
+    }
+    let mut resumed = granite_core::dem::DemSim::from_json(json, &granite::registry()).unwrap();
+    assert_eq!(resumed.pairs.param_stride, 5);
+    for _ in 0..300 {
+        sim.step().unwrap();
+        resumed.step().unwrap();
+    }
+    assert!(sim.spheres.x == resumed.spheres.x && sim.spheres.v == resumed.spheres.v);
+}

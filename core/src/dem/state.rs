@@ -167,6 +167,7 @@ impl DemSim {
         sim.external = st.external;
         sim.energy = st.energy;
         sim.next_id = sim.spheres.id.iter().max().map_or(0, |m| m + 1);
+        widen_pair_layout(&mut sim);
         check_consistent(&sim).map_err(|e| GraniteError::Other(format!("{source}: not a usable DEM state: {e}")))?;
         // The parallel stages' cuts of the pair lists are found again on the first step, not saved.
         // Reading grows arrays by doubling; copies hold just their contents (a loaded RVE is the
@@ -176,6 +177,35 @@ impl DemSim {
         sim.wall_pairs = sim.wall_pairs.clone();
         sim.x_at_build = sim.x_at_build.clone();
         Ok(sim)
+    }
+}
+
+/// A state written when a law kept fewer values per pair (`hertz_mindlin` before its dashpot)
+/// has its pairs laid out for the laws of this build and their values set again from them,
+/// keeping their history. Only a list whose arrays and indices hold together is touched; anything
+/// else is left for `check_consistent` to name.
+fn widen_pair_layout(sim: &mut DemSim) {
+    let ps = sim.laws.iter().map(|l| l.param_count()).max().unwrap_or(0).max(1);
+    let hs = sim.laws.iter().map(|l| l.history_count()).max().unwrap_or(0).max(1);
+    let (spheres, walls, laws) = (sim.spheres.len(), sim.walls.len(), sim.laws.len());
+    let sound = |list: &crate::dem::contacts::PairList, others: usize| {
+        let m = list.len();
+        [list.b.len(), list.shift.len(), list.law.len(), list.touching.len(), list.force.len()].iter().all(|&l| l == m)
+            && list.params.len() == m * list.param_stride
+            && list.history.len() == m * list.history_stride
+            && list.history_stride <= hs
+            && list.a.iter().all(|&i| (i as usize) < spheres)
+            && list.b.iter().all(|&j| (j as usize) < others)
+            && list.law.iter().all(|&l| (l as usize) < laws)
+    };
+    let narrow = |list: &crate::dem::contacts::PairList| list.param_stride < ps || list.history_stride < hs;
+    if (narrow(&sim.pairs) || narrow(&sim.wall_pairs))
+        && sound(&sim.pairs, spheres)
+        && sound(&sim.wall_pairs, walls)
+        && sim.spheres.material.iter().all(|&m| (m as usize) < sim.materials.len())
+    {
+        let laws = sim.laws.clone();
+        sim.refresh_pair_laws(&laws);
     }
 }
 
