@@ -1,0 +1,59 @@
+//! `granite repl` on a real terminal (a pseudo-terminal): Tab completes a variable's methods and
+//! the keys of an open options map, the history is kept in a file between sessions, and an
+//! interactive session with a failed input still exits 0.
+
+use std::process::Command;
+
+/// Starts the REPL on a pseudo-terminal with its history in `history`.
+fn start(history: &std::path::Path, out: &std::path::Path) -> rexpect::session::PtySession {
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_granite"));
+    cmd.args(["repl", "--quiet", "--out"]).arg(out).env("GRANITE_HISTORY", history).env("TERM", "xterm");
+    let mut p = rexpect::session::spawn_command(cmd, Some(30_000)).expect("granite repl starts on a terminal");
+    p.exp_string("granite> ").expect("a prompt");
+    p
+}
+
+/// Keys typed as they are, without a newline.
+fn type_in(p: &mut rexpect::session::PtySession, keys: &str) {
+    p.send(keys).unwrap();
+    p.flush().unwrap();
+    std::thread::sleep(std::time::Duration::from_millis(100));
+}
+
+#[test]
+fn tab_completes_and_history_is_kept() {
+    let dir = std::env::temp_dir().join(format!("granite_repl_terminal_{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let history = dir.join("history");
+    let mut p = start(&history, &dir.join("out"));
+    p.send_line("let sim = dem();").unwrap();
+    p.exp_string("granite> ").unwrap();
+    // `sim.gra` + Tab becomes `sim.gravity`: the only DemSim method starting so.
+    type_in(&mut p, "sim.gra");
+    type_in(&mut p, "\t");
+    type_in(&mut p, "([0.0, 0.0, -9.81]); print_line(`g = ${sim.diagnostics().particles}`);");
+    type_in(&mut p, "\r");
+    p.exp_string("g = 0").expect("the completed call ran");
+    // An option key of the open map: `#{ dens` + Tab becomes `#{ density`.
+    type_in(&mut p, "let m = sim.material(#{ dens");
+    type_in(&mut p, "\t");
+    type_in(&mut p, ": 2500.0 }); print_line(`made ${m}`);");
+    type_in(&mut p, "\r");
+    p.exp_string("made DemMaterial(").expect("the completed key was accepted");
+    // A failed input, then leave: still exit 0.
+    p.send_line("sim.no_such_call();").unwrap();
+    p.exp_string("Function not found").unwrap();
+    p.send_line(":quit").unwrap();
+    p.exp_eof().unwrap();
+    let saved = std::fs::read_to_string(&history).expect("the history file is written");
+    assert!(saved.contains("sim.gravity([0.0, 0.0, -9.81])"), "{saved}");
+    assert!(saved.contains("#{ density: 2500.0 }"), "{saved}");
+    // A new session starts with that history: Up recalls the last input.
+    let mut p = start(&history, &dir.join("out2"));
+    type_in(&mut p, "\x1b[A");
+    type_in(&mut p, "\r");
+    p.exp_string(":quit").expect("the last input recalled");
+    p.exp_eof().unwrap();
+    let _ = std::fs::remove_dir_all(&dir);
+}
