@@ -113,7 +113,7 @@ impl DemSim {
         let mean = |i: usize| {
             ([0, 1, 2].map(|a| 0.5 * (b.v[i][a] + s.v[i][a])), [0, 1, 2].map(|a| 0.5 * (b.w[i][a] + s.w[i][a])))
         };
-        let mut add = |law: u16, normal: Vec3, overlap: f64, rel: (Vec3, Vec3), k: usize, wall: bool| {
+        let mut add = |law: u16, normal: Vec3, overlap: f64, rel: (Vec3, Vec3, Vec3), k: usize, wall: bool| {
             let list = if wall { &self.wall_pairs } else { &self.pairs };
             let before = if wall { &b.history.1 } else { &b.history.0 };
             let (ps, hs) = (list.param_stride, list.history_stride);
@@ -126,6 +126,7 @@ impl DemSim {
                 overlap,
                 rel_velocity: rel.0,
                 mean_rel_velocity: rel.1,
+                rel_spin: rel.2,
                 dt: self.dt,
                 params,
                 history_before: &before[k * hs..(k + 1) * hs],
@@ -155,7 +156,8 @@ impl DemSim {
                 [0, 1, 2].map(|a| (vj[a] - vi[a]) - c[a])
             };
             let ((vi, wi), (vj, wj)) = (mean(i), mean(j));
-            let rel = (relative(b.v[i], b.w[i], b.v[j], b.w[j]), relative(vi, wi, vj, wj));
+            let spin = [0, 1, 2].map(|a| b.w[j][a] - b.w[i][a]);
+            let rel = (relative(b.v[i], b.w[i], b.v[j], b.w[j]), relative(vi, wi, vj, wj), spin);
             add(self.pairs.law[k], n, overlap, rel, k, false);
         }
         for k in 0..self.wall_pairs.len() {
@@ -174,7 +176,15 @@ impl DemSim {
                 [0, 1, 2].map(|a| wall.velocity[a] - (v[a] + spin[a]))
             };
             let (vm, wm) = mean(i);
-            add(self.wall_pairs.law[k], geo.normal, -geo.gap, (relative(b.v[i], b.w[i]), relative(vm, wm)), k, true);
+            let spin = b.w[i].map(|c| -c);
+            add(
+                self.wall_pairs.law[k],
+                geo.normal,
+                -geo.gap,
+                (relative(b.v[i], b.w[i]), relative(vm, wm), spin),
+                k,
+                true,
+            );
             // A moving wall works on the sphere through the contact.
             walls += dot(self.wall_pairs.force[k], wall.velocity) * self.dt;
         }

@@ -156,6 +156,8 @@ pub struct ContactStep<'a> {
     /// Relative velocity over the step, the mean of the half-step velocities before and after
     /// it: the force's work on the bodies is `force . mean_rel_velocity dt`.
     pub mean_rel_velocity: Vec3,
+    /// Angular velocity of particle 2 minus that of particle 1, as the law saw it.
+    pub rel_spin: Vec3,
     pub dt: f64,
     pub params: &'a [f64],
     pub history_before: &'a [f64],

@@ -114,6 +114,21 @@ impl ContactLaw for RollingResistance {
         let tr = [h[3], h[4], h[5]];
         0.5 * p[0] * overlap * overlap + 0.5 * p[1] * dot(u, u) + 0.5 * p[3] * dot(tr, tr) + 0.5 * p[4] * h[6] * h[6]
     }
+    fn tracks_dissipation(&self) -> bool {
+        true
+    }
+    fn dissipation(&self, c: &granite_core::ext::contact::ContactStep<'_>) -> (f64, f64) {
+        use super::tangential::spring_slip_work;
+        let [_, kt, _, kr, ktw, _] = [c.params[0], c.params[1], c.params[2], c.params[3], c.params[4], c.params[5]];
+        let (before, after) = (c.history_before, c.history_after);
+        let sliding = spring_slip_work(&before[..3], &after[..3], c.normal, c.rel_velocity, c.dt, kt);
+        // Rolling: the same spring-slider on the relative rotation in the contact plane.
+        let rolling = spring_slip_work(&before[3..6], &after[3..6], c.normal, c.rel_spin, c.dt, kr);
+        // Twisting: a scalar spring on the relative rotation about the normal (trapezoid rule).
+        let trial = before[6] + dot(c.rel_spin, c.normal) * c.dt;
+        let twisting = ktw * 0.5 * (before[6] + after[6]) * (trial - after[6]);
+        (sliding + rolling + twisting, 0.0)
+    }
 }
 
 // The law on every contact of a batch, compiled for AVX2 where the CPU has it.
