@@ -6,6 +6,33 @@ use granite_core::script::{run_source, RunOptions};
 
 mod common;
 
+/// 120 spheres dropped into a box under `law` and Cundall `damping`, then squeezed by a side wall
+/// moving in at 5 cm/s, the energy tracked throughout; `series` rows every that many steps.
+fn squeezed_deposition(name: &str, law: &str, damping: f64, series: u64) -> granite_core::script::RunReport {
+    let source = format!(
+        r#"
+let r = 0.01; let rho = 2600.0;
+let sim = dem(#{{ seed: 3, skin: 0.5 * r }});
+let glass = sim.material(#{{ name: "glass", density: rho }});
+sim.contact_law({law});
+let walls = sim.box_walls(glass, [0.0, 0.0, 0.0], [0.1, 0.1, 0.3], #{{ open_top: true }});
+sim.lattice(glass, [0.0, 0.0, 0.0], [0.1, 0.1, 0.12], #{{ spacing: 2.2 * r, radius: r, jitter: 0.1 * r }});
+sim.gravity([0.0, 0.0, -9.81]);
+sim.damping({damping:?});
+sim.dt(0.1 * r * sqrt(rho / 1.0e7));
+sim.series_every({series});
+sim.track_energy(true);
+sim.run_steps(15000);
+sim.wall_velocity(walls[1], [-0.05, 0.0, 0.0]);
+sim.run_steps(10000);
+let e = sim.energy();
+for k in e.keys() {{ summary(k, e[k]); }}
+"#
+    );
+    let options = RunOptions { out_dir: common::out_dir(name), quiet: true, ..Default::default() };
+    run_source("energy.rhai", &source, granite::registry(), options).unwrap_or_else(|e| panic!("{name}: {e}"))
+}
+
 /// 120 spheres dropped into a box (visco-elastic contacts with restitution 0.5, friction 30
 /// degrees, Cundall damping 0.2), then squeezed by a side wall moving in at 5 cm/s. Each loss and
 /// the wall's work are a sizeable share of the initial energy, and the balance holds to 1e-3 of
@@ -13,26 +40,8 @@ mod common;
 /// the run ends 1e-4 off; at 0.3 r sqrt(rho/E), 5e-4.)
 #[test]
 fn a_damped_frictional_deposition_keeps_its_energy_balance() {
-    let source = r#"
-let r = 0.01; let rho = 2600.0;
-let sim = dem(#{ seed: 3, skin: 0.5 * r });
-let glass = sim.material(#{ name: "glass", density: rho });
-sim.contact_law("visco_elastic", #{ young: 1.0e7, kt_ratio: 0.3, friction: 30.0, restitution: 0.5 });
-let walls = sim.box_walls(glass, [0.0, 0.0, 0.0], [0.1, 0.1, 0.3], #{ open_top: true });
-sim.lattice(glass, [0.0, 0.0, 0.0], [0.1, 0.1, 0.12], #{ spacing: 2.2 * r, radius: r, jitter: 0.1 * r });
-sim.gravity([0.0, 0.0, -9.81]);
-sim.damping(0.2);
-sim.dt(0.1 * r * sqrt(rho / 1.0e7));
-sim.series_every(1000);
-sim.track_energy(true);
-sim.run_steps(15000);
-sim.wall_velocity(walls[1], [-0.05, 0.0, 0.0]);
-sim.run_steps(10000);
-let e = sim.energy();
-for k in e.keys() { summary(k, e[k]); }
-"#;
-    let options = RunOptions { out_dir: common::out_dir("dem_energy"), quiet: true, ..Default::default() };
-    let report = run_source("energy.rhai", source, granite::registry(), options).unwrap_or_else(|e| panic!("{e}"));
+    let law = r#""visco_elastic", #{ young: 1.0e7, kt_ratio: 0.3, friction: 30.0, restitution: 0.5 }"#;
+    let report = squeezed_deposition("dem_energy", law, 0.2, 1000);
     let get = |k: &str| common::summary_f64(&report, k);
     let initial = get("initial_total");
     for term in ["friction", "viscous", "damping", "boundary_work"] {
@@ -52,26 +61,8 @@ for k in e.keys() { summary(k, e[k]); }
 /// ones (leaving them out of the losses puts the balance 26 % off), and the balance holds to 1e-3.
 #[test]
 fn rolling_and_twisting_losses_close_the_balance() {
-    let source = r#"
-let r = 0.01; let rho = 2600.0;
-let sim = dem(#{ seed: 3, skin: 0.5 * r });
-let glass = sim.material(#{ name: "glass", density: rho });
-sim.contact_law("rolling_resistance", #{ young: 1.0e7, alpha_s: 0.3, alpha_r: 0.5, alpha_t: 0.5, friction: 30.0, eta_r: 0.05 });
-let walls = sim.box_walls(glass, [0.0, 0.0, 0.0], [0.1, 0.1, 0.3], #{ open_top: true });
-sim.lattice(glass, [0.0, 0.0, 0.0], [0.1, 0.1, 0.12], #{ spacing: 2.2 * r, radius: r, jitter: 0.1 * r });
-sim.gravity([0.0, 0.0, -9.81]);
-sim.damping(0.05);
-sim.dt(0.1 * r * sqrt(rho / 1.0e7));
-sim.series_every(1000000);
-sim.track_energy(true);
-sim.run_steps(15000);
-sim.wall_velocity(walls[1], [-0.05, 0.0, 0.0]);
-sim.run_steps(10000);
-let e = sim.energy();
-for k in e.keys() { summary(k, e[k]); }
-"#;
-    let options = RunOptions { out_dir: common::out_dir("dem_energy_rolling"), quiet: true, ..Default::default() };
-    let report = run_source("energy.rhai", source, granite::registry(), options).unwrap_or_else(|e| panic!("{e}"));
+    let law = r#""rolling_resistance", #{ young: 1.0e7, alpha_s: 0.3, alpha_r: 0.5, alpha_t: 0.5, friction: 30.0, eta_r: 0.05 }"#;
+    let report = squeezed_deposition("dem_energy_rolling", law, 0.05, 1000000);
     let get = |k: &str| common::summary_f64(&report, k);
     let initial = get("initial_total");
     assert!(get("friction") > 0.2 * initial && get("boundary_work") > 0.2 * initial);
