@@ -343,6 +343,7 @@ impl Handle<MpmScene> {
 
     fn create(ctx: Arc<ScriptContext>, opts: Map) -> RhaiResult<SimHandle> {
         ctx.before_simulation()?;
+        api_options(&opts, "", "mpm")?;
         let mut opts = opts;
         let update = opts.remove("velocity_update").map(|d| string(&d, "velocity_update")).transpose()?;
         let mesh = parse_mesh(&opts, None)?;
