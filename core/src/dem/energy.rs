@@ -63,6 +63,8 @@ pub(crate) struct BeforeMotion {
     x: Vec<Vec3>,
     v: Vec<Vec3>,
     w: Vec<Vec3>,
+    /// Clumps: centre, velocity, angular velocity and inertia tensor in the world frame.
+    clumps: Vec<(Vec3, Vec3, Vec3, nalgebra::Matrix3<f64>)>,
     /// History of the sphere pairs and of the wall pairs before the contact stage.
     history: (Vec<f64>, Vec<f64>),
 }
@@ -76,8 +78,8 @@ fn cross(a: Vec3, b: Vec3) -> Vec3 {
 }
 
 impl DemSim {
-    /// Starts (or stops) tracking energy from the next step. Periodic cells and clumps are not
-    /// covered, nor laws that do not account for their losses.
+    /// Starts (or stops) tracking energy from the next step. Periodic cells are not covered, nor
+    /// laws that do not account for their losses.
     pub fn track_energy(&mut self, on: bool) -> Result<()> {
         if !on {
             self.energy = None;
@@ -85,9 +87,6 @@ impl DemSim {
         }
         if self.cell.is_some() {
             return Err(GraniteError::Setup("energy tracking covers open domains, not periodic cells".into()));
-        }
-        if !self.clumps.is_empty() {
-            return Err(GraniteError::Setup("energy tracking covers spheres, not clumps".into()));
         }
         if let Some(law) = self.laws.iter().find(|l| !l.tracks_dissipation()) {
             return Err(GraniteError::Setup(format!(
@@ -102,7 +101,15 @@ impl DemSim {
     /// What the tracker keeps of a step before its motion (called after the contact stage).
     pub(crate) fn energy_before_motion(&self, history: (Vec<f64>, Vec<f64>)) -> BeforeMotion {
         let s = &self.spheres;
-        BeforeMotion { x: s.x.clone(), v: s.v.clone(), w: s.w.clone(), history }
+        let cl = &self.clumps;
+        let clumps = (0..cl.len())
+            .map(|c| {
+                let rot = cl.q[c].to_rotation_matrix();
+                let body = nalgebra::Matrix3::from_diagonal(&nalgebra::Vector3::from(cl.inertia[c]));
+                (cl.x[c], cl.v[c], cl.w[c], rot.matrix() * body * rot.matrix().transpose())
+            })
+            .collect();
+        BeforeMotion { x: s.x.clone(), v: s.v.clone(), w: s.w.clone(), clumps, history }
     }
 
     /// Contact energies of the step, at the positions its forces came from: the elastic energy,
@@ -222,6 +229,27 @@ impl DemSim {
                 account(m, before.v[i][a], s.v[i][a], s.force[i][a] / m + g[a], blocked & (dof::X << a) != 0);
                 account(inertia, before.w[i][a], s.w[i][a], s.torque[i][a] / inertia, blocked & (dof::RX << a) != 0);
             }
+        }
+        // Clumps: their members' motion is the clump's. Translation as a sphere's; rotation by
+        // Euler's equations in the world frame, `I w' = T - w x (I w)`: damping is the part of the
+        // change beyond that free one. (The gyroscopic term and the turning of `I` make the
+        // rotational energy only approximately conserved by the integration: an error of the
+        // scheme, not a loss.)
+        let cl = &self.clumps;
+        for (c, &(x0, v0, w0, i_world)) in before.clumps.iter().enumerate() {
+            let m = cl.mass[c];
+            gravitational -= m * dot(g, x0);
+            let (v1, w1) = (cl.v[c], cl.w[c]);
+            for a in 0..3 {
+                kinetic += 0.5 * m * v0[a] * v1[a];
+                let extra = m * ((v1[a] - v0[a]) / dt - (cl.force[c][a] / m + g[a]));
+                damping -= extra * 0.5 * (v0[a] + v1[a]) * dt;
+            }
+            let (w0v, w1v) = (nalgebra::Vector3::from(w0), nalgebra::Vector3::from(w1));
+            kinetic += 0.5 * w0v.dot(&(i_world * w1v));
+            let free = nalgebra::Vector3::from(cl.torque[c]) - w0v.cross(&(i_world * w0v));
+            let extra = i_world * ((w1v - w0v) / dt) - free;
+            damping -= extra.dot(&(0.5 * (w0v + w1v))) * dt;
         }
         // External loads are in the spheres' forces: their work, over the step's mean velocities.
         for load in &self.external {

@@ -91,6 +91,7 @@ impl DemSim {
         };
         let motion = Motion::new(self.gravity, self.damping, self.dt, affine);
         let tracking = self.energy.is_some();
+        let mut energy_before = None;
         let mut moved = if parallel && !check && self.external.is_empty() && !tracking {
             self.contacts_and_motion(&motion)
         } else {
@@ -106,12 +107,8 @@ impl DemSim {
             if check {
                 self.check_time_step()?;
             }
-            let before = history.map(|history| self.energy_before_motion(history));
-            let moved = integrate(&mut self.spheres, &self.x_at_build, &motion);
-            if let Some(before) = before {
-                self.energy_after_motion(before);
-            }
-            moved
+            energy_before = history.map(|history| self.energy_before_motion(history));
+            integrate(&mut self.spheres, &self.x_at_build, &motion)
         };
         if deformed.is_some() {
             self.cell = deformed;
@@ -135,6 +132,10 @@ impl DemSim {
             }
             let d = sub(w.position, *at);
             wall_moved = wall_moved.max((d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt());
+        }
+        // The tracker closes the step once everything has moved (clumps and walls too).
+        if let Some(before) = energy_before {
+            self.energy_after_motion(before);
         }
         self.time += self.dt;
         self.step += 1;
