@@ -110,18 +110,13 @@ fn plot_writes_an_svg() {
     assert!(!bad.status.success() && String::from_utf8_lossy(&bad.stderr).contains("time, kinetic_energy, runout"));
 }
 
-#[test]
-fn batch_runs_every_set_and_reports_a_failure() {
-    let dir = common::out_dir("cli_batch");
+/// `granite batch` of bouncing_cube.rhai over the parameter file `toml`, two jobs at a time,
+/// into `DIR/runs` of a fresh folder named `name`; the folder and the command's output.
+fn batch(name: &str, toml: &str) -> (std::path::PathBuf, std::process::Output) {
+    let dir = common::out_dir(name);
     std::fs::create_dir_all(&dir).unwrap();
     let params = dir.join("params.toml");
-    // Three runs; the last asks for a velocity update that does not exist (the script declares
-    // no limits for it, so the run itself finds out).
-    std::fs::write(
-        &params,
-        "[grid]\nduration = 0.02\n[[set]]\nupdate = \"FLIP\"\n[[set]]\nupdate = \"PIC\"\n[[set]]\nupdate = \"XYZ\"\n",
-    )
-    .unwrap();
+    std::fs::write(&params, toml).unwrap();
     let out = granite()
         .args(["batch", "scripts/mpm/bouncing_cube.rhai", "--jobs", "2", "--quiet", "--params"])
         .arg(&params)
@@ -130,6 +125,17 @@ fn batch_runs_every_set_and_reports_a_failure() {
         .current_dir(common::root())
         .output()
         .unwrap();
+    (dir, out)
+}
+
+#[test]
+fn batch_runs_every_set_and_reports_a_failure() {
+    // Three runs; the last asks for a velocity update that does not exist (the script declares
+    // no limits for it, so the run itself finds out).
+    let (dir, out) = batch(
+        "cli_batch",
+        "[grid]\nduration = 0.02\n[[set]]\nupdate = \"FLIP\"\n[[set]]\nupdate = \"PIC\"\n[[set]]\nupdate = \"XYZ\"\n",
+    );
     assert!(!out.status.success(), "a failed run makes the batch fail");
     assert!(
         String::from_utf8_lossy(&out.stdout).contains("3 runs, 2 ok, 1 failed"),
@@ -153,18 +159,8 @@ fn batch_runs_every_set_and_reports_a_failure() {
 /// A value outside a parameter's declared limits is found before any run starts, naming the run.
 #[test]
 fn batch_checks_every_set_before_running() {
-    let dir = common::out_dir("cli_batch_check");
-    std::fs::create_dir_all(&dir).unwrap();
-    let params = dir.join("params.toml");
-    std::fs::write(&params, "[grid]\nduration = 0.02\n[[set]]\nscheme = \"USF\"\n[[set]]\nscheme = \"XYZ\"\n").unwrap();
-    let out = granite()
-        .args(["batch", "scripts/mpm/bouncing_cube.rhai", "--quiet", "--params"])
-        .arg(&params)
-        .arg("--out")
-        .arg(dir.join("runs"))
-        .current_dir(common::root())
-        .output()
-        .unwrap();
+    let (dir, out) =
+        batch("cli_batch_check", "[grid]\nduration = 0.02\n[[set]]\nscheme = \"USF\"\n[[set]]\nscheme = \"XYZ\"\n");
     assert!(!out.status.success());
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("run 1 [scheme=XYZ duration=0.02] would fail before it starts"), "{err}");

@@ -82,28 +82,32 @@ summary("p", r.p[10]);
 /// object per point.
 #[test]
 fn dem_rve_lattice_under_isotropic_compression() {
-    let source = r#"
-let rve = dem(#{ skin: 1e-4 });
-let g = rve.material(#{ density: 2650.0 });
-rve.contact_law("linear", #{ kn: 1e5 });
-let r = 1e-3;
+    let (kn, radius, eps, dem_steps, calls) = (1e5, 1e-3, 1e-4, 50, 10);
+    let source = format!(
+        r#"
+let rve = dem(#{{ skin: 1e-4 }});
+let g = rve.material(#{{ density: 2650.0 }});
+rve.contact_law("linear", #{{ kn: {kn:?} }});
+let r = {radius:?};
 rve.periodic([8.0 * r, 8.0 * r, 8.0 * r]);
-for i in 0..4 { for j in 0..4 { for k in 0..4 {
+for i in 0..4 {{ for j in 0..4 {{ for k in 0..4 {{
     rve.sphere(g, [(2 * i + 1).to_float() * r, (2 * j + 1).to_float() * r, (2 * k + 1).to_float() * r], r);
-} } }
+}} }} }}
 rve.dt(5e-6);
-let t = element_test("dem_rve", #{ rve: rve, dem_steps: 50 }, #{ strain: [-1e-4, -1e-4, -1e-4, 0.0, 0.0, 0.0], steps: 10 });
-summary("sxx", t.stress[10][0]);
-summary("szz", t.stress[10][2]);
-summary("sxy", t.stress[10][3]);
+let t = element_test("dem_rve", #{{ rve: rve, dem_steps: {dem_steps} }}, #{{ strain: [-{eps:?}, -{eps:?}, -{eps:?}, 0.0, 0.0, 0.0], steps: {calls} }});
+summary("sxx", t.stress[{calls}][0]);
+summary("szz", t.stress[{calls}][2]);
+summary("sxy", t.stress[{calls}][3]);
 let refused = "";
-try {
-    element_test("dem_rve", #{ rve: rve }, #{ strain: [0.0, 0.0, -1e-4, 0.0, 0.0, 0.0], hold: #{ xx: -5e3 }, steps: 2 });
-} catch (e) { refused = e; }
+try {{
+    element_test("dem_rve", #{{ rve: rve }}, #{{ strain: [0.0, 0.0, -1e-4, 0.0, 0.0, 0.0], hold: #{{ xx: -5e3 }}, steps: 2 }});
+}} catch (e) {{ refused = e; }}
 summary("refused", refused);
-"#;
-    let s = run("element_dem_rve", source);
-    let expected = -1e5 * 1e-4 * (1.0 - 1.0 / 500.0) / (2.0 * 1e-3);
+"#
+    );
+    let s = run("element_dem_rve", &source);
+    // The forces of the last DEM step: one DEM step of strain short of the whole path.
+    let expected = -kn * eps * (1.0 - 1.0 / (dem_steps * calls) as f64) / (2.0 * radius);
     for key in ["sxx", "szz"] {
         assert!((number(&s, key) - expected).abs() < 1e-3 * expected.abs(), "{key} = {}", number(&s, key));
     }

@@ -16,6 +16,10 @@ pub struct ExternalLoad {
     pub id: u64,
     pub force: Vec3,
     pub torque: Vec3,
+    /// Where the sphere was last found: checked first, so that a step does not search the
+    /// spheres for it once they are numbered in space (ids no longer their indices).
+    #[serde(skip)]
+    pub(crate) index: usize,
 }
 
 /// Changes to one sphere, applied together once all are checked (a refused change leaves the
@@ -181,7 +185,7 @@ impl DemSim {
         }
         if force.is_some() || torque.is_some() {
             let (f0, t0) = self.external_load(id);
-            let load = ExternalLoad { id, force: force.unwrap_or(f0), torque: torque.unwrap_or(t0) };
+            let load = ExternalLoad { id, force: force.unwrap_or(f0), torque: torque.unwrap_or(t0), index };
             self.external.retain(|l| l.id != id);
             if load.force != [0.0; 3] || load.torque != [0.0; 3] {
                 self.external.push(load);
@@ -203,16 +207,25 @@ impl DemSim {
         Ok(before - self.spheres.len())
     }
 
+    /// Index of the sphere an external load acts on, from its remembered index when that still
+    /// holds the sphere.
+    pub(crate) fn load_index(&self, load: &ExternalLoad) -> Option<usize> {
+        match self.spheres.id.get(load.index) {
+            Some(&id) if id == load.id => Some(load.index),
+            _ => self.sphere_index(load.id),
+        }
+    }
+
     /// Adds the lasting external loads to the spheres' forces and torques of this step.
     pub(crate) fn apply_external_loads(&mut self) {
         for k in 0..self.external.len() {
-            let load = self.external[k];
-            if let Some(i) = self.sphere_index(load.id) {
-                let s = &mut self.spheres;
-                for a in 0..3 {
-                    s.force[i][a] += load.force[a];
-                    s.torque[i][a] += load.torque[a];
-                }
+            let Some(i) = self.load_index(&self.external[k]) else { continue };
+            let load = &mut self.external[k];
+            load.index = i;
+            let s = &mut self.spheres;
+            for a in 0..3 {
+                s.force[i][a] += load.force[a];
+                s.torque[i][a] += load.torque[a];
             }
         }
     }

@@ -17,7 +17,6 @@
 
 use crate::dem::particles::{dof, FREE};
 use crate::dem::sim::DemSim;
-use crate::dem::step::branch;
 use crate::error::{GraniteError, Result};
 use crate::ext::contact::ContactStep;
 use crate::math::Vec3;
@@ -151,12 +150,7 @@ impl DemSim {
                 continue;
             }
             let (i, j) = (self.pairs.a[k] as usize, self.pairs.b[k] as usize);
-            let d = branch(&b.x, i, j, self.pairs.shift[k], self.cell.as_ref());
-            let dist = dot(d, d).sqrt();
-            let n = d.map(|c| c / dist);
-            let overlap = s.radius[i] + s.radius[j] - dist;
-            let la = s.radius[i] - 0.5 * overlap;
-            let lb = dist - la;
+            let (n, overlap, la, lb) = self.pair_geometry(&b.x, k);
             let relative = |vi: Vec3, wi: Vec3, vj: Vec3, wj: Vec3| {
                 let spins = [0, 1, 2].map(|a| la * wi[a] + lb * wj[a]);
                 let c = cross(spins, n);
@@ -173,11 +167,12 @@ impl DemSim {
             }
             let (i, w) = (self.wall_pairs.a[k] as usize, self.wall_pairs.b[k] as usize);
             let wall = &self.walls[w];
-            // The wall as it was at the contact stage (it moved with the spheres).
-            let mut then = wall.clone();
-            then.position = [0, 1, 2].map(|a| wall.position[a] - wall.velocity[a] * self.dt);
-            let Some(geo) = then.contact(b.x[i], s.radius[i], 0.0) else { continue };
-            let arm = [0, 1, 2].map(|a| geo.point[a] - b.x[i][a]);
+            // The wall as it was at the contact stage (it has moved since by v dt): the same
+            // geometry as the sphere moved on by v dt against the wall where it is now.
+            let shift = wall.velocity.map(|c| c * self.dt);
+            let ahead = [0, 1, 2].map(|a| b.x[i][a] + shift[a]);
+            let Some(geo) = wall.contact(ahead, s.radius[i], 0.0) else { continue };
+            let arm = [0, 1, 2].map(|a| geo.point[a] - ahead[a]);
             let relative = |v: Vec3, w: Vec3| {
                 let spin = cross(w, arm);
                 [0, 1, 2].map(|a| wall.velocity[a] - (v[a] + spin[a]))
@@ -253,7 +248,7 @@ impl DemSim {
         }
         // External loads are in the spheres' forces: their work, over the step's mean velocities.
         for load in &self.external {
-            if let Some(i) = self.sphere_index(load.id) {
+            if let Some(i) = self.load_index(load) {
                 let mean = |old: Vec3, new: Vec3| [0, 1, 2].map(|a| 0.5 * (old[a] + new[a]));
                 boundary += dot(load.force, mean(before.v[i], s.v[i])) * dt;
                 boundary += dot(load.torque, mean(before.w[i], s.w[i])) * dt;

@@ -109,15 +109,25 @@ impl DemSim {
         }
     }
 
-    fn sphere_contact(&self, k: usize) -> ContactView {
+    /// The geometry of sphere pair `k` at positions `x`, as the contact stage makes it: unit
+    /// normal from the first sphere to the second, overlap, and the lever arms `(la, lb)` from each
+    /// centre to the contact point.
+    pub(crate) fn pair_geometry(&self, x: &[Vec3], k: usize) -> (Vec3, f64, f64, f64) {
         let (i, j) = (self.pairs.a[k] as usize, self.pairs.b[k] as usize);
-        let s = &self.spheres;
-        let d = branch(&s.x, i, j, self.pairs.shift[k], self.cell.as_ref());
+        let r = &self.spheres.radius;
+        let d = branch(x, i, j, self.pairs.shift[k], self.cell.as_ref());
         let dist = dot(d, d).sqrt();
         let n = if dist > 0.0 { d.map(|c| c / dist) } else { [0.0; 3] };
-        let overlap = s.radius[i] + s.radius[j] - dist;
-        let la = s.radius[i] - 0.5 * overlap;
-        let point = [0, 1, 2].map(|a| s.x[i][a] + la * n[a]);
+        let overlap = r[i] + r[j] - dist;
+        let la = r[i] - 0.5 * overlap;
+        (n, overlap, la, dist - la)
+    }
+
+    fn sphere_contact(&self, k: usize) -> ContactView {
+        let x = &self.spheres.x;
+        let (n, overlap, la, _) = self.pair_geometry(x, k);
+        let i = self.pairs.a[k] as usize;
+        let point = [0, 1, 2].map(|a| x[i][a] + la * n[a]);
         self.view(false, k, point, n, overlap)
     }
 
@@ -140,7 +150,7 @@ impl DemSim {
             if !self.pairs.touching[k] {
                 continue;
             }
-            let n = self.sphere_contact(k).normal;
+            let n = self.pair_geometry(&self.spheres.x, k).0;
             for (a, row) in f.iter_mut().enumerate() {
                 for (b, entry) in row.iter_mut().enumerate() {
                     *entry += n[a] * n[b];

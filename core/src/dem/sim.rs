@@ -233,6 +233,13 @@ impl DemSim {
         Ok(())
     }
 
+    /// Values a pair holds for its law's parameters and history: the most any law keeps (at least
+    /// one of each), so that pairs of different laws share one list.
+    pub(crate) fn pair_strides(&self) -> (usize, usize) {
+        let most = |count: fn(&Arc<dyn ContactLaw>) -> usize| self.laws.iter().map(count).max().unwrap_or(0).max(1);
+        (most(|l| l.param_count()), most(|l| l.history_count()))
+    }
+
     /// The law index a key uses: a material pair's own law or, with None, the default law.
     pub fn law_index(&self, pair: Option<(u16, u16)>) -> Option<u16> {
         match pair {
@@ -246,8 +253,7 @@ impl DemSim {
     /// history; another starts with none. The pair lists are laid out again when the laws need
     /// more values per pair.
     pub(crate) fn refresh_pair_laws(&mut self, old_laws: &[Arc<dyn ContactLaw>]) {
-        let ps = self.laws.iter().map(|l| l.param_count()).max().unwrap_or(0).max(1);
-        let hs = self.laws.iter().map(|l| l.history_count()).max().unwrap_or(0).max(1);
+        let (ps, hs) = self.pair_strides();
         let mut lists = [std::mem::take(&mut self.pairs), std::mem::take(&mut self.wall_pairs)];
         for (list, wall) in lists.iter_mut().zip([false, true]) {
             if list.is_empty() {

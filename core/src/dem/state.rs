@@ -185,8 +185,7 @@ impl DemSim {
 /// keeping their history. Only a list whose arrays and indices hold together is touched; anything
 /// else is left for `check_consistent` to name.
 fn widen_pair_layout(sim: &mut DemSim) {
-    let ps = sim.laws.iter().map(|l| l.param_count()).max().unwrap_or(0).max(1);
-    let hs = sim.laws.iter().map(|l| l.history_count()).max().unwrap_or(0).max(1);
+    let (ps, hs) = sim.pair_strides();
     let (spheres, walls, laws) = (sim.spheres.len(), sim.walls.len(), sim.laws.len());
     let sound = |list: &crate::dem::contacts::PairList, others: usize| {
         let m = list.len();

@@ -460,8 +460,7 @@ impl DemSim {
 
     /// Rebuilds the candidate pair lists (keeping the history of pairs still present).
     pub fn rebuild_candidates(&mut self) -> Result<()> {
-        let p_stride = self.laws.iter().map(|l| l.param_count()).max().unwrap_or(0).max(1);
-        let h_stride = self.laws.iter().map(|l| l.history_count()).max().unwrap_or(0).max(1);
+        let (p_stride, h_stride) = self.pair_strides();
         if p_stride > MAX_PARAMS || h_stride > MAX_HISTORY {
             return Err(GraniteError::Setup(format!(
                 "a contact law uses more than {MAX_PARAMS} parameters or {MAX_HISTORY} history values per contact"

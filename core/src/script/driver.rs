@@ -214,8 +214,8 @@ impl Background {
 
 impl<S: ScriptSim> Handle<S> {
     pub fn new(sim: S, ctx: Arc<ScriptContext>) -> Handle<S> {
-        // The file prefix is chosen when the simulation first writes: a simulation that only
-        // serves as a template (e.g. a loaded RVE) does not take the main output names.
+        // The output folder is chosen when the simulation first writes: a simulation that only
+        // serves as a template (e.g. a loaded RVE) does not take the run's folder.
         let output = Output::new(ctx.options.out_dir.clone());
         let state = State {
             sim,

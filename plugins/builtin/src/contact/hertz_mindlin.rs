@@ -199,8 +199,8 @@ impl ContactLaw for HertzMindlin {
         let kt = 8.0 * g_star * a;
         // The history is a force: the slip is the force the cap took off, over k_t.
         let friction = if kt > 0.0 {
-            let before: Vec<f64> = c.history_before.iter().map(|f| f / kt).collect();
-            let after: Vec<f64> = c.history_after.iter().map(|f| f / kt).collect();
+            let before = [0, 1, 2].map(|a| c.history_before[a] / kt);
+            let after = [0, 1, 2].map(|a| c.history_after[a] / kt);
             super::tangential::spring_slip_work(&before, &after, c.normal, c.rel_velocity, c.dt, kt)
         } else {
             0.0
