@@ -28,22 +28,32 @@ pub fn restitution(x: f64) -> f64 {
 /// The damping ratio `beta / w0` that gives restitution `e` (0 < e <= 1), by bisection on the
 /// monotonic `restitution(x)`.
 pub fn damping_ratio(e: f64) -> f64 {
+    bisect_decreasing(restitution, e, 200, 0.0)
+}
+
+/// The `x >= 0` where the decreasing `f` (with `f(0) = 1`) takes the value `e` in (0, 1], by
+/// bisection: `iterations` at most, or until the bracket is narrower than `relative` of itself.
+/// Beyond 1e6 the bracket's end is returned (a dashpot that strong stops any contact dead).
+fn bisect_decreasing(f: impl Fn(f64) -> f64, e: f64, iterations: usize, relative: f64) -> f64 {
     if e >= 1.0 {
         return 0.0;
     }
     let (mut lo, mut hi) = (0.0f64, 1.0f64);
-    while restitution(hi) > e {
+    while f(hi) > e {
         hi *= 2.0;
         if hi > 1e6 {
             return hi;
         }
     }
-    for _ in 0..200 {
+    for _ in 0..iterations {
         let mid = 0.5 * (lo + hi);
-        if restitution(mid) > e {
+        if f(mid) > e {
             lo = mid;
         } else {
             hi = mid;
+        }
+        if hi - lo < relative * hi {
+            break;
         }
     }
     0.5 * (lo + hi)
@@ -114,28 +124,7 @@ pub fn hertz_restitution(beta: f64) -> f64 {
 /// that decreasing function (Thornton, Cummins & Cleary (2013) fit the same relation with a
 /// polynomial, within about 0.005 in e).
 pub fn hertz_damping_ratio(e: f64) -> f64 {
-    if e >= 1.0 {
-        return 0.0;
-    }
-    let (mut lo, mut hi) = (0.0f64, 1.0f64);
-    while hertz_restitution(hi) > e {
-        hi *= 2.0;
-        if hi > 1e6 {
-            return hi;
-        }
-    }
-    for _ in 0..60 {
-        let mid = 0.5 * (lo + hi);
-        if hertz_restitution(mid) > e {
-            lo = mid;
-        } else {
-            hi = mid;
-        }
-        if hi - lo < 1e-10 * hi {
-            break;
-        }
-    }
-    0.5 * (lo + hi)
+    bisect_decreasing(hertz_restitution, e, 60, 1e-10)
 }
 
 #[cfg(test)]
