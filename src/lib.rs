@@ -2,6 +2,8 @@
 
 pub mod batch;
 pub mod bench;
+#[cfg(feature = "mpi")]
+pub mod mpi_comm;
 pub mod repl;
 
 use granite_core::script::{run_script, RunOptions, RunReport};
@@ -41,15 +43,64 @@ pub fn run_with_plugins(
     threads: Option<usize>,
     plugins: Vec<PathBuf>,
 ) -> Result<RunReport> {
+    run_among(script, overrides, out_dir, quiet, threads, plugins, None)
+}
+
+/// [`run_with_plugins`] as one of the processes of `comm` (an MPI run): every process runs the
+/// script, the first one speaks and writes the files.
+pub fn run_among(
+    script: &Path,
+    overrides: Vec<(String, String)>,
+    out_dir: Option<PathBuf>,
+    quiet: bool,
+    threads: Option<usize>,
+    plugins: Vec<PathBuf>,
+    comm: Option<granite_core::comm::Comm>,
+) -> Result<RunReport> {
     let out_dir = out_dir.unwrap_or_else(|| default_out_dir(script));
     let mut pool = rayon::ThreadPoolBuilder::new();
-    if let Some(n) = threads {
+    if let Some(n) = threads.or_else(threads_per_process) {
         pool = pool.num_threads(n);
     }
     let pool = pool.build().map_err(|e| granite_core::GraniteError::Other(format!("thread pool: {e}")))?;
     let program = format!("granite {} ({})", env!("CARGO_PKG_VERSION"), env!("GRANITE_GIT_COMMIT"));
-    let options = RunOptions { program, out_dir, overrides, quiet, plugins, ..Default::default() };
+    let quiet = quiet || comm.as_ref().is_some_and(|c| c.rank() > 0);
+    let options = RunOptions { program, out_dir, overrides, quiet, plugins, comm, ..Default::default() };
     pool.install(|| run_script(script, registry(), options))
+}
+
+/// The end of one process of an MPI run. Processes that fail together (an RVE failing in one
+/// fails the step in all) meet and stop; a process that failed alone (a file only it could not
+/// read) would leave the others waiting in their next step forever, so after a grace period it
+/// says why and stops the whole run.
+pub fn end_among(comm: &granite_core::comm::Comm, error: Option<&granite_core::GraniteError>) {
+    let grace = match error {
+        None => std::time::Duration::from_secs(u64::MAX / 4),
+        Some(_) => std::time::Duration::from_secs(END_GRACE_S),
+    };
+    if !comm.meet(grace) {
+        let why = error.map(|e| e.to_string()).unwrap_or_default();
+        eprintln!(
+            "granite: error on rank {} of {}: {why}\ngranite: the other processes did not stop with it within {END_GRACE_S} s: aborting the run",
+            comm.rank(),
+            comm.size()
+        );
+        comm.abort(1);
+    }
+}
+
+/// Seconds a failed process waits for the others to stop too before aborting the run.
+pub const END_GRACE_S: u64 = 60;
+
+/// Threads per process when several processes share a machine (`mpirun -np 2` on one node):
+/// the cores divided among them, from the launcher's count of local processes (Open MPI's
+/// `OMPI_COMM_WORLD_LOCAL_SIZE`, MPICH's `MPI_LOCALNRANKS`). None outside a launcher.
+pub fn threads_per_process() -> Option<usize> {
+    let local: usize = ["OMPI_COMM_WORLD_LOCAL_SIZE", "MPI_LOCALNRANKS"]
+        .iter()
+        .find_map(|v| std::env::var(v).ok()?.trim().parse().ok())?;
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    Some((cores / local.max(1)).max(1))
 }
 
 /// `granite run SCRIPT --list-params`: the parameters the script declares before its first

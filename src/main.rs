@@ -138,9 +138,21 @@ fn main() -> ExitCode {
             }
         }
         Command::Run { script, set, out, threads, quiet, plugins, .. } => {
-            match granite::run_with_plugins(&script, set, out, quiet, threads, plugins) {
+            #[cfg(feature = "mpi")]
+            let (_universe, comm) = match granite::mpi_comm::start() {
+                Ok((universe, comm)) => (Some(universe), (comm.size() > 1).then_some(comm)),
+                Err(e) => {
+                    eprintln!("granite: error: MPI: {e}");
+                    return ExitCode::FAILURE;
+                }
+            };
+            #[cfg(not(feature = "mpi"))]
+            let comm = None;
+            let first = comm.as_ref().is_none_or(|c: &granite_core::comm::Comm| c.rank() == 0);
+            let result = granite::run_among(&script, set, out, quiet, threads, plugins, comm.clone());
+            let code = match &result {
                 Ok(report) => {
-                    if !quiet {
+                    if !quiet && first {
                         println!("granite: done; outputs in {}", report.out_dir.display());
                         for (k, v) in &report.summary {
                             println!("  {k} = {v}");
@@ -149,10 +161,16 @@ fn main() -> ExitCode {
                     ExitCode::SUCCESS
                 }
                 Err(e) => {
-                    eprintln!("granite: error: {e}");
+                    if first {
+                        eprintln!("granite: error: {e}");
+                    }
                     ExitCode::FAILURE
                 }
+            };
+            if let Some(comm) = &comm {
+                granite::end_among(comm, result.as_ref().err());
             }
+            code
         }
         Command::Bench { which, points, steps, particles, dem_steps, threads, axial_strain, repeat } => {
             let result = match which.as_str() {

@@ -99,7 +99,7 @@ fn zero_increment_returns_the_prepared_stress() {
     let p = (before[0] + before[1] + before[2]) / 3.0;
     assert!(p < -5e4, "the prepared RVE must be compressed, p = {p}");
     let law = DemRve::new(params(&[]), &objects(&rve)).unwrap();
-    law.points_added(1).unwrap();
+    law.points_added(&[true]).unwrap();
     let mut stress = [[0.0; 6]];
     let mut state = vec![0.0; law.state_names().len()];
     law.update(LawBatch { first: 0, stress: &mut stress, dstrain: &[[0.0; 6]], state: &mut state }).unwrap();

@@ -8,6 +8,7 @@
 // comparisons are deliberate: they also reject NaN.
 #![allow(clippy::needless_range_loop, clippy::neg_cmp_op_on_partial_ord)]
 
+pub mod comm;
 pub mod dem;
 pub mod element_test;
 pub mod error;

@@ -109,7 +109,23 @@ impl DemSim {
     /// A state from [`DemSim::to_json`]; contact laws are rebuilt from `registry`.
     pub fn from_json(value: serde_json::Value, registry: &Registry) -> Result<DemSim> {
         let st: DemState = serde_json::from_value(value).map_err(|e| GraniteError::Other(format!("DEM state: {e}")))?;
-        Self::from_state(st, registry, "checkpoint")
+        Self::from_state(st, &from_registry(registry), "checkpoint")
+    }
+
+    /// A state from [`DemSim::to_json`] of a copy of `like` (an RVE moved between processes):
+    /// its contact laws are `like`'s, which must be the ones it was written with.
+    pub fn from_json_like(value: serde_json::Value, like: &DemSim) -> Result<DemSim> {
+        let st: DemState = serde_json::from_value(value).map_err(|e| GraniteError::Other(format!("DEM state: {e}")))?;
+        let laws = |k: usize, record: &LawRecord| -> Result<std::sync::Arc<dyn crate::ext::ContactLaw>> {
+            match like.laws.get(k) {
+                Some(law) if law.name() == record.name => Ok(law.clone()),
+                _ => Err(GraniteError::Other(format!(
+                    "DEM state: contact law {k} is `{}`, not one of the sample it was copied from",
+                    record.name
+                ))),
+            }
+        };
+        Self::from_state(st, &laws, "moved sample")
     }
 
     /// Writes the whole state as JSON (f64 values round-trip exactly).
@@ -124,10 +140,10 @@ impl DemSim {
         let text = std::fs::read_to_string(path).map_err(|e| GraniteError::io(path, e))?;
         let st: DemState = serde_json::from_str(&text)
             .map_err(|e| GraniteError::Other(format!("{} is not a granite DEM state: {e}", path.display())))?;
-        Self::from_state(st, registry, &path.display().to_string())
+        Self::from_state(st, &from_registry(registry), &path.display().to_string())
     }
 
-    fn from_state(st: DemState, registry: &Registry, source: &str) -> Result<DemSim> {
+    fn from_state(st: DemState, build_law: &LawBuilder, source: &str) -> Result<DemSim> {
         if st.format != FORMAT || st.version != VERSION {
             return Err(GraniteError::Other(format!(
                 "{source}: format {} version {} (this granite reads {FORMAT} version {VERSION})",
@@ -135,9 +151,8 @@ impl DemSim {
             )));
         }
         let mut sim = DemSim::new();
-        for law in &st.laws {
-            let built = registry.build_contact_law(&law.name, &law.params)?;
-            sim.laws.push(std::sync::Arc::from(built));
+        for (k, law) in st.laws.iter().enumerate() {
+            sim.laws.push(build_law(k, law)?);
         }
         sim.spheres = st.spheres;
         sim.clumps = st.clumps;
@@ -178,6 +193,15 @@ impl DemSim {
         sim.x_at_build = sim.x_at_build.clone();
         Ok(sim)
     }
+}
+
+/// Makes the contact law of a state's record (its index, name and parameters).
+type LawBuilder<'a> = dyn Fn(usize, &LawRecord) -> Result<std::sync::Arc<dyn crate::ext::ContactLaw>> + 'a;
+
+fn from_registry(
+    registry: &Registry,
+) -> impl Fn(usize, &LawRecord) -> Result<std::sync::Arc<dyn crate::ext::ContactLaw>> + '_ {
+    move |_, law| Ok(std::sync::Arc::from(registry.build_contact_law(&law.name, &law.params)?))
 }
 
 /// A state written when a law kept fewer values per pair (`hertz_mindlin` before its dashpot)

@@ -48,10 +48,39 @@ pub trait ConstitutiveLaw: Send + Sync {
     }
     /// Updates stress and state of a batch of points from their strain increments.
     fn update(&self, batch: LawBatch<'_>) -> Result<()>;
-    /// `count` points were appended to the material (laws with per-point objects create them).
-    fn points_added(&self, _count: usize) -> Result<()> {
+    /// `here.len()` points were appended to the material. Laws with per-point objects make one for
+    /// each point whose flag is true; the others' objects live in other processes of the run.
+    fn points_added(&self, _here: &[bool]) -> Result<()> {
         Ok(())
     }
+    /// Whether the points' objects may live in different processes: a point's update reads and
+    /// writes only its own object, stress, strain increment and state. A run over MPI spreads the
+    /// objects of such laws over its processes (`mpm::spread`).
+    fn spreadable(&self) -> bool {
+        false
+    }
+    /// Drops the objects of the points whose flag is false (they live in another process now).
+    fn release_objects(&self, _keep: &[bool]) {}
+    /// One point's object as JSON, to move it to another process or gather it into a checkpoint.
+    fn point_object(&self, point: usize) -> Result<serde_json::Value> {
+        Err(crate::GraniteError::Other(format!("law {} keeps no object for point {point}", self.name())))
+    }
+    /// Takes in the object `point_object` wrote for `point` in another process.
+    fn adopt_point_object(&self, point: usize, _object: serde_json::Value) -> Result<()> {
+        Err(crate::GraniteError::Other(format!("law {} keeps no object for point {point}", self.name())))
+    }
+    /// What `save_objects` writes, from every point's `point_object` in point order (gathered
+    /// from the processes that hold them).
+    fn save_objects_from(&self, _points: Vec<serde_json::Value>) -> Result<Option<serde_json::Value>> {
+        Ok(None)
+    }
+    /// A law that tells one event for all its points (the lowest point's): the event it holds
+    /// for the points of this process, if any. A spread run gathers these and puts the one of
+    /// the lowest point back into every process with `set_pending_event` before `take_events`.
+    fn pending_event(&self) -> Option<(usize, String)> {
+        None
+    }
+    fn set_pending_event(&self, _event: Option<(usize, String)>) {}
     /// Points of the material were removed: keep those whose flag is true, in order.
     fn points_removed(&self, _keep: &[bool]) {}
     /// The law's own per-point objects as JSON for a checkpoint (None: it has none).

@@ -47,10 +47,23 @@ struct MpmState {
 }
 
 impl MpmSim {
-    /// Writes a checkpoint as JSON (f64 values round-trip exactly).
+    /// Writes a checkpoint as JSON (f64 values round-trip exactly). In a run over several
+    /// processes every process calls it: the objects of spread materials are gathered to the
+    /// first process, which writes the file, and every process returns its outcome.
     pub fn save(&self, path: &Path) -> Result<()> {
+        crate::comm::agree(self.comm.as_ref(), 0, self.write_checkpoint(path))
+    }
+
+    fn write_checkpoint(&self, path: &Path) -> Result<()> {
         let mut materials = Vec::new();
         for m in &self.materials {
+            let objects = match &m.spread {
+                Some(spread) => match spread.gather_objects(m.law.as_ref())? {
+                    Some(points) => m.law.save_objects_from(points)?,
+                    None => None,
+                },
+                None => m.law.save_objects()?,
+            };
             materials.push(MaterialRecord {
                 name: m.name.clone(),
                 density: m.density,
@@ -58,8 +71,11 @@ impl MpmSim {
                 params: m.law.params().iter().filter(|(_, v)| !v.is_nan()).map(|(k, v)| (k.to_string(), v)).collect(),
                 state: m.state.clone(),
                 count: m.count,
-                objects: m.law.save_objects()?,
+                objects,
             });
+        }
+        if !self.writes_files() {
+            return Ok(());
         }
         let state = MpmState {
             format: FORMAT.into(),
@@ -114,7 +130,14 @@ impl MpmSim {
                     law
                 }
             };
-            sim.materials.push(Material { name: m.name, density: m.density, law, state: m.state, count: m.count });
+            sim.materials.push(Material {
+                name: m.name,
+                density: m.density,
+                law,
+                state: m.state,
+                count: m.count,
+                spread: None,
+            });
         }
         sim.points = st.points;
         sim.boundary = st.boundary;

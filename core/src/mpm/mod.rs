@@ -9,6 +9,7 @@ pub mod mesh;
 pub mod points;
 pub mod shape;
 pub mod sim;
+pub mod spread;
 pub mod step;
 
 pub use boundary::{Boundary, Face, TimeFunction};

@@ -53,6 +53,8 @@ pub struct Material {
     pub state: Vec<f64>,
     /// Number of points of this material (they are stored contiguously).
     pub count: usize,
+    /// Where the law's per-point objects live in a run over several processes.
+    pub spread: Option<crate::mpm::spread::Spread>,
 }
 
 impl Material {
@@ -93,6 +95,9 @@ pub struct MpmSim {
     pub(crate) grid: Grid,
     pub(crate) slabs: SlabIndex,
     pub(crate) loc: Vec<Location>,
+    /// The processes running this simulation together (None: this process alone).
+    pub(crate) comm: Option<crate::comm::Comm>,
+    balance_every: u64,
 }
 
 impl MpmSim {
@@ -116,7 +121,52 @@ impl MpmSim {
             grid: Grid::default(),
             slabs: SlabIndex::default(),
             loc: Vec::new(),
+            comm: None,
+            balance_every: crate::mpm::spread::DEFAULT_BALANCE_EVERY,
         }
+    }
+
+    /// Runs this simulation together with the other processes of `comm`: the per-point objects of
+    /// spreadable laws (RVEs) are shared out among them, each kept by one process only.
+    pub fn set_communicator(&mut self, comm: crate::comm::Comm) {
+        self.comm = Some(comm);
+        for k in 0..self.materials.len() {
+            if self.materials[k].spread.is_some() {
+                continue;
+            }
+            if let Some(mut spread) = self.new_spread(self.materials[k].law.as_ref()) {
+                let m = &mut self.materials[k];
+                let here = spread.add(m.count);
+                m.law.release_objects(&here);
+                m.spread = Some(spread);
+            }
+        }
+    }
+
+    /// Steps between two balances of the spread materials' objects over the processes (0: keep
+    /// them where they are). Without other processes it changes nothing.
+    pub fn set_balance_every(&mut self, steps: u64) {
+        self.balance_every = steps;
+        for spread in self.materials.iter_mut().filter_map(|m| m.spread.as_mut()) {
+            spread.balance_every = steps;
+        }
+    }
+
+    fn new_spread(&self, law: &dyn ConstitutiveLaw) -> Option<crate::mpm::spread::Spread> {
+        let comm = self.comm.as_ref().filter(|c| c.size() > 1 && law.spreadable())?;
+        let mut spread = crate::mpm::spread::Spread::new(comm.clone());
+        spread.balance_every = self.balance_every;
+        Some(spread)
+    }
+
+    /// Whether this process writes the simulation's files (the first of a run's processes).
+    pub fn writes_files(&self) -> bool {
+        self.comm.as_ref().is_none_or(|c| c.rank() == 0)
+    }
+
+    /// The processes running this simulation, if more than this one.
+    pub fn communicator(&self) -> Option<&crate::comm::Comm> {
+        self.comm.as_ref()
     }
 
     pub(crate) fn next_id(&self) -> u64 {
@@ -135,7 +185,8 @@ impl MpmSim {
         if !(density > 0.0 && density.is_finite()) {
             return Err(GraniteError::param_in(format!("`density` of material \"{name}\""), density, "must be > 0"));
         }
-        self.materials.push(Material { name: name.into(), density, law, state: Vec::new(), count: 0 });
+        let spread = self.new_spread(law.as_ref());
+        self.materials.push(Material { name: name.into(), density, law, state: Vec::new(), count: 0, spread });
         Ok(self.materials.len() - 1)
     }
 
@@ -180,7 +231,11 @@ impl MpmSim {
         let at = self.material_range(m).end;
         self.points.insert(at, m as u32, self.next_id, &new);
         self.next_id += new.len() as u64;
-        self.materials[m].law.points_added(new.len())?;
+        let here = match self.materials[m].spread.as_mut() {
+            Some(spread) => spread.add(new.len()),
+            None => vec![true; new.len()],
+        };
+        self.materials[m].law.points_added(&here)?;
         let material = &mut self.materials[m];
         let stride = material.state_stride();
         let mut fresh = vec![0.0; stride];
@@ -278,6 +333,9 @@ impl MpmSim {
             let mask = &keep[start..start + m.count];
             retain_strided(&mut m.state, m.law.state_names().len(), mask);
             m.law.points_removed(mask);
+            if let Some(spread) = m.spread.as_mut() {
+                spread.retain(mask);
+            }
             start += m.count;
             m.count = mask.iter().filter(|&&k| k).count();
         }

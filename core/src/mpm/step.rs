@@ -520,6 +520,13 @@ fn stress_update(pts: &mut Points, materials: &mut [Material]) -> Result<()> {
         }
         let stride = m.law.state_names().len();
         let law = m.law.as_ref();
+        if let Some(spread) = m.spread.as_mut() {
+            let (stress, dstrain) = (&mut pts.stress[range.clone()], &pts.dstrain[range]);
+            spread
+                .update(law, stress, dstrain, &mut m.state, stride)
+                .map_err(|e| GraniteError::Other(format!("material \"{}\" ({}): {e}", m.name, law.name())))?;
+            continue;
+        }
         // Laws with per-point objects (an RVE per point) are expensive per point: one task each.
         let (chunk, min_chunks) = if law.bytes_per_point() > 0 { (1, 1) } else { (CHUNK, MIN_CHUNKS_PER_TASK) };
         let stress = pts.stress[range.clone()].par_chunks_mut(chunk);

@@ -94,6 +94,7 @@ pub static API: &[ApiDoc] = &[
     f("MpmSim", "point_strain", &["sim.point_strain(i)"], NONE, "strain of point i"),
     f("MpmSim", "point_state", &["sim.point_state(i, name)"], NONE, "a state variable of point i's law"),
     f("MpmSim", "point_position", &["sim.point_position(i)"], NONE, "position of point i"),
+    f("MpmSim", "balance_every", &["sim.balance_every(n)"], NONE, "steps between two balances of the RVEs over MPI processes by their measured cost (default 50; 0: never)"),
     f("MpmSim", "write_point_object", &["sim.write_point_object(i, file)"], NONE, "a VTU of point i's own object (the RVE of dem_rve)"),
     f("Material", "name", &["material.name"], NONE, "the material's name"),
     // DEM: set-up.

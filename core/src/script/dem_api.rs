@@ -382,7 +382,9 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
     engine.register_fn("save", |s: &mut DemHandle, file: &str| {
         let mut st = s.lock();
         let path = st.points_path(file);
-        st.sim.prepared().save(&path).map(|_| path.display().to_string()).or_rhai()
+        // Every process of an MPI run holds the same DEM simulation: the first one writes it.
+        let written = if st.output.writes { st.sim.prepared().save(&path) } else { Ok(()) };
+        crate::comm::agree(st.ctx.comm(), 0, written).map(|_| path.display().to_string()).or_rhai()
     });
     let c = ctx.clone();
     engine.register_fn("dem_load", move |file: &str| {

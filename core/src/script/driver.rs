@@ -47,6 +47,11 @@ pub trait ScriptSim: Send + 'static {
     fn drain_events(&mut self) -> Vec<String>;
     /// Sets the value of boundary condition `target` from a script function (see `Handle::drive`).
     fn set_driven(&mut self, target: usize, value: f64);
+    /// A run call ended: what the engine reports of it (the processes' share of the work in a run
+    /// over MPI). Every process calls it at the same point.
+    fn run_ended(&mut self, _ctx: &ScriptContext) -> Result<()> {
+        Ok(())
+    }
 }
 
 pub struct State<S: ScriptSim> {
@@ -112,7 +117,8 @@ impl<S: ScriptSim> State<S> {
             self.sim.restore(snap);
             self.output.last_vtk_step = None;
             let path = self.points_path("last_good_points.csv");
-            let written = self.write_vtk().and_then(|_| self.sim.write_points(&path));
+            let writes = self.output.writes;
+            let written = self.write_vtk().and_then(|_| if writes { self.sim.write_points(&path) } else { Ok(()) });
             msg = match written {
                 Ok(()) => format!(
                     "{msg}\nthe last good state (step {}, t = {:.6e} s) is kept and written to {} and vtk/",
@@ -216,7 +222,8 @@ impl<S: ScriptSim> Handle<S> {
     pub fn new(sim: S, ctx: Arc<ScriptContext>) -> Handle<S> {
         // The output folder is chosen when the simulation first writes: a simulation that only
         // serves as a template (e.g. a loaded RVE) does not take the run's folder.
-        let output = Output::new(ctx.options.out_dir.clone());
+        let mut output = Output::new(ctx.options.out_dir.clone());
+        output.writes = ctx.writes_files();
         let state = State {
             sim,
             ctx,
@@ -393,7 +400,9 @@ impl<S: ScriptSim> Handle<S> {
             }
         }
         progress.finish();
-        Ok(())
+        let mut st = self.lock();
+        let ctx = st.ctx.clone();
+        st.sim.run_ended(&ctx).or_rhai()
     }
 
     pub fn run_until(&self, ctx: &NativeCallContext, t_end: Dynamic) -> RhaiResult<()> {
@@ -417,6 +426,13 @@ impl<S: ScriptSim> Handle<S> {
         let Some(engine) = ctx.engine() else {
             return err("background runs need a script session (granite run or granite repl)");
         };
+        if let Some(comm) = ctx.comm() {
+            return err(format!(
+                "sim.run() goes on in the background, which a run over {} MPI processes cannot do (they must \
+                 step together): use sim.run_steps(n) or sim.run_until(t)",
+                comm.size()
+            ));
+        }
         let stop = Arc::new(AtomicBool::new(false));
         // A run without an end of its own is stopped, not waited for, when the script ends.
         let open_ended = steps.is_none().then(|| stop.clone());
@@ -614,7 +630,8 @@ pub fn register_common<S: ScriptSim>(engine: &mut Engine) {
     engine.register_fn("write_points", |s: &mut Handle<S>, file: &str| {
         let mut st = s.lock();
         let path = st.points_path(file);
-        st.sim.write_points(&path).map(|_| path.display().to_string()).or_rhai()
+        let written = if st.output.writes { st.sim.write_points(&path) } else { Ok(()) };
+        crate::comm::agree(st.ctx.comm(), 0, written).map(|_| path.display().to_string()).or_rhai()
     });
     engine.register_fn("write_series", |ctx: NativeCallContext, s: &mut Handle<S>| s.write_series(&ctx));
     engine.register_fn("series_column", |s: &mut Handle<S>, name: &str, f: FnPtr| {

@@ -52,9 +52,22 @@ pub struct RunOptions {
     /// Every simulation writes into a folder of its own, `simN/` (a REPL session, where one
     /// simulation follows another); otherwise the first one writing uses the folder itself.
     pub folder_per_simulation: bool,
+    /// The processes running this script together (`mpirun`); None: this process alone. Every
+    /// process runs the whole script; the first one writes the files.
+    pub comm: Option<crate::comm::Comm>,
 }
 
 impl ScriptContext {
+    /// Whether this process writes the run's files (the first of several processes, or the only one).
+    pub fn writes_files(&self) -> bool {
+        self.options.comm.as_ref().is_none_or(|c| c.rank() == 0)
+    }
+
+    /// The other processes of the run, if any.
+    pub fn comm(&self) -> Option<&crate::comm::Comm> {
+        self.options.comm.as_ref().filter(|c| c.size() > 1)
+    }
+
     /// A file a script reads (`mpm_load`, `dem_load`): a relative path from the working
     /// directory, else from the output folder or one of its simulation folders (where
     /// `sim.save` wrote it).
@@ -348,14 +361,25 @@ fn build_engine(ctx: &Arc<ScriptContext>) -> Engine {
     });
     let c = ctx.clone();
     engine.register_fn("out_dir", move || c.options.out_dir.display().to_string());
-    engine.register_fn("print_line", |s: &str| println!("{s}"));
+    if ctx.writes_files() {
+        engine.register_fn("print_line", |s: &str| println!("{s}"));
+    } else {
+        // The other processes of an MPI run run the same script: one of them speaks.
+        engine.register_fn("print_line", |_: &str| {});
+        engine.on_print(|_| {});
+        engine.on_debug(|_, _, _| {});
+    }
     let c = ctx.clone();
     engine.register_fn("plot", move |csv: &str, x: &str, ys: rhai::Array, out: &str| -> RhaiResult<String> {
         let dir = &c.options.out_dir;
         let ys: Vec<String> = ys.iter().map(|y| y.to_string()).collect();
-        crate::io::plot::plot(&dir.join(csv), x, &ys, Some(dir.join(out)))
-            .map(|p| p.display().to_string())
-            .map_err(convert::to_rhai)
+        let drawn = if c.writes_files() {
+            crate::io::plot::plot(&dir.join(csv), x, &ys, Some(dir.join(out))).map(|_| ())
+        } else {
+            Ok(())
+        };
+        crate::comm::agree(c.comm(), 0, drawn).map_err(convert::to_rhai)?;
+        Ok(dir.join(out).display().to_string())
     });
     mpm_api::register(&mut engine, ctx);
     dem_api::register(&mut engine, ctx);
@@ -453,8 +477,10 @@ pub fn run_source(name: &str, source: &str, registry: Registry, options: RunOpti
         summary.insert("error".into(), Value::from(e.clone()));
     }
     summary.insert("wall_time_s".into(), Value::from(started.elapsed().as_secs_f64()));
-    crate::io::write_summary(&out_dir.join("summary.json"), &summary)?;
-    write_provenance(&out_dir, name, source, &ctx, started_at, summary.get("status"))?;
+    if ctx.writes_files() {
+        crate::io::write_summary(&out_dir.join("summary.json"), &summary)?;
+        write_provenance(&out_dir, name, source, &ctx, started_at, summary.get("status"))?;
+    }
     match outcome {
         Ok(()) => Ok(RunReport { out_dir, summary }),
         Err(e) => Err(GraniteError::Other(e)),
@@ -517,6 +543,7 @@ fn write_provenance(
     );
     p.insert("plugins".to_string(), plugins);
     p.insert("threads".to_string(), Value::from(rayon::current_num_threads()));
+    p.insert("processes".to_string(), Value::from(ctx.options.comm.as_ref().map_or(1, |c| c.size())));
     p.insert("started".to_string(), Value::from(iso8601(started)));
     p.insert("ended".to_string(), Value::from(iso8601(std::time::SystemTime::now())));
     p.insert("status".to_string(), status.cloned().unwrap_or(Value::Null));

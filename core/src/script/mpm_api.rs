@@ -217,6 +217,21 @@ impl ScriptSim for MpmScene {
     fn drain_events(&mut self) -> Vec<String> {
         self.mpm.events.drain(..).collect()
     }
+    fn run_ended(&mut self, ctx: &ScriptContext) -> Result<()> {
+        for m in &self.mpm.materials {
+            let Some(spread) = &m.spread else { continue };
+            let report = spread.report()?;
+            if ctx.writes_files() {
+                if !ctx.options.quiet {
+                    eprintln!("granite: material \"{}\": {}", m.name, report.line());
+                }
+                for (key, value) in report.summary() {
+                    ctx.set_summary(&key, value);
+                }
+            }
+        }
+        Ok(())
+    }
     fn set_driven(&mut self, target: usize, value: f64) {
         match self.driven.get(target) {
             Some(Driven::Velocity(i)) => self.mpm.boundary.velocity[*i].value = TimeFunction::Driven(value),
@@ -349,7 +364,11 @@ impl Handle<MpmScene> {
         let mesh = parse_mesh(&opts, None)?;
         let strategy =
             ctx.registry().build_velocity_update(update.as_deref().unwrap_or("FLIP"), &ParamMap::new()).or_rhai()?;
-        let scene = MpmScene { mpm: MpmSim::new(mesh, strategy), runout: None, driven: Vec::new() };
+        let mut mpm = MpmSim::new(mesh, strategy);
+        if let Some(comm) = &ctx.options.comm {
+            mpm.set_communicator(comm.clone());
+        }
+        let scene = MpmScene { mpm, runout: None, driven: Vec::new() };
         Ok(Handle::new(scene, ctx))
     }
 
@@ -619,6 +638,13 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
             None => err(format!("material \"{}\" does not belong to this simulation", m.name)),
         }
     });
+    engine.register_fn("balance_every", |s: &mut SimHandle, n: i64| -> RhaiResult<()> {
+        if n < 0 {
+            return err(format!("balance_every(n) needs n >= 0 steps (0: never), got {n}"));
+        }
+        s.lock().sim.mpm.set_balance_every(n as u64);
+        Ok(())
+    });
     engine.register_fn("save", |s: &mut SimHandle, file: &str| {
         let mut st = s.lock();
         let path = st.points_path(file);
@@ -630,7 +656,10 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
         let path = c
             .input_path(file)
             .map_err(|why| super::convert::to_rhai(GraniteError::Setup(format!("mpm_load: {why}"))))?;
-        let mpm = MpmSim::load(&path, &c.registry()).or_rhai()?;
+        let mut mpm = MpmSim::load(&path, &c.registry()).or_rhai()?;
+        if let Some(comm) = &c.options.comm {
+            mpm.set_communicator(comm.clone());
+        }
         Ok::<_, Box<rhai::EvalAltResult>>(Handle::new(MpmScene { mpm, runout: None, driven: Vec::new() }, c.clone()))
     });
     engine.register_fn("fill_box", |s: &mut SimHandle, m: MaterialHandle, lo: Dynamic, hi: Dynamic, opts: Map| {
@@ -792,11 +821,20 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
         let i = point_index(sim, i)? as i64;
         let m = sim.points.material[i as usize] as usize;
         let local = i as usize - sim.material_range(m).start;
-        let Some((x, fields)) = sim.materials[m].law.object_frame(local) else {
-            return err(format!("law \"{}\" keeps no per-point object to write", sim.materials[m].law.name()));
+        // In a run over several processes, the one holding the point's object writes it.
+        let (holder, here) = match &sim.materials[m].spread {
+            Some(spread) => (spread.owner[local] as usize, spread.owner[local] as usize == spread.rank()),
+            None => (0, sim.writes_files()),
         };
+        let frame = if here { sim.materials[m].law.object_frame(local) } else { None };
+        let law = sim.materials[m].law.name().to_string();
         let path = st.points_path(file);
-        crate::io::vtk::write_vtu(&path, &x, &fields).or_rhai()?;
+        let written = match frame {
+            Some((x, fields)) => crate::io::vtk::write_vtu(&path, &x, &fields),
+            None if here => Err(GraniteError::Other(format!("law \"{law}\" keeps no per-point object to write"))),
+            None => Ok(()),
+        };
+        crate::comm::agree(st.ctx.comm(), holder, written).or_rhai()?;
         Ok(path.display().to_string())
     });
     engine.register_fn("point_position", |s: &mut SimHandle, i: i64| -> RhaiResult<Array> {

@@ -8,6 +8,9 @@ use std::path::PathBuf;
 
 pub struct Output {
     pub dir: PathBuf,
+    /// False in the processes of an MPI run other than the first: they run the same simulation
+    /// and write nothing.
+    pub writes: bool,
     series: Option<SeriesWriter>,
     vtk: Option<VtkWriter>,
     /// Poly-data series beside the points (DEM walls, contact network), by name.
@@ -25,6 +28,7 @@ impl Output {
     pub fn new(dir: PathBuf) -> Output {
         Output {
             dir,
+            writes: true,
             series: None,
             vtk: None,
             poly: Vec::new(),
@@ -40,6 +44,10 @@ impl Output {
     /// `<prefix>series_<tag>.csv`.
     pub fn write_series(&mut self, step: u64, cols: &[&str], vals: &[f64], tag: &str) -> Result<()> {
         if self.last_series_step == Some(step) {
+            return Ok(());
+        }
+        if !self.writes {
+            self.last_series_step = Some(step);
             return Ok(());
         }
         let needs_new = match &self.series {
@@ -72,6 +80,10 @@ impl Output {
         poly: &[(&str, PolyData)],
     ) -> Result<()> {
         if self.last_vtk_step == Some(step) {
+            return Ok(());
+        }
+        if !self.writes {
+            self.last_vtk_step = Some(step);
             return Ok(());
         }
         let dir = self.dir.join("vtk");

@@ -39,7 +39,8 @@ struct Rve {
 pub struct DemRve {
     params: Params,
     template: DemSim,
-    rves: RwLock<Vec<Mutex<Rve>>>,
+    /// One slot per material point; empty for points whose RVE lives in another process.
+    rves: RwLock<Vec<Mutex<Option<Rve>>>>,
     inertial_number: f64,
     keep_dt: bool,
     vertical_axis: usize,
@@ -92,7 +93,7 @@ impl ConstitutiveLawFactory for DemRveFactory {
             for v in rves {
                 let mut sim = DemSim::from_json(v, registry)?;
                 sim.set_sequential(true);
-                store.push(Mutex::new(Rve { sim, stress: None }));
+                store.push(Mutex::new(Some(Rve { sim, stress: None })));
             }
         }
         Ok(Box::new(law))
@@ -245,12 +246,45 @@ impl ConstitutiveLaw for DemRve {
     fn state_names(&self) -> &[&'static str] {
         STATE
     }
-    fn points_added(&self, count: usize) -> Result<()> {
+    fn points_added(&self, here: &[bool]) -> Result<()> {
         let mut rves = self.rves.write().map_err(|_| GraniteError::Other("RVE store poisoned".into()))?;
-        for _ in 0..count {
-            rves.push(Mutex::new(Rve { sim: self.template.clone(), stress: None }));
+        for &here in here {
+            rves.push(Mutex::new(here.then(|| Rve { sim: self.template.clone(), stress: None })));
         }
         Ok(())
+    }
+    fn spreadable(&self) -> bool {
+        true
+    }
+    fn release_objects(&self, keep: &[bool]) {
+        if let Ok(rves) = self.rves.read() {
+            for (slot, &keep) in rves.iter().zip(keep) {
+                if !keep {
+                    *slot.lock().unwrap_or_else(|e| e.into_inner()) = None;
+                }
+            }
+        }
+    }
+    fn point_object(&self, point: usize) -> Result<serde_json::Value> {
+        self.with_rve(point, |sim| sim.to_json())
+            .unwrap_or_else(|| Err(GraniteError::Other(format!("no RVE of material point {point} in this process"))))
+    }
+    fn adopt_point_object(&self, point: usize, object: serde_json::Value) -> Result<()> {
+        let mut sim = DemSim::from_json_like(object, &self.template)?;
+        sim.set_sequential(true);
+        let rves = self.rves.read().map_err(|_| GraniteError::Other("RVE store poisoned".into()))?;
+        let slot = rves.get(point).ok_or_else(|| GraniteError::Other(format!("no material point {point}")))?;
+        *slot.lock().unwrap_or_else(|e| e.into_inner()) = Some(Rve { sim, stress: None });
+        Ok(())
+    }
+    fn save_objects_from(&self, points: Vec<serde_json::Value>) -> Result<Option<serde_json::Value>> {
+        Ok(Some(serde_json::json!({ "template": self.template.to_json()?, "rves": points })))
+    }
+    fn pending_event(&self) -> Option<(usize, String)> {
+        self.event.lock().unwrap_or_else(|e| e.into_inner()).clone()
+    }
+    fn set_pending_event(&self, event: Option<(usize, String)>) {
+        *self.event.lock().unwrap_or_else(|e| e.into_inner()) = event;
     }
     fn points_removed(&self, keep: &[bool]) {
         if let Ok(mut rves) = self.rves.write() {
@@ -299,13 +333,9 @@ impl ConstitutiveLaw for DemRve {
         })
     }
     fn save_objects(&self) -> Result<Option<serde_json::Value>> {
-        let rves = self.rves.read().map_err(|_| GraniteError::Other("RVE store poisoned".into()))?;
-        let mut list = Vec::with_capacity(rves.len());
-        for r in rves.iter() {
-            let guard = r.lock().map_err(|_| GraniteError::Other("RVE poisoned".into()))?;
-            list.push(guard.sim.to_json()?);
-        }
-        Ok(Some(serde_json::json!({ "template": self.template.to_json()?, "rves": list })))
+        let count = self.rves.read().map_err(|_| GraniteError::Other("RVE store poisoned".into()))?.len();
+        let list = (0..count).map(|k| self.point_object(k)).collect::<Result<Vec<_>>>()?;
+        self.save_objects_from(list)
     }
     fn update(&self, batch: LawBatch<'_>) -> Result<()> {
         let rves = self.rves.read().map_err(|_| GraniteError::Other("RVE store poisoned".into()))?;
@@ -317,7 +347,9 @@ impl ConstitutiveLaw for DemRve {
                 .ok_or_else(|| GraniteError::Other(format!("no RVE for material point {index}")))?
                 .lock()
                 .map_err(|_| GraniteError::Other(format!("RVE {index} poisoned")))?;
-            let Rve { sim, stress: last_stress } = &mut *rve;
+            let Some(Rve { sim, stress: last_stress }) = &mut *rve else {
+                return Err(GraniteError::Other(format!("the RVE of material point {index} is in another process")));
+            };
             let de = batch.dstrain[k];
             let e = granite_core::math::strain_matrix(&de);
             let max_strain = SymmetricEigen::new(e).eigenvalues.amax();
@@ -389,6 +421,6 @@ impl DemRve {
     pub fn with_rve<R>(&self, index: usize, f: impl FnOnce(&DemSim) -> R) -> Option<R> {
         let rves = self.rves.read().ok()?;
         let guard = rves.get(index)?.lock().ok()?;
-        Some(f(&guard.sim))
+        guard.as_ref().map(|rve| f(&rve.sim))
     }
 }

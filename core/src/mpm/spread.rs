@@ -1,0 +1,458 @@
+//! A material whose law keeps an object per point (an RVE) spread over the processes of a run.
+//!
+//! Every process holds the whole MPM (mesh, points, stresses, state variables) and takes the
+//! same step; a spread material's objects live each in one process, its *owner*. In the stress
+//! stage every process updates the points it owns, then one all-gather gives every process the
+//! new stresses and state variables of all points. A point's update depends only on its own
+//! object and inputs, and every process ends the stage with the same numbers, so the run is bit
+//! for bit the run of one process, whatever the number of processes and whoever owns what.
+//!
+//! Objects cost different amounts to update (an RVE's DEM steps per increment follow its pressure
+//! and strain rate, thesis eqs. 4.1-4.5). Each process times its points; the times travel with
+//! the stresses, so every process knows every point's cost and, every `balance_every` steps,
+//! computes the same new owners and moves the objects that change hands.
+
+use crate::comm::{Comm, Reader, Writer};
+use crate::error::{GraniteError, Result};
+use crate::ext::{ConstitutiveLaw, LawBatch};
+use crate::math::Voigt;
+use rayon::prelude::*;
+use std::time::Instant;
+
+/// Steps between two balances unless the script says otherwise.
+pub const DEFAULT_BALANCE_EVERY: u64 = 50;
+/// Imbalance below which the owners stay as they are: moving an RVE costs its serialisation.
+const BALANCE_TOLERANCE: f64 = 0.05;
+
+/// Where a spread material's objects live, and what they cost.
+pub struct Spread {
+    comm: Comm,
+    /// Rank holding each point's object.
+    pub owner: Vec<u32>,
+    /// Seconds each point's updates took since the last balance (known for every point).
+    cost: Vec<f64>,
+    /// Steps between two balances; 0 keeps the owners as they are.
+    pub balance_every: u64,
+    steps_since_balance: u64,
+    pub stats: SpreadStats,
+}
+
+/// What the processes did, for the run log, summary.json and benchmarks.
+#[derive(Debug, Clone, Default)]
+pub struct SpreadStats {
+    /// Per rank: seconds of wall time updating its own points.
+    pub busy_s: Vec<f64>,
+    /// Seconds this process spent in the stress stage (own updates, waiting and communicating).
+    pub stage_s: f64,
+    /// Seconds this process spent in the all-gather (waiting for the slowest included).
+    pub gather_s: f64,
+    /// Bytes this process received in all-gathers.
+    pub gather_bytes: u64,
+    pub stages: u64,
+    /// Objects moved between processes by balancing, and the seconds balancing took here.
+    pub moved: u64,
+    pub balance_s: f64,
+}
+
+impl SpreadStats {
+    /// Largest busy time over the mean, minus one (0: perfectly even).
+    pub fn imbalance(&self) -> f64 {
+        let n = self.busy_s.len().max(1) as f64;
+        let mean = self.busy_s.iter().sum::<f64>() / n;
+        let max = self.busy_s.iter().cloned().fold(0.0, f64::max);
+        if mean > 0.0 {
+            max / mean - 1.0
+        } else {
+            0.0
+        }
+    }
+}
+
+/// The processes' share of a spread material's work, as the run log and summary.json give it.
+#[derive(Debug, Clone)]
+pub struct SpreadReport {
+    /// Per rank: seconds updating its points; seconds in the stress stage (updates, waiting for
+    /// the others, communicating); seconds in the all-gathers.
+    pub busy_s: Vec<f64>,
+    pub stage_s: Vec<f64>,
+    pub gather_s: Vec<f64>,
+    /// Bytes one process received in all-gathers (the largest over processes).
+    pub gather_bytes: u64,
+    pub stages: u64,
+    pub moved: u64,
+    /// Points each rank holds now.
+    pub points: Vec<usize>,
+}
+
+impl SpreadReport {
+    /// Per rank: the fraction of the stress stage spent updating its own points.
+    pub fn busy_fraction(&self) -> Vec<f64> {
+        self.busy_s.iter().zip(&self.stage_s).map(|(b, s)| if *s > 0.0 { (b / s).min(1.0) } else { 0.0 }).collect()
+    }
+
+    /// The busiest rank's time over the mean, minus one.
+    pub fn imbalance(&self) -> f64 {
+        SpreadStats { busy_s: self.busy_s.clone(), ..Default::default() }.imbalance()
+    }
+
+    pub fn line(&self) -> String {
+        let busy: Vec<String> = self.busy_fraction().iter().map(|f| format!("{:.0} %", 100.0 * f)).collect();
+        let per_stage = |x: f64| if self.stages > 0 { x / self.stages as f64 } else { 0.0 };
+        let gather_us = 1e6 * per_stage(self.gather_s.iter().cloned().fold(0.0, f64::max));
+        format!(
+            "{} processes hold {:?} points; busy {} of the stress stage; imbalance {:.1} %; {} objects moved; \
+             {:.0} us and {:.0} bytes of all-gather per step",
+            self.busy_s.len(),
+            self.points,
+            busy.join(", "),
+            100.0 * self.imbalance(),
+            self.moved,
+            gather_us,
+            per_stage(self.gather_bytes as f64),
+        )
+    }
+
+    /// Keys for summary.json (timings: they differ from run to run).
+    pub fn summary(&self) -> Vec<(String, serde_json::Value)> {
+        vec![
+            ("processes".into(), self.busy_s.len().into()),
+            ("rank_busy_fraction".into(), self.busy_fraction().into()),
+            ("rank_imbalance".into(), self.imbalance().into()),
+            ("rank_points".into(), self.points.clone().into()),
+            ("objects_moved".into(), self.moved.into()),
+        ]
+    }
+}
+
+impl Spread {
+    pub fn new(comm: Comm) -> Spread {
+        let size = comm.size();
+        Spread {
+            comm,
+            owner: Vec::new(),
+            cost: Vec::new(),
+            balance_every: DEFAULT_BALANCE_EVERY,
+            steps_since_balance: 0,
+            stats: SpreadStats { busy_s: vec![0.0; size], ..Default::default() },
+        }
+    }
+
+    pub fn rank(&self) -> usize {
+        self.comm.rank()
+    }
+
+    pub fn size(&self) -> usize {
+        self.comm.size()
+    }
+
+    /// Owners of `count` new points: each to the process holding the fewest points so far
+    /// (lowest rank on ties), which interleaves a fill's rows over the processes. Returns which
+    /// of them live here.
+    pub fn add(&mut self, count: usize) -> Vec<bool> {
+        let mut held = vec![0usize; self.size()];
+        for &o in &self.owner {
+            held[o as usize] += 1;
+        }
+        let me = self.rank() as u32;
+        let mut here = Vec::with_capacity(count);
+        for _ in 0..count {
+            let r = (0..held.len()).min_by_key(|&r| (held[r], r)).unwrap_or(0);
+            held[r] += 1;
+            self.owner.push(r as u32);
+            self.cost.push(0.0);
+            here.push(r as u32 == me);
+        }
+        here
+    }
+
+    /// Points were removed: keep those whose flag is true.
+    pub fn retain(&mut self, keep: &[bool]) {
+        let mut k = keep.iter();
+        self.owner.retain(|_| *k.next().unwrap_or(&true));
+        let mut k = keep.iter();
+        self.cost.retain(|_| *k.next().unwrap_or(&true));
+    }
+
+    /// Which points live here.
+    pub fn here(&self) -> Vec<bool> {
+        let me = self.rank() as u32;
+        self.owner.iter().map(|&o| o == me).collect()
+    }
+
+    /// The stress stage of a spread material: this process updates its points, then all
+    /// processes swap results. An update that fails in any process fails the stage in every
+    /// process, with the lowest failing point's message and the rank that ran it.
+    pub fn update(
+        &mut self,
+        law: &dyn ConstitutiveLaw,
+        stress: &mut [Voigt],
+        dstrain: &[Voigt],
+        state: &mut [f64],
+        stride: usize,
+    ) -> Result<()> {
+        let started = Instant::now();
+        let n = stress.len();
+        let me = self.rank() as u32;
+        let owner = &self.owner;
+        // Laws without state variables still get one slot per point to split on; it is not passed.
+        let mut no_state = vec![0.0; if stride == 0 { n } else { 0 }];
+        let states: &mut [f64] = if stride == 0 { &mut no_state } else { state };
+        let outcomes: Vec<(usize, f64, Result<()>)> = stress
+            .par_chunks_mut(1)
+            .zip(dstrain.par_chunks(1))
+            .zip(states.par_chunks_mut(stride.max(1)))
+            .enumerate()
+            .with_min_len(1)
+            .filter(|(i, _)| owner[*i] == me)
+            .map(|(i, ((s, de), st))| {
+                let t = Instant::now();
+                let st = &mut st[..stride];
+                let r = law.update(LawBatch { first: i, stress: s, dstrain: de, state: st });
+                (i, t.elapsed().as_secs_f64(), r)
+            })
+            .collect();
+        let busy = started.elapsed().as_secs_f64();
+        let mut w = Writer::default();
+        let failures: Vec<&(usize, f64, Result<()>)> = outcomes.iter().filter(|o| o.2.is_err()).collect();
+        w.u64(failures.len() as u64);
+        for (i, _, r) in failures {
+            w.u64(*i as u64).str(&r.as_ref().err().map(|e| e.to_string()).unwrap_or_default());
+        }
+        match law.pending_event() {
+            Some((point, text)) => w.u64(1).u64(point as u64).str(&text),
+            None => w.u64(0),
+        };
+        w.f64(busy);
+        w.u64(outcomes.len() as u64);
+        for (i, seconds, _) in &outcomes {
+            w.f64s(&stress[*i]).f64s(&states[i * stride..(i + 1) * stride]).f64(*seconds);
+        }
+        let gather_started = Instant::now();
+        let all = self.comm.all_gather(&w.0);
+        self.stats.gather_s += gather_started.elapsed().as_secs_f64();
+        self.stats.gather_bytes += all.iter().map(|b| b.len() as u64).sum::<u64>();
+        let mut failed: Option<(usize, usize, String)> = None;
+        let mut event: Option<(usize, String)> = None;
+        for (rank, bytes) in all.iter().enumerate() {
+            let mut r = Reader::new(bytes);
+            for _ in 0..r.u64()? {
+                let (point, text) = (r.u64()? as usize, r.str()?);
+                if failed.as_ref().is_none_or(|f| point < f.0) {
+                    failed = Some((point, rank, text));
+                }
+            }
+            if r.u64()? == 1 {
+                let (point, text) = (r.u64()? as usize, r.str()?);
+                if event.as_ref().is_none_or(|e| point < e.0) {
+                    event = Some((point, text));
+                }
+            }
+            self.stats.busy_s[rank] += r.f64()?;
+            let count = r.u64()? as usize;
+            let mut got = 0;
+            for i in (0..n).filter(|&i| self.owner[i] as usize == rank) {
+                if got == count {
+                    break;
+                }
+                if rank as u32 != me {
+                    r.f64s_into(&mut stress[i])?;
+                    r.f64s_into(&mut states[i * stride..(i + 1) * stride])?;
+                } else {
+                    // Our own numbers are already in place.
+                    r.skip_f64s(6 + stride)?;
+                }
+                self.cost[i] += r.f64()?;
+                got += 1;
+            }
+            if got != count || !r.done() {
+                return Err(GraniteError::Other(format!(
+                    "rank {rank} sent {count} points' results where it owns {got}: the processes disagree on the owners"
+                )));
+            }
+        }
+        law.set_pending_event(event);
+        self.stats.stages += 1;
+        self.stats.stage_s += started.elapsed().as_secs_f64();
+        if let Some((_, rank, text)) = failed {
+            return Err(GraniteError::Other(format!("{text} (rank {rank} of {})", self.size())));
+        }
+        self.steps_since_balance += 1;
+        if self.balance_every > 0 && self.steps_since_balance >= self.balance_every && self.size() > 1 {
+            self.balance(law)?;
+        }
+        Ok(())
+    }
+
+    /// New owners from the measured costs, the same in every process; moves the objects that
+    /// change hands.
+    fn balance(&mut self, law: &dyn ConstitutiveLaw) -> Result<()> {
+        let started = Instant::now();
+        let new_owner = balanced_owners(&self.owner, &self.cost, self.size());
+        self.steps_since_balance = 0;
+        self.cost.iter_mut().for_each(|c| *c = 0.0);
+        let me = self.rank() as u32;
+        let mut outgoing = vec![Writer::default(); self.size()];
+        let mut moved = 0;
+        for (i, (&from, &to)) in self.owner.iter().zip(&new_owner).enumerate() {
+            if from == to {
+                continue;
+            }
+            moved += 1;
+            if from == me {
+                let object = serde_json::to_vec(&law.point_object(i)?)
+                    .map_err(|e| GraniteError::Other(format!("object of material point {i}: {e}")))?;
+                outgoing[to as usize].u64(i as u64).bytes(&object);
+            }
+        }
+        if moved == 0 {
+            return Ok(());
+        }
+        let incoming = self.comm.exchange(outgoing.into_iter().map(|w| w.0).collect());
+        self.owner = new_owner;
+        law.release_objects(&self.here());
+        for bytes in incoming {
+            let mut r = Reader::new(&bytes);
+            while !r.done() {
+                let point = r.u64()? as usize;
+                let object = serde_json::from_slice(r.bytes()?)
+                    .map_err(|e| GraniteError::Other(format!("object of material point {point}: {e}")))?;
+                law.adopt_point_object(point, object)?;
+            }
+        }
+        self.stats.moved += moved;
+        self.stats.balance_s += started.elapsed().as_secs_f64();
+        Ok(())
+    }
+
+    /// What every process did so far, in every process (a collective call).
+    pub fn report(&self) -> Result<SpreadReport> {
+        let mut w = Writer::default();
+        w.f64(self.stats.stage_s).f64(self.stats.gather_s).u64(self.stats.gather_bytes).u64(self.stats.stages);
+        let all = self.comm.all_gather(&w.0);
+        let mut report = SpreadReport {
+            busy_s: self.stats.busy_s.clone(),
+            stage_s: Vec::new(),
+            gather_s: Vec::new(),
+            gather_bytes: 0,
+            stages: self.stats.stages,
+            moved: self.stats.moved,
+            points: vec![0; self.size()],
+        };
+        for bytes in &all {
+            let mut r = Reader::new(bytes);
+            report.stage_s.push(r.f64()?);
+            report.gather_s.push(r.f64()?);
+            report.gather_bytes = report.gather_bytes.max(r.u64()?);
+            r.u64()?;
+        }
+        for &o in &self.owner {
+            report.points[o as usize] += 1;
+        }
+        Ok(report)
+    }
+
+    /// Every point's object in point order on rank 0 (for a checkpoint); None elsewhere.
+    pub fn gather_objects(&self, law: &dyn ConstitutiveLaw) -> Result<Option<Vec<serde_json::Value>>> {
+        let me = self.rank() as u32;
+        let mut w = Writer::default();
+        let mut failure = String::new();
+        for (i, _) in self.owner.iter().enumerate().filter(|(_, &o)| o == me) {
+            match law.point_object(i).and_then(|v| {
+                serde_json::to_vec(&v).map_err(|e| GraniteError::Other(format!("object of material point {i}: {e}")))
+            }) {
+                Ok(bytes) => {
+                    w.u64(i as u64).bytes(&bytes);
+                }
+                Err(e) if failure.is_empty() => failure = e.to_string(),
+                Err(_) => {}
+            }
+        }
+        let mut packet = Writer::default();
+        packet.str(&failure).bytes(&w.0);
+        let Some(all) = self.comm.gather_to_root(&packet.0) else { return Ok(None) };
+        let mut objects: Vec<Option<serde_json::Value>> = vec![None; self.owner.len()];
+        for (rank, bytes) in all.iter().enumerate() {
+            let mut r = Reader::new(bytes);
+            let failure = r.str()?;
+            if !failure.is_empty() {
+                return Err(GraniteError::Other(format!("{failure} (rank {rank})")));
+            }
+            let mut list = Reader::new(r.bytes()?);
+            while !list.done() {
+                let point = list.u64()? as usize;
+                let value = serde_json::from_slice(list.bytes()?)
+                    .map_err(|e| GraniteError::Other(format!("object of material point {point}: {e}")))?;
+                if let Some(slot) = objects.get_mut(point) {
+                    *slot = Some(value);
+                }
+            }
+        }
+        objects
+            .into_iter()
+            .enumerate()
+            .map(|(i, o)| {
+                o.ok_or_else(|| GraniteError::Other(format!("no process sent the object of material point {i}")))
+            })
+            .collect::<Result<Vec<_>>>()
+            .map(Some)
+    }
+}
+
+/// Owners that even out the processes' summed costs while moving few objects: repeatedly, the
+/// point of the busiest process whose cost is nearest half the gap to the idlest one moves
+/// there, while that narrows the gap and the busiest is more than the tolerance above the mean.
+/// Deterministic: ties go to the lowest rank and the lowest point.
+pub fn balanced_owners(owner: &[u32], cost: &[f64], size: usize) -> Vec<u32> {
+    let mut owner = owner.to_vec();
+    let mut load = vec![0.0; size];
+    for (&o, &c) in owner.iter().zip(cost) {
+        load[o as usize] += c;
+    }
+    let mean = load.iter().sum::<f64>() / size as f64;
+    if !(mean > 0.0) {
+        return owner;
+    }
+    for _ in 0..owner.len() {
+        let busiest = (0..size).fold(0, |b, r| if load[r] > load[b] { r } else { b });
+        let idlest = (0..size).fold(0, |b, r| if load[r] < load[b] { r } else { b });
+        let gap = load[busiest] - load[idlest];
+        if load[busiest] <= mean * (1.0 + BALANCE_TOLERANCE) || busiest == idlest {
+            break;
+        }
+        let best = (0..owner.len())
+            .filter(|&i| owner[i] as usize == busiest && cost[i] > 0.0 && cost[i] < gap)
+            .min_by(|&a, &b| (cost[a] - gap / 2.0).abs().total_cmp(&(cost[b] - gap / 2.0).abs()).then(a.cmp(&b)));
+        let Some(i) = best else { break };
+        owner[i] = idlest as u32;
+        load[busiest] -= cost[i];
+        load[idlest] += cost[i];
+    }
+    owner
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn balancing_evens_out_costs_with_few_moves() {
+        // Four costly points all on rank 0, cheap ones spread: two of the costly ones move.
+        let owner = vec![0, 0, 0, 0, 1, 1, 1, 1];
+        let cost = vec![4.0, 4.0, 4.0, 4.0, 1.0, 1.0, 1.0, 1.0];
+        let new = balanced_owners(&owner, &cost, 2);
+        let load = |r: u32| -> f64 { new.iter().zip(&cost).filter(|(&o, _)| o == r).map(|(_, c)| c).sum() };
+        assert_eq!(load(0), 10.0);
+        assert_eq!(load(1), 10.0);
+        assert_eq!(new.iter().zip(&owner).filter(|(a, b)| a != b).count(), 2);
+        // Already even: nothing moves.
+        assert_eq!(balanced_owners(&new, &cost, 2), new);
+        // No cost measured yet: nothing moves.
+        assert_eq!(balanced_owners(&owner, &[0.0; 8], 2), owner);
+    }
+
+    #[test]
+    fn imbalance_is_the_busiest_over_the_mean() {
+        let stats = SpreadStats { busy_s: vec![3.0, 1.0], ..Default::default() };
+        assert!((stats.imbalance() - 0.5).abs() < 1e-12);
+    }
+}
