@@ -460,46 +460,150 @@ struct RvesAlone {
 
 /// `granite bench mpmxdem`: an oedometric scene of 16 material points, each with a 125-sphere
 /// periodic RVE, 200 MPM steps of 1e-5 s with 51 DEM steps each (the peer's protocol).
-pub fn mpmxdem(threads: &[usize], repeat: usize) -> Result<()> {
+/// The scene of `granite bench mpmxdem`: 2 x 2 cells, 2 x 2 points each, every point a copy of
+/// `rve` stepped `DEM_STEPS` times per MPM step, compressed oedometrically from the top. Over the
+/// processes of `comm` when given. Returns it with the memory of one RVE.
+fn oedometric_rves(rve: &granite_core::dem::DemSim, comm: Option<granite_core::comm::Comm>) -> Result<(MpmSim, usize)> {
     use granite_core::mpm::boundary::{TimeFunction, VelocityConstraint};
     use granite_core::mpm::fill::{cell_points, Layout};
     use granite_core::mpm::Face;
     use std::sync::Arc;
-    // What a second core can give right now: the 2-thread figure below is read against it.
-    machine_reference(threads, repeat)?;
-    println!(
-        "granite bench mpmxdem: 16 points x 125-sphere RVEs, {MPM_STEPS} MPM steps x {DEM_STEPS} DEM steps, oedometric"
-    );
+    let reg = crate::registry();
+    let mesh = Mesh::new(2, [0.0; 3], [CELL, CELL, 1.0], [2, 2, 1])?;
+    let mut sim = MpmSim::new(mesh.clone(), reg.build_velocity_update("PIC", &ParamMap::new())?);
+    if let Some(comm) = comm {
+        sim.set_communicator(comm);
+    }
+    let mut objects = granite_core::ext::constitutive::ObjectMap::new();
+    objects.insert("rve".into(), Arc::new(rve.clone()));
+    let law = reg.build_law_with("dem_rve", &params(&[("dem_steps", DEM_STEPS as f64)]), &objects)?;
+    let bytes = law.bytes_per_point();
+    let m = sim.add_material("sand", 1700.0, law)?;
+    let (xs, vols) = cell_points(&mesh, Layout::Gauss, 2, |_| Ok(true))?;
+    let volume = rve.cell_volume().unwrap_or(1.0);
+    sim.add_points(m, &xs, &vols, [0.0; 3], rve.love_weber_stress(volume))?;
+    for (face, axis, v) in [("x-", 0, 0.0), ("x+", 0, 0.0), ("y-", 1, 0.0), ("y+", 1, -TOP_SPEED)] {
+        let f = Face::parse(face, 2)?;
+        sim.boundary.velocity.push(VelocityConstraint {
+            nodes: f.nodes(&mesh),
+            axis,
+            value: TimeFunction::Constant(v),
+        });
+    }
+    sim.set_dt(MPM_DT)?;
+    Ok((sim, bytes))
+}
+
+/// The RVE of `granite bench mpmxdem`: 125 spheres at 100 kPa with a script's default skin.
+fn bench_rve() -> Result<granite_core::dem::DemSim> {
     let mut rve = periodic_rve(125, 1e5)?;
     // The Verlet skin scripts/mpmxdem/prepare_rve.rhai gives an RVE by default (0.05 smallest
     // radii): an RVE deforms slowly, so a thin skin means fewer candidate pairs and few rebuilds.
     let r_min = rve.spheres.smallest_radius();
     rve.set_skin(0.05 * r_min)?;
+    Ok(rve)
+}
+
+/// `mpirun -np N granite bench mpmxdem`: the benchmark scene over N processes of one thread
+/// each, against the same scene in rank 0 alone on N threads (the others wait without using
+/// their core), alternating, `repeat` rounds; fastest and slowest of each printed, with per MPM
+/// step the time in RVEs, in the all-gather, and its bytes.
+pub fn mpmxdem_mpi(comm: granite_core::comm::Comm, repeat: usize) -> Result<()> {
+    let (rank, size) = (comm.rank(), comm.size());
+    let rve = bench_rve()?;
+    let first = rank == 0;
+    if first {
+        println!(
+            "granite bench mpmxdem over MPI: 16 points x {}-sphere RVEs, {MPM_STEPS} MPM steps x {DEM_STEPS} DEM steps, \
+             {size} processes of 1 thread against 1 process of {size} threads",
+            rve.spheres.len()
+        );
+    }
+    let threads_pool = pool(size)?;
+    let one_pool = pool(1)?;
+    let wait = std::time::Duration::from_secs(3600);
+    let (mut threaded, mut spread): (Vec<f64>, Vec<f64>) = (Vec::new(), Vec::new());
+    let mut last_report = None;
+    for _ in 0..repeat.max(1) {
+        if first {
+            threaded.push(threads_pool.install(|| -> Result<f64> {
+                let (mut sim, _) = oedometric_rves(&rve, None)?;
+                let t = Instant::now();
+                for _ in 0..MPM_STEPS {
+                    sim.step()?;
+                }
+                Ok(t.elapsed().as_secs_f64())
+            })?);
+        }
+        if !comm.meet(wait) {
+            comm.abort(1);
+        }
+        let (secs, report) =
+            one_pool.install(|| -> Result<(f64, Option<granite_core::mpm::spread::SpreadReport>)> {
+                let (mut sim, _) = oedometric_rves(&rve, Some(comm.clone()))?;
+                let t = Instant::now();
+                for _ in 0..MPM_STEPS {
+                    sim.step()?;
+                }
+                let secs = t.elapsed().as_secs_f64();
+                // One process keeps every RVE itself: nothing is spread, nothing communicated.
+                let report = sim.materials[0].spread.as_ref().map(|s| s.report()).transpose()?;
+                Ok((secs, report))
+            })?;
+        spread.push(secs);
+        last_report = report;
+    }
+    if !first {
+        return Ok(());
+    }
+    let fastest = |v: &[f64]| v.iter().cloned().fold(f64::INFINITY, f64::min);
+    let slowest = |v: &[f64]| v.iter().cloned().fold(0.0, f64::max);
+    let sphere_steps = (16 * rve.spheres.len() * DEM_STEPS * MPM_STEPS) as f64;
+    let per_step = |s: f64| 1e6 * s / MPM_STEPS as f64;
+    let (t_threads, t_spread) = (fastest(&threaded), fastest(&spread));
+    println!(
+        "1 process, {size} threads    {t_threads:>7.3} s ({:.3})  {:>6.2} M sphere-steps/s  {:>8.0} us per MPM step",
+        slowest(&threaded),
+        sphere_steps / t_threads / 1e6,
+        per_step(t_threads)
+    );
+    println!(
+        "{size} processes, 1 thread  {t_spread:>7.3} s ({:.3})  {:>6.2} M sphere-steps/s  {:>8.0} us per MPM step: {:.1} % of the threaded rate",
+        slowest(&spread),
+        sphere_steps / t_spread / 1e6,
+        per_step(t_spread),
+        100.0 * t_threads / t_spread
+    );
+    let Some(report) = last_report else {
+        println!("  one process: all of each MPM step in its RVEs and the MPM, no communication");
+        return Ok(());
+    };
+    let stages = report.stages.max(1) as f64;
+    for r in 0..size {
+        println!(
+            "  rank {r}: {} RVEs; per MPM step {:>8.0} us in its RVEs, {:>6.0} us in the all-gather (waiting included), {:.0} bytes received",
+            report.points[r],
+            1e6 * report.busy_s[r] / stages,
+            1e6 * report.gather_s[r] / stages,
+            report.gather_bytes as f64 / stages
+        );
+    }
+    Ok(())
+}
+
+pub fn mpmxdem(threads: &[usize], repeat: usize) -> Result<()> {
+    // What a second core can give right now: the 2-thread figure below is read against it.
+    machine_reference(threads, repeat)?;
+    println!(
+        "granite bench mpmxdem: 16 points x 125-sphere RVEs, {MPM_STEPS} MPM steps x {DEM_STEPS} DEM steps, oedometric"
+    );
+    let rve = bench_rve()?;
     // The coupling's own cost: in every round, right after the coupled run, the same DEM work
     // without the MPM around it (one slow spell of the machine then hits both alike).
     // Fastest time of that, per thread count.
     let alone_best = std::sync::Mutex::new(std::collections::BTreeMap::<usize, RvesAlone>::new());
     let timed = best_of(threads, repeat, || -> Result<(f64, (usize, usize))> {
-        let reg = crate::registry();
-        let mesh = Mesh::new(2, [0.0; 3], [CELL, CELL, 1.0], [2, 2, 1])?;
-        let mut sim = MpmSim::new(mesh.clone(), reg.build_velocity_update("PIC", &ParamMap::new())?);
-        let mut objects = granite_core::ext::constitutive::ObjectMap::new();
-        objects.insert("rve".into(), Arc::new(rve.clone()));
-        let law = reg.build_law_with("dem_rve", &params(&[("dem_steps", DEM_STEPS as f64)]), &objects)?;
-        let bytes = law.bytes_per_point();
-        let m = sim.add_material("sand", 1700.0, law)?;
-        let (xs, vols) = cell_points(&mesh, Layout::Gauss, 2, |_| Ok(true))?;
-        let volume = rve.cell_volume().unwrap_or(1.0);
-        sim.add_points(m, &xs, &vols, [0.0; 3], rve.love_weber_stress(volume))?;
-        for (face, axis, v) in [("x-", 0, 0.0), ("x+", 0, 0.0), ("y-", 1, 0.0), ("y+", 1, -TOP_SPEED)] {
-            let f = Face::parse(face, 2)?;
-            sim.boundary.velocity.push(VelocityConstraint {
-                nodes: f.nodes(&mesh),
-                axis,
-                value: TimeFunction::Constant(v),
-            });
-        }
-        sim.set_dt(MPM_DT)?;
+        let (mut sim, bytes) = oedometric_rves(&rve, None)?;
         let t = Instant::now();
         for _ in 0..MPM_STEPS {
             sim.step()?;

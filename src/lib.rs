@@ -89,6 +89,11 @@ pub fn end_among(comm: &granite_core::comm::Comm, error: Option<&granite_core::G
     }
 }
 
+/// Whether an MPI launcher started this process (Open MPI, MPICH, Intel MPI or Slurm's srun).
+pub fn launched_by_mpirun() -> bool {
+    ["OMPI_COMM_WORLD_SIZE", "PMI_SIZE", "PMIX_RANK", "MPI_LOCALNRANKS"].iter().any(|v| std::env::var_os(v).is_some())
+}
+
 /// Seconds a failed process waits for the others to stop too before aborting the run.
 pub const END_GRACE_S: u64 = 60;
 

@@ -173,6 +173,23 @@ fn main() -> ExitCode {
             code
         }
         Command::Bench { which, points, steps, particles, dem_steps, threads, axial_strain, repeat } => {
+            #[cfg(feature = "mpi")]
+            if which == "mpmxdem" && granite::launched_by_mpirun() {
+                let (_universe, comm) = match granite::mpi_comm::start() {
+                    Ok(started) => started,
+                    Err(e) => {
+                        eprintln!("granite: error: MPI: {e}");
+                        return ExitCode::FAILURE;
+                    }
+                };
+                return match granite::bench::mpmxdem_mpi(comm, repeat) {
+                    Ok(()) => ExitCode::SUCCESS,
+                    Err(e) => {
+                        eprintln!("granite: bench failed: {e}");
+                        ExitCode::FAILURE
+                    }
+                };
+            }
             let result = match which.as_str() {
                 "mpm" => granite::bench::mpm(points, steps, &threads),
                 "dem" => granite::bench::dem(&particles, dem_steps, &threads, repeat),

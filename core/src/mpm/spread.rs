@@ -436,18 +436,28 @@ mod tests {
 
     #[test]
     fn balancing_evens_out_costs_with_few_moves() {
-        // Four costly points all on rank 0, cheap ones spread: two of the costly ones move.
-        let owner = vec![0, 0, 0, 0, 1, 1, 1, 1];
-        let cost = vec![4.0, 4.0, 4.0, 4.0, 1.0, 1.0, 1.0, 1.0];
+        let load = |owner: &[u32], cost: &[f64], r: u32| -> f64 {
+            owner.iter().zip(cost).filter(|(&o, _)| o == r).map(|(_, c)| c).sum()
+        };
+        let moves = |a: &[u32], b: &[u32]| a.iter().zip(b).filter(|(x, y)| x != y).count();
+        // Eight equal points on rank 0, two on rank 1: three move, 5 and 5.
+        let owner = vec![0, 0, 0, 0, 0, 0, 0, 0, 1, 1];
+        let cost = vec![1.0; 10];
         let new = balanced_owners(&owner, &cost, 2);
-        let load = |r: u32| -> f64 { new.iter().zip(&cost).filter(|(&o, _)| o == r).map(|(_, c)| c).sum() };
-        assert_eq!(load(0), 10.0);
-        assert_eq!(load(1), 10.0);
-        assert_eq!(new.iter().zip(&owner).filter(|(a, b)| a != b).count(), 2);
+        assert_eq!((load(&new, &cost, 0), load(&new, &cost, 1)), (5.0, 5.0));
+        assert_eq!(moves(&owner, &new), 3);
         // Already even: nothing moves.
         assert_eq!(balanced_owners(&new, &cost, 2), new);
+        // Three ranks, one costly point among cheap ones (loads 9, 2, 2): the costly point alone
+        // sets the least possible busiest load, 6, and balancing gets there.
+        let owner = vec![0, 0, 0, 0, 1, 1, 2, 2];
+        let cost = vec![6.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0];
+        let new = balanced_owners(&owner, &cost, 3);
+        let loads: Vec<f64> = (0..3).map(|r| load(&new, &cost, r)).collect();
+        assert_eq!(loads.iter().cloned().fold(0.0, f64::max), 6.0, "{loads:?}");
+        assert_eq!(loads.iter().sum::<f64>(), 13.0);
         // No cost measured yet: nothing moves.
-        assert_eq!(balanced_owners(&owner, &[0.0; 8], 2), owner);
+        assert_eq!(balanced_owners(&owner, &[0.0; 8], 3), owner);
     }
 
     #[test]

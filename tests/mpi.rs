@@ -1,0 +1,143 @@
+//! MPMxDEM over MPI processes (`cargo test --features mpi --test mpi`, Open MPI's `mpirun` on
+//! the PATH): the same script gives byte-identical results on 1, 2 and 3 processes and without
+//! MPI, a checkpoint written on 2 processes continues on 3 and without MPI bit for bit, and an
+//! RVE failing on rank 1 stops every process with the point and the rank named.
+#![cfg(feature = "mpi")]
+
+mod common;
+use common::*;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::sync::OnceLock;
+
+/// A small RVE (80 spheres at 1 kPa), prepared once for every test of this file.
+fn rve() -> &'static Path {
+    static RVE: OnceLock<PathBuf> = OnceLock::new();
+    RVE.get_or_init(|| {
+        let prep = run(
+            "mpmxdem/prepare_rve.rhai",
+            "mpi_rve",
+            &[("count", "80"), ("p_init", "1000"), ("vertical_axis", "1")],
+            2,
+        )
+        .expect("preparing the RVE");
+        prep.out_dir.join("rve.json")
+    })
+}
+
+fn test_script(name: &str) -> PathBuf {
+    root().join("tests").join("mpi").join(name)
+}
+
+/// `mpirun -np N granite run SCRIPT --set ...` into a fresh folder; (exit code, stderr, folder).
+fn mpirun(np: usize, script: &str, name: &str, sets: &[(&str, &str)]) -> (i32, String, PathBuf) {
+    let out = out_dir(name);
+    let mut cmd = Command::new("mpirun");
+    let version = Command::new("mpirun").arg("--version").output().expect("mpirun on the PATH (Open MPI)");
+    if String::from_utf8_lossy(&version.stdout).contains("Open MPI") {
+        // Containers run as root; CI machines have fewer cores than some runs have processes.
+        cmd.args(["--allow-run-as-root", "--oversubscribe"]);
+        // Waiting processes give their core away instead of spinning (2-core machines).
+        cmd.env("OMPI_MCA_mpi_yield_when_idle", "1");
+    }
+    cmd.args(["-np", &np.to_string(), env!("CARGO_BIN_EXE_granite"), "run"]).arg(test_script(script));
+    cmd.args(["--quiet", "--threads", "1", "--out"]).arg(&out);
+    for (k, v) in sets {
+        cmd.args(["--set", &format!("{k}={v}")]);
+    }
+    let output = cmd.output().expect("running mpirun");
+    (output.status.code().unwrap_or(-1), String::from_utf8_lossy(&output.stderr).into_owned(), out)
+}
+
+/// The same script without MPI, in this process.
+fn alone(script: &str, name: &str, sets_: &[(&str, &str)]) -> granite_core::Result<PathBuf> {
+    granite::run(&test_script(script), sets(sets_), Some(out_dir(name)), true, Some(1)).map(|r| r.out_dir)
+}
+
+fn bytes(path: &Path) -> Vec<u8> {
+    std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+}
+
+/// summary.json without what differs from run to run (times) and what only a run over several
+/// processes reports (their share of the work).
+fn results(dir: &Path) -> serde_json::Map<String, serde_json::Value> {
+    let text = std::fs::read_to_string(dir.join("summary.json")).unwrap();
+    let serde_json::Value::Object(mut map) = serde_json::from_str(&text).unwrap() else { panic!("summary.json") };
+    for key in ["wall_time_s", "processes", "rank_busy_fraction", "rank_imbalance", "rank_points", "objects_moved"] {
+        map.remove(key);
+    }
+    map
+}
+
+#[test]
+fn one_two_and_three_processes_write_the_same_bytes_as_a_run_without_mpi() {
+    let rve = rve().to_str().unwrap();
+    let sets = [("rve", rve), ("steps", "60"), ("balance_every", "10")];
+    let reference = alone("spread_column.rhai", "mpi_alone", &sets).unwrap();
+    for np in [1, 2, 3] {
+        let (code, stderr, out) = mpirun(np, "spread_column.rhai", &format!("mpi_np{np}"), &sets);
+        assert_eq!(code, 0, "{np} processes: {stderr}");
+        for file in ["series.csv", "half.json", "rve_point5.vtu"] {
+            assert!(bytes(&reference.join(file)) == bytes(&out.join(file)), "{np} processes: {file} differs");
+        }
+        assert_eq!(results(&reference), results(&out), "{np} processes: summary.json differs");
+        let summary: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+        if np > 1 {
+            // Every process reports its share, and the RVEs are all somewhere.
+            let points: Vec<u64> =
+                summary["rank_points"].as_array().unwrap().iter().map(|v| v.as_u64().unwrap()).collect();
+            assert_eq!(points.len(), np);
+            assert_eq!(points.iter().sum::<u64>(), 36, "36 material points over {np} processes: {points:?}");
+            let busy = summary["rank_busy_fraction"].as_array().unwrap();
+            assert!(busy.iter().all(|b| b.as_f64().is_some_and(|b| (0.0..=1.0).contains(&b))), "{busy:?}");
+        }
+    }
+}
+
+#[test]
+fn a_run_saved_on_two_processes_continues_on_three_and_without_mpi_bit_for_bit() {
+    let rve = rve().to_str().unwrap();
+    let sets = [("rve", rve), ("steps", "60"), ("balance_every", "10")];
+    let (code, stderr, saved) = mpirun(2, "spread_column.rhai", "mpi_saved_on_2", &sets);
+    assert_eq!(code, 0, "{stderr}");
+    let checkpoint = saved.join("half.json");
+    let checkpoint = checkpoint.to_str().unwrap();
+    let resume = [("resume", checkpoint), ("steps", "60"), ("balance_every", "7")];
+    let (code, stderr, on3) = mpirun(3, "spread_column.rhai", "mpi_resumed_on_3", &resume);
+    assert_eq!(code, 0, "{stderr}");
+    let without = alone("spread_column.rhai", "mpi_resumed_alone", &resume).unwrap();
+    // The resumed series starts at the checkpoint's step (30) and must be the saved run's rows from there.
+    let full = String::from_utf8(bytes(&saved.join("series.csv"))).unwrap();
+    let from_half: Vec<&str> = full.lines().skip_while(|l| !l.starts_with("30,")).collect();
+    assert!(from_half.len() > 5, "the full run's series reaches past step 30");
+    for resumed in [&on3, &without] {
+        let text = String::from_utf8(bytes(&resumed.join("series.csv"))).unwrap();
+        let rows: Vec<&str> = text.lines().skip(1).collect();
+        assert_eq!(rows, from_half, "{}: the resumed run departs from the uninterrupted one", resumed.display());
+        assert_eq!(results(resumed), results(&saved), "{}: summary.json", resumed.display());
+    }
+}
+
+#[test]
+fn an_rve_failing_on_rank_1_stops_every_process_naming_the_point_and_the_rank() {
+    let rve = rve().to_str().unwrap();
+    let started = std::time::Instant::now();
+    let (code, stderr, out) = mpirun(2, "failing_rve.rhai", "mpi_failing", &[("rve", rve)]);
+    assert_ne!(code, 0, "the run must fail: {stderr}");
+    assert!(
+        started.elapsed().as_secs() < granite::END_GRACE_S,
+        "both processes stop together, without waiting for the grace period of a lone failure"
+    );
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(summary["status"], "failed");
+    let error = summary["error"].as_str().unwrap();
+    assert!(error.contains("RVE of point 1") && error.contains("rank 1 of 2"), "{error}");
+    assert!(error.contains("max_dem_steps"), "says what to change: {error}");
+    assert!(out.join("last_good_points.csv").is_file(), "the last good state is written");
+    assert!(stderr.contains("rank 1 of 2"), "the error reaches the terminal: {stderr}");
+    // Without MPI the same point fails with the same message, less the rank.
+    let alone = alone("failing_rve.rhai", "mpi_failing_alone", &[("rve", rve)]).unwrap_err().to_string();
+    assert!(alone.contains("RVE of point 1") && !alone.contains("rank"), "{alone}");
+}
