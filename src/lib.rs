@@ -94,6 +94,11 @@ pub fn launched_by_mpirun() -> bool {
     ["OMPI_COMM_WORLD_SIZE", "PMI_SIZE", "PMIX_RANK", "MPI_LOCALNRANKS"].iter().any(|v| std::env::var_os(v).is_some())
 }
 
+/// How many processes the launcher started, where it says (Open MPI; MPICH and srun with PMI).
+pub fn launched_processes() -> Option<usize> {
+    ["OMPI_COMM_WORLD_SIZE", "PMI_SIZE"].iter().find_map(|v| std::env::var(v).ok()?.trim().parse().ok())
+}
+
 /// Seconds a failed process waits for the others to stop too before aborting the run.
 pub const END_GRACE_S: u64 = 60;
 

@@ -138,9 +138,11 @@ fn main() -> ExitCode {
             }
         }
         Command::Run { script, set, out, threads, quiet, plugins, .. } => {
+            // MPI starts only under a launcher: a plain `granite run` of an MPI build is a plain run.
             #[cfg(feature = "mpi")]
-            let (_universe, comm) = match granite::mpi_comm::start() {
-                Ok((universe, comm)) => (Some(universe), (comm.size() > 1).then_some(comm)),
+            let (_universe, comm) = match granite::launched_by_mpirun().then(granite::mpi_comm::start).transpose() {
+                Ok(Some((universe, comm))) => (Some(universe), (comm.size() > 1).then_some(comm)),
+                Ok(None) => (None, None),
                 Err(e) => {
                     eprintln!("granite: error: MPI: {e}");
                     return ExitCode::FAILURE;
@@ -148,6 +150,15 @@ fn main() -> ExitCode {
             };
             #[cfg(not(feature = "mpi"))]
             let comm = None;
+            #[cfg(not(feature = "mpi"))]
+            if let Some(n) = granite::launched_processes().filter(|&n| n > 1) {
+                eprintln!(
+                    "granite: error: started as one of {n} MPI processes, but this granite was built without MPI: \
+                     each process would run the whole simulation and write the same files. Build it with \
+                     `cargo build --release --features mpi` (see README, Over MPI)"
+                );
+                return ExitCode::FAILURE;
+            }
             let first = comm.as_ref().is_none_or(|c: &granite_core::comm::Comm| c.rank() == 0);
             let result = granite::run_among(&script, set, out, quiet, threads, plugins, comm.clone());
             let code = match &result {

@@ -229,3 +229,22 @@ fn the_api_reference_is_generated_from_the_table() {
     let help = granite().args(["api", "sim.gravty"]).output().unwrap();
     assert!(String::from_utf8_lossy(&help.stderr).contains("did you mean `gravity`?"));
 }
+
+/// Started by `mpirun -np 2` without the `mpi` feature, each process would run the whole
+/// simulation and write the same files: refused, saying how to build for MPI.
+#[cfg(not(feature = "mpi"))]
+#[test]
+fn a_build_without_mpi_refuses_to_run_as_one_of_several_mpi_processes() {
+    let dir = common::out_dir("cli_not_mpi");
+    let out = granite()
+        .args(["run", "scripts/mpm/bouncing_cube.rhai", "--quiet", "--out"])
+        .arg(&dir)
+        .current_dir(common::root())
+        .env("OMPI_COMM_WORLD_SIZE", "2")
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("2 MPI processes") && stderr.contains("--features mpi"), "{stderr}");
+    assert!(!dir.join("summary.json").exists(), "nothing written");
+}

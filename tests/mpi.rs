@@ -1,7 +1,8 @@
 //! MPMxDEM over MPI processes (`cargo test --features mpi --test mpi`, Open MPI's `mpirun` on
 //! the PATH): the same script gives byte-identical results on 1, 2 and 3 processes and without
 //! MPI, a checkpoint written on 2 processes continues on 3 and without MPI bit for bit, and an
-//! RVE failing on rank 1 stops every process with the point and the rank named.
+//! RVE failing on rank 1, or a checkpoint the first process cannot write, stops every process
+//! with the cause named.
 #![cfg(feature = "mpi")]
 
 mod common;
@@ -140,4 +141,20 @@ fn an_rve_failing_on_rank_1_stops_every_process_naming_the_point_and_the_rank() 
     // Without MPI the same point fails with the same message, less the rank.
     let alone = alone("failing_rve.rhai", "mpi_failing_alone", &[("rve", rve)]).unwrap_err().to_string();
     assert!(alone.contains("RVE of point 1") && !alone.contains("rank"), "{alone}");
+}
+
+#[test]
+fn a_checkpoint_the_first_process_cannot_write_stops_every_process() {
+    let rve = rve().to_str().unwrap();
+    let started = std::time::Instant::now();
+    // series.csv is a file: no folder can be made under it.
+    let sets = [("rve", rve), ("steps", "10"), ("checkpoint", "series.csv/half.json")];
+    let (code, stderr, out) = mpirun(2, "spread_column.rhai", "mpi_cannot_write", &sets);
+    assert_ne!(code, 0, "the run must fail: {stderr}");
+    assert!(started.elapsed().as_secs() < granite::END_GRACE_S, "both processes stop together");
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(summary["status"], "failed");
+    let error = summary["error"].as_str().unwrap();
+    assert!(error.contains("half.json") && error.contains("line"), "names the file and the script line: {error}");
 }

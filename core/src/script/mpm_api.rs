@@ -403,7 +403,7 @@ impl Handle<MpmScene> {
             return err(format!("material \"{}\" does not belong to this simulation", m.name));
         };
         let law = material.law.name().to_string();
-        if material.law.save_objects().or_rhai()?.is_some() {
+        if material.law.bytes_per_point() > 0 {
             return err(format!(
                 "set_material(\"{}\"): law \"{law}\" keeps an object per point; its parameters are fixed",
                 m.name
