@@ -31,32 +31,28 @@ pub fn run(
     quiet: bool,
     threads: Option<usize>,
 ) -> Result<RunReport> {
-    run_with_plugins(script, overrides, out_dir, quiet, threads, Vec::new())
+    run_request(script, RunRequest { overrides, out_dir, quiet, threads, ..Default::default() })
 }
 
-/// [`run`], loading native law plugins first (`--plugin`).
-pub fn run_with_plugins(
-    script: &Path,
-    overrides: Vec<(String, String)>,
-    out_dir: Option<PathBuf>,
-    quiet: bool,
-    threads: Option<usize>,
-    plugins: Vec<PathBuf>,
-) -> Result<RunReport> {
-    run_among(script, overrides, out_dir, quiet, threads, plugins, None)
+/// What `granite run` is given besides the script.
+#[derive(Debug, Default)]
+pub struct RunRequest {
+    pub overrides: Vec<(String, String)>,
+    /// Output folder (default: out/<script stem>/).
+    pub out_dir: Option<PathBuf>,
+    pub quiet: bool,
+    /// Worker threads (default: all cores, or under an MPI launcher the cores over the processes).
+    pub threads: Option<usize>,
+    /// Native law plugins to load first (`--plugin`).
+    pub plugins: Vec<PathBuf>,
+    /// The processes of an MPI run this one belongs to: every process runs the script, the first
+    /// one speaks and writes the files.
+    pub comm: Option<granite_core::comm::Comm>,
 }
 
-/// [`run_with_plugins`] as one of the processes of `comm` (an MPI run): every process runs the
-/// script, the first one speaks and writes the files.
-pub fn run_among(
-    script: &Path,
-    overrides: Vec<(String, String)>,
-    out_dir: Option<PathBuf>,
-    quiet: bool,
-    threads: Option<usize>,
-    plugins: Vec<PathBuf>,
-    comm: Option<granite_core::comm::Comm>,
-) -> Result<RunReport> {
+/// [`run`] with everything `granite run` takes.
+pub fn run_request(script: &Path, request: RunRequest) -> Result<RunReport> {
+    let RunRequest { overrides, out_dir, quiet, threads, plugins, comm } = request;
     let out_dir = out_dir.unwrap_or_else(|| default_out_dir(script));
     let mut pool = rayon::ThreadPoolBuilder::new();
     if let Some(n) = threads.or_else(threads_per_process) {

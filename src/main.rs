@@ -160,7 +160,9 @@ fn main() -> ExitCode {
                 return ExitCode::FAILURE;
             }
             let first = comm.as_ref().is_none_or(|c: &granite_core::comm::Comm| c.rank() == 0);
-            let result = granite::run_among(&script, set, out, quiet, threads, plugins, comm.clone());
+            let request =
+                granite::RunRequest { overrides: set, out_dir: out, quiet, threads, plugins, comm: comm.clone() };
+            let result = granite::run_request(&script, request);
             let code = match &result {
                 Ok(report) => {
                     if !quiet && first {
