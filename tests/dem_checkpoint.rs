@@ -62,7 +62,10 @@ fn inconsistent_state_files_are_refused_with_the_reason() {
         let mut state = good.clone();
         edit(&mut state);
         let path = dir.join("state.json");
-        std::fs::write(&path, state.to_string()).unwrap();
+        // Sealed as granite seals a file: what is checked here is the content, not the checksum.
+        let version = state["version"].as_u64().unwrap() as u32;
+        let sealed = granite_core::io::checkpoint_file::seal("granite-dem-state", version, "test", &state.to_string());
+        std::fs::write(&path, sealed).unwrap();
         let e = granite_core::dem::DemSim::load(&path, &granite::registry()).err().expect(what).to_string();
         assert!(e.contains("not a usable DEM state") && e.contains(&says), "{what}: {e}");
     }

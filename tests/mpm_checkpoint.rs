@@ -35,7 +35,8 @@ fn inconsistent_checkpoints_are_refused_with_the_reason() {
     std::fs::create_dir_all(&dir).unwrap();
     let path = dir.join("checkpoint.json");
     sim.save(&path).unwrap();
-    let good: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+    let file: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+    let good = file["state"].clone();
     let nodes = sim.mesh.node_count();
     type Edit = fn(&mut serde_json::Value);
     let edits: [(&str, Edit, String); 4] = [
@@ -51,7 +52,11 @@ fn inconsistent_checkpoints_are_refused_with_the_reason() {
     for (what, edit, says) in edits {
         let mut state = good.clone();
         edit(&mut state);
-        std::fs::write(&path, state.to_string()).unwrap();
+        // Sealed as granite seals a file: what is checked here is the content, not the checksum.
+        let version = file["version"].as_u64().unwrap() as u32;
+        let sealed =
+            granite_core::io::checkpoint_file::seal("granite-mpm-checkpoint", version, "test", &state.to_string());
+        std::fs::write(&path, sealed).unwrap();
         let e = granite_core::mpm::MpmSim::load(&path, &granite::registry()).err().expect(what).to_string();
         assert!(e.contains("not a usable MPM checkpoint") && e.contains(&says), "{what}: {e}");
     }

@@ -14,8 +14,13 @@ use serde::{Deserialize, Serialize};
 use std::path::Path;
 
 const FORMAT: &str = "granite-dem-state";
+/// 3: the file is an envelope (`io::checkpoint_file`: writer, CRC-32) around the state of 2.
 /// 2: a pair of spheres is stored under its larger index (`a > b`); 1 stored it under the smaller.
-const VERSION: u32 = 2;
+/// Bump it whenever `DemState` changes, and read the older ones through an upgrade path.
+const VERSION: u32 = 3;
+/// The oldest version read: 2, whose state is 3's (external loads and the energy tracker, added
+/// since, default to none).
+const OLDEST: u32 = 2;
 
 /// A contact law by registry name and parameters (rebuilt from the registry on load).
 #[derive(Serialize, Deserialize)]
@@ -128,25 +133,33 @@ impl DemSim {
         Self::from_state(st, &laws, "moved sample")
     }
 
-    /// Writes the whole state as JSON (f64 values round-trip exactly).
+    /// Writes the whole state as JSON (f64 values round-trip exactly), sealed with a checksum.
     pub fn save(&self, path: &Path) -> Result<()> {
-        let text = serde_json::to_string(&self.to_state())
+        self.save_as(path, &crate::io::checkpoint_file::default_writer())
+    }
+
+    /// [`DemSim::save`], recording `written_by` (the program and its commit) in the file.
+    pub fn save_as(&self, path: &Path, written_by: &str) -> Result<()> {
+        let state = serde_json::to_string(&self.to_state())
             .map_err(|e| GraniteError::Other(format!("{}: {e}", path.display())))?;
+        let text = crate::io::checkpoint_file::seal(FORMAT, VERSION, written_by, &state);
         std::fs::write(path, text).map_err(|e| GraniteError::io(path, e))
     }
 
-    /// Reads a state written by [`DemSim::save`]; contact laws are rebuilt from `registry`.
+    /// Reads a state written by [`DemSim::save`] (this version or an older one); a damaged file or
+    /// one from a newer granite is refused. Contact laws are rebuilt from `registry`.
     pub fn load(path: &Path, registry: &Registry) -> Result<DemSim> {
         let text = std::fs::read_to_string(path).map_err(|e| GraniteError::io(path, e))?;
-        let st: DemState = serde_json::from_str(&text)
+        let opened = crate::io::checkpoint_file::open(path, &text, FORMAT, VERSION, OLDEST)?;
+        let st: DemState = serde_json::from_str(opened.state)
             .map_err(|e| GraniteError::Other(format!("{} is not a granite DEM state: {e}", path.display())))?;
         Self::from_state(st, &from_registry(registry), &path.display().to_string())
     }
 
     fn from_state(st: DemState, build_law: &LawBuilder, source: &str) -> Result<DemSim> {
-        if st.format != FORMAT || st.version != VERSION {
+        if st.format != FORMAT || !(OLDEST..=VERSION).contains(&st.version) {
             return Err(GraniteError::Other(format!(
-                "{source}: format {} version {} (this granite reads {FORMAT} version {VERSION})",
+                "{source}: format {} version {} (this granite reads {FORMAT} versions {OLDEST} to {VERSION})",
                 st.format, st.version
             )));
         }

@@ -1,5 +1,6 @@
 //! Output files of the output contract: `series.csv`, `summary.json`, `vtk/`.
 
+pub mod checkpoint_file;
 pub mod plot;
 pub mod series;
 pub mod vtk;

@@ -12,7 +12,11 @@ use serde::{Deserialize, Serialize};
 use std::path::Path;
 
 const FORMAT: &str = "granite-mpm-checkpoint";
-const VERSION: u32 = 1;
+/// 2: the file is an envelope (`io::checkpoint_file`: writer, CRC-32) around the state of 1.
+/// Bump it whenever `MpmState` changes, and read the older ones through an upgrade path.
+const VERSION: u32 = 2;
+/// The oldest version read: 1, whose state is 2's.
+const OLDEST: u32 = 1;
 
 #[derive(Serialize, Deserialize)]
 struct MaterialRecord {
@@ -51,10 +55,15 @@ impl MpmSim {
     /// processes every process calls it: the objects of spread materials are gathered to the
     /// first process, which writes the file, and every process returns its outcome.
     pub fn save(&self, path: &Path) -> Result<()> {
-        crate::comm::agree(self.comm.as_ref(), 0, self.write_checkpoint(path))
+        self.save_as(path, &crate::io::checkpoint_file::default_writer())
     }
 
-    fn write_checkpoint(&self, path: &Path) -> Result<()> {
+    /// [`MpmSim::save`], recording `written_by` (the program and its commit) in the file.
+    pub fn save_as(&self, path: &Path, written_by: &str) -> Result<()> {
+        crate::comm::agree(self.comm.as_ref(), 0, self.write_checkpoint(path, written_by))
+    }
+
+    fn write_checkpoint(&self, path: &Path, written_by: &str) -> Result<()> {
         let mut materials = Vec::new();
         for m in &self.materials {
             let objects = match &m.spread {
@@ -96,8 +105,9 @@ impl MpmSim {
             deleted_points: self.deleted_points,
             next_id: self.next_id(),
         };
-        let text =
+        let state =
             serde_json::to_string(&state).map_err(|e| GraniteError::Other(format!("{}: {e}", path.display())))?;
+        let text = crate::io::checkpoint_file::seal(FORMAT, VERSION, written_by, &state);
         std::fs::write(path, text).map_err(|e| GraniteError::io(path, e))
     }
 
@@ -105,11 +115,12 @@ impl MpmSim {
     /// objects (an RVE per point) get them back from the checkpoint.
     pub fn load(path: &Path, registry: &Registry) -> Result<MpmSim> {
         let text = std::fs::read_to_string(path).map_err(|e| GraniteError::io(path, e))?;
-        let st: MpmState = serde_json::from_str(&text)
+        let opened = crate::io::checkpoint_file::open(path, &text, FORMAT, VERSION, OLDEST)?;
+        let st: MpmState = serde_json::from_str(opened.state)
             .map_err(|e| GraniteError::Other(format!("{} is not a granite MPM checkpoint: {e}", path.display())))?;
-        if st.format != FORMAT || st.version != VERSION {
+        if st.format != FORMAT || !(OLDEST..=VERSION).contains(&st.version) {
             return Err(GraniteError::Other(format!(
-                "{}: format {} version {} (this granite reads {FORMAT} version {VERSION})",
+                "{}: format {} version {} (this granite reads {FORMAT} versions {OLDEST} to {VERSION})",
                 path.display(),
                 st.format,
                 st.version

@@ -383,7 +383,8 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
         let mut st = s.lock();
         let path = st.points_path(file);
         // Every process of an MPI run holds the same DEM simulation: the first one writes it.
-        let written = if st.output.writes { st.sim.prepared().save(&path) } else { Ok(()) };
+        let program = st.ctx.options.program.clone();
+        let written = if st.output.writes { st.sim.prepared().save_as(&path, &program) } else { Ok(()) };
         crate::comm::agree(st.ctx.comm(), 0, written).map(|_| path.display().to_string()).or_rhai()
     });
     let c = ctx.clone();

@@ -648,7 +648,8 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
     engine.register_fn("save", |s: &mut SimHandle, file: &str| {
         let mut st = s.lock();
         let path = st.points_path(file);
-        st.sim.mpm.save(&path).map(|_| path.display().to_string()).or_rhai()
+        let program = st.ctx.options.program.clone();
+        st.sim.mpm.save_as(&path, &program).map(|_| path.display().to_string()).or_rhai()
     });
     let c = ctx.clone();
     engine.register_fn("mpm_load", move |file: &str| {

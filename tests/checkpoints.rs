@@ -1,0 +1,117 @@
+//! What a checkpoint guarantees: a damaged file is refused naming it, a file says which granite
+//! wrote it, a newer format is refused with a clear message, and the formats granite released
+//! before (kept in tests/checkpoints/) still load and run.
+
+mod common;
+use granite_core::script::{run_source, RunOptions};
+use std::path::{Path, PathBuf};
+
+/// Runs script text; Err carries the script error.
+fn run(name: &str, source: &str) -> Result<PathBuf, String> {
+    let out = common::out_dir(name);
+    let options = RunOptions { out_dir: out.clone(), quiet: true, ..Default::default() };
+    run_source(&format!("{name}.rhai"), source, granite::registry(), options).map(|r| r.out_dir).map_err(|e| e.to_string())
+}
+
+const MPM_RUN: &str = r#"
+let sim = mpm(#{ dim: 2, origin: [0.0, 0.0], cell: 0.1, cells: [3, 3] });
+let soil = sim.material("mohr_coulomb", #{ name: "soil", density: 1800.0, young: 1e6, poisson: 0.3, friction: 30.0, cohesion: 0.0 });
+sim.fill_box(soil, [0.0, 0.0], [0.2, 0.2], #{ per_cell: 2 });
+sim.fix("x-", "x"); sim.fix("y-", "y");
+sim.gravity([0.0, -9.81]);
+sim.dt(1e-4);
+sim.run_steps(40);
+sim.save("state.json");
+"#;
+
+const DEM_RUN: &str = r#"
+let sim = dem(#{ seed: 3 });
+let glass = sim.material(#{ name: "glass", density: 2500.0 });
+sim.contact_law("hertz_mindlin", #{ young: 1e7, poisson: 0.3, friction: 20.0 });
+sim.box_walls(glass, [0.0, 0.0, 0.0], [0.05, 0.05, 0.05]);
+sim.sphere(glass, [0.025, 0.025, 0.006], 0.005);
+sim.sphere(glass, [0.025, 0.025, 0.0165], 0.005);
+sim.gravity([0.0, 0.0, -9.81]);
+sim.dt(0.2 * sim.critical_dt());
+sim.run_steps(200);
+sim.save("state.json");
+"#;
+
+/// Changes one digit in the middle of the file (a 3 becomes a 4, or the reverse).
+fn change_one_digit(path: &Path) {
+    let mut bytes = std::fs::read(path).unwrap();
+    let middle = bytes.len() / 2;
+    let at = (middle..bytes.len()).find(|&i| bytes[i] == b'3' || bytes[i] == b'4').expect("a digit 3 or 4");
+    bytes[at] = if bytes[at] == b'3' { b'4' } else { b'3' };
+    std::fs::write(path, bytes).unwrap();
+}
+
+fn load_script(function: &str, path: &Path) -> String {
+    format!("let sim = {function}({:?});\nsim.run_steps(5);\n", path.to_str().unwrap())
+}
+
+#[test]
+fn a_checkpoint_with_one_digit_changed_is_refused_naming_the_file() {
+    for (name, writer, loader) in [("ckpt_mpm", MPM_RUN, "mpm_load"), ("ckpt_dem", DEM_RUN, "dem_load")] {
+        let dir = run(name, writer).unwrap();
+        let file = dir.join("state.json");
+        // Intact, it loads and runs.
+        run(&format!("{name}_intact"), &load_script(loader, &file)).unwrap();
+        change_one_digit(&file);
+        let e = run(&format!("{name}_damaged"), &load_script(loader, &file)).unwrap_err();
+        assert!(e.contains("state.json is damaged") && e.contains("crc32") && e.contains("line 1"), "{loader}: {e}");
+    }
+}
+
+#[test]
+fn a_checkpoint_says_which_granite_wrote_it_and_a_newer_format_is_refused() {
+    let dir = common::out_dir("ckpt_cli");
+    let script = dir.with_extension("rhai");
+    std::fs::create_dir_all(dir.parent().unwrap()).unwrap();
+    std::fs::write(&script, MPM_RUN).unwrap();
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_granite"))
+        .args(["run", "--quiet", "--out"])
+        .arg(&dir)
+        .arg(&script)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let text = std::fs::read_to_string(dir.join("state.json")).unwrap();
+    let header: serde_json::Value = serde_json::from_str(&text).unwrap();
+    let writer = header["written_by"].as_str().unwrap();
+    assert!(
+        writer.contains(env!("CARGO_PKG_VERSION")) && writer.contains(env!("GRANITE_GIT_COMMIT")),
+        "written by {writer}"
+    );
+    assert_eq!(header["version"], 2);
+    // The same file as a future granite would write it.
+    let newer = text.replacen("\"version\":2", "\"version\":3", 1).replacen(writer, "granite 9.9.9 (future)", 1);
+    let future = dir.join("future.json");
+    std::fs::write(&future, newer).unwrap();
+    let e = run("ckpt_future", &load_script("mpm_load", &future)).unwrap_err();
+    assert!(e.contains("granite 9.9.9 (future)") && e.contains("version 3") && e.contains("versions 1 to 2"), "{e}");
+}
+
+/// Formats released before: a DEM state of version 2 and an MPM checkpoint of version 1, written
+/// by granite before checkpoints carried a checksum, load through their upgrade path and run on.
+#[test]
+fn checkpoints_of_every_released_format_load_and_run() {
+    let fixtures = common::root().join("tests").join("checkpoints");
+    let dem = fixtures.join("dem_state_v2.json");
+    let source = format!(
+        "let sim = dem_load({:?});\nlet before = sim.step;\nsim.run_steps(100);\nsummary(\"steps\", sim.step - before);\nsummary(\"particles\", sim.particles);\n",
+        dem.to_str().unwrap()
+    );
+    let dir = run("ckpt_dem_v2", &source).unwrap();
+    let summary = std::fs::read_to_string(dir.join("summary.json")).unwrap();
+    assert!(summary.contains("\"steps\": 100") && summary.contains("\"particles\": 3"), "{summary}");
+    let mpm = fixtures.join("mpm_checkpoint_v1.json");
+    let source = format!(
+        "let sim = mpm_load({:?});\nsim.run_steps(20);\nsummary(\"points\", sim.points);\nsummary(\"step\", sim.step);\n",
+        mpm.to_str().unwrap()
+    );
+    let dir = run("ckpt_mpm_v1", &source).unwrap();
+    let summary = std::fs::read_to_string(dir.join("summary.json")).unwrap();
+    // Written at step 50 with 4 points (2 x 2 cells, one point each).
+    assert!(summary.contains("\"points\": 4") && summary.contains("\"step\": 70"), "{summary}");
+}
