@@ -5,6 +5,7 @@ pub mod bench;
 #[cfg(feature = "mpi")]
 pub mod mpi_comm;
 pub mod repl;
+pub mod signals;
 
 use granite_core::script::{run_script, RunOptions, RunReport};
 use granite_core::{Registry, Result};
@@ -48,11 +49,13 @@ pub struct RunRequest {
     /// The processes of an MPI run this one belongs to: every process runs the script, the first
     /// one speaks and writes the files.
     pub comm: Option<granite_core::comm::Comm>,
+    /// A flag a signal handler sets (see [`signals`]): the run stops cleanly at its next step.
+    pub stop_signal: Option<&'static std::sync::atomic::AtomicI32>,
 }
 
 /// [`run`] with everything `granite run` takes.
 pub fn run_request(script: &Path, request: RunRequest) -> Result<RunReport> {
-    let RunRequest { overrides, out_dir, quiet, threads, plugins, comm } = request;
+    let RunRequest { overrides, out_dir, quiet, threads, plugins, comm, stop_signal } = request;
     let out_dir = out_dir.unwrap_or_else(|| default_out_dir(script));
     let mut pool = rayon::ThreadPoolBuilder::new();
     if let Some(n) = threads.or_else(threads_per_process) {
@@ -61,7 +64,7 @@ pub fn run_request(script: &Path, request: RunRequest) -> Result<RunReport> {
     let pool = pool.build().map_err(|e| granite_core::GraniteError::Other(format!("thread pool: {e}")))?;
     let program = format!("granite {} ({})", env!("CARGO_PKG_VERSION"), env!("GRANITE_GIT_COMMIT"));
     let quiet = quiet || comm.as_ref().is_some_and(|c| c.rank() > 0);
-    let options = RunOptions { program, out_dir, overrides, quiet, plugins, comm, ..Default::default() };
+    let options = RunOptions { program, out_dir, overrides, quiet, plugins, comm, stop_signal, ..Default::default() };
     pool.install(|| run_script(script, registry(), options))
 }
 

@@ -160,9 +160,32 @@ fn main() -> ExitCode {
                 return ExitCode::FAILURE;
             }
             let first = comm.as_ref().is_none_or(|c: &granite_core::comm::Comm| c.rank() == 0);
-            let request =
-                granite::RunRequest { overrides: set, out_dir: out, quiet, threads, plugins, comm: comm.clone() };
+            // Alone, a signal stops the run cleanly; the processes of an MPI run would stop at
+            // different steps and wait for each other, so there the launcher's signal ends them.
+            let stop_signal = match &comm {
+                Some(_) => None,
+                None => match granite::signals::install() {
+                    Ok(flag) => Some(flag),
+                    Err(e) => {
+                        eprintln!("granite: error: {e}");
+                        return ExitCode::FAILURE;
+                    }
+                },
+            };
+            let request = granite::RunRequest {
+                overrides: set,
+                out_dir: out,
+                quiet,
+                threads,
+                plugins,
+                comm: comm.clone(),
+                stop_signal,
+            };
             let result = granite::run_request(&script, request);
+            if let (Some(signal), Err(e)) = (granite::signals::received(), &result) {
+                eprintln!("granite: {e}");
+                return ExitCode::from((128 + signal).clamp(0, 255) as u8);
+            }
             let code = match &result {
                 Ok(report) => {
                     if !quiet && first {

@@ -10,7 +10,9 @@ use std::path::{Path, PathBuf};
 fn run(name: &str, source: &str) -> Result<PathBuf, String> {
     let out = common::out_dir(name);
     let options = RunOptions { out_dir: out.clone(), quiet: true, ..Default::default() };
-    run_source(&format!("{name}.rhai"), source, granite::registry(), options).map(|r| r.out_dir).map_err(|e| e.to_string())
+    run_source(&format!("{name}.rhai"), source, granite::registry(), options)
+        .map(|r| r.out_dir)
+        .map_err(|e| e.to_string())
 }
 
 const MPM_RUN: &str = r#"

@@ -55,9 +55,8 @@ pub struct Opened<'a> {
 /// version an upgrade path reads.
 pub fn open<'a>(path: &Path, text: &'a str, format: &str, current: u32, oldest: u32) -> Result<Opened<'a>> {
     let file = path.display();
-    let header: Header = serde_json::from_str(text).map_err(|e| {
-        GraniteError::Other(format!("{file} is not a granite {format} file (or is damaged: {e})"))
-    })?;
+    let header: Header = serde_json::from_str(text)
+        .map_err(|e| GraniteError::Other(format!("{file} is not a granite {format} file (or is damaged: {e})")))?;
     if header.format != format {
         return Err(GraniteError::Other(format!("{file} is a `{}` file, not a `{format}` one", header.format)));
     }

@@ -69,6 +69,7 @@ pub static API: &[ApiDoc] = &[
     f("sim", "critical_dt", &["sim.critical_dt()"], NONE, "the stability limit of the time step (MPM: P-wave cell crossing; DEM: sqrt(m/k_n) of one contact)"),
     f("sim", "gravity", &["sim.gravity([gx, gy, gz])"], NONE, "body acceleration, m/s^2"),
     f("sim", "damping", &["sim.damping(d)"], NONE, "Cundall local damping in [0, 1)"),
+    f("sim", "checkpoint_every", &["sim.checkpoint_every(n, file)"], NONE, "a checkpoint (as sim.save) every n steps of the runs, overwritten, and one when a signal stops the run"),
     f("sim", "save", &["sim.save(file)"], NONE, "the whole state, to continue bit for bit (file in the output folder); returns the path"),
     // MPM.
     f("MpmSim", "material", &["sim.material(law, #{ density, name, ...law parameters })"], &["density", "name"], "a material of a registered law (`granite plugins` lists them and their parameters)"),

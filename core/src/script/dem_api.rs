@@ -227,6 +227,11 @@ impl ScriptSim for DemScene {
         self.dem.wall_pairs = Default::default();
         let _ = self.dem.rebuild_candidates();
     }
+    fn save_state(&self, path: &std::path::Path, ctx: &ScriptContext) -> Result<()> {
+        // Every process of an MPI run holds the same DEM simulation: the first one writes it.
+        let written = if ctx.writes_files() { self.prepared().save_as(path, &ctx.options.program) } else { Ok(()) };
+        crate::comm::agree(ctx.comm(), 0, written)
+    }
     fn drain_events(&mut self) -> Vec<String> {
         self.dem.events.drain(..).collect()
     }
@@ -382,10 +387,8 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
     engine.register_fn("save", |s: &mut DemHandle, file: &str| {
         let mut st = s.lock();
         let path = st.points_path(file);
-        // Every process of an MPI run holds the same DEM simulation: the first one writes it.
-        let program = st.ctx.options.program.clone();
-        let written = if st.output.writes { st.sim.prepared().save_as(&path, &program) } else { Ok(()) };
-        crate::comm::agree(st.ctx.comm(), 0, written).map(|_| path.display().to_string()).or_rhai()
+        let ctx = st.ctx.clone();
+        st.sim.save_state(&path, &ctx).map(|_| path.display().to_string()).or_rhai()
     });
     let c = ctx.clone();
     engine.register_fn("dem_load", move |file: &str| {

@@ -47,6 +47,9 @@ pub trait ScriptSim: Send + 'static {
     fn drain_events(&mut self) -> Vec<String>;
     /// Sets the value of boundary condition `target` from a script function (see `Handle::drive`).
     fn set_driven(&mut self, target: usize, value: f64);
+    /// Writes a checkpoint of the whole state (every process of an MPI run calls it; the first
+    /// writes) that `mpm_load` / `dem_load` resume from.
+    fn save_state(&self, path: &Path, ctx: &ScriptContext) -> Result<()>;
     /// A run call ended: what the engine reports of it (the processes' share of the work in a run
     /// over MPI). Every process calls it at the same point.
     fn run_ended(&mut self, _ctx: &ScriptContext) -> Result<()> {
@@ -64,6 +67,8 @@ pub struct State<S: ScriptSim> {
     columns: Vec<(String, FnPtr)>,
     output_claimed: bool,
     last_good: Option<S::Snapshot>,
+    /// `sim.checkpoint_every(n, file)`: a checkpoint every n steps, and when a signal stops the run.
+    checkpoint: Option<(u64, String)>,
     background: Option<Background>,
 }
 
@@ -107,6 +112,37 @@ impl<S: ScriptSim> State<S> {
             let _ = std::fs::create_dir_all(dir);
         }
         path
+    }
+
+    /// Writes the checkpoint the script asked for, if it asked; its path.
+    fn write_checkpoint(&mut self) -> Result<Option<std::path::PathBuf>> {
+        let Some((_, file)) = self.checkpoint.clone() else { return Ok(None) };
+        let path = self.points_path(&file);
+        self.sim.save_state(&path, &self.ctx)?;
+        Ok(Some(path))
+    }
+
+    /// A signal asked the run to stop: the state as it is after the last whole step is written
+    /// (series row, VTK frame, the script's checkpoint), and the script ends with where it stopped
+    /// and how to resume.
+    fn stop_on_signal(&mut self, signal: i32) -> Box<rhai::EvalAltResult> {
+        let (step, time) = (self.sim.steps(), self.sim.time());
+        let mut msg = format!(
+            "stopped by {} at step {step} (t = {time:.6e} s); the outputs hold the state up to there",
+            super::signal_name(signal)
+        );
+        self.output.last_vtk_step = None;
+        if let Err(e) = self.write_vtk() {
+            msg.push_str(&format!(" (the last VTK frame could not be written: {e})"));
+        }
+        msg.push_str(&match self.write_checkpoint() {
+            Ok(Some(path)) => format!("; checkpoint {}: resume from it with mpm_load / dem_load", path.display()),
+            Ok(None) => {
+                "; no checkpoint was asked for (sim.checkpoint_every(n, file) writes one, also on a signal)".into()
+            }
+            Err(e) => format!("; the checkpoint could not be written: {e}"),
+        });
+        super::convert::to_rhai(GraniteError::Other(msg))
     }
 
     /// Restores the last good state, writes it out, and turns the failure into a script error.
@@ -233,6 +269,7 @@ impl<S: ScriptSim> Handle<S> {
             columns: Vec::new(),
             output_claimed: false,
             last_good: None,
+            checkpoint: None,
             background: None,
         };
         Handle(Arc::new(Shared { state: Mutex::new(state), waiting: AtomicUsize::new(0) }))
@@ -337,6 +374,12 @@ impl<S: ScriptSim> Handle<S> {
                     std::thread::yield_now();
                 }
             }
+            let stop = self.lock().ctx.stop_requested();
+            if let Some(signal) = stop {
+                progress.finish();
+                self.write_series_with(caller)?;
+                return Err(self.lock().stop_on_signal(signal));
+            }
             let (t, driven, paused) = {
                 let st = self.lock();
                 let stopped = plan.stop.as_ref().is_some_and(|s| s.load(Ordering::SeqCst));
@@ -386,6 +429,9 @@ impl<S: ScriptSim> Handle<S> {
                 // in a script loop would otherwise flood vtk/).
                 if step.is_multiple_of(plan.vtk_every) || (last && k >= plan.vtk_every) {
                     st.write_vtk().or_rhai()?;
+                }
+                if st.checkpoint.as_ref().is_some_and(|(every, _)| step.is_multiple_of(*every)) {
+                    st.write_checkpoint().or_rhai()?;
                 }
                 progress.tick(k, st.sim.time());
                 let due =
@@ -643,6 +689,13 @@ pub fn register_common<S: ScriptSim>(engine: &mut Engine) {
         Ok(())
     });
     engine.register_fn("write_vtk", |s: &mut Handle<S>| s.lock().write_vtk().or_rhai());
+    engine.register_fn("checkpoint_every", |s: &mut Handle<S>, n: i64, file: &str| {
+        if n < 1 {
+            return err(format!("checkpoint_every(n, file) needs n >= 1 steps, got {n}"));
+        }
+        s.lock().checkpoint = Some((n as u64, file.to_string()));
+        Ok(())
+    });
     engine.register_fn("vtk_format", |s: &mut Handle<S>, format: &str| {
         let encoding = crate::io::vtk::Encoding::parse(format).or_rhai()?;
         s.lock().output.vtk_encoding = encoding;

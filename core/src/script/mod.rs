@@ -55,12 +55,20 @@ pub struct RunOptions {
     /// The processes running this script together (`mpirun`); None: this process alone. Every
     /// process runs the whole script; the first one writes the files.
     pub comm: Option<crate::comm::Comm>,
+    /// Set by a signal handler to the number of a signal asking the run to stop (SIGINT, SIGTERM):
+    /// a run stops cleanly at its next step and the script ends `interrupted`.
+    pub stop_signal: Option<&'static std::sync::atomic::AtomicI32>,
 }
 
 impl ScriptContext {
     /// Whether this process writes the run's files (the first of several processes, or the only one).
     pub fn writes_files(&self) -> bool {
         self.options.comm.as_ref().is_none_or(|c| c.rank() == 0)
+    }
+
+    /// The signal that asked the run to stop, if one did.
+    pub fn stop_requested(&self) -> Option<i32> {
+        self.options.stop_signal.map(|s| s.load(std::sync::atomic::Ordering::SeqCst)).filter(|&s| s != 0)
     }
 
     /// The other processes of the run, if any.
@@ -334,7 +342,9 @@ fn build_engine(ctx: &Arc<ScriptContext>) -> Engine {
     // check outside the REPL is one thread-local read.
     engine.on_progress(move |_| match INTERRUPTIBLE_SINCE.get() {
         Some(presses) if c.pause_requests() != presses => Some(Dynamic::from(INTERRUPTED)),
-        _ => None,
+        // A signal stops `granite run` between steps (see the driver) and its script here, at
+        // the next operation, should it be busy outside any run.
+        _ => c.stop_requested().map(|s| Dynamic::from(format!("stopped by {}", signal_name(s)))),
     });
     // param(name, default) and param(name, default, limits), for each kind of default.
     macro_rules! register_param {
@@ -472,7 +482,15 @@ pub fn run_source(name: &str, source: &str, registry: Registry, options: RunOpti
         })
         .and_then(|_| ctx.check_overrides().map_err(|e| format!("{name}: {}", describe(&e, &engine))));
     let mut summary = ctx.summary.lock().unwrap().clone();
-    summary.insert("status".into(), Value::from(if outcome.is_ok() { "ok" } else { "failed" }));
+    let status = match (&outcome, ctx.stop_requested()) {
+        (_, Some(_)) => "interrupted",
+        (Ok(()), None) => "ok",
+        (Err(_), None) => "failed",
+    };
+    summary.insert("status".into(), Value::from(status));
+    if let Some(signal) = ctx.stop_requested() {
+        summary.insert("signal".into(), Value::from(signal_name(signal)));
+    }
     if let Err(e) = &outcome {
         summary.insert("error".into(), Value::from(e.clone()));
     }
@@ -484,6 +502,16 @@ pub fn run_source(name: &str, source: &str, registry: Registry, options: RunOpti
     match outcome {
         Ok(()) => Ok(RunReport { out_dir, summary }),
         Err(e) => Err(GraniteError::Other(e)),
+    }
+}
+
+/// SIGINT, SIGTERM, or the number of another signal.
+pub fn signal_name(signal: i32) -> String {
+    match signal {
+        2 => "SIGINT".into(),
+        15 => "SIGTERM".into(),
+        1 => "SIGHUP".into(),
+        n => format!("signal {n}"),
     }
 }
 

@@ -214,6 +214,10 @@ impl ScriptSim for MpmScene {
     fn restore(&mut self, snapshot: Snapshot) {
         self.mpm.restore(snapshot)
     }
+    fn save_state(&self, path: &std::path::Path, ctx: &ScriptContext) -> Result<()> {
+        // Collective: every process calls it, the first writes.
+        self.mpm.save_as(path, &ctx.options.program)
+    }
     fn drain_events(&mut self) -> Vec<String> {
         self.mpm.events.drain(..).collect()
     }
@@ -648,8 +652,8 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
     engine.register_fn("save", |s: &mut SimHandle, file: &str| {
         let mut st = s.lock();
         let path = st.points_path(file);
-        let program = st.ctx.options.program.clone();
-        st.sim.mpm.save_as(&path, &program).map(|_| path.display().to_string()).or_rhai()
+        let ctx = st.ctx.clone();
+        st.sim.save_state(&path, &ctx).map(|_| path.display().to_string()).or_rhai()
     });
     let c = ctx.clone();
     engine.register_fn("mpm_load", move |file: &str| {

@@ -1,0 +1,110 @@
+//! Signals during `granite run`, sent for real: SIGINT and SIGTERM stop the run at its next step
+//! with its outputs, summary.json and provenance.json written (status `interrupted`), a checkpoint
+//! when the script asked for one, a line saying where it stopped, and exit code 130 or 143; a
+//! second signal ends the process at once.
+#![cfg(unix)]
+
+mod common;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+/// An MPM column that would run for hours, checkpointing every 200000 steps.
+const ENDLESS: &str = r#"
+let sim = mpm(#{ dim: 2, origin: [0.0, 0.0], cell: 0.1, cells: [10, 10] });
+let soil = sim.material("mohr_coulomb", #{ name: "soil", density: 1800.0, young: 1e6, poisson: 0.3, friction: 30.0, cohesion: 0.0 });
+sim.fill_box(soil, [0.0, 0.0], [0.5, 0.5], #{ per_cell: 2 });
+sim.fix("x-", "x"); sim.fix("y-", "y");
+sim.gravity([0.0, -9.81]);
+sim.dt(1e-5);
+sim.series_every(100);
+sim.checkpoint_every(200000, "checkpoint.json");
+sim.run_steps(100000000);
+"#;
+
+fn start(name: &str, source: &str) -> (Child, PathBuf) {
+    let out = common::out_dir(name);
+    std::fs::create_dir_all(&out).unwrap();
+    let script = out.join("endless.rhai");
+    std::fs::write(&script, source).unwrap();
+    let child = Command::new(env!("CARGO_BIN_EXE_granite"))
+        .args(["run", "--quiet", "--threads", "1", "--out"])
+        .arg(&out)
+        .arg(&script)
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Running once series.csv has rows past its first.
+    let started = Instant::now();
+    while std::fs::read_to_string(out.join("series.csv")).map_or(0, |t| t.lines().count()) < 3 {
+        assert!(started.elapsed() < Duration::from_secs(60), "the run did not start");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    (child, out)
+}
+
+fn signal(child: &Child, signal: i32) {
+    assert_eq!(unsafe { libc::kill(child.id() as i32, signal) }, 0, "kill");
+}
+
+fn finish(child: Child) -> (i32, String) {
+    let out = child.wait_with_output().unwrap();
+    (out.status.code().unwrap_or(-1), String::from_utf8_lossy(&out.stderr).into_owned())
+}
+
+fn json(path: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
+}
+
+#[test]
+fn sigint_and_sigterm_stop_the_run_cleanly_and_it_resumes_from_its_checkpoint() {
+    for (sig, name, code) in [(libc::SIGINT, "SIGINT", 130), (libc::SIGTERM, "SIGTERM", 143)] {
+        let (child, out) = start(&format!("signal_{name}"), ENDLESS);
+        signal(&child, sig);
+        let (exit, stderr) = finish(child);
+        assert_eq!(exit, code, "{name}: {stderr}");
+        let summary = json(&out.join("summary.json"));
+        assert_eq!(summary["status"], "interrupted", "{summary}");
+        assert_eq!(summary["signal"], name);
+        assert_eq!(json(&out.join("provenance.json"))["status"], "interrupted");
+        // The line on stderr says where it stopped and how to resume.
+        let step: u64 = stderr
+            .split("at step ")
+            .nth(1)
+            .and_then(|s| s.split_whitespace().next())
+            .and_then(|s| s.parse().ok())
+            .unwrap_or_else(|| panic!("{name}: no step in {stderr}"));
+        assert!(stderr.contains("checkpoint") && stderr.contains("mpm_load"), "{stderr}");
+        // The series ends on that step, and the checkpoint holds it.
+        let (header, rows) = common::read_csv(&out.join("series.csv"));
+        assert_eq!(rows.last().unwrap()[common::column(&header, "step")], step as f64);
+        let checkpoint = out.join("checkpoint.json");
+        let resume = format!(
+            "let sim = mpm_load({:?});\nsummary(\"step\", sim.step);\nsim.run_steps(10);\n",
+            checkpoint.to_str().unwrap()
+        );
+        let resumed = common::out_dir(&format!("signal_{name}_resumed"));
+        let options = granite_core::script::RunOptions { out_dir: resumed.clone(), quiet: true, ..Default::default() };
+        granite_core::script::run_source("resume.rhai", &resume, granite::registry(), options).unwrap();
+        assert_eq!(json(&resumed.join("summary.json"))["step"], step);
+    }
+}
+
+#[test]
+fn a_second_signal_ends_the_process_at_once() {
+    // 10000 points: the way out (the last frame, a checkpoint of several MB) takes a while, and
+    // the second signal comes during it. (Two signals sent back to back would merge into one.)
+    let big = ENDLESS.replace("cells: [10, 10]", "cells: [100, 100]").replace("[0.5, 0.5]", "[5.0, 5.0]");
+    let (child, out) = start("signal_twice", &big);
+    signal(&child, libc::SIGINT);
+    // The first signal was taken once the way out has begun: its VTK frame is there.
+    let started = Instant::now();
+    while !out.join("vtk").join("points_000001.vtu").exists() {
+        assert!(started.elapsed() < Duration::from_secs(60), "the run did not stop");
+        std::thread::sleep(Duration::from_millis(1));
+    }
+    signal(&child, libc::SIGINT);
+    let (exit, stderr) = finish(child);
+    assert_eq!(exit, 130, "{stderr}");
+    assert!(stderr.contains("a second signal: stopped at once"), "{stderr}");
+}
