@@ -16,6 +16,7 @@ pub mod ext;
 pub mod io;
 mod loaded;
 pub mod math;
+pub mod memory;
 pub mod mpm;
 pub mod par;
 pub mod params;

@@ -88,6 +88,13 @@ pub fn cloud(
     existing: &[(Vec3, f64)],
 ) -> Result<Vec<(Vec3, f64)>> {
     psd.validate()?;
+    crate::memory::check(
+        "sim.cloud",
+        count as f64,
+        "spheres",
+        crate::memory::BYTES_PER_SPHERE,
+        "ask for fewer spheres",
+    )?;
     let r_max = psd.max_radius();
     for a in 0..3 {
         if !(hi[a] - lo[a] > 2.0 * r_max) {
@@ -169,9 +176,17 @@ pub fn lattice(lo: Vec3, hi: Vec3, spacing: f64, radius: f64, jitter: f64, seed:
         ));
     }
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    let n: Vec<usize> = (0..3)
-        .map(|a| (((hi[a] - lo[a] - 2.0 * (radius + jitter)) / spacing).floor() as i64 + 1).max(0) as usize)
-        .collect();
+    // Sites per axis, counted in f64 first: a tiny spacing must be refused, not overflow.
+    let sites: Vec<f64> =
+        (0..3).map(|a| (((hi[a] - lo[a] - 2.0 * (radius + jitter)) / spacing).floor() + 1.0).max(0.0)).collect();
+    crate::memory::check(
+        "sim.lattice",
+        sites[0] * sites[1] * sites[2],
+        "spheres",
+        crate::memory::BYTES_PER_SPHERE,
+        "make the spacing larger or the box smaller",
+    )?;
+    let n: Vec<usize> = sites.iter().map(|&s| s as usize).collect();
     let mut out = Vec::with_capacity(n[0] * n[1] * n[2]);
     for k in 0..n[2] {
         for j in 0..n[1] {

@@ -76,6 +76,7 @@ pub fn cell_points(
     }
     let local = layout.local_positions(per_dir);
     let per_cell = per_dir.pow(mesh.dim as u32);
+
     let volume = mesh.cell_volume() / per_cell as f64;
     let (mut xs, mut vols) = (Vec::new(), Vec::new());
     let nz = if mesh.dim == 3 { per_dir } else { 1 };
@@ -90,6 +91,16 @@ pub fn cell_points(
                         x[a] = mesh.origin[a] + mesh.cell[a] * (ijk[a] as f64 + 0.5 * (lx[a] + 1.0));
                     }
                     if inside(x)? {
+                        if xs.len() == xs.capacity() {
+                            // The arrays are about to double: would the points fit?
+                            crate::memory::check(
+                                "a fill",
+                                2.0 * xs.len().max(1024) as f64,
+                                "material points",
+                                crate::memory::BYTES_PER_POINT,
+                                "use fewer points per cell or a smaller region",
+                            )?;
+                        }
                         xs.push(x);
                         vols.push(volume);
                     }

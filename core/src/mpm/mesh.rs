@@ -43,10 +43,12 @@ impl Mesh {
             cells[2] = 1;
             cell[2] = 1.0;
         }
-        let nodes = (cells[0] + 1) * (cells[1] + 1) * if dim == 3 { cells[2] + 1 } else { 1 };
-        if nodes > u32::MAX as usize / 2 {
+        let nodes =
+            (cells[0] as f64 + 1.0) * (cells[1] as f64 + 1.0) * if dim == 3 { cells[2] as f64 + 1.0 } else { 1.0 };
+        if nodes > u32::MAX as f64 / 2.0 {
             return Err(GraniteError::param("cells", nodes, "too many nodes for one mesh"));
         }
+        crate::memory::check("the mesh", nodes, "nodes", crate::memory::BYTES_PER_NODE, "use fewer or larger cells")?;
         Ok(Mesh { dim, origin, cell, cells })
     }
 

@@ -331,12 +331,24 @@ thread_local! {
     pub(crate) static INTERRUPTIBLE_SINCE: std::cell::Cell<Option<u64>> = const { std::cell::Cell::new(None) };
 }
 
+/// Most elements of a script's array (16 bytes each: 160 MB), bytes of a string, entries of a map.
+pub const MAX_ARRAY_SIZE: usize = 10_000_000;
+pub const MAX_STRING_SIZE: usize = 100_000_000;
+pub const MAX_MAP_SIZE: usize = 1_000_000;
+
 /// What an input stopped by Ctrl-C ends with (see [`INTERRUPTIBLE_SINCE`]).
 pub(crate) const INTERRUPTED: &str = "interrupted by Ctrl-C";
 
 fn build_engine(ctx: &Arc<ScriptContext>) -> Engine {
     let mut engine = Engine::new();
     engine.set_max_expr_depths(128, 64);
+    // Sizes a script cannot exceed, so that it cannot abort granite by asking for more memory
+    // than there is (`a.pad(1e10, 0.0)`, a string doubled 40 times): far above what setting up a
+    // simulation from a script takes (particles and points live in the engine, not in Rhai), and
+    // no limit on operations, which would cut off a legitimate long run.
+    engine.set_max_array_size(MAX_ARRAY_SIZE);
+    engine.set_max_string_size(MAX_STRING_SIZE);
+    engine.set_max_map_size(MAX_MAP_SIZE);
     let c = ctx.clone();
     // Checked at every operation: a loop of runs does only a few between two runs, and the
     // check outside the REPL is one thread-local read.
@@ -592,6 +604,10 @@ pub(crate) fn describe(e: &EvalAltResult, engine: &Engine) -> String {
     let msg = match inner {
         EvalAltResult::ErrorRuntime(d, _) => d.to_string(),
         EvalAltResult::ErrorFunctionNotFound(call, _) => function_not_found(call, engine),
+        EvalAltResult::ErrorDataTooLarge(what, _) => format!(
+            "{what}: a script's arrays hold at most {MAX_ARRAY_SIZE} elements, its strings {MAX_STRING_SIZE} bytes \
+             and its maps {MAX_MAP_SIZE} entries (particles and points live in the simulation, not in script arrays)"
+        ),
         EvalAltResult::ErrorTerminated(_, _) => {
             format!("{INTERRUPTED}: the input stopped here; simulations keep their state")
         }

@@ -1,0 +1,55 @@
+//! Requests too big for the machine are refused with the numbers, never a panic or an abort in
+//! the allocator: generators, meshes and fills estimate their memory first, and a script's own
+//! arrays, strings and maps have a size limit.
+
+mod common;
+use granite_core::script::{run_source, RunOptions};
+
+fn fails(name: &str, source: &str) -> String {
+    let options = RunOptions { out_dir: common::out_dir(name), quiet: true, ..Default::default() };
+    match run_source(&format!("{name}.rhai"), source, granite::registry(), options) {
+        Ok(_) => panic!("{name}: the script must fail"),
+        Err(e) => e.to_string(),
+    }
+}
+
+#[test]
+fn generators_meshes_and_fills_beyond_the_memory_are_refused_with_the_numbers() {
+    let lattice = |spacing: &str, radius: &str| {
+        format!(
+            "let sim = dem();\nlet m = sim.material(#{{ name: \"g\", density: 2500.0 }});\n\
+             sim.lattice(m, [0.0, 0.0, 0.0], [1.0, 1.0, 1.0], #{{ spacing: {spacing}, radius: {radius} }});\n"
+        )
+    };
+    // 1e18 sites (a capacity overflow before) and 1e9 (an abort on a 32 GB allocation before).
+    for (spacing, radius, sites) in [("1e-6", "4e-7", "1.000e18"), ("1e-3", "4e-4", "1.000e9")] {
+        let e = fails("limits_lattice", &lattice(spacing, radius));
+        assert!(e.contains("line 3") && e.contains(&format!("{sites} spheres")) && e.contains("GB"), "{e}");
+    }
+    let e = fails(
+        "limits_cloud",
+        "let sim = dem();\nlet m = sim.material(#{ name: \"g\", density: 2500.0 });\n\
+         sim.cloud(m, [0.0, 0.0, 0.0], [1.0, 1.0, 1.0], #{ count: 100000000000, radius: 1e-4 });\n",
+    );
+    assert!(e.contains("line 3") && e.contains("1.000e11 spheres"), "{e}");
+    let e = fails(
+        "limits_mesh",
+        "let sim = mpm(#{ dim: 3, origin: [0.0, 0.0, 0.0], cell: 1e-3, cells: [1200, 1200, 1200] });\n",
+    );
+    assert!(e.contains("line 1") && e.contains("nodes would take"), "{e}");
+    let e = fails(
+        "limits_fill",
+        "let sim = mpm(#{ dim: 3, origin: [0.0, 0.0, 0.0], cell: 1e-3, cells: [300, 300, 300] });\n\
+         let m = sim.material(\"linear_elastic\", #{ name: \"s\", density: 2000.0, young: 1e6, poisson: 0.3 });\n\
+         sim.fill_box(m, [0.0, 0.0, 0.0], [0.3, 0.3, 0.3], #{ per_cell: 20 });\n",
+    );
+    assert!(e.contains("line 3") && e.contains("material points would take"), "{e}");
+}
+
+#[test]
+fn a_script_cannot_abort_granite_through_its_own_arrays_and_strings() {
+    let e = fails("limits_pad", "let a = [];\na.pad(10000000000, 0.0);\n");
+    assert!(e.contains("line 2") && e.contains("at most 10000000 elements"), "{e}");
+    let e = fails("limits_string", "let s = \"ab\";\nfor i in 0..40 { s += s; }\n");
+    assert!(e.contains("line 2") && e.contains("strings 100000000 bytes"), "{e}");
+}
