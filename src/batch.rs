@@ -214,6 +214,10 @@ fn write_summary(out: &Path, outcomes: &[Outcome]) -> Result<()> {
             }
         }
     }
+    // Always a warnings column: an empty one says no run warned.
+    if !keys.iter().any(|k| k == "warnings") {
+        keys.push("warnings".into());
+    }
     let path = out.join("batch_summary.csv");
     let mut w = csv::Writer::from_path(&path).map_err(|e| GraniteError::Other(format!("{}: {e}", path.display())))?;
     let mut header = vec!["run".to_string(), "exit_code".to_string()];
@@ -229,6 +233,10 @@ fn write_summary(out: &Path, outcomes: &[Outcome]) -> Result<()> {
         for k in &keys {
             let v = o.summary.as_ref().and_then(|s| s.get(k)).map(|v| match v {
                 serde_json::Value::String(s) => s.clone(),
+                // A list of texts (the warnings), one cell.
+                serde_json::Value::Array(items) if items.iter().all(|i| i.is_string()) => {
+                    items.iter().filter_map(|i| i.as_str()).collect::<Vec<_>>().join(" | ")
+                }
                 other => other.to_string(),
             });
             row.push(v.unwrap_or_default());

@@ -248,3 +248,46 @@ fn a_build_without_mpi_refuses_to_run_as_one_of_several_mpi_processes() {
     assert!(stderr.contains("2 MPI processes") && stderr.contains("--features mpi"), "{stderr}");
     assert!(!dir.join("summary.json").exists(), "nothing written");
 }
+
+/// A point thrown out of the mesh is deleted with a warning (speed 0: none).
+const LEAVES_THE_MESH: &str = "let speed = param(\"speed\", 5.0);\n\
+    let sim = mpm(#{ dim: 2, origin: [0.0, 0.0], cell: 0.1, cells: [4, 4] });\n\
+    let s = sim.material(\"linear_elastic\", #{ name: \"s\", density: 1000.0, young: 1e5, poisson: 0.3 });\n\
+    sim.fill_box(s, [0.3, 0.0], [0.4, 0.1], #{ per_cell: 1, velocity: [speed, 0.0] });\n\
+    sim.dt(1e-3);\nsim.run_steps(50);\n";
+
+/// `--quiet` hides progress, not warnings; warnings go to summary.json and batch_summary.csv too.
+#[test]
+fn warnings_reach_stderr_under_quiet_summary_json_and_the_batch_summary() {
+    let dir = common::out_dir("cli_warnings");
+    std::fs::create_dir_all(&dir).unwrap();
+    let script = dir.join("leaves.rhai");
+    std::fs::write(&script, LEAVES_THE_MESH).unwrap();
+    let out = granite().args(["run", "--quiet", "--out"]).arg(dir.join("run")).arg(&script).output().unwrap();
+    assert!(out.status.success());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("left the mesh"), "the warning under --quiet: {stderr}");
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("run/summary.json")).unwrap()).unwrap();
+    let warnings = summary["warnings"].as_array().expect("summary.json lists the warnings");
+    assert!(warnings.iter().any(|w| w.as_str().unwrap().contains("left the mesh")), "{warnings:?}");
+    let params = dir.join("params.toml");
+    std::fs::write(&params, "[[set]]\nspeed = 5.0\n[[set]]\nspeed = 0.0\n").unwrap();
+    let out = granite()
+        .args(["batch"])
+        .arg(&script)
+        .arg("--params")
+        .arg(&params)
+        .arg("--out")
+        .arg(dir.join("batch"))
+        .args(["--quiet"])
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let mut csv = csv::Reader::from_path(dir.join("batch/batch_summary.csv")).unwrap();
+    let header = csv.headers().unwrap().clone();
+    let column = header.iter().position(|h| h == "warnings").expect("a warnings column");
+    let rows: Vec<csv::StringRecord> = csv.records().map(|r| r.unwrap()).collect();
+    assert!(rows[0][column].contains("left the mesh"), "{:?}", &rows[0]);
+    assert_eq!(&rows[1][column], "", "the run at rest has none");
+}

@@ -182,3 +182,20 @@ fn spheres_and_clumps_whose_mass_overflows_or_vanishes_are_refused_at_once() {
         assert!(e.contains("line 3") && e.contains(what), "{name}: {e}");
     }
 }
+
+/// Values that cannot be right are refused where they are given, not run on or written as null.
+#[test]
+fn infinite_friction_a_past_end_time_and_a_nan_summary_are_refused() {
+    let e = run_err("inf_friction", &format!("{HEAD}sim.friction(\"y-\", 1.0 / 0.0);\n"), &[]);
+    assert!(e.contains("line 2") && e.contains("finite") && e.contains("mu"), "{e}");
+    let src = format!(
+        "{HEAD}let m = sim.material(\"linear_elastic\", #{{ density: 1000.0, young: 1e5, poisson: 0.2 }});\n\
+         sim.fill_box(m, [0.0, 0.0], [0.2, 0.2]);\nsim.dt(1e-3);\nsim.run_until(0.01);\nsim.run_until(0.005);\n"
+    );
+    let e = run_err("past_end", &src, &[]);
+    assert!(e.contains("line 6") && e.contains("run_until(5e-3)") && e.contains("already at t = 1"), "{e}");
+    let e = run_err("nan_summary", "let x = 0.0 / 0.0;\nsummary(\"x\", x);\n", &[]);
+    assert!(e.contains("line 2") && e.contains("NaN") && e.contains("summary(\"x\""), "{e}");
+    let e = run_err("nan_in_list", "summary(\"xs\", [1.0, 1.0 / 0.0]);\n", &[]);
+    assert!(e.contains("inf"), "{e}");
+}

@@ -414,9 +414,7 @@ impl<S: ScriptSim> Handle<S> {
                     return Err(st.fail(e));
                 }
                 for ev in st.sim.drain_events() {
-                    if !st.ctx.options.quiet {
-                        eprintln!("granite: {ev}");
-                    }
+                    st.ctx.warn(&ev);
                 }
                 k += 1;
                 let step = st.sim.steps();
@@ -457,6 +455,14 @@ impl<S: ScriptSim> Handle<S> {
             let st = self.lock();
             st.sim.validate().or_rhai()?;
             let remaining = t_end - st.sim.time();
+            // Half a step of slack: a script reaching its end times by sums of steps lands there
+            // within rounding.
+            if remaining < -0.5 * st.sim.dt() {
+                return err(format!(
+                    "run_until({t_end:e}): the simulation is already at t = {:e} s, past that time; nothing would run",
+                    st.sim.time()
+                ));
+            }
             if remaining <= 0.0 {
                 return Ok(());
             }

@@ -146,7 +146,12 @@ pub struct ScriptContext {
     background: Mutex<Vec<BackgroundThread>>,
     /// Set when a parameter listing stopped the script at its first simulation.
     listing_done: std::sync::atomic::AtomicBool,
+    /// Warnings kept for summary.json, and how many there were in all.
+    warnings: Mutex<(Vec<String>, usize)>,
 }
+
+/// Warnings summary.json lists in full; past these it counts them.
+pub const MAX_WARNINGS_KEPT: usize = 50;
 
 impl ScriptContext {
     fn new(registry: Registry, options: RunOptions) -> ScriptContext {
@@ -162,6 +167,7 @@ impl ScriptContext {
             engine: Mutex::new(std::sync::Weak::new()),
             background: Mutex::new(Vec::new()),
             listing_done: std::sync::atomic::AtomicBool::new(false),
+            warnings: Mutex::new((Vec::new(), 0)),
         }
     }
 
@@ -282,6 +288,20 @@ impl ScriptContext {
         Ok(())
     }
 
+    /// Something the user must be told (a deleted point, a time step above the stable one): on
+    /// stderr whatever `--quiet` says (it hides progress, not warnings), and in summary.json's
+    /// `warnings` (the first [`MAX_WARNINGS_KEPT`], then a count of the rest).
+    pub fn warn(&self, text: &str) {
+        if self.writes_files() {
+            eprintln!("granite: {text}");
+        }
+        let mut warnings = self.warnings.lock().unwrap();
+        warnings.1 += 1;
+        if warnings.0.len() < MAX_WARNINGS_KEPT {
+            warnings.0.push(text.to_string());
+        }
+    }
+
     pub fn set_summary(&self, name: &str, value: Value) {
         self.summary.lock().unwrap().insert(name.to_string(), value);
     }
@@ -376,7 +396,17 @@ fn build_engine(ctx: &Arc<ScriptContext>) -> Engine {
     register_param!(&str, |d: &str| Dynamic::from(d.to_string()));
     register_param!(bool, Dynamic::from);
     let c = ctx.clone();
-    engine.register_fn("summary", move |name: &str, value: Dynamic| c.set_summary(name, to_json(&value)));
+    engine.register_fn("summary", move |name: &str, value: Dynamic| -> RhaiResult<()> {
+        // JSON has no NaN or infinity: such a value would be written as null, with status ok.
+        if let Some(bad) = non_finite(&value) {
+            return err(format!(
+                "summary(\"{name}\", ...): {bad} is not a finite number and JSON cannot hold it; the run has gone \
+                 wrong before this line, or the value needs a check"
+            ));
+        }
+        c.set_summary(name, to_json(&value));
+        Ok(())
+    });
     let c = ctx.clone();
     engine.register_fn("load_plugin", move |path: &str| -> RhaiResult<String> {
         c.load_plugin(Path::new(path)).map(|(name, _)| name).map_err(convert::to_rhai)
@@ -503,6 +533,13 @@ pub fn run_source(name: &str, source: &str, registry: Registry, options: RunOpti
     if let Some(signal) = ctx.stop_requested() {
         summary.insert("signal".into(), Value::from(signal_name(signal)));
     }
+    let (mut warnings, count) = ctx.warnings.lock().unwrap().clone();
+    if count > warnings.len() {
+        warnings.push(format!("... and {} more warnings (on stderr)", count - warnings.len()));
+    }
+    if !warnings.is_empty() {
+        summary.insert("warnings".into(), Value::from(warnings));
+    }
     if let Err(e) = &outcome {
         summary.insert("error".into(), Value::from(e.clone()));
     }
@@ -515,6 +552,20 @@ pub fn run_source(name: &str, source: &str, registry: Registry, options: RunOpti
         Ok(()) => Ok(RunReport { out_dir, summary }),
         Err(e) => Err(GraniteError::Other(e)),
     }
+}
+
+/// The first number in `value` (an array or map searched too) that is NaN or infinite.
+fn non_finite(value: &Dynamic) -> Option<f64> {
+    if let Ok(x) = value.as_float() {
+        return (!x.is_finite()).then_some(x);
+    }
+    if let Some(items) = value.read_lock::<rhai::Array>() {
+        return items.iter().find_map(non_finite);
+    }
+    if let Some(map) = value.read_lock::<rhai::Map>() {
+        return map.values().find_map(non_finite);
+    }
+    None
 }
 
 /// SIGINT, SIGTERM, or the number of another signal.

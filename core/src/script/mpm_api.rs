@@ -547,8 +547,8 @@ impl Handle<MpmScene> {
 
     fn friction(&mut self, face: &str, mu: Dynamic) -> RhaiResult<()> {
         let mu = number(&mu, "mu")?;
-        if !(mu >= 0.0) {
-            return err(format!("friction coefficient `mu` must be >= 0, got {mu}"));
+        if !(mu >= 0.0 && mu.is_finite()) {
+            return err(format!("friction coefficient `mu` must be finite and >= 0, got {mu}"));
         }
         let mut st = self.lock();
         let face = Face::parse(face, st.sim.mpm.dim()).or_rhai()?;
