@@ -199,3 +199,25 @@ fn infinite_friction_a_past_end_time_and_a_nan_summary_are_refused() {
     let e = run_err("nan_in_list", "summary(\"xs\", [1.0, 1.0 / 0.0]);\n", &[]);
     assert!(e.contains("inf"), "{e}");
 }
+
+/// The error names the cause: the missing contact law behind an infinite critical time step,
+/// the misspelt option behind a missing density.
+#[test]
+fn errors_name_the_missing_law_and_the_misspelt_option() {
+    let e = run_err(
+        "no_contact_law",
+        "let sim = dem();\nlet m = sim.material(#{ name: \"g\", density: 2500.0 });\n\
+         sim.sphere(m, [0.0, 0.0, 0.0], 0.01);\nsim.dt(0.3 * sim.critical_dt());\n",
+        &[],
+    );
+    assert!(e.contains("line 4") && e.contains("no contact law") && e.contains("sim.contact_law"), "{e}");
+    let e = run_err(
+        "densty",
+        &format!("{HEAD}let m = sim.material(\"linear_elastic\", #{{ densty: 1000.0, young: 1e5, poisson: 0.2 }});\n"),
+        &[],
+    );
+    assert!(
+        e.contains("line 2") && e.contains("unknown option `densty`") && e.contains("did you mean `density`?"),
+        "{e}"
+    );
+}

@@ -649,7 +649,24 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
         st.sim.dem.check_dt(dt).or_rhai()?;
         st.sim.dem.set_dt(dt).or_rhai()
     });
-    engine.register_fn("critical_dt", |s: &mut DemHandle| s.lock().sim.dem.critical_dt().unwrap_or(f64::INFINITY));
+    engine.register_fn("critical_dt", |s: &mut DemHandle| -> RhaiResult<f64> {
+        let st = s.lock();
+        let dem = &st.sim.dem;
+        // No limit means nothing to compute it from: say what is missing (a dt of inf would be
+        // refused later with no word of the cause).
+        dem.critical_dt().ok_or(()).or_else(|_| {
+            err(if dem.spheres.is_empty() {
+                "critical_dt(): no spheres yet: the limit comes from their masses and their contacts' stiffness"
+                    .to_string()
+            } else if dem.laws.is_empty() {
+                "critical_dt(): no contact law yet: call sim.contact_law(name, #{ ... }) first".to_string()
+            } else {
+                "critical_dt(): the contact laws give the spheres' materials no stiffness (set_contact_law between \
+                 them?)"
+                    .to_string()
+            })
+        })
+    });
     engine.register_fn("stable_dt", |s: &mut DemHandle| {
         s.lock().sim.dem.stable_dt().map(|limit| limit.dt).unwrap_or(f64::INFINITY)
     });

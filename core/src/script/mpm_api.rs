@@ -380,7 +380,15 @@ impl Handle<MpmScene> {
         let mut st = self.lock();
         let density = match get(&opts, "density") {
             Some(d) => number(d, "density")?,
-            None => return err(format!("material \"{law}\" needs `density` (kg/m^3)")),
+            None => {
+                // A misspelt `density` is the likelier cause: name it.
+                let keys: Vec<String> = opts.keys().map(|k| k.to_string()).collect();
+                let typo = keys.iter().find(|k| !super::api_doc::closest(k, ["density"]).is_empty());
+                return err(match typo {
+                    Some(k) => format!("unknown option `{k}` of material \"{law}\"; did you mean `density`?"),
+                    None => format!("material \"{law}\" needs `density` (kg/m^3)"),
+                });
+            }
         };
         let name = match get(&opts, "name") {
             Some(n) => string(n, "name")?,
