@@ -221,3 +221,44 @@ fn errors_name_the_missing_law_and_the_misspelt_option() {
         "{e}"
     );
 }
+
+/// Impossible geometry is refused; doubtful geometry is said once, naming the bodies.
+#[test]
+fn inverted_boxes_are_refused_and_twin_walls_and_deep_overlaps_are_said() {
+    let head = "let sim = dem();\nlet m = sim.material(#{ name: \"g\", density: 2500.0 });\n";
+    let e = run_err("inverted_box", &format!("{head}sim.box_walls(m, [0.0, 0.0, 0.0], [0.2, -0.2, 0.2]);\n"), &[]);
+    assert!(e.contains("line 3") && e.contains("not on y"), "{e}");
+    let e = run_err(
+        "inverted_erase",
+        &format!(
+            "{head}sim.sphere(m, [0.1, 0.1, 0.1], 0.005);\nsim.erase_outside([0.2, 0.0, 0.0], [0.0, 0.2, 0.2]);\n"
+        ),
+        &[],
+    );
+    assert!(e.contains("line 4") && e.contains("every sphere would be erased"), "{e}");
+    // The same floor twice, a sphere centred on it, two spheres 0.1 mm apart at r = 5 mm.
+    let src = format!(
+        "{head}sim.contact_law(\"linear\", #{{ kn: 1e4 }});\n\
+         sim.wall_plane(m, [0.0, 0.0, 0.0], [0.0, 0.0, 1.0]);\n\
+         sim.wall_plane(m, [0.3, 0.1, 0.0], [0.0, 0.0, 1.0]);\n\
+         sim.sphere(m, [0.1, 0.1, 0.0], 0.005);\n\
+         sim.sphere(m, [0.05, 0.05, 0.05], 0.005);\nsim.sphere(m, [0.0501, 0.05, 0.05], 0.005);\n\
+         sim.dt(0.1 * sim.critical_dt());\nsim.run_steps(1);\n"
+    );
+    let out = common::out_dir("overlaps");
+    let options = RunOptions { out_dir: out.clone(), quiet: true, ..Default::default() };
+    run_source("overlaps.rhai", &src, granite::registry(), options).unwrap();
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    let warnings: Vec<&str> = summary["warnings"].as_array().unwrap().iter().map(|w| w.as_str().unwrap()).collect();
+    assert!(warnings.iter().any(|w| w.contains("wall 1") && w.contains("same surface as wall 0")), "{warnings:?}");
+    let deep = warnings.iter().find(|w| w.contains("overlap by more than 10 %")).expect("the deep overlaps");
+    assert!(deep.contains("spheres 2 and 1 by 198 %") && deep.contains("sphere 0 and wall 0"), "{deep}");
+    // Said off: no warning.
+    let allowed = src.replace("sim.dt(", "sim.allow_overlaps(true);\nsim.dt(");
+    let out = common::out_dir("overlaps_allowed");
+    let options = RunOptions { out_dir: out.clone(), quiet: true, ..Default::default() };
+    run_source("overlaps_allowed.rhai", &allowed, granite::registry(), options).unwrap();
+    let summary = std::fs::read_to_string(out.join("summary.json")).unwrap();
+    assert!(!summary.contains("overlap by more than"), "{summary}");
+}

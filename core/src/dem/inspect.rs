@@ -140,6 +140,35 @@ impl DemSim {
         }
     }
 
+    /// Sphere pairs and sphere-wall pairs whose overlap exceeds `fraction` of the smaller radius
+    /// (of the sphere's, for a wall), from the candidate lists as they are (after a rebuild):
+    /// `(description, overlap / radius)`, deepest first, at most `most`. A packing made by hand
+    /// with such overlaps starts with forces it was never meant to have.
+    pub fn deep_overlaps(&self, fraction: f64, most: usize) -> Vec<(String, f64)> {
+        let s = &self.spheres;
+        let mut found: Vec<(String, f64)> = Vec::new();
+        for k in 0..self.pairs.len() {
+            let (i, j) = (self.pairs.a[k] as usize, self.pairs.b[k] as usize);
+            let (_, overlap, _, _) = self.pair_geometry(&s.x, k);
+            let depth = overlap / s.radius[i].min(s.radius[j]);
+            if depth > fraction {
+                found.push((format!("spheres {} and {}", s.id[i], s.id[j]), depth));
+            }
+        }
+        for k in 0..self.wall_pairs.len() {
+            let (i, w) = (self.wall_pairs.a[k] as usize, self.wall_pairs.b[k] as usize);
+            if let Some(g) = self.walls[w].contact(s.x[i], s.radius[i], f64::INFINITY) {
+                let depth = -g.gap / s.radius[i];
+                if depth > fraction {
+                    found.push((format!("sphere {} and wall {w} (\"{}\")", s.id[i], self.walls[w].name), depth));
+                }
+            }
+        }
+        found.sort_by(|a, b| b.1.total_cmp(&a.1));
+        found.truncate(most);
+        found
+    }
+
     /// Fabric tensor of the sphere contacts, `(1/N) sum n n^T` over the N contacts touching in the
     /// last step (Oda 1982): symmetric, trace 1; one third of the identity for an isotropic
     /// network. Zero without contacts.

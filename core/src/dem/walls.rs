@@ -25,6 +25,21 @@ pub struct Wall {
     pub material: u16,
 }
 
+impl Wall {
+    /// Whether `other` is the same surface (a plane given through another of its points included):
+    /// spheres would touch both, with twice the stiffness.
+    pub fn same_surface(&self, other: &Wall) -> bool {
+        let offset: Vec3 = [0, 1, 2].map(|a| self.position[a] - other.position[a]);
+        let scale = 1e-12 * (1.0 + dot3(self.position, self.position).sqrt());
+        match (&self.shape, &other.shape) {
+            (WallShape::Plane { normal: a }, WallShape::Plane { normal: b }) => {
+                a == b && dot3(offset, *a).abs() <= scale
+            }
+            (a, b) => a == b && dot3(offset, offset).sqrt() <= scale,
+        }
+    }
+}
+
 /// Contact of a sphere with a wall: unit normal from the sphere's centre towards the wall, the gap
 /// `distance - radius` (negative = overlap) and the contact point.
 #[derive(Debug, Clone, Copy)]

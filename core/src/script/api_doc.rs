@@ -106,6 +106,7 @@ pub static API: &[ApiDoc] = &[
     f("DemSim", "set_contact_params", &["sim.set_contact_params(#{ ...parameters })", "sim.set_contact_params(material, #{ ...parameters })", "sim.set_contact_params(material1, material2, #{ ...parameters })"], NONE, "changes some parameters of the default law, of every pair one material is in, or of one pair, from the next step on, keeping every contact and its history"),
     f("DemSim", "sphere", &["sim.sphere(material, [x, y, z], radius)", "sim.sphere(material, [x, y, z], radius, #{ velocity, fixed })"], &["velocity", "fixed"], "one sphere; returns its id"),
     f("DemSim", "cloud", &["sim.cloud(material, lower, upper, #{ count, radius, psd, seed })"], &["count", "radius", "psd", "seed"], "random non-overlapping spheres in a box"),
+    f("DemSim", "allow_overlaps", &["sim.allow_overlaps(true)"], NONE, "no warning for bodies overlapping by more than 10 % of a radius at the start of a run"),
     f("DemSim", "lattice", &["sim.lattice(material, lower, upper, #{ spacing, radius, jitter, seed })"], &["spacing", "radius", "jitter", "seed"], "spheres on a cubic lattice"),
     f("DemSim", "clump", &["sim.clump(material, [[x, y, z, r], ...])"], NONE, "a rigid clump of spheres"),
     f("DemSim", "tetra_clump", &["sim.tetra_clump(material, centre, r_sphere, r_clump)"], NONE, "a clump of four spheres on a tetrahedron (thesis table 2.3)"),

@@ -24,7 +24,16 @@ pub struct DemScene {
     driven: Vec<(usize, usize)>,
     /// The skin was left to its default (half the smallest radius, as YADE).
     auto_skin: bool,
+    /// Deep overlaps are looked for before a run while this holds (`sim.allow_overlaps(true)`
+    /// turns it off), once per set of bodies: the sphere and wall counts last checked.
+    check_overlaps: bool,
+    overlaps_checked_for: Option<(usize, usize)>,
 }
+
+/// Overlap, as a fraction of the smaller radius, above which a body at the start of a run is
+/// reported: a sound stiffness keeps a packing at rest well under 1 %; 10 % is a set-up mistake
+/// (spheres placed inside one another, a sphere centred on a wall).
+pub const DEEP_OVERLAP: f64 = 0.1;
 
 pub type DemHandle = Handle<DemScene>;
 
@@ -67,6 +76,33 @@ impl DemScene {
 }
 
 impl ScriptSim for DemScene {
+    fn setup_warnings(&mut self) -> Vec<String> {
+        let bodies = (self.dem.spheres.len(), self.dem.walls.len());
+        if !self.check_overlaps || self.overlaps_checked_for == Some(bodies) {
+            return Vec::new();
+        }
+        self.overlaps_checked_for = Some(bodies);
+        // The candidate lists as the first step would build them; it still builds them itself
+        // (the step's own checks follow a rebuild). Lists in force are used as they are.
+        if self.dem.needs_rebuild {
+            if self.dem.rebuild_candidates().is_err() {
+                return Vec::new();
+            }
+            self.dem.needs_rebuild = true;
+        }
+        let deep = self.dem.deep_overlaps(DEEP_OVERLAP, 5);
+        if deep.is_empty() {
+            return Vec::new();
+        }
+        let list: Vec<String> = deep.iter().map(|(what, d)| format!("{what} by {:.0} %", 100.0 * d)).collect();
+        vec![format!(
+            "bodies overlap by more than {:.0} % of a radius at the start of the run (deepest: {}): they start \
+             with forces a packing at rest never has and may fly apart; move them, or sim.allow_overlaps(true) \
+             if this is meant",
+            100.0 * DEEP_OVERLAP,
+            list.join(", ")
+        )]
+    }
     type Snapshot = DemSnapshot;
 
     fn validate(&self) -> Result<()> {
@@ -324,7 +360,10 @@ impl Handle<DemScene> {
             }
             None => true,
         };
-        Ok(Handle::new(DemScene { dem, driven: Vec::new(), auto_skin }, ctx))
+        Ok(Handle::new(
+            DemScene { dem, driven: Vec::new(), auto_skin, check_overlaps: true, overlaps_checked_for: None },
+            ctx,
+        ))
     }
 
     fn material(&mut self, opts: Map) -> RhaiResult<DemMaterialHandle> {
@@ -358,7 +397,41 @@ impl Handle<DemScene> {
 
     fn add_wall(&mut self, mat: &DemMaterialHandle, name: String, shape: WallShape, position: Vec3) -> i64 {
         let wall = Wall::new(&name, shape, position, mat.index);
-        self.lock().sim.dem.add_wall(wall) as i64
+        let mut st = self.lock();
+        let twin = st.sim.dem.walls.iter().position(|w| w.same_surface(&wall));
+        let index = st.sim.dem.add_wall(wall);
+        if let Some(twin) = twin {
+            st.ctx.warn(&format!(
+                "wall {index} (\"{name}\") is the same surface as wall {twin} (\"{}\"): a sphere touches both, \
+                 with twice the stiffness; add it once",
+                st.sim.dem.walls[twin].name
+            ));
+        }
+        index as i64
+    }
+
+    /// The six walls of a box (or five, open at the top), lower corner `lo`, upper `hi`.
+    fn box_walls(&mut self, m: &DemMaterialHandle, lo: &Dynamic, hi: &Dynamic, open_top: bool) -> RhaiResult<Array> {
+        let (lo, hi) = (vector(lo, 3, "lower corner")?, vector(hi, 3, "upper corner")?);
+        if let Some(a) = (0..3).find(|&a| !(lo[a] < hi[a])) {
+            return err(format!(
+                "box_walls: the lower corner {lo:?} must be below the upper corner {hi:?} on every axis (not on {})",
+                ["x", "y", "z"][a]
+            ));
+        }
+        let mut out = Array::new();
+        for a in 0..3 {
+            for (upper, point) in [(false, lo), (true, hi)] {
+                if upper && a == 2 && open_top {
+                    continue;
+                }
+                let mut n = [0.0; 3];
+                n[a] = if upper { -1.0 } else { 1.0 };
+                let name = format!("{}{}", ["x", "y", "z"][a], if upper { "+" } else { "-" });
+                out.push(Dynamic::from(self.add_wall(m, name, WallShape::Plane { normal: n }, point)));
+            }
+        }
+        Ok(out)
     }
 
     fn wall_index(&self, w: i64) -> RhaiResult<usize> {
@@ -401,7 +474,7 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
         })?;
         let dem = DemSim::load(&path, &c.registry()).or_rhai()?;
         Ok::<_, Box<rhai::EvalAltResult>>(Handle::new(
-            DemScene { dem, driven: Vec::new(), auto_skin: false },
+            DemScene { dem, driven: Vec::new(), auto_skin: false, check_overlaps: true, overlaps_checked_for: None },
             c.clone(),
         ))
     });
@@ -579,34 +652,11 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
     );
     engine.register_fn("box_walls", |s: &mut DemHandle, m: DemMaterialHandle, lo: Dynamic, hi: Dynamic, opts: Map| {
         api_options(&opts, "DemSim", "box_walls")?;
-        let (lo, hi) = (vector(&lo, 3, "lower corner")?, vector(&hi, 3, "upper corner")?);
         let open_top = get(&opts, "open_top").and_then(|d| d.as_bool().ok()).unwrap_or(false);
-        let mut out = Array::new();
-        for a in 0..3 {
-            for (upper, point) in [(false, lo), (true, hi)] {
-                if upper && a == 2 && open_top {
-                    continue;
-                }
-                let mut n = [0.0; 3];
-                n[a] = if upper { -1.0 } else { 1.0 };
-                let name = format!("{}{}", ["x", "y", "z"][a], if upper { "+" } else { "-" });
-                out.push(Dynamic::from(s.add_wall(&m, name, WallShape::Plane { normal: n }, point)));
-            }
-        }
-        Ok::<_, Box<rhai::EvalAltResult>>(out)
+        s.box_walls(&m, &lo, &hi, open_top)
     });
     engine.register_fn("box_walls", |s: &mut DemHandle, m: DemMaterialHandle, lo: Dynamic, hi: Dynamic| {
-        let (lo, hi) = (vector(&lo, 3, "lower corner")?, vector(&hi, 3, "upper corner")?);
-        let mut out = Array::new();
-        for a in 0..3 {
-            for (upper, point) in [(false, lo), (true, hi)] {
-                let mut n = [0.0; 3];
-                n[a] = if upper { -1.0 } else { 1.0 };
-                let name = format!("{}{}", ["x", "y", "z"][a], if upper { "+" } else { "-" });
-                out.push(Dynamic::from(s.add_wall(&m, name, WallShape::Plane { normal: n }, point)));
-            }
-        }
-        Ok::<_, Box<rhai::EvalAltResult>>(out)
+        s.box_walls(&m, &lo, &hi, false)
     });
     engine.register_fn("wall_velocity", |s: &mut DemHandle, w: i64, v: Dynamic| {
         let w = s.wall_index(w)?;
@@ -670,11 +720,21 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
     engine.register_fn("stable_dt", |s: &mut DemHandle| {
         s.lock().sim.dem.stable_dt().map(|limit| limit.dt).unwrap_or(f64::INFINITY)
     });
+    engine.register_fn("allow_overlaps", |s: &mut DemHandle, allow: bool| {
+        s.lock().sim.check_overlaps = !allow;
+    });
     engine.register_fn("stop_on_unstable_dt", |s: &mut DemHandle, on: bool| {
         s.lock().sim.dem.stop_on_unstable_dt = on;
     });
     engine.register_fn("erase_outside", |s: &mut DemHandle, lo: Dynamic, hi: Dynamic| {
         let (lo, hi) = (vector(&lo, 3, "lower corner")?, vector(&hi, 3, "upper corner")?);
+        if let Some(a) = (0..3).find(|&a| !(lo[a] <= hi[a])) {
+            return err(format!(
+                "erase_outside: the lower corner {lo:?} must not be above the upper corner {hi:?} on any axis (it is \
+                 on {}): every sphere would be erased",
+                ["x", "y", "z"][a]
+            ));
+        }
         let mut st = s.lock();
         let keep: Vec<bool> =
             st.sim.dem.spheres.x.iter().map(|x| (0..3).all(|a| x[a] >= lo[a] && x[a] <= hi[a])).collect();

@@ -47,6 +47,11 @@ pub trait ScriptSim: Send + 'static {
     fn drain_events(&mut self) -> Vec<String>;
     /// Sets the value of boundary condition `target` from a script function (see `Handle::drive`).
     fn set_driven(&mut self, target: usize, value: f64);
+    /// What the set-up should tell the user before its first run (bodies overlapping deeply);
+    /// called before every run, it says each thing once.
+    fn setup_warnings(&mut self) -> Vec<String> {
+        Vec::new()
+    }
     /// Writes a checkpoint of the whole state (every process of an MPI run calls it; the first
     /// writes) that `mpm_load` / `dem_load` resume from.
     fn save_state(&self, path: &Path, ctx: &ScriptContext) -> Result<()>;
@@ -319,6 +324,9 @@ impl<S: ScriptSim> Handle<S> {
         }
         st.ctx.check_overrides()?;
         st.sim.validate().or_rhai()?;
+        for w in st.sim.setup_warnings() {
+            st.ctx.warn(&w);
+        }
         // Unless the script set them, output intervals follow the run's length up to this call's
         // end: a short first call (common in the REPL) must not fix every-step output for later
         // long ones, and a script looping over short calls (`loop { sim.run_steps(500); ... }`)
