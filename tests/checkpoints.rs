@@ -98,22 +98,21 @@ fn a_checkpoint_says_which_granite_wrote_it_and_a_newer_format_is_refused() {
 /// by granite before checkpoints carried a checksum, load through their upgrade path and run on.
 #[test]
 fn checkpoints_of_every_released_format_load_and_run() {
-    let fixtures = common::root().join("tests").join("checkpoints");
-    let dem = fixtures.join("dem_state_v2.json");
-    let source = format!(
-        "let sim = dem_load({:?});\nlet before = sim.step;\nsim.run_steps(100);\nsummary(\"steps\", sim.step - before);\nsummary(\"particles\", sim.particles);\n",
-        dem.to_str().unwrap()
-    );
-    let dir = run("ckpt_dem_v2", &source).unwrap();
-    let summary = std::fs::read_to_string(dir.join("summary.json")).unwrap();
-    assert!(summary.contains("\"steps\": 100") && summary.contains("\"particles\": 3"), "{summary}");
-    let mpm = fixtures.join("mpm_checkpoint_v1.json");
-    let source = format!(
-        "let sim = mpm_load({:?});\nsim.run_steps(20);\nsummary(\"points\", sim.points);\nsummary(\"step\", sim.step);\n",
-        mpm.to_str().unwrap()
-    );
-    let dir = run("ckpt_mpm_v1", &source).unwrap();
-    let summary = std::fs::read_to_string(dir.join("summary.json")).unwrap();
-    // Written at step 50 with 4 points (2 x 2 cells, one point each).
-    assert!(summary.contains("\"points\": 4") && summary.contains("\"step\": 70"), "{summary}");
+    // Each file, how to load it, and what summary.json must then say.
+    let cases = [
+        ("dem_state_v2.json", "dem_load", "particles", "\"particles\": 3", "\"steps\": 100"),
+        // Written at step 50 with 4 points (2 x 2 cells, one point each).
+        ("mpm_checkpoint_v1.json", "mpm_load", "points", "\"points\": 4", "\"step\": 150"),
+    ];
+    for (file, load, count, has_count, has_steps) in cases {
+        let path = common::root().join("tests").join("checkpoints").join(file);
+        let source = format!(
+            "let sim = {load}({:?});\nlet before = sim.step;\nsim.run_steps(100);\n\
+             summary(\"steps\", sim.step - before);\nsummary(\"step\", sim.step);\nsummary(\"{count}\", sim.{count});\n",
+            path.to_str().unwrap()
+        );
+        let dir = run(&format!("ckpt_{load}_released"), &source).unwrap();
+        let summary = std::fs::read_to_string(dir.join("summary.json")).unwrap();
+        assert!(summary.contains(has_count) && summary.contains(has_steps), "{file}: {summary}");
+    }
 }
