@@ -262,3 +262,22 @@ fn inverted_boxes_are_refused_and_twin_walls_and_deep_overlaps_are_said() {
     let summary = std::fs::read_to_string(out.join("summary.json")).unwrap();
     assert!(!summary.contains("overlap by more than"), "{summary}");
 }
+
+/// Replacing the mesh clears its boundary conditions: said only when the next run starts
+/// without any (a script that sets them again hears nothing).
+#[test]
+fn a_replaced_mesh_without_boundaries_is_said_and_one_with_them_is_not() {
+    let run = |name: &str, again: &str| -> String {
+        let src = format!(
+            "{HEAD}let m = sim.material(\"linear_elastic\", #{{ density: 1000.0, young: 1e5, poisson: 0.2 }});\n\
+             sim.fill_box(m, [0.0, 0.0], [0.2, 0.2]);\nsim.fix(\"y-\", \"y\");\nsim.gravity([0.0, -9.81]);\n\
+             sim.dt(1e-3);\nsim.run_steps(2);\nsim.mesh(#{{ cell: 0.1, cells: [8, 4] }});\n{again}sim.run_steps(2);\n"
+        );
+        let out = common::out_dir(name);
+        let options = RunOptions { out_dir: out.clone(), quiet: true, ..Default::default() };
+        run_source(&format!("{name}.rhai"), &src, granite::registry(), options).unwrap();
+        std::fs::read_to_string(out.join("summary.json")).unwrap()
+    };
+    assert!(run("mesh_bare", "").contains("none was set since"));
+    assert!(!run("mesh_bounded", "sim.fix(\"y-\", \"y\");\n").contains("warnings"));
+}

@@ -132,6 +132,10 @@ impl Boundary {
         *self = Boundary::default();
     }
 
+    pub fn is_empty(&self) -> bool {
+        self.velocity.is_empty() && self.friction.is_empty() && self.forces.is_empty()
+    }
+
     /// Nodal forces equivalent to a uniform traction on a mesh face (eq. 3.22 with linear shape
     /// functions: each node carries the face area it is closest to).
     pub fn traction_on_face(mesh: &Mesh, face: Face, traction: Vec3) -> (Vec<u32>, Vec<Vec3>) {

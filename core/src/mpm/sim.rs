@@ -98,6 +98,8 @@ pub struct MpmSim {
     /// The processes running this simulation together (None: this process alone).
     pub(crate) comm: Option<crate::comm::Comm>,
     balance_every: u64,
+    /// The mesh was replaced (its boundary conditions with it) since the last run began.
+    pub(crate) mesh_replaced: bool,
 }
 
 impl MpmSim {
@@ -123,6 +125,7 @@ impl MpmSim {
             loc: Vec::new(),
             comm: None,
             balance_every: crate::mpm::spread::DEFAULT_BALANCE_EVERY,
+            mesh_replaced: false,
         }
     }
 
@@ -261,7 +264,7 @@ impl MpmSim {
         }
         self.mesh = mesh;
         self.boundary.clear();
-        self.events.push("mesh replaced: boundary conditions cleared".into());
+        self.mesh_replaced = true;
         Ok(())
     }
 

@@ -221,6 +221,17 @@ impl ScriptSim for MpmScene {
     fn drain_events(&mut self) -> Vec<String> {
         self.mpm.events.drain(..).collect()
     }
+    fn setup_warnings(&mut self) -> Vec<String> {
+        // Said only when it matters: a script usually sets the new mesh's boundaries right after.
+        let bare = std::mem::take(&mut self.mpm.mesh_replaced) && self.mpm.boundary.is_empty();
+        if bare {
+            vec!["the mesh was replaced, which cleared its boundary conditions, and none was set since: the \
+                  points run with no boundary"
+                .into()]
+        } else {
+            Vec::new()
+        }
+    }
     fn run_ended(&mut self, ctx: &ScriptContext) -> Result<()> {
         for m in &self.mpm.materials {
             let Some(spread) = &m.spread else { continue };
