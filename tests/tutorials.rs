@@ -1,0 +1,39 @@
+//! The tutorials of examples/ run as a user runs them (at a small size) and do what they say.
+
+mod common;
+
+fn run(script: &str, name: &str, sets: &[(&str, &str)]) -> granite_core::script::RunReport {
+    let path = common::root().join("examples").join(script);
+    granite::run(&path, common::sets(sets), Some(common::out_dir(name)), true, Some(1)).unwrap()
+}
+
+/// The elastic block thrown at 2 m/s along a floor with friction 0.3 slides as a rigid block
+/// would: `v t - mu g t^2 / 2` (0.341 m in 0.2 s). Friction acts at the floor's nodes and the
+/// block is elastic, so a few per cent less (3.3 % measured).
+#[test]
+fn the_mpm_tutorial_block_slides_as_friction_says() {
+    let front = |duration: &str| {
+        common::summary_f64(
+            &run("tutorial_mpm.rhai", &format!("tutorial_mpm_{duration}"), &[("duration", duration)]),
+            "front_position",
+        )
+    };
+    let slid = front("0.2") - front("0.0");
+    let rigid = 2.0 * 0.2 - 0.5 * 0.3 * 9.81 * 0.2f64.powi(2);
+    assert!((slid / rigid - 1.0).abs() < 0.06, "slid {slid} m, a rigid block {rigid} m");
+}
+
+/// The beads come to rest, and the potential energy they lost is in friction, damping and the
+/// contacts' springs: the balance holds to 1 % of it.
+#[test]
+fn the_dem_tutorial_beads_settle_and_keep_the_energy_balance() {
+    let report = run("tutorial_dem.rhai", "tutorial_dem", &[("count", "200"), ("duration", "0.3")]);
+    let get = |k: &str| common::summary_f64(&report, k);
+    let lost = get("gravitational_energy_lost");
+    assert!(lost > 0.0);
+    assert!(get("kinetic_energy") < 1e-3 * lost, "at rest: {} J of {lost} J", get("kinetic_energy"));
+    let accounted = get("dissipated") + get("elastic_energy") + get("kinetic_energy");
+    assert!((accounted / lost - 1.0).abs() < 0.01, "{accounted} J of {lost} J accounted for");
+    assert!(get("energy_balance_error") < 0.01 * lost);
+    assert!(get("coordination") > 2.0, "a heap in contact: {}", get("coordination"));
+}
