@@ -106,6 +106,12 @@ fn plot_writes_an_svg() {
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let svg = std::fs::read_to_string(dir.join("plot_kinetic_energy_runout.svg")).unwrap();
     assert!(svg.len() > 1000 && svg.contains("<svg") && svg.contains("polyline"), "an SVG with lines");
+    // Energy and length on axes of their own, each labelled with its unit.
+    assert!(svg.matches("<polyline").count() >= 2);
+    assert!(
+        svg.contains("time [s]") && svg.contains("runout [m]") && svg.contains("kinetic_energy [J"),
+        "axes with units"
+    );
     let bad = granite().args(["plot"]).arg(&csv).args(["--y", "nope"]).output().unwrap();
     assert!(!bad.status.success() && String::from_utf8_lossy(&bad.stderr).contains("time, kinetic_energy, runout"));
 }
