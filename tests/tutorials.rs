@@ -46,7 +46,9 @@ fn the_mpmxdem_tutorial_follows_the_triaxial_stress_path() {
     let get = |k: &str| common::summary_f64(&report, k);
     let (q, p, lateral) = (get("q"), get("p"), get("lateral_stress"));
     assert!(q > 0.1 * lateral, "the sand resists: q = {q} Pa");
-    assert!((p - (lateral + q / 3.0)).abs() < 0.02 * p, "p = {p} Pa, q = {q} Pa");
+    // The points' lateral stress trails the traction by the slow compression's inertia: 0.55 %
+    // of p measured.
+    assert!((p - (lateral + q / 3.0)).abs() < 0.01 * p, "p = {p} Pa, q = {q} Pa");
     // The MPM is the script's second simulation: its files are in sim2/.
     assert!(report.out_dir.join("sim2/rve_point0/end.vtu").is_file());
     assert!(report.out_dir.join("sim2/series.csv").is_file());

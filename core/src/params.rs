@@ -12,6 +12,17 @@ pub fn time_step(dt: f64) -> Result<f64> {
     }
 }
 
+/// Refuses a time step above a stability `limit` (None: nothing limits it yet); `limit_is` says
+/// what the limit is, for the message.
+pub fn time_step_within(dt: f64, limit: Option<f64>, limit_is: &str) -> Result<()> {
+    match limit {
+        Some(crit) if dt > crit => {
+            Err(GraniteError::param("dt", format!("{dt:e}"), &format!("must not exceed {limit_is} = {crit:.4e} s")))
+        }
+        _ => Ok(()),
+    }
+}
+
 /// The time step a run needs: none set yet (zero) is an error that says what to call.
 pub fn require_time_step(dt: f64) -> Result<()> {
     if dt > 0.0 {

@@ -592,16 +592,7 @@ impl DemSim {
     /// Whether `dt` is within `critical_dt` of the spheres and laws present (a script's `sim.dt`
     /// checks it at once; a run checks it again, as spheres and laws may come later).
     pub fn check_dt(&self, dt: f64) -> Result<()> {
-        if let Some(crit) = self.critical_dt() {
-            if dt > crit {
-                return Err(GraniteError::param(
-                    "dt",
-                    format!("{dt:e}"),
-                    &format!("must not exceed sqrt(m/k_n) = {crit:.4e} s of the stiffest, lightest contact"),
-                ));
-            }
-        }
-        Ok(())
+        crate::params::time_step_within(dt, self.critical_dt(), "sqrt(m/k_n) of the stiffest, lightest contact")
     }
 
     /// Cundall damping (YADE's), in [0, 1).

@@ -287,16 +287,11 @@ impl MpmSim {
     /// Whether `dt` is within the stability limit of the points present (a script's `sim.dt`
     /// checks it at once; a run checks it again, as points and materials may come later).
     pub fn check_dt(&self, dt: f64) -> Result<()> {
-        if let Some(crit) = self.critical_dt() {
-            if dt > crit {
-                return Err(GraniteError::param(
-                    "dt",
-                    format!("{dt:e}"),
-                    &format!("must not exceed the stability limit cell/c_p = {crit:.4e} s of this mesh and material"),
-                ));
-            }
-        }
-        Ok(())
+        crate::params::time_step_within(
+            dt,
+            self.critical_dt(),
+            "the stability limit cell/c_p of this mesh and material",
+        )
     }
 
     /// Checks everything a run needs; called before stepping.

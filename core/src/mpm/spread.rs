@@ -49,22 +49,18 @@ pub struct SpreadStats {
     /// Bytes this process received in all-gathers.
     pub gather_bytes: u64,
     pub stages: u64,
-    /// Objects moved between processes by balancing, and the seconds balancing took here.
+    /// Objects moved between processes by balancing.
     pub moved: u64,
-    pub balance_s: f64,
 }
 
-impl SpreadStats {
-    /// Largest busy time over the mean, minus one (0: perfectly even).
-    pub fn imbalance(&self) -> f64 {
-        let n = self.busy_s.len().max(1) as f64;
-        let mean = self.busy_s.iter().sum::<f64>() / n;
-        let max = self.busy_s.iter().cloned().fold(0.0, f64::max);
-        if mean > 0.0 {
-            max / mean - 1.0
-        } else {
-            0.0
-        }
+/// The largest of the ranks' busy times over their mean, minus one (0: perfectly even).
+pub fn imbalance(busy_s: &[f64]) -> f64 {
+    let mean = busy_s.iter().sum::<f64>() / busy_s.len().max(1) as f64;
+    let max = busy_s.iter().cloned().fold(0.0, f64::max);
+    if mean > 0.0 {
+        max / mean - 1.0
+    } else {
+        0.0
     }
 }
 
@@ -92,7 +88,7 @@ impl SpreadReport {
 
     /// The busiest rank's time over the mean, minus one.
     pub fn imbalance(&self) -> f64 {
-        SpreadStats { busy_s: self.busy_s.clone(), ..Default::default() }.imbalance()
+        imbalance(&self.busy_s)
     }
 
     pub fn line(&self) -> String {
@@ -233,6 +229,9 @@ impl Spread {
         self.stats.gather_bytes += all.iter().map(|b| b.len() as u64).sum::<u64>();
         let mut failed: Option<(usize, usize, String)> = None;
         let mut event: Option<(usize, String)> = None;
+        // Each rank's header first, then its points' results, read in point order through one
+        // reader per rank (one pass over the points, whatever the number of ranks).
+        let mut readers = Vec::with_capacity(all.len());
         for (rank, bytes) in all.iter().enumerate() {
             let mut r = Reader::new(bytes);
             for _ in 0..r.u64()? {
@@ -249,26 +248,26 @@ impl Spread {
             }
             self.stats.busy_s[rank] += r.f64()?;
             let count = r.u64()? as usize;
-            let mut got = 0;
-            for i in (0..n).filter(|&i| self.owner[i] as usize == rank) {
-                if got == count {
-                    break;
-                }
-                if rank as u32 != me {
-                    r.f64s_into(&mut stress[i])?;
-                    r.f64s_into(&mut states[i * stride..(i + 1) * stride])?;
-                } else {
-                    // Our own numbers are already in place.
-                    r.skip_f64s(6 + stride)?;
-                }
-                self.cost[i] += r.f64()?;
-                got += 1;
+            readers.push((r, count));
+        }
+        for i in 0..n {
+            let rank = self.owner[i] as usize;
+            let (r, left) = &mut readers[rank];
+            if *left == 0 {
+                return Err(disagree(rank));
             }
-            if got != count || !r.done() {
-                return Err(GraniteError::Other(format!(
-                    "rank {rank} sent {count} points' results where it owns {got}: the processes disagree on the owners"
-                )));
+            *left -= 1;
+            if rank as u32 == me {
+                // Our own numbers are already in place.
+                r.skip_f64s(6 + stride)?;
+            } else {
+                r.f64s_into(&mut stress[i])?;
+                r.f64s_into(&mut states[i * stride..(i + 1) * stride])?;
             }
+            self.cost[i] += r.f64()?;
+        }
+        if let Some(rank) = readers.iter().position(|(r, left)| *left != 0 || !r.done()) {
+            return Err(disagree(rank));
         }
         law.set_pending_event(event);
         self.stats.stages += 1;
@@ -286,7 +285,6 @@ impl Spread {
     /// New owners from the measured costs, the same in every process; moves the objects that
     /// change hands.
     fn balance(&mut self, law: &dyn ConstitutiveLaw) -> Result<()> {
-        let started = Instant::now();
         let new_owner = balanced_owners(&self.owner, &self.cost, self.size());
         self.steps_since_balance = 0;
         self.cost.iter_mut().for_each(|c| *c = 0.0);
@@ -320,14 +318,13 @@ impl Spread {
             }
         }
         self.stats.moved += moved;
-        self.stats.balance_s += started.elapsed().as_secs_f64();
         Ok(())
     }
 
     /// What every process did so far, in every process (a collective call).
     pub fn report(&self) -> Result<SpreadReport> {
         let mut w = Writer::default();
-        w.f64(self.stats.stage_s).f64(self.stats.gather_s).u64(self.stats.gather_bytes).u64(self.stats.stages);
+        w.f64(self.stats.stage_s).f64(self.stats.gather_s).u64(self.stats.gather_bytes);
         let all = self.comm.all_gather(&w.0);
         let mut report = SpreadReport {
             busy_s: self.stats.busy_s.clone(),
@@ -343,7 +340,6 @@ impl Spread {
             report.stage_s.push(r.f64()?);
             report.gather_s.push(r.f64()?);
             report.gather_bytes = report.gather_bytes.max(r.u64()?);
-            r.u64()?;
         }
         for &o in &self.owner {
             report.points[o as usize] += 1;
@@ -396,6 +392,13 @@ impl Spread {
             .collect::<Result<Vec<_>>>()
             .map(Some)
     }
+}
+
+/// Rank `rank` sent results for other points than every process thinks it owns.
+fn disagree(rank: usize) -> GraniteError {
+    GraniteError::Other(format!(
+        "rank {rank} sent results for other points than it owns: the processes disagree on the owners"
+    ))
 }
 
 /// Owners that even out the processes' summed costs while moving few objects: repeatedly, the
@@ -462,7 +465,7 @@ mod tests {
 
     #[test]
     fn imbalance_is_the_busiest_over_the_mean() {
-        let stats = SpreadStats { busy_s: vec![3.0, 1.0], ..Default::default() };
-        assert!((stats.imbalance() - 0.5).abs() < 1e-12);
+        assert!((imbalance(&[3.0, 1.0]) - 0.5).abs() < 1e-12);
+        assert_eq!(imbalance(&[2.0, 2.0]), 0.0);
     }
 }

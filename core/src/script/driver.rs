@@ -382,21 +382,20 @@ impl<S: ScriptSim> Handle<S> {
                     std::thread::yield_now();
                 }
             }
-            let stop = self.lock().ctx.stop_requested();
-            if let Some(signal) = stop {
-                progress.finish();
-                self.write_series_with(caller)?;
-                return Err(self.lock().stop_on_signal(signal));
-            }
-            let (t, driven, paused) = {
+            let (t, driven, paused, signal) = {
                 let st = self.lock();
                 let stopped = plan.stop.as_ref().is_some_and(|s| s.load(Ordering::SeqCst));
                 let interrupted = st.ctx.pause_requests() != plan.pauses_at_start;
                 if interrupted && !stopped {
                     eprintln!("granite: paused at step {} (t = {:.6e} s)", st.sim.steps(), st.sim.time());
                 }
-                (st.sim.time(), st.driven.clone(), stopped || interrupted)
+                (st.sim.time(), st.driven.clone(), stopped || interrupted, st.ctx.stop_requested())
             };
+            if let Some(signal) = signal {
+                progress.finish();
+                self.write_series_with(caller)?;
+                return Err(self.lock().stop_on_signal(signal));
+            }
             if paused {
                 progress.finish();
                 // The series ends on the paused state, whatever the interval.
