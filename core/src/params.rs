@@ -3,6 +3,9 @@
 use crate::error::{GraniteError, Result};
 use indexmap::IndexMap;
 
+/// User-given parameter values by name, in the order given.
+pub type ParamMap = indexmap::IndexMap<String, f64>;
+
 /// A time step as a user gives it: finite and > 0.
 pub fn time_step(dt: f64) -> Result<f64> {
     if dt > 0.0 && dt.is_finite() {

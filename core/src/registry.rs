@@ -10,8 +10,7 @@ use crate::params::Params;
 use indexmap::IndexMap;
 use std::sync::Arc;
 
-/// User-given parameter values by name, in the order given.
-pub type ParamMap = IndexMap<String, f64>;
+pub use crate::params::ParamMap;
 
 pub trait Plugin {
     fn register(&self, registry: &mut Registry);
@@ -127,5 +126,11 @@ impl Registry {
         let factory = lookup(&self.velocity_updates, name, "velocity update")?;
         let params = Params::resolve(&format!("velocity update \"{}\"", factory.name()), factory.param_specs(), given)?;
         factory.build(params)
+    }
+}
+
+impl crate::ext::contact::ContactLawSource for Registry {
+    fn build_contact_law(&self, name: &str, given: &ParamMap) -> Result<Box<dyn ContactLaw>> {
+        Registry::build_contact_law(self, name, given)
     }
 }

@@ -4,23 +4,11 @@
 //! Spheres are addressed by their id (creation order), which stays with a sphere when the engine
 //! reorders the arrays (spatial ordering before the first step) or compacts them (erasures).
 
+pub use crate::dem::particles::ExternalLoad;
 use crate::dem::particles::{dof, FREE};
 use crate::dem::sim::DemSim;
 use crate::error::{GraniteError, Result};
 use crate::math::Vec3;
-
-/// A force and torque applied to one sphere at every step until changed (YADE's permanent
-/// forces), on top of contacts and gravity.
-#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct ExternalLoad {
-    pub id: u64,
-    pub force: Vec3,
-    pub torque: Vec3,
-    /// Where the sphere was last found: checked first, so that a step does not search the
-    /// spheres for it once they are numbered in space (ids no longer their indices).
-    #[serde(skip)]
-    pub(crate) index: usize,
-}
 
 /// Changes to one sphere, applied together once all are checked (a refused change leaves the
 /// sphere as it was).

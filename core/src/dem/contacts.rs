@@ -5,6 +5,10 @@ use crate::dem::broad_phase::Candidate;
 use crate::math::Vec3;
 use rayon::prelude::*;
 
+/// Most per-pair parameters / history values a contact law may use.
+pub const MAX_PARAMS: usize = 16;
+pub const MAX_HISTORY: usize = 16;
+
 /// One piece of a new list's entries, written by [`PairList::merge_block`].
 struct Merged<'a> {
     a: &'a mut [u32],

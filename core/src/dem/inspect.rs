@@ -1,8 +1,8 @@
 //! Contacts as a user inspects them between two steps (YADE's `O.interactions`): geometry of the
 //! present positions, forces of the last step, the law and its values for the pair.
 
+use crate::dem::contact_stage::branch;
 use crate::dem::sim::DemSim;
-use crate::dem::step::branch;
 use crate::math::Vec3;
 
 /// The other body of a contact.

@@ -53,7 +53,7 @@ impl DemSim {
             self.walls[list.b[k] as usize].contact(s.x[i], s.radius[i], 0.0).map_or(0.0, |g| -g.gap)
         } else {
             let j = list.b[k] as usize;
-            let d = crate::dem::step::branch(&s.x, i, j, list.shift[k], self.cell.as_ref());
+            let d = crate::dem::contact_stage::branch(&s.x, i, j, list.shift[k], self.cell.as_ref());
             s.radius[i] + s.radius[j] - (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt()
         };
         overlap.max(0.0)

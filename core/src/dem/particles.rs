@@ -131,3 +131,16 @@ impl Spheres {
         self.radius.iter().map(|r| 4.0 / 3.0 * std::f64::consts::PI * r * r * r).sum()
     }
 }
+
+/// A force and torque applied to one sphere at every step until changed (YADE's permanent
+/// forces), on top of contacts and gravity.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct ExternalLoad {
+    pub id: u64,
+    pub force: Vec3,
+    pub torque: Vec3,
+    /// Where the sphere was last found: checked first, so that a step does not search the
+    /// spheres for it once they are numbered in space (ids no longer their indices).
+    #[serde(skip)]
+    pub(crate) index: usize,
+}

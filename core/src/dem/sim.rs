@@ -6,6 +6,7 @@ use crate::dem::contacts::PairList;
 use crate::dem::particles::Spheres;
 use crate::dem::walls::Wall;
 use crate::error::{GraniteError, Result};
+pub use crate::ext::contact::Elastic;
 use crate::ext::{ContactLaw, PairInfo};
 use crate::math::{add3, scale3, Vec3};
 use std::collections::HashMap;
@@ -19,13 +20,6 @@ pub struct DemMaterial {
     /// `E*`); an infinite modulus is a rigid body. None: the law's own values apply.
     #[serde(default)]
     pub elastic: Option<Elastic>,
-}
-
-/// Young's modulus (Pa, infinite for a rigid body) and Poisson's ratio of a material.
-#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct Elastic {
-    pub young: f64,
-    pub poisson: f64,
 }
 
 #[derive(Clone)]
@@ -61,9 +55,9 @@ pub struct DemSim {
     /// Storage the next rebuild of `pairs` fills (the previous list's; see `PairList::merge`).
     pub(crate) spare_pairs: PairList,
     /// Where the parallel stages cut the pair lists (found again after a rebuild).
-    pub(crate) piece_bounds: crate::dem::step::PieceBounds,
+    pub(crate) piece_bounds: crate::dem::pieces::PieceBounds,
     /// What each parallel contact piece leaves for the gather (see `Handover`).
-    pub(crate) handovers: crate::dem::step::Handovers,
+    pub(crate) handovers: crate::dem::contact_stage::Handovers,
     /// Positions (spheres) and wall positions when the candidate lists were built.
     pub(crate) x_at_build: Vec<Vec3>,
     pub(crate) walls_at_build: Vec<Vec3>,
@@ -87,7 +81,7 @@ pub struct DemSim {
     pub rebuilds: u64,
     pub events: Vec<String>,
     /// Lasting external loads on single spheres, by id (see `bodies.rs`).
-    pub external: Vec<crate::dem::bodies::ExternalLoad>,
+    pub external: Vec<crate::dem::particles::ExternalLoad>,
     /// The energy balance, when tracked (see `energy.rs`).
     pub energy: Option<crate::dem::energy::EnergyTracker>,
     pub(crate) next_id: u64,
@@ -192,7 +186,7 @@ impl DemSim {
                 }
             }
         }
-        use crate::dem::step::{MAX_HISTORY, MAX_PARAMS};
+        use crate::dem::contacts::{MAX_HISTORY, MAX_PARAMS};
         if law.param_count() > MAX_PARAMS || law.history_count() > MAX_HISTORY {
             return Err(GraniteError::Setup(format!(
                 "contact law `{}` uses more than {MAX_PARAMS} parameters or {MAX_HISTORY} history values per contact",

@@ -8,8 +8,9 @@ use crate::dem::particles::Spheres;
 use crate::dem::sim::{DemMaterial, DemSim};
 use crate::dem::walls::Wall;
 use crate::error::{GraniteError, Result};
+use crate::ext::contact::ContactLawSource;
 use crate::math::Vec3;
-use crate::registry::{ParamMap, Registry};
+use crate::params::ParamMap;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
@@ -58,7 +59,7 @@ pub(crate) struct DemState {
     needs_rebuild: bool,
     rebuilds: u64,
     #[serde(default)]
-    external: Vec<crate::dem::bodies::ExternalLoad>,
+    external: Vec<crate::dem::particles::ExternalLoad>,
     #[serde(default)]
     energy: Option<crate::dem::energy::EnergyTracker>,
 }
@@ -112,7 +113,7 @@ impl DemSim {
     }
 
     /// A state from [`DemSim::to_json`]; contact laws are rebuilt from `registry`.
-    pub fn from_json(value: serde_json::Value, registry: &Registry) -> Result<DemSim> {
+    pub fn from_json(value: serde_json::Value, registry: &dyn ContactLawSource) -> Result<DemSim> {
         let st: DemState = serde_json::from_value(value).map_err(|e| GraniteError::Other(format!("DEM state: {e}")))?;
         Self::from_state(st, &from_registry(registry), "checkpoint")
     }
@@ -148,7 +149,7 @@ impl DemSim {
 
     /// Reads a state written by [`DemSim::save`] (this version or an older one); a damaged file or
     /// one from a newer granite is refused. Contact laws are rebuilt from `registry`.
-    pub fn load(path: &Path, registry: &Registry) -> Result<DemSim> {
+    pub fn load(path: &Path, registry: &dyn ContactLawSource) -> Result<DemSim> {
         let text = std::fs::read_to_string(path).map_err(|e| GraniteError::io(path, e))?;
         let opened = crate::io::checkpoint_file::open(path, &text, FORMAT, VERSION, OLDEST)?;
         let st: DemState = serde_json::from_str(opened.state)
@@ -212,7 +213,7 @@ impl DemSim {
 type LawBuilder<'a> = dyn Fn(usize, &LawRecord) -> Result<std::sync::Arc<dyn crate::ext::ContactLaw>> + 'a;
 
 fn from_registry(
-    registry: &Registry,
+    registry: &dyn ContactLawSource,
 ) -> impl Fn(usize, &LawRecord) -> Result<std::sync::Arc<dyn crate::ext::ContactLaw>> + '_ {
     move |_, law| Ok(std::sync::Arc::from(registry.build_contact_law(&law.name, &law.params)?))
 }

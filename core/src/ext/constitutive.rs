@@ -2,8 +2,9 @@
 //! called over batches of material points so that one virtual call serves many points.
 
 use crate::error::Result;
+use crate::ext::contact::ContactLawSource;
 use crate::math::Voigt;
-use crate::params::{ParamSpec, Params};
+use crate::params::{ParamMap, ParamSpec, Params};
 
 /// The points a law updates in one call. All slices have the same number of points `n`;
 /// `state` holds `n * state_names().len()` values, point after point.
@@ -87,8 +88,8 @@ pub trait ConstitutiveLaw: Send + Sync {
     fn save_objects(&self) -> Result<Option<serde_json::Value>> {
         Ok(None)
     }
-    /// Restores objects written by `save_objects` (contact laws and the like come from `registry`).
-    fn load_objects(&self, _objects: serde_json::Value, _registry: &crate::registry::Registry) -> Result<()> {
+    /// Restores objects written by `save_objects` (their contact laws built by `contact_laws`).
+    fn load_objects(&self, _objects: serde_json::Value, _contact_laws: &dyn ContactLawSource) -> Result<()> {
         Err(crate::GraniteError::Other(format!("law {} keeps no objects to restore", self.name())))
     }
     /// A picture of one point's object (e.g. its RVE's particles) for ParaView: positions and
@@ -133,11 +134,11 @@ pub trait ConstitutiveLawFactory: Send + Sync {
     /// Rebuilds a law with per-point objects from a checkpoint (`objects` from `save_objects`).
     fn restore(
         &self,
-        given: &crate::registry::ParamMap,
+        given: &ParamMap,
         objects: serde_json::Value,
-        registry: &crate::registry::Registry,
+        contact_laws: &dyn ContactLawSource,
     ) -> Result<Box<dyn ConstitutiveLaw>> {
-        let _ = (given, objects, registry);
+        let _ = (given, objects, contact_laws);
         Err(crate::GraniteError::Other(format!("law {} cannot be restored from a checkpoint", self.name())))
     }
 }

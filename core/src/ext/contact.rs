@@ -10,6 +10,13 @@ use crate::error::Result;
 use crate::math::Vec3;
 use crate::params::{ParamSpec, Params};
 
+/// Young's modulus (Pa, infinite for a rigid body) and Poisson's ratio of a material.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Elastic {
+    pub young: f64,
+    pub poisson: f64,
+}
+
 /// What a law knows about one contact pair when the pair is first met (to set its parameters).
 #[derive(Debug, Clone, Copy)]
 pub struct PairInfo {
@@ -21,7 +28,7 @@ pub struct PairInfo {
     pub seed: u64,
     /// Elastic constants of the two materials, where they were given (`sim.material(#{ young,
     /// poisson })`); a law that combines them (Hertz's `E*`) reads them here.
-    pub elastic: [Option<crate::dem::sim::Elastic>; 2],
+    pub elastic: [Option<Elastic>; 2],
 }
 
 impl PairInfo {
@@ -243,4 +250,14 @@ pub fn uniform(seed: u64, stream: u64) -> f64 {
     z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
     z ^= z >> 31;
     (z >> 11) as f64 / (1u64 << 53) as f64
+}
+
+/// Contact laws by name, as a checkpoint's objects (the RVEs of `dem_rve`) need them to be
+/// restored: the registry, seen from the extension points without their depending on it.
+pub trait ContactLawSource {
+    fn build_contact_law(
+        &self,
+        name: &str,
+        given: &crate::params::ParamMap,
+    ) -> crate::error::Result<Box<dyn ContactLaw>>;
 }

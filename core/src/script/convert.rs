@@ -1,6 +1,7 @@
 //! Conversions from Rhai values to engine values, with errors that name the parameter.
 
 use crate::error::{GraniteError, Result};
+use crate::ext::contact::Elastic;
 use crate::math::Vec3;
 use crate::registry::ParamMap;
 use rhai::{Dynamic, EvalAltResult, Map, Position};
@@ -126,4 +127,31 @@ pub fn api_options(map: &Map, on: &str, name: &str) -> RhaiResult<()> {
 
 pub fn string(d: &Dynamic, name: &str) -> RhaiResult<String> {
     d.clone().into_string().or_else(|_| err(format!("`{name}` must be a string, got {}", d.type_name())))
+}
+
+/// Elastic constants from `#{ young, poisson }` or `#{ rigid: true }` (None when neither is given).
+pub(super) fn elastic_from(opts: &Map, what: &str) -> RhaiResult<Option<Elastic>> {
+    let rigid = match get(opts, "rigid") {
+        Some(d) => d.as_bool().or_else(|_| err(format!("`rigid` of {what} is true or false")))?,
+        None => false,
+    };
+    let young = get(opts, "young").map(|d| number(d, "young")).transpose()?;
+    let poisson = get(opts, "poisson").map(|d| finite(d, "poisson")).transpose()?;
+    match (rigid, young, poisson) {
+        (true, None, p) => Ok(Some(Elastic { young: f64::INFINITY, poisson: p.unwrap_or(0.0) })),
+        (true, Some(_), _) => err(format!("{what}: give `rigid: true` or `young`, not both")),
+        (false, Some(young), Some(poisson)) => Ok(Some(Elastic { young, poisson })),
+        (false, None, None) => Ok(None),
+        _ => err(format!("{what}: give both `young` (Pa) and `poisson`, or `rigid: true`")),
+    }
+}
+
+/// The index of a named axis: x, y (and z in 3D).
+pub(super) fn axis_index(name: &str, dim: usize) -> RhaiResult<usize> {
+    match name {
+        "x" => Ok(0),
+        "y" => Ok(1),
+        "z" if dim == 3 => Ok(2),
+        _ => err(format!("axis `{name}` must be one of {}", if dim == 3 { "x, y, z" } else { "x, y" })),
+    }
 }

@@ -374,7 +374,7 @@ impl Handle<DemScene> {
             Some(n) => string(n, "name")?,
             None => format!("material_{}", st.sim.dem.materials.len() + 1),
         };
-        let elastic = super::dem_console::elastic_from(&opts, &format!("material \"{name}\""))?;
+        let elastic = super::convert::elastic_from(&opts, &format!("material \"{name}\""))?;
         let index = st.sim.dem.add_material(&name, density).or_rhai()?;
         st.sim.dem.set_material_elastic(index, elastic).or_rhai()?;
         Ok(DemMaterialHandle { index, name })
@@ -472,7 +472,7 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
                  RVE: `granite run scripts/mpmxdem/prepare_rve.rhai` writes out/prepare_rve/rve.json)"
             )))
         })?;
-        let dem = DemSim::load(&path, &c.registry()).or_rhai()?;
+        let dem = DemSim::load(&path, &*c.registry()).or_rhai()?;
         Ok::<_, Box<rhai::EvalAltResult>>(Handle::new(
             DemScene { dem, driven: Vec::new(), auto_skin: false, check_overlaps: true, overlaps_checked_for: None },
             c.clone(),
@@ -666,7 +666,7 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
     });
     engine.register_fn("wall_velocity", |s: &mut DemHandle, w: i64, axis: &str, f: FnPtr| {
         let w = s.wall_index(w)?;
-        let axis = super::mpm_api::axis_index(axis, 3)?;
+        let axis = super::convert::axis_index(axis, 3)?;
         let target = {
             let mut st = s.lock();
             st.sim.driven.push((w, axis));
@@ -764,7 +764,6 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
     engine.register_get("clumps", |s: &mut DemHandle| s.lock().sim.dem.clumps.len() as i64);
     register_cell(engine);
     register_measures(engine);
-    super::dem_console::register(engine);
 }
 
 fn cell_axis(name: &str) -> Option<usize> {

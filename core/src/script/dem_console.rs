@@ -2,12 +2,12 @@
 //! `O.interactions`, `O.forces`), and live changes of contact laws and materials that keep the
 //! contacts' history. Every call acts between two steps, also on a run going in the background.
 
+use super::convert::elastic_from;
 use super::convert::{api_options, err, finite, get, integer, number, string, vector, OrRhai, RhaiResult};
 use super::dem_api::{DemHandle, DemMaterialHandle};
 use crate::dem::bodies::{dofs_name, parse_dofs, SphereEdit};
 use crate::dem::inspect::{ContactView, Other};
 use crate::dem::particles::FREE;
-use crate::dem::sim::Elastic;
 use crate::dem::DemSim;
 use crate::error::GraniteError;
 use crate::math::Vec3;
@@ -106,23 +106,6 @@ fn sphere_edit(opts: &Map, material: Option<u16>) -> RhaiResult<SphereEdit> {
         force: v3("force")?,
         torque: v3("torque")?,
     })
-}
-
-/// Elastic constants from `#{ young, poisson }` or `#{ rigid: true }` (None when neither is given).
-pub(super) fn elastic_from(opts: &Map, what: &str) -> RhaiResult<Option<Elastic>> {
-    let rigid = match get(opts, "rigid") {
-        Some(d) => d.as_bool().or_else(|_| err(format!("`rigid` of {what} is true or false")))?,
-        None => false,
-    };
-    let young = get(opts, "young").map(|d| number(d, "young")).transpose()?;
-    let poisson = get(opts, "poisson").map(|d| finite(d, "poisson")).transpose()?;
-    match (rigid, young, poisson) {
-        (true, None, p) => Ok(Some(Elastic { young: f64::INFINITY, poisson: p.unwrap_or(0.0) })),
-        (true, Some(_), _) => err(format!("{what}: give `rigid: true` or `young`, not both")),
-        (false, Some(young), Some(poisson)) => Ok(Some(Elastic { young, poisson })),
-        (false, None, None) => Ok(None),
-        _ => err(format!("{what}: give both `young` (Pa) and `poisson`, or `rigid: true`")),
-    }
 }
 
 impl DemHandle {

@@ -435,6 +435,7 @@ fn build_engine(ctx: &Arc<ScriptContext>) -> Engine {
     });
     mpm_api::register(&mut engine, ctx);
     dem_api::register(&mut engine, ctx);
+    dem_console::register(&mut engine);
     element::register(&mut engine, ctx);
     script_law::register(&mut engine, ctx);
     engine

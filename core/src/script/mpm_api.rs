@@ -1,7 +1,8 @@
 //! The `mpm(...)` simulation object of scripts and its methods.
 
 use super::convert::{
-    api_options, counts, err, finite, get, integer, number, numbers, param_map, string, vector, OrRhai, RhaiResult,
+    api_options, axis_index, counts, err, finite, get, integer, number, numbers, param_map, string, vector, OrRhai,
+    RhaiResult,
 };
 use super::driver::{register_common, Handle, ScriptSim};
 use super::ScriptContext;
@@ -283,15 +284,6 @@ fn parse_mesh(opts: &Map, dim_hint: Option<usize>) -> RhaiResult<Mesh> {
         None => return err("mesh needs `cells` (cells along each axis)"),
     };
     Mesh::new(dim, origin, cell, cells).or_rhai()
-}
-
-pub(super) fn axis_index(name: &str, dim: usize) -> RhaiResult<usize> {
-    match name {
-        "x" => Ok(0),
-        "y" => Ok(1),
-        "z" if dim == 3 => Ok(2),
-        _ => err(format!("axis `{name}` must be one of {}", if dim == 3 { "x, y, z" } else { "x, y" })),
-    }
 }
 
 /// A point index from a script, checked.

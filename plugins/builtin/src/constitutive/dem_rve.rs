@@ -78,7 +78,7 @@ impl ConstitutiveLawFactory for DemRveFactory {
         &self,
         given: &granite_core::registry::ParamMap,
         objects: serde_json::Value,
-        registry: &granite_core::Registry,
+        registry: &dyn granite_core::ext::contact::ContactLawSource,
     ) -> Result<Box<dyn ConstitutiveLaw>> {
         let bad = || GraniteError::Other("dem_rve checkpoint: expected {template, rves}".into());
         let serde_json::Value::Object(mut map) = objects else { return Err(bad()) };
