@@ -106,7 +106,7 @@ enum Command {
         #[arg(long)]
         quiet: bool,
     },
-    /// Plot series.csv columns against another column, as SVG.
+    /// Plot series.csv columns against another column, as SVG or PNG (by the output file's extension; text drawn with a built-in font).
     Plot {
         /// The CSV file (e.g. out/column_collapse/series.csv).
         csv: PathBuf,
@@ -116,7 +116,7 @@ enum Command {
         /// Columns to plot, comma separated.
         #[arg(long, value_delimiter = ',', required = true)]
         y: Vec<String>,
-        /// Output file (default: plot_<columns>.svg next to the CSV).
+        /// Output file, .svg or .png (default: plot_<columns>.svg next to the CSV).
         #[arg(long)]
         out: Option<PathBuf>,
     },

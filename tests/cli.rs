@@ -116,6 +116,45 @@ fn plot_writes_an_svg() {
     assert!(!bad.status.success() && String::from_utf8_lossy(&bad.stderr).contains("time, kinetic_energy, runout"));
 }
 
+/// A plot named .png is a bitmap drawn with the font built into granite: its lines in their
+/// colours and its text (the title band holds dark pixels) without any font on the machine.
+#[test]
+fn plot_writes_a_png_with_its_text() {
+    let dir = common::out_dir("cli_plot_png");
+    std::fs::create_dir_all(&dir).unwrap();
+    let csv = dir.join("series.csv");
+    std::fs::write(&csv, "step,time,kinetic_energy,runout\n0,0,1.0,0\n1,0.1,0.5,0.2\n2,0.2,0.25,0.3\n").unwrap();
+    let png = dir.join("energy.png");
+    let out = granite()
+        .args(["plot"])
+        .arg(&csv)
+        .args(["--x", "time", "--y", "kinetic_energy,runout", "--out"])
+        .arg(&png)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(&png).unwrap()));
+    let mut reader = decoder.read_info().unwrap();
+    let mut pixels = vec![0; reader.output_buffer_size()];
+    let frame = reader.next_frame(&mut pixels).unwrap();
+    assert_eq!(frame.color_type, png::ColorType::Rgb);
+    let (width, height) = (frame.width as usize, frame.height as usize);
+    // Two panels (J and m): 2 x (120 + 2 x 380) pixels high, 1800 wide.
+    assert_eq!((width, height), (1800, 2 * (120 + 2 * 380)));
+    let rgb = |i: usize| (pixels[3 * i], pixels[3 * i + 1], pixels[3 * i + 2]);
+    let count =
+        |from: usize, to: usize, want: &dyn Fn((u8, u8, u8)) -> bool| (from..to).filter(|&i| want(rgb(i))).count();
+    let all = width * height;
+    assert!(count(0, all, &|c| c == (0, 0, 255)) > 500, "the first series' blue line");
+    assert!(count(0, all, &|c| c == (255, 0, 0)) > 500, "the second series' red line");
+    let title_band = 40 * width;
+    assert!(count(0, title_band, &|(r, g, b)| r < 100 && g < 100 && b < 100) > 200, "the title's letters");
+    let bad =
+        granite().args(["plot"]).arg(&csv).args(["--y", "runout", "--out"]).arg(dir.join("x.jpg")).output().unwrap();
+    let err = String::from_utf8_lossy(&bad.stderr);
+    assert!(!bad.status.success() && err.contains("`.jpg`") && err.contains(".svg or .png"), "{err}");
+}
+
 /// `granite batch` of bouncing_cube.rhai over the parameter file `toml`, two jobs at a time,
 /// into `DIR/runs` of a fresh folder named `name`; the folder and the command's output.
 fn batch(name: &str, toml: &str) -> (std::path::PathBuf, std::process::Output) {

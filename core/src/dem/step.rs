@@ -319,8 +319,8 @@ impl DemSim {
 mod tests {
     use super::*;
     use crate::dem::cell::PeriodicCell;
-    use crate::ext::{ContactBatch, ContactLaw};
     use crate::dem::pieces::RECUT_AFTER_STEPS;
+    use crate::ext::{ContactBatch, ContactLaw};
     use crate::math::Vec3;
 
     /// A normal spring and a drag on the relative velocity: enough to make spheres spin and to

@@ -1,5 +1,5 @@
-//! `granite plot`: line plots of series.csv columns as SVG, so energies, runout and stress paths
-//! can be looked at without other tools.
+//! `granite plot`: line plots of series.csv columns as SVG or PNG, so energies, runout and stress
+//! paths can be looked at without other tools.
 
 use crate::error::{GraniteError, Result};
 use plotters::prelude::*;
@@ -47,7 +47,8 @@ fn axis_label(names: &[&str], unit: Option<&str>) -> String {
     }
 }
 
-/// Plots `ys` against `x` from a CSV file into an SVG; returns the file written. Columns of
+/// Plots `ys` against `x` from a CSV file into an SVG, or a PNG when `out` ends in `.png`;
+/// returns the file written. Columns of
 /// different units go to panels of their own, one above the other, each axis labelled with its
 /// unit: one quantity per axis.
 pub fn plot(csv: &Path, x: &str, ys: &[String], out: Option<PathBuf>) -> Result<PathBuf> {
@@ -104,46 +105,119 @@ pub fn plot(csv: &Path, x: &str, ys: &[String], out: Option<PathBuf>) -> Result<
         x1 = x0 + 1.0;
     }
     let out = out.unwrap_or_else(|| csv.with_file_name(format!("plot_{}.svg", ys.join("_"))));
-    {
-        let height = 120 + 380 * panels.len() as u32;
+    let png = match out.extension().and_then(|e| e.to_str()).map(|e| e.to_ascii_lowercase()).as_deref() {
+        Some("png") => true,
+        Some("svg") | None => false,
+        Some(other) => {
+            return Err(GraniteError::Setup(format!(
+                "plot {}: `.{other}` is not an image format granite writes; name the file .svg or .png",
+                out.display()
+            )))
+        }
+    };
+    let height = 120 + 380 * panels.len() as u32;
+    let figure = Figure { x, ys, xs: &xs, rows: &rows, yi: &yi, panels: &panels, ranges: &ranges, x_range: (x0, x1) };
+    let err = |e: &dyn std::fmt::Display| GraniteError::Other(format!("plot {}: {e}", out.display()));
+    // Text is measured with the embedded font for either format.
+    embedded_font()?;
+    if png {
+        // Twice the SVG's size in pixels: lines and labels stay sharp on a screen.
+        let root = BitMapBackend::new(&out, (1800, 2 * height)).into_drawing_area();
+        figure.draw(root, 2).map_err(|e| err(&e))?;
+    } else {
         let root = SVGBackend::new(&out, (900, height)).into_drawing_area();
-        let err = |e: &dyn std::fmt::Display| GraniteError::Other(format!("plot {}: {e}", out.display()));
-        root.fill(&WHITE).map_err(|e| err(&e))?;
-        let root = root.titled(&format!("{} vs {x}", ys.join(", ")), ("sans-serif", 20)).map_err(|e| err(&e))?;
+        figure.draw(root, 1).map_err(|e| err(&e))?;
+    }
+    Ok(out)
+}
+
+/// The name the plots' text is drawn in: a font built into granite (DejaVu Sans), so that a PNG
+/// needs no fonts on the machine. SVG files name the same family; a viewer without it uses its
+/// own sans-serif.
+const FONT: &str = "sans-serif";
+
+/// Registers the embedded font with the plotting library, once per process.
+fn embedded_font() -> Result<()> {
+    static REGISTERED: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
+    let ok = *REGISTERED
+        .get_or_init(|| plotters::style::register_font(FONT, FontStyle::Normal, dejavu::sans::regular()).is_ok());
+    if ok {
+        Ok(())
+    } else {
+        Err(GraniteError::Other("the embedded plot font could not be read".into()))
+    }
+}
+
+/// What one plot shows: the columns of each panel with their ranges, against `x`.
+struct Figure<'a> {
+    x: &'a str,
+    ys: &'a [String],
+    xs: &'a [f64],
+    rows: &'a [Vec<f64>],
+    /// The column of each name of `ys`.
+    yi: &'a [usize],
+    /// The members of `ys` in each panel, with the panel's unit.
+    panels: &'a [(Option<&'a str>, Vec<usize>)],
+    ranges: &'a [(f64, f64)],
+    x_range: (f64, f64),
+}
+
+impl Figure<'_> {
+    /// Draws on any backend; `scale` multiplies sizes (text, margins, lines) for a bitmap drawn
+    /// larger than the SVG.
+    fn draw<DB: DrawingBackend>(
+        &self,
+        root: DrawingArea<DB, plotters::coord::Shift>,
+        scale: u32,
+    ) -> std::result::Result<(), String> {
+        let e = |e: DrawingAreaErrorKind<DB::ErrorType>| e.to_string();
+        let px = |v: u32| v * scale;
+        let Figure { x, ys, xs, rows, yi, panels, ranges, x_range: (x0, x1) } = self;
+        root.fill(&WHITE).map_err(e)?;
+        let root = root.titled(&format!("{} vs {x}", ys.join(", ")), (FONT, px(20))).map_err(e)?;
         let areas = root.split_evenly((panels.len(), 1));
         let palette = [BLUE, RED, GREEN, MAGENTA, CYAN, BLACK];
-        for (((unit, members), area), &(y0, y1)) in panels.iter().zip(&areas).zip(&ranges) {
+        let finite = |v: f64| v.is_finite();
+        for (((unit, members), area), &(y0, y1)) in panels.iter().zip(&areas).zip(ranges.iter()) {
             let mut chart = ChartBuilder::on(area)
-                .margin(12)
-                .x_label_area_size(40)
-                .y_label_area_size(90)
-                .build_cartesian_2d(x0..x1, y0..y1)
-                .map_err(|e| err(&e))?;
+                .margin(px(12))
+                .x_label_area_size(px(40))
+                .y_label_area_size(px(90))
+                .build_cartesian_2d(*x0..*x1, y0..y1)
+                .map_err(e)?;
             let names: Vec<&str> = members.iter().map(|&k| ys[k].as_str()).collect();
             chart
                 .configure_mesh()
+                .label_style((FONT, px(12)))
+                .axis_desc_style((FONT, px(14)))
                 .x_desc(axis_label(&[x], unit_of(x)))
                 .y_desc(axis_label(&names, *unit))
                 .draw()
-                .map_err(|e| err(&e))?;
+                .map_err(e)?;
             for &k in members {
                 let colour = palette[k % palette.len()];
                 let points: Vec<(f64, f64)> = rows
                     .iter()
-                    .zip(&xs)
+                    .zip(xs.iter())
                     .filter_map(|(r, &xv)| r.get(yi[k]).copied().filter(|y| finite(*y) && finite(xv)).map(|y| (xv, y)))
                     .collect();
+                let line = colour.stroke_width(scale);
                 chart
-                    .draw_series(LineSeries::new(points, &colour))
-                    .map_err(|e| err(&e))?
+                    .draw_series(LineSeries::new(points, line))
+                    .map_err(e)?
                     .label(ys[k].clone())
-                    .legend(move |(a, b)| PathElement::new(vec![(a, b), (a + 20, b)], colour));
+                    .legend(move |(a, b)| PathElement::new(vec![(a, b), (a + 12 * scale as i32, b)], line));
             }
-            chart.configure_series_labels().border_style(BLACK).background_style(WHITE).draw().map_err(|e| err(&e))?;
+            chart
+                .configure_series_labels()
+                .label_font((FONT, px(13)))
+                .border_style(BLACK)
+                .background_style(WHITE)
+                .draw()
+                .map_err(e)?;
         }
-        root.present().map_err(|e| err(&e))?;
+        root.present().map_err(e)
     }
-    Ok(out)
 }
 
 #[cfg(test)]
