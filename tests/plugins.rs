@@ -70,6 +70,30 @@ summary("gamma_p", sim.point_state(0, "gamma_p"));
     assert_eq!(prov["plugins"]["loaded"][0]["law"], "drucker_prager");
 }
 
+/// The plugin tutorial as a user runs it: its element test reaches the Drucker–Prager strength
+/// of a drained triaxial, q_f = (k - 3 alpha sigma_3) / (1/sqrt(3) - alpha), to 1e-9, and its
+/// cohesionless block cannot keep a vertical face: it slumps beyond its 0.4 m base.
+#[test]
+fn the_plugin_tutorial_checks_the_law_and_slumps() {
+    let lib = build_plugin(&[], "plugin-test");
+    let sets = common::sets(&[("plugin", &lib.display().to_string()), ("duration", "0.3")]);
+    let report = granite::run(
+        &common::root().join("examples/tutorial_plugin.rhai"),
+        sets,
+        Some(common::out_dir("tutorial_plugin")),
+        true,
+        Some(1),
+    )
+    .unwrap();
+    let get = |k: &str| common::summary_f64(&report, k);
+    let (q, q_f) = (get("q_end"), get("q_failure"));
+    let (k, alpha, s3) = (2e3, 0.2, -1e5);
+    assert!((q_f - (k - 3.0 * alpha * s3) / (1.0 / 3f64.sqrt() - alpha)).abs() < 1e-9 * q_f);
+    assert!((q - q_f).abs() < 1e-9 * q_f, "q = {q} Pa at 5 % axial strain, strength {q_f} Pa");
+    assert!(get("gamma_p_end") > 0.0);
+    assert!(get("front_position") > 0.6, "front at {} m", get("front_position"));
+}
+
 #[test]
 fn bad_plugins_are_refused_with_the_library_named() {
     let good = build_plugin(&[], "plugin-test");

@@ -2,8 +2,9 @@
 //!
 //! Yield function `f = sqrt(J2) + alpha I1 - k` (tension positive: compression raises the
 //! strength), isotropic elasticity, non-associated flow without dilatancy: a plastic trial keeps
-//! its mean stress and its deviator is scaled back onto the surface (radial return). State
-//! variable: the accumulated plastic shear `gamma_p`.
+//! its mean stress and its deviator is scaled back onto the surface (radial return); a trial in
+//! more tension than the cone's apex `I1 = k / alpha` returns to the apex. State variable: the
+//! accumulated plastic shear `gamma_p`.
 //!
 //! Build: `cargo build --release -p custom_law`; load: `load_plugin("target/release/libcustom_law.so")`
 //! in a script or `granite run --plugin ...`; use: `sim.material("drucker_prager", #{ density: ...,
@@ -52,7 +53,15 @@ impl NativeLaw for DruckerPrager {
             let j2 =
                 0.5 * (dev[0] * dev[0] + dev[1] * dev[1] + dev[2] * dev[2]) + s[3] * s[3] + s[4] * s[4] + s[5] * s[5];
             let tau = j2.sqrt();
-            let limit = (self.k - self.alpha * i1).max(0.0);
+            if self.alpha > 0.0 && i1 > self.k / self.alpha {
+                // More tension than the cone's apex holds (p > k / 3 alpha): back to the apex, an
+                // isotropic stress; a cohesionless soil (k = 0) carries no tension at all.
+                let apex = self.k / (3.0 * self.alpha);
+                *s = [apex, apex, apex, 0.0, 0.0, 0.0];
+                *gp += tau / self.shear;
+                continue;
+            }
+            let limit = self.k - self.alpha * i1;
             if tau > limit {
                 let scale = if tau > 0.0 { limit / tau } else { 0.0 };
                 for a in 0..3 {
