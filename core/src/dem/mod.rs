@@ -19,6 +19,7 @@ mod motion;
 pub mod particles;
 pub mod picture;
 mod pieces;
+pub mod potential;
 mod rebuild;
 pub mod repose;
 mod rows;
