@@ -327,8 +327,7 @@ pub(super) fn integrate_clumps(
     dt: f64,
     affine: Option<(Matrix3<f64>, Matrix3<f64>)>,
 ) -> f64 {
-    use nalgebra::{UnitQuaternion, Vector3};
-    let damp = |acc: f64, vel: f64| cundall(acc, vel, damping, dt);
+    use nalgebra::Vector3;
     let mut moved: f64 = 0.0;
     for c in 0..cl.len() {
         let xc = cl.x[c];
@@ -340,38 +339,8 @@ pub(super) fn integrate_clumps(
         }
         cl.force[c] = f;
         cl.torque[c] = t;
-        let mass = cl.mass[c];
-        let lx = match &affine {
-            Some((l, _)) => mat_vec(l, xc),
-            None => [0.0; 3],
-        };
-        for a in 0..3 {
-            let acc = damp(f[a] / mass + gravity[a], cl.v[c][a]);
-            cl.v[c][a] += acc * dt;
-        }
-        let moving = add(cl.v[c], lx);
-        for a in 0..3 {
-            cl.x[c][a] += moving[a] * dt;
-        }
-        if let Some((l, _)) = &affine {
-            // Newton's law for the whole velocity, as for a sphere (`Motion::advance_free`).
-            let field_change = mat_vec(l, moving);
-            for a in 0..3 {
-                cl.v[c][a] -= field_change[a] * dt;
-            }
-        }
-        // Euler's equations in the world frame: I w' = T - w x (I w).
-        let rot = cl.q[c].to_rotation_matrix();
-        let i_body = Matrix3::from_diagonal(&Vector3::new(cl.inertia[c][0], cl.inertia[c][1], cl.inertia[c][2]));
-        let i_world = rot.matrix() * i_body * rot.matrix().transpose();
-        let w = Vector3::new(cl.w[c][0], cl.w[c][1], cl.w[c][2]);
-        let rhs = Vector3::new(t[0], t[1], t[2]) - w.cross(&(i_world * w));
-        let alpha = i_world.try_inverse().map(|inv| inv * rhs).unwrap_or_else(Vector3::zeros);
-        for a in 0..3 {
-            cl.w[c][a] += damp(alpha[a], cl.w[c][a]) * dt;
-        }
-        let wn = Vector3::new(cl.w[c][0], cl.w[c][1], cl.w[c][2]);
-        cl.q[c] = UnitQuaternion::from_scaled_axis(wn * dt) * cl.q[c];
+        let body = RigidBody { x: &mut cl.x[c], v: &mut cl.v[c], w: &mut cl.w[c], q: &mut cl.q[c] };
+        body.advance((cl.mass[c], cl.inertia[c]), (f, t), &RigidMotion { gravity, damping, dt, affine });
         let xc = cl.x[c];
         for m in cl.members_of(c) {
             let i = cl.members[m] as usize;
@@ -399,4 +368,65 @@ pub(super) fn integrate_clumps(
         }
     }
     moved
+}
+
+/// What moves every free rigid body (clump or potential particle) in a step.
+pub(crate) struct RigidMotion {
+    pub gravity: Vec3,
+    pub damping: f64,
+    pub dt: f64,
+    /// The periodic cell's `(L, F)`: velocities are fluctuations around `L x`.
+    pub affine: Option<(Matrix3<f64>, Matrix3<f64>)>,
+}
+
+/// The state of one rigid body a step changes: centre, velocity, angular velocity (world frame)
+/// and orientation (body principal frame to world).
+pub(crate) struct RigidBody<'a> {
+    pub x: &'a mut Vec3,
+    pub v: &'a mut Vec3,
+    pub w: &'a mut Vec3,
+    pub q: &'a mut nalgebra::UnitQuaternion<f64>,
+}
+
+impl RigidBody<'_> {
+    /// One leapfrog step of a body of `(mass, principal moments)` under force and torque `(f, t)`,
+    /// gravity and Cundall damping: Newton's law for the centre, Euler's equations in the world
+    /// frame for the rotation, the orientation turned by the new angular velocity.
+    pub(crate) fn advance(self, (mass, inertia): (f64, Vec3), (f, t): (Vec3, Vec3), m: &RigidMotion) {
+        use nalgebra::{UnitQuaternion, Vector3};
+        let RigidMotion { gravity, damping, dt, ref affine } = *m;
+        let damp = |acc: f64, vel: f64| cundall(acc, vel, damping, dt);
+        let xc = *self.x;
+        let lx = match affine {
+            Some((l, _)) => mat_vec(l, xc),
+            None => [0.0; 3],
+        };
+        for a in 0..3 {
+            let acc = damp(f[a] / mass + gravity[a], self.v[a]);
+            self.v[a] += acc * dt;
+        }
+        let moving = add(*self.v, lx);
+        for a in 0..3 {
+            self.x[a] += moving[a] * dt;
+        }
+        if let Some((l, _)) = affine {
+            // Newton's law for the whole velocity, as for a sphere (`Motion::advance_free`).
+            let field_change = mat_vec(l, moving);
+            for a in 0..3 {
+                self.v[a] -= field_change[a] * dt;
+            }
+        }
+        // Euler's equations in the world frame: I w' = T - w x (I w).
+        let rot = self.q.to_rotation_matrix();
+        let i_body = Matrix3::from_diagonal(&Vector3::new(inertia[0], inertia[1], inertia[2]));
+        let i_world = rot.matrix() * i_body * rot.matrix().transpose();
+        let w = Vector3::new(self.w[0], self.w[1], self.w[2]);
+        let rhs = Vector3::new(t[0], t[1], t[2]) - w.cross(&(i_world * w));
+        let alpha = i_world.try_inverse().map(|inv| inv * rhs).unwrap_or_else(Vector3::zeros);
+        for a in 0..3 {
+            self.w[a] += damp(alpha[a], self.w[a]) * dt;
+        }
+        let wn = Vector3::new(self.w[0], self.w[1], self.w[2]);
+        *self.q = UnitQuaternion::from_scaled_axis(wn * dt) * *self.q;
+    }
 }

@@ -22,6 +22,10 @@ pub struct DemMaterial {
     pub elastic: Option<Elastic>,
 }
 
+/// Why a scene holds spheres (and clumps) or potential particles, not both.
+pub(crate) const MIXED_SHAPES: &str = "spheres (and clumps) and potential particles do not meet one another: a \
+     simulation holds one kind or the other";
+
 #[derive(Clone)]
 pub struct DemSim {
     pub spheres: Spheres,
@@ -85,6 +89,12 @@ pub struct DemSim {
     /// The energy balance, when tracked (see `energy.rs`).
     pub energy: Option<crate::dem::energy::EnergyTracker>,
     pub(crate) next_id: u64,
+    /// Potential particles (see `dem::potential`), their candidate pairs with one another and
+    /// with the walls, and their centres when those lists were built.
+    pub potentials: crate::dem::potential::Potentials,
+    pub(crate) potential_pairs: PairList,
+    pub(crate) potential_wall_pairs: PairList,
+    pub(crate) potential_x_at_build: Vec<Vec3>,
 }
 
 impl Default for DemSim {
@@ -133,6 +143,10 @@ impl DemSim {
             external: Vec::new(),
             energy: None,
             next_id: 0,
+            potentials: Default::default(),
+            potential_pairs: PairList::default(),
+            potential_wall_pairs: PairList::default(),
+            potential_x_at_build: Vec::new(),
         }
     }
 
@@ -297,6 +311,9 @@ impl DemSim {
     /// A sphere a step can move: finite position and velocity, a radius whose mass at the
     /// material's density is finite and > 0. Returns that density.
     pub(crate) fn check_sphere(&self, material: u16, x: Vec3, radius: f64, v: Vec3) -> Result<f64> {
+        if !self.potentials.is_empty() {
+            return Err(GraniteError::Setup(MIXED_SHAPES.into()));
+        }
         if !(radius > 0.0 && radius.is_finite()) {
             return Err(GraniteError::param("radius", radius, "must be > 0"));
         }
@@ -556,22 +573,32 @@ impl DemSim {
     /// each sphere with a copy of itself and with each wall (multiply by ~0.2-0.3 for packings).
     pub fn critical_dt(&self) -> Option<f64> {
         let mut best: Option<f64> = None;
+        let mut consider = |law: Option<u16>, info: PairInfo| {
+            if let Some(l) = law {
+                let k = self.laws[l as usize].max_normal_stiffness(&info);
+                if k > 0.0 {
+                    let dt = (info.effective_mass() / k).sqrt();
+                    best = Some(best.map_or(dt, |b: f64| b.min(dt)));
+                }
+            }
+        };
         for i in 0..self.spheres.len() {
             let mi = self.spheres.material[i];
-            let mut consider = |law: Option<u16>, info: PairInfo| {
-                if let Some(l) = law {
-                    let k = self.laws[l as usize].max_normal_stiffness(&info);
-                    if k > 0.0 {
-                        let dt = (info.effective_mass() / k).sqrt();
-                        best = Some(best.map_or(dt, |b: f64| b.min(dt)));
-                    }
-                }
-            };
             let mut self_pair = self.pair_info(i, Some(i));
             self_pair.seed = 0;
             consider(self.law_for(mi, mi), self_pair);
             for (w, wall) in self.walls.iter().enumerate() {
                 consider(self.law_for(mi, wall.material), self.info_for(i, w, true));
+            }
+        }
+        let p = &self.potentials;
+        for i in (0..p.len()).filter(|&i| !p.fixed[i]) {
+            let mi = p.material[i];
+            let mut self_pair = self.potential_info(i, i, false);
+            self_pair.seed = 0;
+            consider(self.law_for(mi, mi), self_pair);
+            for (w, wall) in self.walls.iter().enumerate() {
+                consider(self.law_for(mi, wall.material), self.potential_info(i, w, true));
             }
         }
         best

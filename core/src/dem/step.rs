@@ -8,7 +8,7 @@ use crate::dem::contact_stage::{
     SharedPairs,
 };
 use crate::dem::contacts::PairList;
-use crate::dem::motion::{
+use crate::dem::motion::{RigidMotion, 
     farther, gather_piece, integrate, integrate_clumps, GatherJob, Motion, PieceState, SphereConstants,
 };
 use crate::dem::particles::Spheres;
@@ -97,6 +97,13 @@ impl DemSim {
             );
             moved = farther(moved, clump_moved);
         }
+        // Potential particles: their contacts see the walls where they were at the step's start.
+        let potential_moved = if self.potentials.is_empty() {
+            0.0
+        } else {
+            let motion = RigidMotion { gravity: self.gravity, damping: self.damping, dt: self.dt, affine: None };
+            self.potential_step(&motion)?
+        };
         let mut wall_moved: f64 = 0.0;
         for (w, at) in self.walls.iter_mut().zip(&self.walls_at_build) {
             for a in 0..3 {
@@ -149,6 +156,12 @@ impl DemSim {
         let affine_growth = strain_since_build * (2.0 * self.radius_max_at_build + self.skin);
         if 2.0 * moved + affine_growth > self.skin || moved + wall_moved > self.skin {
             self.needs_rebuild = true;
+        }
+        if !self.potentials.is_empty() {
+            let skin = self.potential_skin();
+            if 2.0 * potential_moved > skin || potential_moved + wall_moved > skin {
+                self.needs_rebuild = true;
+            }
         }
         Ok(())
     }

@@ -38,6 +38,9 @@ impl DemSim {
         if self.cell.is_some() {
             return Err(GraniteError::Setup("energy tracking covers open domains, not periodic cells".into()));
         }
+        if !self.potentials.is_empty() {
+            return Err(GraniteError::Setup("energy tracking covers spheres and clumps, not potential particles".into()));
+        }
         if let Some(law) = self.laws.iter().find(|l| !l.tracks_dissipation()) {
             return Err(GraniteError::Setup(format!(
                 "contact law `{}` does not account for its losses: energy cannot be tracked with it",

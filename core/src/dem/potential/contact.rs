@@ -26,7 +26,7 @@ use nalgebra::{Matrix3, Matrix4, Vector3, Vector4};
 
 /// How far from the optimal value of `max(f_A, f_B)` a solution may be (potentials are
 /// dimensionless, about `2 delta / r` at a depth `delta` below the surface).
-pub const VALUE_TOLERANCE: f64 = 1e-13;
+pub const VALUE_TOLERANCE: f64 = 1e-11;
 /// Most Newton steps of one solve before it reports failure.
 const MAX_STEPS: usize = 60;
 
@@ -258,6 +258,83 @@ fn overlap_along_normal(a: Placed<'_>, b: Placed<'_>, x: Vec3, ga: Vector3<f64>)
     Touch { normal, overlap: into_b + into_a, point: [0, 1, 2].map(|i| x[i] + middle * normal[i]) }
 }
 
+/// The contact of a particle with a plane through `point` whose unit `normal` points to the
+/// particles' side: the particle's deepest point below the plane, `argmin normal . x` over
+/// `f <= 0`, from Newton's method on `normal + mu grad f = 0, f = 0` (started from `start`, the
+/// previous deepest point, or from the centre's ray against the normal). It stops when the
+/// point is on the surface and the stationarity residual, over the shadow sphere's modulus, is
+/// below `LENGTH_TOLERANCE` of the particle's size. The normal of the touch points from the
+/// particle into the wall (`-normal`).
+pub fn detect_plane(p: Placed<'_>, point: Vec3, normal: Vec3, start: Option<Vec3>) -> Result<(Vec3, Option<Touch>), NoConvergence> {
+    let size = p.shape.bounding_radius;
+    let n = Vector3::new(normal[0], normal[1], normal[2]);
+    let mut x = match start {
+        Some(s) => Vector3::new(s[0], s[1], s[2]),
+        None => {
+            let c = p.pose.position;
+            let t = along_ray(p, c, normal.map(|v| -v), size);
+            Vector3::new(c[0] - t * normal[0], c[1] - t * normal[1], c[2] - t * normal[2])
+        }
+    };
+    let (_, g, _) = p.value_gradient_hessian([x[0], x[1], x[2]]);
+    let mut mu = 1.0 / g.norm().max(f64::MIN_POSITIVE);
+    let modulus = p.modulus();
+    let mut steps = 0;
+    loop {
+        let (f, g, h) = p.value_gradient_hessian([x[0], x[1], x[2]]);
+        let stationarity = n + g * mu;
+        // Distance along the normal still in doubt: the surface residual through the gradient,
+        // and the stationarity residual through the strong convexity (as in `detect`).
+        let doubt = f.abs() / g.norm().max(f64::MIN_POSITIVE) + stationarity.norm_squared() / (2.0 * mu * modulus);
+        if doubt <= LENGTH_TOLERANCE * size {
+            break;
+        }
+        if steps == MAX_STEPS {
+            return Err(NoConvergence { steps, gap_bound: doubt / size });
+        }
+        steps += 1;
+        let mut m = Matrix4::zeros();
+        m.fixed_view_mut::<3, 3>(0, 0).copy_from(&(h * mu));
+        for i in 0..3 {
+            m[(i, 3)] = g[i];
+            m[(3, i)] = g[i];
+        }
+        let rhs = -Vector4::new(stationarity[0], stationarity[1], stationarity[2], f);
+        let Some(step) = m.lu().solve(&rhs) else {
+            return Err(NoConvergence { steps, gap_bound: doubt / size });
+        };
+        // The multiplier stays positive, and a step is halved until it lowers the residual of the
+        // optimality conditions: on a flat face the tangential curvature is the shadow sphere's
+        // alone, and a full step from off the deepest point can jump far across the surface.
+        let residual = |x: Vector3<f64>, mu: f64| {
+            let (f, g, _) = p.value_gradient_hessian([x[0], x[1], x[2]]);
+            (n + g * mu).norm_squared() + (f / g.norm().max(f64::MIN_POSITIVE) / size).powi(2)
+        };
+        let now = residual(x, mu);
+        let mut t = 1.0;
+        while mu + t * step[3] <= 0.0 && t > 1e-6 {
+            t *= 0.5;
+        }
+        while t > 1e-6 && residual(x + Vector3::new(step[0], step[1], step[2]) * t, mu + t * step[3]) >= now {
+            t *= 0.5;
+        }
+        x += Vector3::new(step[0], step[1], step[2]) * t;
+        mu += t * step[3];
+    }
+    let deepest = [x[0], x[1], x[2]];
+    let depth = -(0..3).map(|i| normal[i] * (deepest[i] - point[i])).sum::<f64>();
+    let touch = (depth > 0.0).then(|| Touch {
+        normal: normal.map(|v| -v),
+        overlap: depth,
+        point: [0, 1, 2].map(|i| deepest[i] + 0.5 * depth * normal[i]),
+    });
+    Ok((deepest, touch))
+}
+
+/// How far from the exact deepest point a plane contact's solve may stop, relative to the
+/// particle's bounding radius.
+pub const LENGTH_TOLERANCE: f64 = 1e-11;
+
 #[cfg(test)]
 mod tests {
     use super::super::shape::{box_planes, tetrahedron_planes, PotentialShape, MASS_RESOLUTION};
@@ -349,5 +426,31 @@ mod tests {
             previous = Some(found.solution);
         }
         assert!(cold_steps > 0);
+    }
+
+    /// A particle pressed into a plane by `delta`: k = 1 (a sphere) and a cube turned about the
+    /// plane's normal give the depth, the normal and the force point of a flat contact.
+    #[test]
+    fn a_plane_is_touched_at_the_deepest_point() {
+        let r_big = 2e-3;
+        let ball = sphere(r_big);
+        let c = ball.sphere_centre;
+        let delta = 1e-4;
+        let pose = Pose::at([1.0 - c[0], 2.0 - c[1], r_big - delta - c[2]]);
+        let (deepest, touch) = detect_plane(Placed { shape: &ball, pose: &pose }, [0.0; 3], [0.0, 0.0, 1.0], None).unwrap();
+        let t = touch.expect("a sphere below the plane's level touches it");
+        assert!((t.overlap - delta).abs() < 1e-12 * r_big, "overlap {}", t.overlap);
+        assert!((deepest[0] - 1.0).abs() < 1e-9 && (deepest[1] - 2.0).abs() < 1e-9);
+        assert_eq!(t.normal, [0.0, 0.0, -1.0]);
+        let (half, r) = (2e-3, 2e-4);
+        let cube = PotentialShape::new(&box_planes([half; 3]), r, 20.0 * half, 1e-4, 60).unwrap();
+        let turn = Rotation3::from_axis_angle(&Unit::new_normalize(Vector3::z()), 0.7).into_inner();
+        let pose = Pose { position: [0.0, 0.0, half + r - delta], rotation: turn };
+        let (_, touch) = detect_plane(Placed { shape: &cube, pose: &pose }, [0.0; 3], [0.0, 0.0, 1.0], None).unwrap();
+        let t = touch.expect("pressed cube touches");
+        assert!((t.overlap / delta - 1.0).abs() < 1e-3, "overlap {}", t.overlap);
+        // Lifted clear of the plane: no touch.
+        let pose = Pose::at([0.0, 0.0, r_big + delta]);
+        assert!(detect_plane(Placed { shape: &ball, pose: &pose }, [0.0; 3], [0.0, 0.0, 1.0], None).unwrap().1.is_none());
     }
 }

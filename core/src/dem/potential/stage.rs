@@ -1,0 +1,299 @@
+//! The potential particles' part of a DEM step: candidate pairs (their bounding spheres in the
+//! broad phase), contact detection per pair from its previous solution, the contact law of the
+//! two materials (any registered law: geometry and law are apart), forces summed per particle in
+//! pair order, and rigid-body motion.
+//!
+//! Detection runs pair by pair in parallel, each pair writing only its own values; the law calls
+//! and the sums then run in pair order, so results do not depend on the number of threads.
+
+use super::contact::{detect, detect_plane, Placed, Solution, Touch};
+use crate::dem::broad_phase::{sphere_pairs, wall_pairs, Candidate};
+use crate::dem::contacts::PairList;
+use crate::dem::motion::{RigidBody, RigidMotion};
+use crate::dem::sim::DemSim;
+use crate::dem::walls::WallShape;
+use crate::error::{GraniteError, Result};
+use crate::ext::{ContactBatch, PairInfo};
+use crate::math::{add3, cross3, sub3, Vec3};
+use rayon::prelude::*;
+
+/// History values a pair keeps after its law's: the last solution of its contact problem (a
+/// point and, between two particles, the weight `lambda`) and whether there is one.
+const WARM: usize = 5;
+
+/// A touching pair's geometry and relative motion, as its law takes them.
+#[derive(Debug, Clone, Copy)]
+struct Found {
+    touch: Touch,
+    rel_velocity: Vec3,
+    rel_spin: Vec3,
+}
+
+impl DemSim {
+    /// Values per pair of the potential particles' lists: the laws' then [`WARM`].
+    fn potential_strides(&self) -> (usize, usize) {
+        let (p, h) = self.pair_strides();
+        (p, h + WARM)
+    }
+
+    /// The Verlet skin of the potential particles: the simulation's, or a tenth of the smallest
+    /// bounding radius when none is set.
+    pub(crate) fn potential_skin(&self) -> f64 {
+        if self.skin > 0.0 {
+            return self.skin;
+        }
+        0.1 * self.potentials.bounding_radii().into_iter().fold(f64::INFINITY, f64::min)
+    }
+
+    /// The pair info of particles `i` and `j` (or of `i` and wall `j`).
+    pub(crate) fn potential_info(&self, i: usize, j: usize, wall: bool) -> PairInfo {
+        let p = &self.potentials;
+        let elastic = |m: u16| self.materials.get(m as usize).and_then(|m| m.elastic);
+        let (r2, m2, id2, e2) = if wall {
+            (f64::INFINITY, f64::INFINITY, u64::MAX - j as u64, elastic(self.walls[j].material))
+        } else {
+            (p.shape_of(j).bounding_radius, p.contact_mass(j), p.id[j], elastic(p.material[j]))
+        };
+        let (lo, hi) = (p.id[i].min(id2), p.id[i].max(id2));
+        let seed = crate::ext::contact::uniform(self.seed ^ lo.wrapping_mul(0x100_0000_01B3), hi).to_bits();
+        PairInfo {
+            radius: [p.shape_of(i).bounding_radius, r2],
+            mass: [p.contact_mass(i), m2],
+            seed,
+            elastic: [elastic(p.material[i]), e2],
+        }
+    }
+
+    /// Rebuilds the potential particles' candidate lists (pairs still present keep their
+    /// history and warm starts). Called with the spheres' rebuild.
+    pub(crate) fn rebuild_potential_pairs(&mut self) -> Result<()> {
+        if self.potentials.is_empty() {
+            return Ok(());
+        }
+        if self.cell.is_some() {
+            return Err(GraniteError::Setup("potential particles run in open domains, not in a periodic cell".into()));
+        }
+        if let Some(w) = self.walls.iter().find(|w| !matches!(w.shape, WallShape::Plane { .. })) {
+            return Err(GraniteError::Setup(format!(
+                "wall \"{}\": potential particles meet plane walls (wall_plane, box_walls) and one another; build other \
+                 container parts from potential particles (potential_box)",
+                w.name
+            )));
+        }
+        let radii = self.potentials.bounding_radii();
+        let skin = self.potential_skin();
+        let strides = self.potential_strides();
+        let pairs = sphere_pairs(&self.potentials.x, &radii, skin);
+        let walls = wall_pairs(&self.potentials.x, &radii, &self.walls, skin);
+        let mut list = std::mem::take(&mut self.potential_pairs);
+        let mut wall_list = std::mem::take(&mut self.potential_wall_pairs);
+        let missing = self
+            .merge_potential(&mut list, &pairs, strides, false)
+            .or(self.merge_potential(&mut wall_list, &walls, strides, true));
+        self.potential_pairs = list;
+        self.potential_wall_pairs = wall_list;
+        if let Some((a, b)) = missing {
+            let name = |m: u16| self.materials.get(m as usize).map(|m| m.name.clone()).unwrap_or_default();
+            return Err(GraniteError::Setup(format!(
+                "no contact law for materials \"{}\" and \"{}\": give a default law or one for this pair",
+                name(a),
+                name(b)
+            )));
+        }
+        self.potential_x_at_build = self.potentials.x.clone();
+        Ok(())
+    }
+
+    /// Merges candidates into a list, giving new pairs their law and parameters; returns a pair
+    /// of materials without a law, if it met one.
+    fn merge_potential(
+        &self,
+        list: &mut PairList,
+        candidates: &[Vec<Candidate>],
+        strides: (usize, usize),
+        wall: bool,
+    ) -> Option<(u16, u16)> {
+        let pieces: Vec<&[Candidate]> = candidates.iter().map(|b| &b[..]).collect();
+        let material = &self.potentials.material;
+        let materials = |a: usize, b: usize| (material[a], if wall { self.walls[b].material } else { material[b] });
+        let mut spare = PairList::default();
+        let missing = list.merge(&mut spare, &pieces, strides, false, |a, b, law, params| {
+            let (a, b) = (a as usize, b as usize);
+            let pair = materials(a, b);
+            let Some(l) = self.law_for(pair.0, pair.1) else { return false };
+            *law = l;
+            self.laws[l as usize].init_pair(&self.potential_info(a, b, wall), params);
+            true
+        });
+        missing.map(|(a, b)| materials(a as usize, b as usize))
+    }
+
+    /// Contacts, forces and motion of the potential particles for one step; returns the largest
+    /// distance a particle's centre moved since the lists were built.
+    pub(crate) fn potential_step(&mut self, motion: &RigidMotion) -> Result<f64> {
+        let p = &mut self.potentials;
+        p.force.iter_mut().for_each(|f| *f = [0.0; 3]);
+        p.torque.iter_mut().for_each(|t| *t = [0.0; 3]);
+        let hs = self.potential_strides().1;
+        let own = hs - WARM;
+        let pairs = std::mem::take(&mut self.potential_pairs);
+        let walls = std::mem::take(&mut self.potential_wall_pairs);
+        let result = self.potential_contacts(pairs, own, false).and_then(|pairs| {
+            self.potential_pairs = pairs;
+            self.potential_contacts(walls, own, true)
+        });
+        match result {
+            Ok(walls) => self.potential_wall_pairs = walls,
+            Err(e) => return Err(e),
+        }
+        let p = &mut self.potentials;
+        let dt = motion.dt;
+        let mut moved: f64 = 0.0;
+        for i in 0..p.len() {
+            if p.fixed[i] {
+                // Moved by its own velocity and spin only.
+                for a in 0..3 {
+                    p.x[i][a] += p.v[i][a] * dt;
+                }
+                let w = nalgebra::Vector3::new(p.w[i][0], p.w[i][1], p.w[i][2]);
+                p.q[i] = nalgebra::UnitQuaternion::from_scaled_axis(w * dt) * p.q[i];
+            } else {
+                let body = RigidBody { x: &mut p.x[i], v: &mut p.v[i], w: &mut p.w[i], q: &mut p.q[i] };
+                body.advance((p.mass[i], p.inertia[i]), (p.force[i], p.torque[i]), motion);
+            }
+            let d = sub3(p.x[i], self.potential_x_at_build.get(i).copied().unwrap_or(p.x[i]));
+            let distance = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+            if !(distance.is_finite() && p.v[i].iter().chain(&p.w[i]).all(|c| c.is_finite())) {
+                return Err(GraniteError::Unstable {
+                    step: self.step,
+                    time: self.time,
+                    reason: format!(
+                        "non-finite position or velocity of potential particle {} (x = {:?}, v = {:?}); the time step may be too large",
+                        p.id[i], p.x[i], p.v[i]
+                    ),
+                });
+            }
+            moved = moved.max(distance);
+        }
+        Ok(moved)
+    }
+
+    /// Detects the contacts of a list (pairs of particles, or particle-wall pairs), runs their
+    /// laws and adds the forces to the particles, in pair order. Returns the list.
+    fn potential_contacts(&mut self, mut list: PairList, own: usize, wall: bool) -> Result<PairList> {
+        let hs = list.history_stride;
+        let p = &self.potentials;
+        let walls = &self.walls;
+        let (a_list, b_list) = (&list.a, &list.b);
+        // Each pair's detection, from its own warm start, in parallel.
+        let found: Vec<std::result::Result<Option<Found>, String>> = list
+            .history
+            .par_chunks_mut(hs.max(1))
+            .enumerate()
+            .map(|(k, history)| {
+                let (i, j) = (a_list[k] as usize, b_list[k] as usize);
+                let warm = &mut history[own..own + WARM];
+                let start = (warm[4] == 1.0).then(|| Solution { point: [warm[0], warm[1], warm[2]], lambda: warm[3] });
+                let pose_i = p.pose(i);
+                let a = Placed { shape: p.shape_of(i), pose: &pose_i };
+                let touch = if wall {
+                    let w = &walls[j];
+                    let WallShape::Plane { normal } = w.shape else { return Ok(None) };
+                    let (deepest, touch) = detect_plane(a, w.position, normal, start.map(|s| s.point))
+                        .map_err(|e| format!("potential particle {} and wall \"{}\": {e:?}", p.id[i], w.name))?;
+                    warm[..3].copy_from_slice(&deepest);
+                    warm[4] = 1.0;
+                    touch.map(|t| (t, w.velocity, [0.0; 3], [0.0; 3]))
+                } else {
+                    let pose_j = p.pose(j);
+                    let b = Placed { shape: p.shape_of(j), pose: &pose_j };
+                    let found =
+                        detect(a, b, start).map_err(|e| format!("potential particles {} and {}: {e:?}", p.id[i], p.id[j]))?;
+                    warm[..3].copy_from_slice(&found.solution.point);
+                    warm[3] = found.solution.lambda;
+                    warm[4] = 1.0;
+                    found.touch.map(|t| (t, p.v[j], p.w[j], p.x[j]))
+                };
+                Ok(touch.map(|(touch, vj, wj, xj)| {
+                    let at = |v: Vec3, w: Vec3, x: Vec3| add3(v, cross3(w, sub3(touch.point, x)));
+                    let rel_velocity = if wall {
+                        sub3(vj, at(p.v[i], p.w[i], p.x[i]))
+                    } else {
+                        sub3(at(vj, wj, xj), at(p.v[i], p.w[i], p.x[i]))
+                    };
+                    Found { touch, rel_velocity, rel_spin: sub3(wj, p.w[i]) }
+                }))
+            })
+            .collect();
+        let mut touching = Vec::new();
+        for (k, f) in found.into_iter().enumerate() {
+            match f {
+                Ok(Some(found)) => touching.push((k, found)),
+                Ok(None) => {
+                    if list.touching[k] {
+                        // Apart: the law's history starts again at the next touch.
+                        list.touching[k] = false;
+                        list.force[k] = [0.0; 3];
+                        list.history[k * hs..k * hs + own].iter_mut().for_each(|h| *h = 0.0);
+                    }
+                }
+                Err(reason) => {
+                    return Err(GraniteError::Unstable {
+                        step: self.step,
+                        time: self.time,
+                        reason: format!("the contact problem of {reason} was not solved"),
+                    })
+                }
+            }
+        }
+        // Each law on its contacts, in pair order.
+        let n = touching.len();
+        let (mut force, mut moment) = (vec![[0.0; 3]; n], vec![[0.0; 3]; n]);
+        for (l, law) in self.laws.iter().enumerate() {
+            let members: Vec<usize> = (0..n).filter(|&e| list.law[touching[e].0] as usize == l).collect();
+            if members.is_empty() {
+                continue;
+            }
+            let pick = |f: &dyn Fn(&Found) -> Vec3| members.iter().map(|&e| f(&touching[e].1)).collect::<Vec<Vec3>>();
+            let normal = pick(&|f| f.touch.normal);
+            let rel_velocity = pick(&|f| f.rel_velocity);
+            let rel_spin = pick(&|f| f.rel_spin);
+            let overlap: Vec<f64> = members.iter().map(|&e| touching[e].1.touch.overlap).collect();
+            let slot: Vec<u32> = members.iter().map(|&e| touching[e].0 as u32).collect();
+            let (mut f, mut m) = (vec![[0.0; 3]; members.len()], vec![[0.0; 3]; members.len()]);
+            law.compute(ContactBatch {
+                normal: &normal,
+                overlap: &overlap,
+                rel_velocity: &rel_velocity,
+                rel_spin: &rel_spin,
+                slot: &slot,
+                strides: (list.param_stride, hs),
+                params: &list.params,
+                history: &mut list.history,
+                force: &mut f,
+                moment: &mut m,
+                dt: self.dt,
+            });
+            for (s, &e) in members.iter().enumerate() {
+                force[e] = f[s];
+                moment[e] = m[s];
+            }
+        }
+        // Sums in pair order.
+        let p = &mut self.potentials;
+        for (e, (k, found)) in touching.iter().enumerate() {
+            let (i, j) = (list.a[*k] as usize, list.b[*k] as usize);
+            let (f, m, point) = (force[e], moment[e], found.touch.point);
+            list.touching[*k] = true;
+            list.force[*k] = f;
+            p.force[i] = add3(p.force[i], f);
+            p.torque[i] = add3(p.torque[i], add3(cross3(sub3(point, p.x[i]), f), m));
+            if !wall {
+                let back = [-f[0], -f[1], -f[2]];
+                p.force[j] = add3(p.force[j], back);
+                p.torque[j] = sub3(add3(p.torque[j], cross3(sub3(point, p.x[j]), back)), m);
+            }
+        }
+        Ok(list)
+    }
+}
