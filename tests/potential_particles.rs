@@ -1,5 +1,8 @@
 //! Potential particles in motion (thesis 2.2.2.2 and 2.2.3): collisions, rest on a wall, energy
-//! over many rotating contacts, and the same results on any number of threads.
+//! over many rotating contacts, the same results on any number of threads, and a heap built from a
+//! script.
+
+mod common;
 
 use granite_core::dem::potential::shape::{box_planes, tetrahedron_planes, PotentialShape, MASS_RESOLUTION};
 use granite_core::dem::potential::{detect, detect_plane, Placed};
@@ -89,8 +92,11 @@ fn a_cube_rests_on_a_wall_with_its_weight_in_the_spring() {
     let mut sim = DemSim::new();
     let resin = sim.add_material("resin", 1111.0).unwrap();
     let kn = 1200.0;
-    sim.set_contact_law(law("visco_elastic", &[("kn", kn), ("kt_ratio", 0.2), ("friction", 30.0), ("restitution", 0.5)]), None)
-        .unwrap();
+    sim.set_contact_law(
+        law("visco_elastic", &[("kn", kn), ("kt_ratio", 0.2), ("friction", 30.0), ("restitution", 0.5)]),
+        None,
+    )
+    .unwrap();
     sim.add_wall(Wall::new("floor", WallShape::Plane { normal: [0.0, 0.0, 1.0] }, [0.0; 3], resin));
     // Tilted a little, dropped from 1 mm above the floor.
     let tilt = UnitQuaternion::from_axis_angle(&Vector3::x_axis(), 0.05);
@@ -104,12 +110,17 @@ fn a_cube_rests_on_a_wall_with_its_weight_in_the_spring() {
     }
     let p = &sim.potentials;
     let weight = p.mass[0] * 9.81;
-    assert!((p.force[0][2] / weight - 1.0).abs() < 1e-3, "contact force {:?} N against the weight {weight} N", p.force[0]);
+    assert!(
+        (p.force[0][2] / weight - 1.0).abs() < 1e-3,
+        "contact force {:?} N against the weight {weight} N",
+        p.force[0]
+    );
     // The face lies flat: the cube settled square on the floor.
     let up = p.q[0] * Vector3::z();
     assert!(up[2] > 1.0 - 1e-6, "top face normal {up:?}");
     let pose = p.pose(0);
-    let (_, touch) = detect_plane(Placed { shape: p.shape_of(0), pose: &pose }, [0.0; 3], [0.0, 0.0, 1.0], None).unwrap();
+    let (_, touch) =
+        detect_plane(Placed { shape: p.shape_of(0), pose: &pose }, [0.0; 3], [0.0, 0.0, 1.0], None).unwrap();
     let overlap = touch.expect("resting on the floor").overlap;
     assert!((kn * overlap / weight - 1.0).abs() < 1e-3, "K_n u_n = {} N against {weight} N", kn * overlap);
 }
@@ -131,8 +142,8 @@ fn energy(sim: &DemSim, kn: f64) -> f64 {
     let poses: Vec<_> = (0..p.len()).map(|i| p.pose(i)).collect();
     for i in 0..p.len() {
         let a = Placed { shape: p.shape_of(i), pose: &poses[i] };
-        for j in 0..i {
-            let b = Placed { shape: p.shape_of(j), pose: &poses[j] };
+        for (j, pose) in poses.iter().enumerate().take(i) {
+            let b = Placed { shape: p.shape_of(j), pose };
             if let Some(t) = detect(a, b, None).unwrap().touch {
                 e += 0.5 * kn * t.overlap * t.overlap;
             }
@@ -180,7 +191,8 @@ fn tetrahedra_in_a_box(threads: usize, k: f64, dt_factor: f64) -> (DemSim, f64, 
                 for l in 0..3 {
                     let x = [0.008 + 0.013 * i as f64, 0.008 + 0.013 * j as f64, 0.008 + 0.012 * l as f64];
                     let q = UnitQuaternion::from_euler_angles(0.3 * k as f64, 0.7 * k as f64, 1.1 * k as f64);
-                    let index = sim.add_potential(resin, &shape, x, q, [0.05 * (k % 3) as f64, -0.03, 0.0], false).unwrap();
+                    let index =
+                        sim.add_potential(resin, &shape, x, q, [0.05 * (k % 3) as f64, -0.03, 0.0], false).unwrap();
                     sim.potentials.w[index] = [10.0 * (k % 2) as f64, 5.0, -7.0];
                     k += 1;
                 }
@@ -210,7 +222,10 @@ fn spheres_keep_their_energy_over_many_contacts() {
     let (sim, start, kinetic, contacts) = tetrahedra_in_a_box(2, 1.0, 0.05);
     let end = energy(&sim, 1200.0);
     assert!(contacts > 5000, "the particles meet the walls and one another ({contacts} particle-steps in contact)");
-    assert!((end - start).abs() < 1e-3 * kinetic, "energy {start} J at the start, {end} J at the end; kinetic up to {kinetic} J");
+    assert!(
+        (end - start).abs() < 1e-3 * kinetic,
+        "energy {start} J at the start, {end} J at the end; kinetic up to {kinetic} J"
+    );
 }
 
 /// Rounded tetrahedra tumbling in the box turn as their contacts push them off-centre, and their
@@ -240,4 +255,48 @@ fn the_same_motion_on_one_and_two_threads() {
     let (two, ..) = tetrahedra_in_a_box(2, 0.65, 0.2);
     assert_eq!(one.potentials.x, two.potentials.x);
     assert_eq!(one.potentials.w, two.potentials.w);
+}
+
+/// A script drops a cloud of the thesis's rounded tetrahedra (`potential_tetra`, table 2.2) onto
+/// a fixed potential box: once they rest, the floor carries their weight (its contact force is
+/// the sum of their weights within 1 %), none has sunk through it, and the VTK frames hold their
+/// surfaces.
+#[test]
+fn a_script_heap_of_rounded_tetrahedra_rests_on_a_potential_floor() {
+    let out = common::run_text(
+        "potential_heap",
+        r#"
+let sim = dem(#{ seed: 3 });
+let resin = sim.material(#{ name: "resin", density: 943.0 });
+sim.contact_law("visco_elastic", #{ kn: 1200.0, kt_ratio: 0.773, friction: 35.5, restitution: 0.8 });
+let floor = sim.potential(resin, [0.0, 0.0, -0.005], #{ shape: "potential_box", hx: 0.06, hy: 0.06, hz: 0.004, fixed: true });
+let count = sim.clump_cloud(resin, [-0.03, -0.03, 0.002], [0.03, 0.03, 0.06], #{ count: 40, shape: "potential_tetra" });
+sim.gravity([0.0, 0.0, -9.81]);
+sim.damping(0.3);
+sim.dt(0.2 * sim.critical_dt());
+sim.vtk_every(1000);
+sim.run_until(0.8);
+let weight = 0.0;
+let lowest = 1.0;
+for id in sim.potential_ids() {
+    let b = sim.potential_body(id);
+    if !b.fixed { weight += 9.81 * b.mass; lowest = min(lowest, b.position[2]); }
+}
+summary("count", count);
+summary("weight", weight);
+summary("floor_force", sim.potential_body(floor).force[2]);
+summary("lowest_centre", lowest);
+summary("kinetic_energy", sim.diagnostics().kinetic_energy);
+"#,
+    );
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    let get = |k: &str| summary[k].as_f64().unwrap_or_else(|| panic!("no {k}"));
+    assert_eq!(get("count"), 40.0);
+    let (weight, floor) = (get("weight"), get("floor_force"));
+    // The floor is pushed down by the heap: its force is the heap's weight, downwards.
+    assert!((floor / -weight - 1.0).abs() < 0.01, "floor force {floor} N, weight {weight} N");
+    // A tetrahedron's centre lies at least its inradius plus r above the floor's top (-0.001 m).
+    assert!(get("lowest_centre") > -0.001 + 0.3101e-2, "lowest centre {}", get("lowest_centre"));
+    assert!(out.join("vtk/potentials.pvd").is_file());
 }

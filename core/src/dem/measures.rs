@@ -91,25 +91,37 @@ impl DemSim {
         };
         let mut resultant = 0.0;
         let mut free = 0usize;
-        let cl = &self.clumps;
-        for c in 0..cl.len() {
-            let (m, v, w, x) = (cl.mass[c], cl.v[c], cl.w[c], cl.x[c]);
+        // A rigid body's (clump's, potential particle's) energies and resultant force.
+        let mut rigid = |d: &mut DemDiagnostics,
+                         m: f64,
+                         (v, w, x): (Vec3, Vec3, Vec3),
+                         q: &nalgebra::UnitQuaternion<f64>,
+                         inertia: Vec3,
+                         force: Vec3| {
             d.kinetic_energy += 0.5 * m * (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
             // Rotational energy with the world-frame inertia.
-            let rot = cl.q[c].to_rotation_matrix();
-            let ib = nalgebra::Matrix3::from_diagonal(&nalgebra::Vector3::new(
-                cl.inertia[c][0],
-                cl.inertia[c][1],
-                cl.inertia[c][2],
-            ));
+            let rot = q.to_rotation_matrix();
+            let ib = nalgebra::Matrix3::from_diagonal(&nalgebra::Vector3::new(inertia[0], inertia[1], inertia[2]));
             let iw = rot.matrix() * ib * rot.matrix().transpose();
             let wv = nalgebra::Vector3::new(w[0], w[1], w[2]);
             d.kinetic_energy += 0.5 * wv.dot(&(iw * wv));
             d.gravitational_energy -= m * (g[0] * x[0] + g[1] * x[1] + g[2] * x[2]);
-            let f = [cl.force[c][0] + m * g[0], cl.force[c][1] + m * g[1], cl.force[c][2] + m * g[2]];
+            let f = [force[0] + m * g[0], force[1] + m * g[1], force[2] + m * g[2]];
             resultant += (f[0] * f[0] + f[1] * f[1] + f[2] * f[2]).sqrt();
             free += 1;
+        };
+        let cl = &self.clumps;
+        for c in 0..cl.len() {
+            rigid(&mut d, cl.mass[c], (cl.v[c], cl.w[c], cl.x[c]), &cl.q[c], cl.inertia[c], cl.force[c]);
         }
+        let p = &self.potentials;
+        for i in 0..p.len() {
+            d.max_height = d.max_height.max(p.x[i][0] * up[0] + p.x[i][1] * up[1] + p.x[i][2] * up[2]);
+            if !p.fixed[i] {
+                rigid(&mut d, p.mass[i], (p.v[i], p.w[i], p.x[i]), &p.q[i], p.inertia[i], p.force[i]);
+            }
+        }
+        d.particles += p.len();
         for i in 0..n {
             let (m, v, w, x) = (s.mass[i], s.v[i], s.w[i], s.x[i]);
             d.max_height = d.max_height.max(x[0] * up[0] + x[1] * up[1] + x[2] * up[2]);

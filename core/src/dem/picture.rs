@@ -153,3 +153,40 @@ impl DemSim {
         p
     }
 }
+
+impl DemSim {
+    /// The potential particles' surfaces (`f = 0`, triangulated along 128 directions from each
+    /// centre), with per-triangle `id`, `material`, `velocity`, `force` and `fixed`.
+    pub fn potentials_picture(&self) -> PolyData {
+        let p = &self.potentials;
+        let mut picture = PolyData::default();
+        let surfaces: Vec<(Vec<Vec3>, Vec<[usize; 3]>)> = p.shapes.iter().map(|s| s.surface(2)).collect();
+        let (mut id, mut material, mut fixed, mut velocity, mut force) =
+            (Vec::new(), Vec::new(), Vec::new(), Vec::new(), Vec::new());
+        for i in 0..p.len() {
+            let (points, triangles) = &surfaces[p.shape[i] as usize];
+            let first = picture.points.len() as u32;
+            let rot = p.q[i].to_rotation_matrix();
+            picture.points.extend(points.iter().map(|b| {
+                let w = rot * nalgebra::Vector3::new(b[0], b[1], b[2]);
+                [p.x[i][0] + w[0], p.x[i][1] + w[1], p.x[i][2] + w[2]]
+            }));
+            for t in triangles {
+                picture.polygons.push(t.iter().map(|&k| first + k as u32).collect());
+                id.push(p.id[i] as i64);
+                material.push(p.material[i] as i64);
+                fixed.push(p.fixed[i] as i64);
+                velocity.extend(p.v[i]);
+                force.extend(p.force[i]);
+            }
+        }
+        picture.cell_fields = vec![
+            Field::int("id", id),
+            Field::int("material", material),
+            Field::int("fixed", fixed),
+            Field::float("velocity", 3, velocity),
+            Field::float("force", 3, force),
+        ];
+        picture
+    }
+}

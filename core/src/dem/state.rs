@@ -109,7 +109,21 @@ impl DemSim {
 
     /// The whole state as a JSON value (for checkpoints that embed DEM samples).
     pub fn to_json(&self) -> Result<serde_json::Value> {
+        self.savable()?;
         serde_json::to_value(self.to_state()).map_err(|e| GraniteError::Other(format!("DEM state: {e}")))
+    }
+
+    /// Whether the state format holds everything of this simulation: not potential particles.
+    fn savable(&self) -> Result<()> {
+        if self.potentials.is_empty() {
+            Ok(())
+        } else {
+            Err(GraniteError::Setup(
+                "a simulation with potential particles cannot be saved: the DEM state format holds spheres, clumps \
+                 and walls"
+                    .into(),
+            ))
+        }
     }
 
     /// A state from [`DemSim::to_json`]; contact laws are rebuilt from `registry`.
@@ -141,6 +155,7 @@ impl DemSim {
 
     /// [`DemSim::save`], recording `written_by` (the program and its commit) in the file.
     pub fn save_as(&self, path: &Path, written_by: &str) -> Result<()> {
+        self.savable()?;
         let state = serde_json::to_string(&self.to_state())
             .map_err(|e| GraniteError::Other(format!("{}: {e}", path.display())))?;
         let text = crate::io::checkpoint_file::seal(FORMAT, VERSION, written_by, &state);

@@ -8,8 +8,8 @@ use crate::dem::contact_stage::{
     SharedPairs,
 };
 use crate::dem::contacts::PairList;
-use crate::dem::motion::{RigidMotion, 
-    farther, gather_piece, integrate, integrate_clumps, GatherJob, Motion, PieceState, SphereConstants,
+use crate::dem::motion::{
+    farther, gather_piece, integrate, integrate_clumps, GatherJob, Motion, PieceState, RigidMotion, SphereConstants,
 };
 use crate::dem::particles::Spheres;
 use crate::dem::pieces::PieceBounds;

@@ -56,6 +56,7 @@ impl DemMaterialHandle {
 /// Everything a whole-state snapshot needs.
 pub struct DemSnapshot {
     spheres: crate::dem::Spheres,
+    potentials: crate::dem::potential::Potentials,
     walls: Vec<Wall>,
     time: f64,
     step: u64,
@@ -221,6 +222,9 @@ impl ScriptSim for DemScene {
         if !self.dem.walls.is_empty() {
             out.push(("walls", self.dem.walls_picture()));
         }
+        if !self.dem.potentials.is_empty() {
+            out.push(("potentials", self.dem.potentials_picture()));
+        }
         out
     }
     fn write_points(&self, path: &Path) -> Result<()> {
@@ -249,6 +253,7 @@ impl ScriptSim for DemScene {
     fn snapshot(&self) -> DemSnapshot {
         DemSnapshot {
             spheres: self.dem.spheres.clone(),
+            potentials: self.dem.potentials.clone(),
             walls: self.dem.walls.clone(),
             time: self.dem.time,
             step: self.dem.step,
@@ -256,6 +261,7 @@ impl ScriptSim for DemScene {
     }
     fn restore(&mut self, s: DemSnapshot) {
         self.dem.spheres = s.spheres;
+        self.dem.potentials = s.potentials;
         self.dem.walls = s.walls;
         self.dem.time = s.time;
         self.dem.step = s.step;
@@ -574,7 +580,18 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
             let template = shape.members();
             let bound = shape.bounding_radius();
             // Reference points kept apart by the grains' bounding spheres; orientations uniformly random.
+            let existing = match shape.potential() {
+                Some(_) => {
+                    let p = &s.lock().sim.dem.potentials;
+                    p.x.iter().copied().zip(p.bounding_radii()).collect()
+                }
+                None => existing,
+            };
             let centres = cloud(lo, hi, count, &Psd::Uniform { min: bound, max: bound }, seed, &existing).or_rhai()?;
+            if let Some(potential) = shape.potential() {
+                let centres: Vec<_> = centres.iter().map(|(c, _)| *c).collect();
+                return super::potential_api::add_cloud(s, &m, &potential, &centres, seed);
+            }
             let density = s.lock().sim.dem.materials[m.index as usize].density;
             let props = crate::dem::clump::mass_properties(&template, density, CLUMP_VOXELS).or_rhai()?;
             let mut st = s.lock();

@@ -12,6 +12,7 @@ mod element;
 mod limits;
 mod mpm_api;
 mod output;
+mod potential_api;
 pub mod repl;
 mod script_law;
 
@@ -436,6 +437,7 @@ fn build_engine(ctx: &Arc<ScriptContext>) -> Engine {
     mpm_api::register(&mut engine, ctx);
     dem_api::register(&mut engine, ctx);
     dem_console::register(&mut engine);
+    potential_api::register(&mut engine);
     element::register(&mut engine, ctx);
     script_law::register(&mut engine, ctx);
     engine

@@ -39,7 +39,9 @@ impl DemSim {
             return Err(GraniteError::Setup("energy tracking covers open domains, not periodic cells".into()));
         }
         if !self.potentials.is_empty() {
-            return Err(GraniteError::Setup("energy tracking covers spheres and clumps, not potential particles".into()));
+            return Err(GraniteError::Setup(
+                "energy tracking covers spheres and clumps, not potential particles".into(),
+            ));
         }
         if let Some(law) = self.laws.iter().find(|l| !l.tracks_dissipation()) {
             return Err(GraniteError::Setup(format!(

@@ -76,7 +76,7 @@ impl Potentials {
         let mass = density * shape.volume;
         let inertia = shape.inertia_per_density.map(|m| density * m);
         let finite = |v: Vec3| v.iter().all(|c| c.is_finite());
-        if !(mass > 0.0 && mass.is_finite()) || !finite(inertia) || !(finite(x) && finite(v)) {
+        if !(mass > 0.0 && mass.is_finite() && finite(inertia) && finite(x) && finite(v)) {
             return Err(GraniteError::Setup(format!(
                 "a potential particle at {x:?} with velocity {v:?}, mass {mass:e} kg and inertia {inertia:?}: position and \
                  velocity must be finite, mass and inertia finite and > 0"

@@ -265,7 +265,12 @@ fn overlap_along_normal(a: Placed<'_>, b: Placed<'_>, x: Vec3, ga: Vector3<f64>)
 /// point is on the surface and the stationarity residual, over the shadow sphere's modulus, is
 /// below `LENGTH_TOLERANCE` of the particle's size. The normal of the touch points from the
 /// particle into the wall (`-normal`).
-pub fn detect_plane(p: Placed<'_>, point: Vec3, normal: Vec3, start: Option<Vec3>) -> Result<(Vec3, Option<Touch>), NoConvergence> {
+pub fn detect_plane(
+    p: Placed<'_>,
+    point: Vec3,
+    normal: Vec3,
+    start: Option<Vec3>,
+) -> Result<(Vec3, Option<Touch>), NoConvergence> {
     let size = p.shape.bounding_radius;
     let n = Vector3::new(normal[0], normal[1], normal[2]);
     let mut x = match start {
@@ -437,7 +442,8 @@ mod tests {
         let c = ball.sphere_centre;
         let delta = 1e-4;
         let pose = Pose::at([1.0 - c[0], 2.0 - c[1], r_big - delta - c[2]]);
-        let (deepest, touch) = detect_plane(Placed { shape: &ball, pose: &pose }, [0.0; 3], [0.0, 0.0, 1.0], None).unwrap();
+        let (deepest, touch) =
+            detect_plane(Placed { shape: &ball, pose: &pose }, [0.0; 3], [0.0, 0.0, 1.0], None).unwrap();
         let t = touch.expect("a sphere below the plane's level touches it");
         assert!((t.overlap - delta).abs() < 1e-12 * r_big, "overlap {}", t.overlap);
         assert!((deepest[0] - 1.0).abs() < 1e-9 && (deepest[1] - 2.0).abs() < 1e-9);
@@ -451,6 +457,9 @@ mod tests {
         assert!((t.overlap / delta - 1.0).abs() < 1e-3, "overlap {}", t.overlap);
         // Lifted clear of the plane: no touch.
         let pose = Pose::at([0.0, 0.0, r_big + delta]);
-        assert!(detect_plane(Placed { shape: &ball, pose: &pose }, [0.0; 3], [0.0, 0.0, 1.0], None).unwrap().1.is_none());
+        assert!(detect_plane(Placed { shape: &ball, pose: &pose }, [0.0; 3], [0.0, 0.0, 1.0], None)
+            .unwrap()
+            .1
+            .is_none());
     }
 }

@@ -3,8 +3,8 @@
 
 pub mod bodies;
 pub mod contact;
-pub mod shape;
 mod scene;
+pub mod shape;
 mod stage;
 
 pub use bodies::Potentials;

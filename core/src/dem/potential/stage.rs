@@ -87,9 +87,12 @@ impl DemSim {
         let walls = wall_pairs(&self.potentials.x, &radii, &self.walls, skin);
         let mut list = std::mem::take(&mut self.potential_pairs);
         let mut wall_list = std::mem::take(&mut self.potential_wall_pairs);
-        let missing = self
-            .merge_potential(&mut list, &pairs, strides, false)
-            .or(self.merge_potential(&mut wall_list, &walls, strides, true));
+        let missing = self.merge_potential(&mut list, &pairs, strides, false).or(self.merge_potential(
+            &mut wall_list,
+            &walls,
+            strides,
+            true,
+        ));
         self.potential_pairs = list;
         self.potential_wall_pairs = wall_list;
         if let Some((a, b)) = missing {
@@ -207,8 +210,8 @@ impl DemSim {
                 } else {
                     let pose_j = p.pose(j);
                     let b = Placed { shape: p.shape_of(j), pose: &pose_j };
-                    let found =
-                        detect(a, b, start).map_err(|e| format!("potential particles {} and {}: {e:?}", p.id[i], p.id[j]))?;
+                    let found = detect(a, b, start)
+                        .map_err(|e| format!("potential particles {} and {}: {e:?}", p.id[i], p.id[j]))?;
                     warm[..3].copy_from_slice(&found.solution.point);
                     warm[3] = found.solution.lambda;
                     warm[4] = 1.0;
