@@ -720,3 +720,103 @@ fn same_work_per_thread_speedups<T>(timed: &[Timed<T>]) -> Vec<String> {
 fn speedup_over(base: &mut Option<f64>, rate: f64) -> f64 {
     rate / *base.get_or_insert(rate)
 }
+
+/// A heap of `count` grains of the JGS resin (thesis table 2.7: K_n 1200 N/m, K_s/K_n 0.773,
+/// friction tan^-1 0.713, restitution 0.8, density 943 kg/m^3, dt 7.86e-5 s) poured into a box of
+/// plane walls and settled for `settle` steps: as 4-sphere clumps (`tetra`) or as the thesis's
+/// rounded tetrahedra (`potential_tetra`), from the same centres and orientations.
+pub fn resin_heap(shape: &str, count: usize, settle: usize) -> Result<granite_core::dem::DemSim> {
+    use granite_core::dem::walls::{Wall, WallShape};
+    let reg = crate::registry();
+    let model = reg.build_shape(shape, &ParamMap::new())?;
+    let mut sim = granite_core::dem::DemSim::new();
+    sim.seed = 1;
+    let resin = sim.add_material("resin", 943.0)?;
+    let friction = 0.713f64.atan().to_degrees();
+    let law = params(&[("kn", 1200.0), ("kt_ratio", 0.773), ("friction", friction), ("restitution", 0.8)]);
+    sim.set_contact_law(reg.build_contact_law("visco_elastic", &law)?, None)?;
+    // Grains on a lattice of 1.1 bounding diameters, 8 across, in a box 10 across.
+    let bound = model.bounding_radius();
+    let spacing = 2.2 * bound;
+    let across = 8usize;
+    let width = (across + 2) as f64 * spacing;
+    for (a, upper) in [(0, false), (0, true), (1, false), (1, true), (2, false)] {
+        let mut n = [0.0; 3];
+        n[a] = if upper { -1.0 } else { 1.0 };
+        let position = if upper { [width, width, 0.0] } else { [0.0; 3] };
+        sim.add_wall(Wall::new("", WallShape::Plane { normal: n }, position, resin));
+    }
+    sim.skin = 0.2 * bound;
+    let props = match model.potential() {
+        Some(_) => None,
+        None => Some(granite_core::dem::clump::mass_properties(&model.members(), 943.0, 400)?),
+    };
+    for k in 0..count {
+        let (i, j, l) = (k % across, (k / across) % across, k / (across * across));
+        let c = [(1.5 + i as f64) * spacing, (1.5 + j as f64) * spacing, (0.6 + l as f64) * spacing];
+        let u = [0, 1, 2].map(|a| granite_core::ext::contact::uniform(7, (3 * k + a) as u64));
+        let (members, q) = granite_core::dem::clump::place_template(&model.members(), c, u);
+        match (&props, model.potential()) {
+            (_, Some(p)) => {
+                sim.add_potential(resin, &p, c, q, [0.0; 3], false)?;
+            }
+            (Some(props), None) => {
+                sim.add_clump_with(resin, &members, &props.transformed(&q, c))?;
+            }
+            (None, None) => unreachable!("a clump shape has mass properties"),
+        }
+    }
+    sim.gravity = [0.0, 0.0, -9.81];
+    sim.set_damping(0.3)?;
+    sim.set_dt(7.86e-5)?;
+    for _ in 0..settle {
+        sim.step()?;
+    }
+    Ok(sim)
+}
+
+/// Potential particles against 4-sphere clumps on the same settled heap, one thread: time per
+/// grain-step (fastest and slowest of `repeat` windows, alternating), and for potential particles
+/// the share of detection and of the law with the sums.
+pub fn potential(count: usize, steps: usize, repeat: usize) -> Result<()> {
+    println!("granite bench potential: a heap of {count} JGS resin grains (thesis table 2.7), settled, then {steps} steps, one thread, best of {repeat}");
+    pool(1)?.install(|| -> Result<()> {
+        let settle = 6000;
+        let heaps = [("4-sphere clumps", resin_heap("tetra", count, settle)?), ("potential particles", resin_heap("potential_tetra", count, settle)?)];
+        let mut times = [(f64::INFINITY, 0.0f64); 2];
+        let mut split = [0.0; 2];
+        for _ in 0..repeat.max(1) {
+            for (k, (_, heap)) in heaps.iter().enumerate() {
+                let mut sim = heap.clone();
+                let before = sim.potential_seconds;
+                let t = Instant::now();
+                for _ in 0..steps {
+                    sim.step()?;
+                }
+                let secs = t.elapsed().as_secs_f64();
+                if secs < times[k].0 {
+                    split = if k == 1 { [sim.potential_seconds[0] - before[0], sim.potential_seconds[1] - before[1]] } else { split };
+                }
+                times[k] = (times[k].0.min(secs), times[k].1.max(secs));
+            }
+        }
+        let per = |secs: f64| secs / (count * steps) as f64 * 1e6;
+        for (k, (label, heap)) in heaps.iter().enumerate() {
+            let contacts = heap.pairs.touching_count() + heap.wall_pairs.touching_count() + heap.potential_contact_count();
+            println!(
+                "{label:<20} {:>7.3} us a grain-step ({:.3})  {} contacts at the start, {:.2} a grain",
+                per(times[k].0),
+                per(times[k].1),
+                contacts,
+                contacts as f64 / count as f64
+            );
+        }
+        println!(
+            "potential particles: {:.2} times the clumps' time a grain-step (target: at most 5; YADE: about 100, thesis figure 2.8); detection {:.0} %, law and sums {:.0} % of the step",
+            times[1].0 / times[0].0,
+            100.0 * split[0] / times[1].0,
+            100.0 * split[1] / times[1].0
+        );
+        Ok(())
+    })
+}

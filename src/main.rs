@@ -54,7 +54,7 @@ enum Command {
     },
     /// Print performance figures.
     Bench {
-        /// Which benchmark: mpm, dem, mpmxdem, triaxial.
+        /// Which benchmark: mpm, dem, mpmxdem, triaxial, potential.
         which: String,
         /// Material points in the 3D block (about).
         #[arg(long, default_value_t = 100_000, value_parser = granite::parse_at_least::<10>)]
@@ -62,9 +62,9 @@ enum Command {
         /// Steps to time.
         #[arg(long, default_value_t = 50, value_parser = granite::parse_at_least::<1>)]
         steps: usize,
-        /// DEM: particle counts, comma separated.
-        #[arg(long, default_value = "10000,50000", value_delimiter = ',', value_parser = granite::parse_at_least::<1>)]
-        particles: Vec<usize>,
+        /// DEM: particle counts, comma separated (dem: 10000,50000; potential: 512 grains).
+        #[arg(long, value_delimiter = ',', value_parser = granite::parse_at_least::<1>)]
+        particles: Option<Vec<usize>>,
         /// DEM: timed steps (after 200 of warm-up).
         #[arg(long, default_value_t = 2000, value_parser = granite::parse_at_least::<1>)]
         dem_steps: usize,
@@ -228,11 +228,19 @@ fn main() -> ExitCode {
             }
             let result = match which.as_str() {
                 "mpm" => granite::bench::mpm(points, steps, &threads),
-                "dem" => granite::bench::dem(&particles, dem_steps, &threads, repeat),
+                "dem" => {
+                    granite::bench::dem(&particles.unwrap_or_else(|| vec![10_000, 50_000]), dem_steps, &threads, repeat)
+                }
                 "mpmxdem" => granite::bench::mpmxdem(&threads, repeat),
                 "triaxial" => granite::bench::triaxial(&threads, axial_strain),
+                "potential" => {
+                    let count = particles.and_then(|p| p.first().copied()).unwrap_or(512);
+                    granite::bench::potential(count, dem_steps, repeat)
+                }
                 other => {
-                    eprintln!("granite: unknown benchmark `{other}`; available: mpm, dem, mpmxdem, triaxial");
+                    eprintln!(
+                        "granite: unknown benchmark `{other}`; available: mpm, dem, mpmxdem, triaxial, potential"
+                    );
                     return ExitCode::from(2);
                 }
             };

@@ -119,8 +119,7 @@ fn a_cube_rests_on_a_wall_with_its_weight_in_the_spring() {
     let up = p.q[0] * Vector3::z();
     assert!(up[2] > 1.0 - 1e-6, "top face normal {up:?}");
     let pose = p.pose(0);
-    let (_, touch) =
-        detect_plane(Placed { shape: p.shape_of(0), pose: &pose }, [0.0; 3], [0.0, 0.0, 1.0], None).unwrap();
+    let (_, touch) = detect_plane(&Placed::new(p.shape_of(0), &pose), [0.0; 3], [0.0, 0.0, 1.0], None).unwrap();
     let overlap = touch.expect("resting on the floor").overlap;
     assert!((kn * overlap / weight - 1.0).abs() < 1e-3, "K_n u_n = {} N against {weight} N", kn * overlap);
 }
@@ -141,16 +140,16 @@ fn energy(sim: &DemSim, kn: f64) -> f64 {
     }
     let poses: Vec<_> = (0..p.len()).map(|i| p.pose(i)).collect();
     for i in 0..p.len() {
-        let a = Placed { shape: p.shape_of(i), pose: &poses[i] };
+        let a = Placed::new(p.shape_of(i), &poses[i]);
         for (j, pose) in poses.iter().enumerate().take(i) {
-            let b = Placed { shape: p.shape_of(j), pose };
-            if let Some(t) = detect(a, b, None).unwrap().touch {
+            let b = Placed::new(p.shape_of(j), pose);
+            if let Some(t) = detect(&a, &b, None).unwrap().touch {
                 e += 0.5 * kn * t.overlap * t.overlap;
             }
         }
         for w in &sim.walls {
             let WallShape::Plane { normal } = w.shape else { unreachable!() };
-            if let (_, Some(t)) = detect_plane(a, w.position, normal, None).unwrap() {
+            if let (_, Some(t)) = detect_plane(&a, w.position, normal, None).unwrap() {
                 e += 0.5 * kn * t.overlap * t.overlap;
             }
         }

@@ -95,6 +95,9 @@ pub struct DemSim {
     pub(crate) potential_pairs: PairList,
     pub(crate) potential_wall_pairs: PairList,
     pub(crate) potential_x_at_build: Vec<Vec3>,
+    /// Seconds the potential particles' contacts spent in detection and in their laws (with the
+    /// sums), since the simulation began: what `granite bench potential` reports.
+    pub potential_seconds: [f64; 2],
 }
 
 impl Default for DemSim {
@@ -147,6 +150,7 @@ impl DemSim {
             potential_pairs: PairList::default(),
             potential_wall_pairs: PairList::default(),
             potential_x_at_build: Vec::new(),
+            potential_seconds: [0.0; 2],
         }
     }
 

@@ -29,6 +29,9 @@ pub struct Potentials {
     /// Force and torque of the last step's contacts.
     pub force: Vec<Vec3>,
     pub torque: Vec<Vec3>,
+    /// Each particle's potential where it is, placed anew at every step before detection (kept
+    /// for its storage).
+    pub(crate) placed: Vec<super::Placed>,
 }
 
 impl Potentials {
@@ -96,6 +99,16 @@ impl Potentials {
         self.force.push([0.0; 3]);
         self.torque.push([0.0; 3]);
         Ok(self.len() - 1)
+    }
+
+    /// Places every particle's potential where the particle is now.
+    pub(crate) fn place_all(&mut self) {
+        self.placed.resize_with(self.len(), Default::default);
+        for i in 0..self.len() {
+            let pose = self.pose(i);
+            let shape = &self.shapes[self.shape[i] as usize];
+            self.placed[i].place(shape, &pose);
+        }
     }
 
     /// The pose of particle `i` for contact detection.

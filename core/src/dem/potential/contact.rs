@@ -20,13 +20,17 @@
 //! along it between the two surfaces through the contact point, found by a bracketed Newton
 //! search on each particle (thesis 2.2.3).
 
-use super::shape::PotentialShape;
+use super::shape::{potential, PotentialShape};
 use crate::math::{dot3, Vec3};
-use nalgebra::{Matrix3, Matrix4, Vector3, Vector4};
+use nalgebra::{Matrix3, Vector3};
 
-/// How far from the optimal value of `max(f_A, f_B)` a solution may be (potentials are
-/// dimensionless, about `2 delta / r` at a depth `delta` below the surface).
-pub const VALUE_TOLERANCE: f64 = 1e-11;
+/// How far from the optimal value of `max(f_A, f_B)` a solution may be. Potentials are
+/// dimensionless, about `2 delta / r` at a depth `delta` below the surface: for the thesis's
+/// tetrahedron (r = 3.1 mm) whether two particles touch is then decided to 2e-11 m, and the
+/// contact point, whose distance from the optimum is at most `|grad L| / mu`, is within 5e-7 m, so
+/// the normal within 2e-4 rad. Tighter stops cost a Newton step a contact: at 1e-10 the heap of
+/// `granite bench potential` stepped 20 % slower.
+pub const VALUE_TOLERANCE: f64 = 1e-8;
 /// Most Newton steps of one solve before it reports failure.
 const MAX_STEPS: usize = 60;
 
@@ -41,36 +45,62 @@ impl Pose {
     pub fn at(position: Vec3) -> Pose {
         Pose { position, rotation: Matrix3::identity() }
     }
+}
 
-    fn body_point(&self, x: Vec3) -> Vec3 {
-        let p = self.position;
-        let b = self.rotation.transpose() * Vector3::new(x[0] - p[0], x[1] - p[1], x[2] - p[2]);
-        [b[0], b[1], b[2]]
+/// A particle's potential where it is: its shape's planes and shadow sphere moved into world
+/// coordinates once, so that each evaluation costs what the shape's own does.
+#[derive(Debug, Clone, Default)]
+pub struct Placed {
+    planes: Vec<(Vec3, f64)>,
+    sphere_centre: Vec3,
+    pub position: Vec3,
+    weights: [f64; 2],
+    /// Strong-convexity modulus of the potential: that of its shadow sphere term, `2 k / R^2`.
+    modulus: f64,
+    pub bounding_radius: f64,
+}
+
+impl Placed {
+    pub fn new(shape: &PotentialShape, pose: &Pose) -> Placed {
+        let mut placed = Placed::default();
+        placed.place(shape, pose);
+        placed
     }
-}
 
-/// A shape at a pose: its potential in world coordinates.
-#[derive(Clone, Copy)]
-pub struct Placed<'a> {
-    pub shape: &'a PotentialShape,
-    pub pose: &'a Pose,
-}
+    /// Moves `shape` to `pose`, keeping this value's storage.
+    pub fn place(&mut self, shape: &PotentialShape, pose: &Pose) {
+        let rot = &pose.rotation;
+        let to_world = |v: Vec3| {
+            let w = rot * Vector3::new(v[0], v[1], v[2]);
+            [w[0], w[1], w[2]]
+        };
+        let x = pose.position;
+        self.planes.clear();
+        self.planes.extend(shape.planes.iter().map(|&(n, d)| {
+            let n = to_world(n);
+            (n, d + dot3(n, x))
+        }));
+        let s = to_world(shape.sphere_centre);
+        self.sphere_centre = [s[0] + x[0], s[1] + x[1], s[2] + x[2]];
+        self.position = x;
+        self.weights = shape.weights();
+        self.modulus = 2.0 * self.weights[1];
+        self.bounding_radius = shape.bounding_radius;
+    }
 
-impl Placed<'_> {
     pub fn value(&self, x: Vec3) -> f64 {
-        self.shape.value(self.pose.body_point(x))
+        potential::<false, false>(&self.planes, self.sphere_centre, self.weights, x).0
     }
 
-    /// Value, gradient and Hessian at world point `x`, in world axes.
+    fn value_gradient(&self, x: Vec3) -> (f64, Vector3<f64>) {
+        let (f, g, _) = potential::<true, false>(&self.planes, self.sphere_centre, self.weights, x);
+        (f, Vector3::new(g[0], g[1], g[2]))
+    }
+
+    /// Value, gradient and Hessian at world point `x`.
     pub fn value_gradient_hessian(&self, x: Vec3) -> (f64, Vector3<f64>, Matrix3<f64>) {
-        let (f, g, h) = self.shape.value_gradient_hessian(self.pose.body_point(x));
-        let rot = &self.pose.rotation;
-        (f, rot * Vector3::new(g[0], g[1], g[2]), rot * h * rot.transpose())
-    }
-
-    /// Strong-convexity modulus of the potential: that of its shadow sphere term.
-    fn modulus(&self) -> f64 {
-        2.0 * self.shape.k / (self.shape.big_r * self.shape.big_r)
+        let (f, g, h) = potential::<true, true>(&self.planes, self.sphere_centre, self.weights, x);
+        (f, Vector3::new(g[0], g[1], g[2]), h)
     }
 }
 
@@ -79,6 +109,9 @@ impl Placed<'_> {
 pub struct Solution {
     pub point: Vec3,
     pub lambda: f64,
+    /// The distances from the point to B's and to A's surface along the normal (the overlap's two
+    /// parts): where the next step's searches along the normal start.
+    pub depths: [f64; 2],
 }
 
 /// The geometry of two touching particles.
@@ -111,8 +144,8 @@ pub struct NoConvergence {
 
 /// The contact between `a` and `b`, from `start` (the previous solution) or, without one, from a
 /// guess on the line between their centres.
-pub fn detect(a: Placed<'_>, b: Placed<'_>, start: Option<Solution>) -> Result<Detection, NoConvergence> {
-    let Solution { point, lambda } = start.unwrap_or_else(|| first_guess(a, b));
+pub fn detect(a: &Placed, b: &Placed, start: Option<Solution>) -> Result<Detection, NoConvergence> {
+    let Solution { point, lambda, depths } = start.unwrap_or_else(|| first_guess(a, b));
     let mut x = Vector3::new(point[0], point[1], point[2]);
     let mut lambda = lambda.clamp(0.0, 1.0);
     let mut state = Kkt::at(a, b, x, lambda);
@@ -141,9 +174,13 @@ pub fn detect(a: Placed<'_>, b: Placed<'_>, start: Option<Solution>) -> Result<D
             t *= 0.5;
         }
     }
-    let solution = Solution { point: [x[0], x[1], x[2]], lambda };
+    let mut solution = Solution { point: [x[0], x[1], x[2]], lambda, depths };
     let value = state.fa.max(state.fb);
-    let touch = (value < 0.0).then(|| overlap_along_normal(a, b, solution.point, state.ga));
+    let touch = (value < 0.0).then(|| {
+        let (touch, depths) = overlap_along_normal(a, b, solution.point, state.ga, depths);
+        solution.depths = depths;
+        touch
+    });
     Ok(Detection { solution, value, steps, touch })
 }
 
@@ -158,7 +195,7 @@ struct Kkt {
 }
 
 impl Kkt {
-    fn at(a: Placed<'_>, b: Placed<'_>, x: Vector3<f64>, _lambda: f64) -> Kkt {
+    fn at(a: &Placed, b: &Placed, x: Vector3<f64>, _lambda: f64) -> Kkt {
         let x = [x[0], x[1], x[2]];
         let (fa, ga, ha) = a.value_gradient_hessian(x);
         let (fb, gb, hb) = b.value_gradient_hessian(x);
@@ -174,8 +211,8 @@ impl Kkt {
     }
 
     /// The proven distance from the optimal value (see the module's text).
-    fn gap_bound(&self, a: Placed<'_>, b: Placed<'_>, lambda: f64) -> f64 {
-        let mu = lambda * a.modulus() + (1.0 - lambda) * b.modulus();
+    fn gap_bound(&self, a: &Placed, b: &Placed, lambda: f64) -> f64 {
+        let mu = lambda * a.modulus + (1.0 - lambda) * b.modulus;
         (self.fa - self.fb).abs() + self.lagrangian_gradient(lambda).norm_squared() / (2.0 * mu)
     }
 
@@ -183,53 +220,63 @@ impl Kkt {
     fn newton_step(&self, lambda: f64) -> (Vector3<f64>, f64) {
         let h = self.ha * lambda + self.hb * (1.0 - lambda);
         let c = self.ga - self.gb;
-        let mut m = Matrix4::zeros();
-        m.fixed_view_mut::<3, 3>(0, 0).copy_from(&h);
-        for i in 0..3 {
-            m[(i, 3)] = c[i];
-            m[(3, i)] = c[i];
-        }
         let g = self.lagrangian_gradient(lambda);
-        let rhs = -Vector4::new(g[0], g[1], g[2], self.fa - self.fb);
-        match m.lu().solve(&rhs) {
-            Some(s) => (Vector3::new(s[0], s[1], s[2]), s[3]),
+        match saddle_solve(&h, &c, &g, self.fa - self.fb) {
+            Some(step) => step,
             // Equal gradients (never at a solution): a gradient step on L instead.
             None => (-g * 0.5 / h.norm().max(f64::MIN_POSITIVE), 0.0),
         }
     }
 }
 
+/// The solution of `[[H, c], [c^T, 0]] (dx, dl) = -(g, r)` with `H` symmetric positive definite
+/// (3 x 3): by the Schur complement, `dl = (r - c^T H^-1 g) / (c^T H^-1 c)`, `dx = -H^-1 (g + c dl)`
+/// (a Cholesky factor of `H` serves both solves). None when `H` is not positive definite or
+/// `c` vanishes.
+#[inline]
+fn saddle_solve(h: &Matrix3<f64>, c: &Vector3<f64>, g: &Vector3<f64>, r: f64) -> Option<(Vector3<f64>, f64)> {
+    let chol = h.cholesky()?;
+    let (hc, hg) = (chol.solve(c), chol.solve(g));
+    let schur = c.dot(&hc);
+    if !(schur > 0.0) {
+        return None;
+    }
+    let dl = (r - c.dot(&hg)) / schur;
+    Some((-(hg + hc * dl), dl))
+}
+
 /// A start for a pair seen for the first time: on the line between the centres, where each
 /// particle's surface leaves off, halfway between the two (exact for two spheres), with the
 /// weight that balances the two gradients there.
-fn first_guess(a: Placed<'_>, b: Placed<'_>) -> Solution {
-    let (ca, cb) = (a.pose.position, b.pose.position);
+fn first_guess(a: &Placed, b: &Placed) -> Solution {
+    let (ca, cb) = (a.position, b.position);
     let d = [cb[0] - ca[0], cb[1] - ca[1], cb[2] - ca[2]];
     let length = dot3(d, d).sqrt();
     if !(length > 0.0) {
-        return Solution { point: ca, lambda: 0.5 };
+        return Solution { point: ca, lambda: 0.5, depths: [0.0; 2] };
     }
     let u = d.map(|c| c / length);
-    let reach_a = along_ray(a, ca, u, a.shape.bounding_radius);
-    let reach_b = along_ray(b, cb, u.map(|c| -c), b.shape.bounding_radius);
+    let reach_a = along_ray(a, ca, u, a.bounding_radius, 0.0);
+    let reach_b = along_ray(b, cb, u.map(|c| -c), b.bounding_radius, 0.0);
     // The surface points of A towards B and of B towards A, and their middle.
     let s = 0.5 * (reach_a + length - reach_b);
     let point = [ca[0] + s * u[0], ca[1] + s * u[1], ca[2] + s * u[2]];
-    let (ga, gb) = (a.value_gradient_hessian(point).1.norm(), b.value_gradient_hessian(point).1.norm());
+    let (ga, gb) = (a.value_gradient(point).1.norm(), b.value_gradient(point).1.norm());
     let lambda = if ga + gb > 0.0 { gb / (ga + gb) } else { 0.5 };
-    Solution { point, lambda }
+    Solution { point, lambda, depths: [0.0; 2] }
 }
 
 /// The distance from `from` (inside the particle) along unit `u` to its surface, within `reach`:
-/// the root of `f` along the ray, by Newton's method kept inside a bracket. Along a ray `f` is a
-/// convex piecewise quadratic, negative at the start: Newton from a point where `f` increases
-/// lands beyond the root, then comes back to it from above, each step inside the bracket.
-fn along_ray(p: Placed<'_>, from: Vec3, u: Vec3, reach: f64) -> f64 {
+/// the root of `f` along the ray, by Newton's method kept inside a bracket, from `guess` (the
+/// last step's distance, or 0). Along a ray `f` is a convex piecewise quadratic, negative at the
+/// start: Newton from a point where `f` increases lands beyond the root, then comes back to it
+/// from above, each step inside the bracket.
+fn along_ray(p: &Placed, from: Vec3, u: Vec3, reach: f64, guess: f64) -> f64 {
     let at = |t: f64| [from[0] + t * u[0], from[1] + t * u[1], from[2] + t * u[2]];
     let (mut lo, mut hi) = (0.0, reach.max(f64::MIN_POSITIVE));
-    let mut t = 0.0;
+    let mut t = if guess > 0.0 && guess < hi { guess } else { 0.0 };
     for _ in 0..100 {
-        let (f, g, _) = p.value_gradient_hessian(at(t));
+        let (f, g) = p.value_gradient(at(t));
         if f > 0.0 {
             hi = t;
         } else {
@@ -238,7 +285,7 @@ fn along_ray(p: Placed<'_>, from: Vec3, u: Vec3, reach: f64) -> f64 {
         let slope = g[0] * u[0] + g[1] * u[1] + g[2] * u[2];
         let newton = if slope > 0.0 { t - f / slope } else { f64::NAN };
         let next = if newton > lo && newton < hi { newton } else { 0.5 * (lo + hi) };
-        if (next - t).abs() <= 1e-15 * hi.max(f64::MIN_POSITIVE) {
+        if (next - t).abs() <= 1e-13 * reach {
             return next;
         }
         t = next;
@@ -246,16 +293,20 @@ fn along_ray(p: Placed<'_>, from: Vec3, u: Vec3, reach: f64) -> f64 {
     t
 }
 
-/// The overlap along the normal `grad f_A` at the contact point `x` (inside both particles).
-fn overlap_along_normal(a: Placed<'_>, b: Placed<'_>, x: Vec3, ga: Vector3<f64>) -> Touch {
+/// The overlap along the normal `grad f_A` at the contact point `x` (inside both particles), and
+/// its two parts (to B's surface, to A's), searched for from `guess`.
+fn overlap_along_normal(a: &Placed, b: &Placed, x: Vec3, ga: Vector3<f64>, guess: [f64; 2]) -> (Touch, [f64; 2]) {
     let norm = ga.norm();
     let normal = [ga[0] / norm, ga[1] / norm, ga[2] / norm];
     let back = normal.map(|c| -c);
     // A's surface lies ahead along the normal, B's behind; neither beyond the other's size.
-    let (into_b, into_a) =
-        (along_ray(a, x, normal, 2.0 * a.shape.bounding_radius), along_ray(b, x, back, 2.0 * b.shape.bounding_radius));
+    let (into_b, into_a) = (
+        along_ray(a, x, normal, 2.0 * a.bounding_radius, guess[0]),
+        along_ray(b, x, back, 2.0 * b.bounding_radius, guess[1]),
+    );
     let middle = 0.5 * (into_b - into_a);
-    Touch { normal, overlap: into_b + into_a, point: [0, 1, 2].map(|i| x[i] + middle * normal[i]) }
+    let touch = Touch { normal, overlap: into_b + into_a, point: [0, 1, 2].map(|i| x[i] + middle * normal[i]) };
+    (touch, [into_b, into_a])
 }
 
 /// The contact of a particle with a plane through `point` whose unit `normal` points to the
@@ -266,24 +317,24 @@ fn overlap_along_normal(a: Placed<'_>, b: Placed<'_>, x: Vec3, ga: Vector3<f64>)
 /// below `LENGTH_TOLERANCE` of the particle's size. The normal of the touch points from the
 /// particle into the wall (`-normal`).
 pub fn detect_plane(
-    p: Placed<'_>,
+    p: &Placed,
     point: Vec3,
     normal: Vec3,
     start: Option<Vec3>,
 ) -> Result<(Vec3, Option<Touch>), NoConvergence> {
-    let size = p.shape.bounding_radius;
+    let size = p.bounding_radius;
     let n = Vector3::new(normal[0], normal[1], normal[2]);
     let mut x = match start {
         Some(s) => Vector3::new(s[0], s[1], s[2]),
         None => {
-            let c = p.pose.position;
-            let t = along_ray(p, c, normal.map(|v| -v), size);
+            let c = p.position;
+            let t = along_ray(p, c, normal.map(|v| -v), size, 0.0);
             Vector3::new(c[0] - t * normal[0], c[1] - t * normal[1], c[2] - t * normal[2])
         }
     };
-    let (_, g, _) = p.value_gradient_hessian([x[0], x[1], x[2]]);
+    let (_, g) = p.value_gradient([x[0], x[1], x[2]]);
     let mut mu = 1.0 / g.norm().max(f64::MIN_POSITIVE);
-    let modulus = p.modulus();
+    let modulus = p.modulus;
     let mut steps = 0;
     loop {
         let (f, g, h) = p.value_gradient_hessian([x[0], x[1], x[2]]);
@@ -298,21 +349,15 @@ pub fn detect_plane(
             return Err(NoConvergence { steps, gap_bound: doubt / size });
         }
         steps += 1;
-        let mut m = Matrix4::zeros();
-        m.fixed_view_mut::<3, 3>(0, 0).copy_from(&(h * mu));
-        for i in 0..3 {
-            m[(i, 3)] = g[i];
-            m[(3, i)] = g[i];
-        }
-        let rhs = -Vector4::new(stationarity[0], stationarity[1], stationarity[2], f);
-        let Some(step) = m.lu().solve(&rhs) else {
+        let Some((dx, dmu)) = saddle_solve(&(h * mu), &g, &stationarity, f) else {
             return Err(NoConvergence { steps, gap_bound: doubt / size });
         };
+        let step = [dx[0], dx[1], dx[2], dmu];
         // The multiplier stays positive, and a step is halved until it lowers the residual of the
         // optimality conditions: on a flat face the tangential curvature is the shadow sphere's
         // alone, and a full step from off the deepest point can jump far across the surface.
         let residual = |x: Vector3<f64>, mu: f64| {
-            let (f, g, _) = p.value_gradient_hessian([x[0], x[1], x[2]]);
+            let (f, g) = p.value_gradient([x[0], x[1], x[2]]);
             (n + g * mu).norm_squared() + (f / g.norm().max(f64::MIN_POSITIVE) / size).powi(2)
         };
         let now = residual(x, mu);
@@ -361,7 +406,7 @@ mod tests {
         for (distance, direction) in [(4.9e-3, [1.0, 0.0, 0.0]), (4.5e-3, [0.6, 0.0, 0.8]), (5.1e-3, [0.0, 1.0, 0.0])] {
             let offset = b.sphere_centre;
             let pb = Pose::at([0, 1, 2].map(|i| direction[i] * distance - offset[i]));
-            let found = detect(Placed { shape: &a, pose: &pa }, Placed { shape: &b, pose: &pb }, None).unwrap();
+            let found = detect(&Placed::new(&a, &pa), &Placed::new(&b, &pb), None).unwrap();
             let expected = ra + rb - distance;
             match found.touch {
                 None => assert!(expected < 0.0, "{distance}: no contact found"),
@@ -394,7 +439,7 @@ mod tests {
         let c = cube.sphere_centre;
         let pa = Pose { position: c.map(|v| -v), rotation: Matrix3::identity() };
         let pb = Pose { position: [2.0 * (half + r) - delta, 0.0, 0.0], rotation: turn };
-        let found = detect(Placed { shape: &cube, pose: &pa }, Placed { shape: &cube, pose: &pb }, None).unwrap();
+        let found = detect(&Placed::new(&cube, &pa), &Placed::new(&cube, &pb), None).unwrap();
         let t = found.touch.expect("pressed cubes touch");
         // The faces are flat where k = 0; the shadow sphere's small share (k = 1e-4, R = 20 half)
         // moves them by a fraction of order k of r, well within 1e-3 of the depth.
@@ -418,14 +463,12 @@ mod tests {
         for step in 0..20 {
             let pb =
                 Pose { position: [8.5e-3 - 1e-5 * step as f64, 1e-3, 0.0], rotation: turn(1.0 + 1e-3 * step as f64) };
-            let found =
-                detect(Placed { shape: &tetra, pose: &pa }, Placed { shape: &tetra, pose: &pb }, previous).unwrap();
+            let found = detect(&Placed::new(&tetra, &pa), &Placed::new(&tetra, &pb), previous).unwrap();
             if step == 0 {
                 cold_steps = found.steps;
             } else {
                 assert!(found.steps <= 3, "step {step}: {} Newton steps from the previous solution", found.steps);
-                let cold =
-                    detect(Placed { shape: &tetra, pose: &pa }, Placed { shape: &tetra, pose: &pb }, None).unwrap();
+                let cold = detect(&Placed::new(&tetra, &pa), &Placed::new(&tetra, &pb), None).unwrap();
                 assert!((cold.value - found.value).abs() <= 2.0 * VALUE_TOLERANCE);
             }
             previous = Some(found.solution);
@@ -442,8 +485,7 @@ mod tests {
         let c = ball.sphere_centre;
         let delta = 1e-4;
         let pose = Pose::at([1.0 - c[0], 2.0 - c[1], r_big - delta - c[2]]);
-        let (deepest, touch) =
-            detect_plane(Placed { shape: &ball, pose: &pose }, [0.0; 3], [0.0, 0.0, 1.0], None).unwrap();
+        let (deepest, touch) = detect_plane(&Placed::new(&ball, &pose), [0.0; 3], [0.0, 0.0, 1.0], None).unwrap();
         let t = touch.expect("a sphere below the plane's level touches it");
         assert!((t.overlap - delta).abs() < 1e-12 * r_big, "overlap {}", t.overlap);
         assert!((deepest[0] - 1.0).abs() < 1e-9 && (deepest[1] - 2.0).abs() < 1e-9);
@@ -452,14 +494,11 @@ mod tests {
         let cube = PotentialShape::new(&box_planes([half; 3]), r, 20.0 * half, 1e-4, 60).unwrap();
         let turn = Rotation3::from_axis_angle(&Unit::new_normalize(Vector3::z()), 0.7).into_inner();
         let pose = Pose { position: [0.0, 0.0, half + r - delta], rotation: turn };
-        let (_, touch) = detect_plane(Placed { shape: &cube, pose: &pose }, [0.0; 3], [0.0, 0.0, 1.0], None).unwrap();
+        let (_, touch) = detect_plane(&Placed::new(&cube, &pose), [0.0; 3], [0.0, 0.0, 1.0], None).unwrap();
         let t = touch.expect("pressed cube touches");
         assert!((t.overlap / delta - 1.0).abs() < 1e-3, "overlap {}", t.overlap);
         // Lifted clear of the plane: no touch.
         let pose = Pose::at([0.0, 0.0, r_big + delta]);
-        assert!(detect_plane(Placed { shape: &ball, pose: &pose }, [0.0; 3], [0.0, 0.0, 1.0], None)
-            .unwrap()
-            .1
-            .is_none());
+        assert!(detect_plane(&Placed::new(&ball, &pose), [0.0; 3], [0.0, 0.0, 1.0], None).unwrap().1.is_none());
     }
 }

@@ -126,39 +126,18 @@ impl PotentialShape {
     /// `f(x)` (body frame).
     #[inline]
     pub fn value(&self, x: Vec3) -> f64 {
-        let mut planes = 0.0;
-        for &(n, d) in &self.planes {
-            let v = dot3(n, x) - d;
-            if v > 0.0 {
-                planes += v * v;
-            }
-        }
-        let s = self.sphere_centre;
-        let y = [x[0] - s[0], x[1] - s[1], x[2] - s[2]];
-        (1.0 - self.k) * (planes / (self.r * self.r) - 1.0) + self.k * (dot3(y, y) / (self.big_r * self.big_r) - 1.0)
+        potential::<false, false>(&self.planes, self.sphere_centre, self.weights(), x).0
     }
 
-    /// `f(x)`, its gradient and its Hessian (constant between the planes' switches).
+    /// `f(x)`, its gradient and its Hessian (constant between the planes' switches), body frame.
     pub fn value_gradient_hessian(&self, x: Vec3) -> (f64, Vec3, Matrix3<f64>) {
-        let (a, b) = ((1.0 - self.k) / (self.r * self.r), self.k / (self.big_r * self.big_r));
-        let s = self.sphere_centre;
-        let y = [x[0] - s[0], x[1] - s[1], x[2] - s[2]];
-        let mut value = a * -self.r * self.r + b * (dot3(y, y) - self.big_r * self.big_r);
-        let mut gradient = [2.0 * b * y[0], 2.0 * b * y[1], 2.0 * b * y[2]];
-        let mut hessian = Matrix3::identity() * (2.0 * b);
-        for &(n, d) in &self.planes {
-            let v = dot3(n, x) - d;
-            if v > 0.0 {
-                value += a * v * v;
-                for i in 0..3 {
-                    gradient[i] += 2.0 * a * v * n[i];
-                    for j in 0..3 {
-                        hessian[(i, j)] += 2.0 * a * n[i] * n[j];
-                    }
-                }
-            }
-        }
-        (value, gradient, hessian)
+        potential::<true, true>(&self.planes, self.sphere_centre, self.weights(), x)
+    }
+
+    /// The weights of the plane and sphere terms, `(1 - k)/r^2` and `k/R^2`, with the constant
+    /// `-(1 - k) - k = -1`.
+    pub(crate) fn weights(&self) -> [f64; 2] {
+        [(1.0 - self.k) / (self.r * self.r), self.k / (self.big_r * self.big_r)]
     }
 
     /// Volume, centroid and inertia tensor per unit density of `f <= 0`, by the midpoint rule on
@@ -275,6 +254,41 @@ fn polytope_reach(planes: &[(Vec3, f64)]) -> Option<f64> {
         }
     }
     reach
+}
+
+/// `f(x) = a sum <n_i . x - d_i>^2 + b |x - s|^2 - 1` for planes `(n_i, d_i)`, sphere centre `s`
+/// and weights `[a, b]` (see [`PotentialShape::weights`]), in whatever frame the planes are given;
+/// with its gradient when `GRADIENT`, and its Hessian when `HESSIAN` (zero otherwise).
+#[inline(always)]
+pub(crate) fn potential<const GRADIENT: bool, const HESSIAN: bool>(
+    planes: &[(Vec3, f64)],
+    s: Vec3,
+    [a, b]: [f64; 2],
+    x: Vec3,
+) -> (f64, Vec3, Matrix3<f64>) {
+    let y = [x[0] - s[0], x[1] - s[1], x[2] - s[2]];
+    let mut sum = 0.0;
+    let mut gradient = if GRADIENT { [2.0 * b * y[0], 2.0 * b * y[1], 2.0 * b * y[2]] } else { [0.0; 3] };
+    let mut hessian = if HESSIAN { Matrix3::identity() * (2.0 * b) } else { Matrix3::zeros() };
+    for &(n, d) in planes {
+        let v = dot3(n, x) - d;
+        if v > 0.0 {
+            sum += v * v;
+            if GRADIENT {
+                for i in 0..3 {
+                    gradient[i] += 2.0 * a * v * n[i];
+                }
+            }
+            if HESSIAN {
+                for i in 0..3 {
+                    for j in 0..3 {
+                        hessian[(i, j)] += 2.0 * a * n[i] * n[j];
+                    }
+                }
+            }
+        }
+    }
+    (a * sum + b * dot3(y, y) - 1.0, gradient, hessian)
 }
 
 /// The point where the ray from `from` (inside, `f < 0`) along unit `u` leaves the surface, found by

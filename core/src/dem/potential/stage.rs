@@ -6,7 +6,7 @@
 //! Detection runs pair by pair in parallel, each pair writing only its own values; the law calls
 //! and the sums then run in pair order, so results do not depend on the number of threads.
 
-use super::contact::{detect, detect_plane, Placed, Solution, Touch};
+use super::contact::{detect, detect_plane, Solution, Touch};
 use crate::dem::broad_phase::{sphere_pairs, wall_pairs, Candidate};
 use crate::dem::contacts::PairList;
 use crate::dem::motion::{RigidBody, RigidMotion};
@@ -18,8 +18,9 @@ use crate::math::{add3, cross3, sub3, Vec3};
 use rayon::prelude::*;
 
 /// History values a pair keeps after its law's: the last solution of its contact problem (a
-/// point and, between two particles, the weight `lambda`) and whether there is one.
-const WARM: usize = 5;
+/// point and, between two particles, the weight `lambda`), whether there is one, and the two
+/// parts of the last overlap.
+const WARM: usize = 7;
 
 /// A touching pair's geometry and relative motion, as its law takes them.
 #[derive(Debug, Clone, Copy)]
@@ -30,6 +31,11 @@ struct Found {
 }
 
 impl DemSim {
+    /// Touching contacts of the potential particles (with one another and with walls).
+    pub fn potential_contact_count(&self) -> usize {
+        self.potential_pairs.touching_count() + self.potential_wall_pairs.touching_count()
+    }
+
     /// Values per pair of the potential particles' lists: the laws' then [`WARM`].
     fn potential_strides(&self) -> (usize, usize) {
         let (p, h) = self.pair_strides();
@@ -135,6 +141,7 @@ impl DemSim {
     /// distance a particle's centre moved since the lists were built.
     pub(crate) fn potential_step(&mut self, motion: &RigidMotion) -> Result<f64> {
         let p = &mut self.potentials;
+        p.place_all();
         p.force.iter_mut().for_each(|f| *f = [0.0; 3]);
         p.torque.iter_mut().for_each(|t| *t = [0.0; 3]);
         let hs = self.potential_strides().1;
@@ -184,8 +191,10 @@ impl DemSim {
     /// Detects the contacts of a list (pairs of particles, or particle-wall pairs), runs their
     /// laws and adds the forces to the particles, in pair order. Returns the list.
     fn potential_contacts(&mut self, mut list: PairList, own: usize, wall: bool) -> Result<PairList> {
+        let started = std::time::Instant::now();
         let hs = list.history_stride;
         let p = &self.potentials;
+        let placed = &p.placed;
         let walls = &self.walls;
         let (a_list, b_list) = (&list.a, &list.b);
         // Each pair's detection, from its own warm start, in parallel.
@@ -196,25 +205,39 @@ impl DemSim {
             .map(|(k, history)| {
                 let (i, j) = (a_list[k] as usize, b_list[k] as usize);
                 let warm = &mut history[own..own + WARM];
-                let start = (warm[4] == 1.0).then(|| Solution { point: [warm[0], warm[1], warm[2]], lambda: warm[3] });
-                let pose_i = p.pose(i);
-                let a = Placed { shape: p.shape_of(i), pose: &pose_i };
+                let start = (warm[4] == 1.0).then(|| Solution {
+                    point: [warm[0], warm[1], warm[2]],
+                    lambda: warm[3],
+                    depths: [warm[5], warm[6]],
+                });
+                let a = &placed[i];
                 let touch = if wall {
                     let w = &walls[j];
                     let WallShape::Plane { normal } = w.shape else { return Ok(None) };
+                    // Clear of the plane by more than the bounding radius: no solve.
+                    let height = (0..3).map(|c| normal[c] * (a.position[c] - w.position[c])).sum::<f64>();
+                    if height > a.bounding_radius {
+                        return Ok(None);
+                    }
                     let (deepest, touch) = detect_plane(a, w.position, normal, start.map(|s| s.point))
                         .map_err(|e| format!("potential particle {} and wall \"{}\": {e:?}", p.id[i], w.name))?;
                     warm[..3].copy_from_slice(&deepest);
                     warm[4] = 1.0;
                     touch.map(|t| (t, w.velocity, [0.0; 3], [0.0; 3]))
                 } else {
-                    let pose_j = p.pose(j);
-                    let b = Placed { shape: p.shape_of(j), pose: &pose_j };
+                    let b = &placed[j];
+                    // Bounding spheres apart: no solve (the warm start waits for the next touch).
+                    let d = sub3(b.position, a.position);
+                    let reach = a.bounding_radius + b.bounding_radius;
+                    if d[0] * d[0] + d[1] * d[1] + d[2] * d[2] > reach * reach {
+                        return Ok(None);
+                    }
                     let found = detect(a, b, start)
                         .map_err(|e| format!("potential particles {} and {}: {e:?}", p.id[i], p.id[j]))?;
                     warm[..3].copy_from_slice(&found.solution.point);
                     warm[3] = found.solution.lambda;
                     warm[4] = 1.0;
+                    warm[5..7].copy_from_slice(&found.solution.depths);
                     found.touch.map(|t| (t, p.v[j], p.w[j], p.x[j]))
                 };
                 Ok(touch.map(|(touch, vj, wj, xj)| {
@@ -228,6 +251,8 @@ impl DemSim {
                 }))
             })
             .collect();
+        let detected = std::time::Instant::now();
+        self.potential_seconds[0] += (detected - started).as_secs_f64();
         let mut touching = Vec::new();
         for (k, f) in found.into_iter().enumerate() {
             match f {
@@ -297,6 +322,7 @@ impl DemSim {
                 p.torque[j] = sub3(add3(p.torque[j], cross3(sub3(point, p.x[j]), back)), m);
             }
         }
+        self.potential_seconds[1] += detected.elapsed().as_secs_f64();
         Ok(list)
     }
 }
