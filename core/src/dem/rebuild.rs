@@ -15,6 +15,14 @@ const MERGE_PIECE: usize = 1024;
 /// Fewest spheres in a simulation renumbered in space before it first runs.
 pub(crate) const MIN_SPHERES_TO_ORDER: usize = 1024;
 
+/// The bodies a pair list joins: their materials (the first body's, and the second's unless it
+/// is a wall), and whether the merge may run in parallel.
+pub(crate) struct PairBodies<'a> {
+    pub material: &'a [u16],
+    pub wall: bool,
+    pub parallel: bool,
+}
+
 impl DemSim {
     /// Brings periodic positions back into the cell and fixes the shifts of their pairs.
     fn wrap_into_cell(&mut self) -> Result<()> {
@@ -119,17 +127,42 @@ impl DemSim {
     ) -> Option<(u16, u16)> {
         // Pieces of at most MERGE_PIECE pairs (a periodic search hands over one sorted list).
         let pieces: Vec<&[Candidate]> = candidates.iter().flat_map(|b| b.chunks(MERGE_PIECE)).collect();
-        let material = &self.spheres.material;
+        let body = PairBodies { material: &self.spheres.material, wall, parallel: self.in_parallel() };
+        self.merge_with_laws(list, spare, &pieces, strides, body, |a, b| self.info_for(a, b, wall))
+    }
+
+    /// [`PairList::merge`] with each new pair given the law of its bodies' materials and its
+    /// parameters from `info`; returns a pair of materials without a contact law, if it met one.
+    pub(crate) fn merge_with_laws(
+        &self,
+        list: &mut PairList,
+        spare: &mut PairList,
+        pieces: &[&[Candidate]],
+        strides: (usize, usize),
+        bodies: PairBodies<'_>,
+        info: impl Fn(usize, usize) -> crate::ext::PairInfo + Sync,
+    ) -> Option<(u16, u16)> {
+        let PairBodies { material, wall, parallel } = bodies;
         let materials = |a: usize, b: usize| (material[a], if wall { self.walls[b].material } else { material[b] });
-        let missing = list.merge(spare, &pieces, strides, self.in_parallel(), |a, b, law, params| {
+        let missing = list.merge(spare, pieces, strides, parallel, |a, b, law, params| {
             let (a, b) = (a as usize, b as usize);
             let pair = materials(a, b);
             let Some(l) = self.law_for(pair.0, pair.1) else { return false };
             *law = l;
-            self.laws[l as usize].init_pair(&self.info_for(a, b, wall), params);
+            self.laws[l as usize].init_pair(&info(a, b), params);
             true
         });
         missing.map(|(a, b)| materials(a as usize, b as usize))
+    }
+
+    /// The error of a pair of materials without a contact law.
+    pub(crate) fn missing_law(&self, (a, b): (u16, u16)) -> GraniteError {
+        let name = |m: u16| self.materials.get(m as usize).map(|m| m.name.clone()).unwrap_or_default();
+        GraniteError::Setup(format!(
+            "no contact law for materials \"{}\" and \"{}\": give a default law or one for this pair",
+            name(a),
+            name(b)
+        ))
     }
 
     /// Rebuilds the candidate pair lists (keeping the history of pairs still present).
@@ -177,13 +210,8 @@ impl DemSim {
             (merge_spheres(), find_and_merge_walls())
         };
         let missing = missing_walls.or(missing_spheres);
-        if let Some((a, b)) = missing {
-            let name = |m: u16| self.materials.get(m as usize).map(|m| m.name.clone()).unwrap_or_default();
-            return Err(GraniteError::Setup(format!(
-                "no contact law for materials \"{}\" and \"{}\": give a default law or one for this pair",
-                name(a),
-                name(b)
-            )));
+        if let Some(pair) = missing {
+            return Err(self.missing_law(pair));
         }
         self.pairs = pairs;
         if !self.sequential {

@@ -10,6 +10,7 @@ use super::contact::{detect, detect_plane, Solution, Touch};
 use crate::dem::broad_phase::{sphere_pairs, wall_pairs, Candidate};
 use crate::dem::contacts::PairList;
 use crate::dem::motion::{RigidBody, RigidMotion};
+use crate::dem::rebuild::PairBodies;
 use crate::dem::sim::DemSim;
 use crate::dem::walls::WallShape;
 use crate::error::{GraniteError, Result};
@@ -101,13 +102,8 @@ impl DemSim {
         ));
         self.potential_pairs = list;
         self.potential_wall_pairs = wall_list;
-        if let Some((a, b)) = missing {
-            let name = |m: u16| self.materials.get(m as usize).map(|m| m.name.clone()).unwrap_or_default();
-            return Err(GraniteError::Setup(format!(
-                "no contact law for materials \"{}\" and \"{}\": give a default law or one for this pair",
-                name(a),
-                name(b)
-            )));
+        if let Some(pair) = missing {
+            return Err(self.missing_law(pair));
         }
         self.potential_x_at_build = self.potentials.x.clone();
         Ok(())
@@ -123,18 +119,10 @@ impl DemSim {
         wall: bool,
     ) -> Option<(u16, u16)> {
         let pieces: Vec<&[Candidate]> = candidates.iter().map(|b| &b[..]).collect();
-        let material = &self.potentials.material;
-        let materials = |a: usize, b: usize| (material[a], if wall { self.walls[b].material } else { material[b] });
-        let mut spare = PairList::default();
-        let missing = list.merge(&mut spare, &pieces, strides, false, |a, b, law, params| {
-            let (a, b) = (a as usize, b as usize);
-            let pair = materials(a, b);
-            let Some(l) = self.law_for(pair.0, pair.1) else { return false };
-            *law = l;
-            self.laws[l as usize].init_pair(&self.potential_info(a, b, wall), params);
-            true
-        });
-        missing.map(|(a, b)| materials(a as usize, b as usize))
+        let bodies = PairBodies { material: &self.potentials.material, wall, parallel: false };
+        self.merge_with_laws(list, &mut PairList::default(), &pieces, strides, bodies, |a, b| {
+            self.potential_info(a, b, wall)
+        })
     }
 
     /// Contacts, forces and motion of the potential particles for one step; returns the largest
