@@ -10,15 +10,20 @@ use crate::math::Vec3;
 use rayon::prelude::*;
 
 /// A particle as the void-ratio methods see it: its spheres (one, or a clump's members) and the
-/// volume of their union.
+/// volume of their union; for a potential particle, its bounding sphere (centre and reach) and
+/// its potential, which decides what lies inside it.
 #[derive(Debug, Clone)]
 pub struct Grain {
     pub spheres: Vec<(Vec3, f64)>,
     pub volume: f64,
+    pub potential: Option<crate::dem::potential::Placed>,
 }
 
 impl Grain {
     fn contains(&self, p: Vec3) -> bool {
+        if let Some(placed) = &self.potential {
+            return placed.value(p) <= 0.0;
+        }
         self.spheres.iter().any(|(c, r)| (p[0] - c[0]).powi(2) + (p[1] - c[1]).powi(2) + (p[2] - c[2]).powi(2) <= r * r)
     }
 
@@ -35,7 +40,8 @@ impl Grain {
     }
 }
 
-/// The grains of a simulation: free spheres and clumps.
+/// The grains of a simulation: free spheres, clumps and potential particles (fixed ones, the
+/// container's parts, left out).
 pub fn grains(sim: &DemSim) -> Vec<Grain> {
     let s = &sim.spheres;
     let mut out: Vec<Grain> = (0..s.len())
@@ -43,6 +49,7 @@ pub fn grains(sim: &DemSim) -> Vec<Grain> {
         .map(|i| Grain {
             spheres: vec![(s.x[i], s.radius[i])],
             volume: 4.0 / 3.0 * std::f64::consts::PI * s.radius[i].powi(3),
+            potential: None,
         })
         .collect();
     for c in 0..sim.clumps.len() {
@@ -50,7 +57,16 @@ pub fn grains(sim: &DemSim) -> Vec<Grain> {
             let i = sim.clumps.members[m] as usize;
             (s.x[i], s.radius[i])
         });
-        out.push(Grain { spheres: spheres.collect(), volume: sim.clumps.volume[c] });
+        out.push(Grain { spheres: spheres.collect(), volume: sim.clumps.volume[c], potential: None });
+    }
+    let p = &sim.potentials;
+    for i in (0..p.len()).filter(|&i| !p.fixed[i]) {
+        let shape = p.shape_of(i);
+        out.push(Grain {
+            spheres: vec![(p.x[i], shape.bounding_radius)],
+            volume: shape.volume,
+            potential: Some(crate::dem::potential::Placed::new(shape, &p.pose(i))),
+        });
     }
     out
 }

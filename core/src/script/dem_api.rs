@@ -753,11 +753,19 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
             ));
         }
         let mut st = s.lock();
-        let keep: Vec<bool> =
-            st.sim.dem.spheres.x.iter().map(|x| (0..3).all(|a| x[a] >= lo[a] && x[a] <= hi[a])).collect();
-        let lost = keep.iter().filter(|k| !**k).count();
+        let inside = |x: &Vec3| (0..3).all(|a| x[a] >= lo[a] && x[a] <= hi[a]);
+        let keep: Vec<bool> = st.sim.dem.spheres.x.iter().map(inside).collect();
+        let mut lost = keep.iter().filter(|k| !**k).count();
         if lost > 0 {
             st.sim.dem.remove_spheres(&keep);
+        }
+        // Potential particles by their centres; fixed ones are container parts and stay.
+        let p = &st.sim.dem.potentials;
+        let keep: Vec<bool> = (0..p.len()).map(|i| p.fixed[i] || inside(&p.x[i])).collect();
+        let gone = keep.iter().filter(|k| !**k).count();
+        if gone > 0 {
+            st.sim.dem.remove_potentials(&keep);
+            lost += gone;
         }
         Ok::<_, Box<rhai::EvalAltResult>>(lost as i64)
     });
@@ -953,7 +961,21 @@ fn register_measures(engine: &mut Engine) {
         };
         let x_min = number(get(&opts, "x_min").unwrap_or(&Dynamic::from(0.32 * d)), "x_min")?;
         let x_max = number(get(&opts, "x_max").unwrap_or(&Dynamic::from(f64::INFINITY)), "x_max")?;
-        let positions = s.lock().sim.dem.spheres.x.clone();
+        let positions = {
+            let st = s.lock();
+            let dem = &st.sim.dem;
+            // Spheres (clump members) and the potential particles' monitor points, those of fixed
+            // ones (container parts) apart.
+            let mut positions = dem.spheres.x.clone();
+            let p = &dem.potentials;
+            if !p.is_empty() {
+                let mobile: Vec<bool> = p.fixed.iter().map(|f| !f).collect();
+                let mut free = p.clone();
+                free.retain(&mobile);
+                positions.extend(free.monitor_positions());
+            }
+            positions
+        };
         let r = measure(&positions, &heap, d, x_min, x_max).or_rhai()?;
         let mut m = Map::new();
         m.insert("angle_deg".into(), Dynamic::from(r.angle_deg));

@@ -101,6 +101,41 @@ impl Potentials {
         Ok(self.len() - 1)
     }
 
+    /// Keeps the particles whose flag is true, in order.
+    pub(crate) fn retain(&mut self, keep: &[bool]) {
+        fn kept<T: Clone>(v: &mut Vec<T>, keep: &[bool]) {
+            let mut k = keep.iter();
+            v.retain(|_| *k.next().unwrap_or(&true));
+        }
+        kept(&mut self.shape, keep);
+        kept(&mut self.id, keep);
+        kept(&mut self.material, keep);
+        kept(&mut self.x, keep);
+        kept(&mut self.v, keep);
+        kept(&mut self.w, keep);
+        kept(&mut self.q, keep);
+        kept(&mut self.mass, keep);
+        kept(&mut self.inertia, keep);
+        kept(&mut self.fixed, keep);
+        kept(&mut self.force, keep);
+        kept(&mut self.torque, keep);
+        self.placed.clear();
+    }
+
+    /// The world positions of every particle's monitor points (see
+    /// [`PotentialShape::monitor_points`]).
+    pub fn monitor_positions(&self) -> Vec<Vec3> {
+        let mut out = Vec::new();
+        for i in 0..self.len() {
+            let rot = self.q[i].to_rotation_matrix();
+            for b in &self.shape_of(i).monitor_points {
+                let w = rot * nalgebra::Vector3::new(b[0], b[1], b[2]);
+                out.push([self.x[i][0] + w[0], self.x[i][1] + w[1], self.x[i][2] + w[2]]);
+            }
+        }
+        out
+    }
+
     /// Places every particle's potential where the particle is now.
     pub(crate) fn place_all(&mut self) {
         self.placed.resize_with(self.len(), Default::default);

@@ -58,6 +58,8 @@ pub struct Placed {
     /// Strong-convexity modulus of the potential: that of its shadow sphere term, `2 k / R^2`.
     modulus: f64,
     pub bounding_radius: f64,
+    /// How far the surface may stand off a plane: `r / sqrt(1 - k)` (infinite at k = 1).
+    standoff: f64,
 }
 
 impl Placed {
@@ -86,10 +88,24 @@ impl Placed {
         self.weights = shape.weights();
         self.modulus = 2.0 * self.weights[1];
         self.bounding_radius = shape.bounding_radius;
+        self.standoff = if shape.k < 1.0 { shape.r / (1.0 - shape.k).sqrt() } else { f64::INFINITY };
     }
 
     pub fn value(&self, x: Vec3) -> f64 {
         potential::<false, false>(&self.planes, self.sphere_centre, self.weights, x).0
+    }
+
+    /// Whether a ball of `radius` about `centre` lies wholly outside the particle: beyond one of
+    /// its planes grown by `r / sqrt(1 - k)`, the most the surface stands off a plane (inside,
+    /// `(1 - k)(<n . x - d>^2 / r^2 - 1) <= k`). A cheap proof of separation for long or flat
+    /// particles, whose bounding spheres reach far.
+    pub fn clear_of(&self, centre: Vec3, radius: f64) -> bool {
+        let [a, _] = self.weights;
+        if a <= 0.0 {
+            return false;
+        }
+        let standoff = self.standoff;
+        self.planes.iter().any(|&(n, d)| dot3(n, centre) - d > standoff + radius)
     }
 
     fn value_gradient(&self, x: Vec3) -> (f64, Vector3<f64>) {
@@ -156,7 +172,10 @@ pub fn detect(a: &Placed, b: &Placed, start: Option<Solution>) -> Result<Detecti
             break;
         }
         if steps == MAX_STEPS {
-            return Err(NoConvergence { steps, gap_bound: bound });
+            // Newton on the optimality conditions did not settle (a far start against a flat,
+            // nearly uncurved face): the dual's bisection, slower but sure.
+            (x, lambda, state) = by_bisection(a, b, x)?;
+            break;
         }
         steps += 1;
         let (dx, dl) = state.newton_step(lambda);
@@ -186,6 +205,7 @@ pub fn detect(a: &Placed, b: &Placed, start: Option<Solution>) -> Result<Detecti
 
 /// The optimality conditions' terms at `(x, lambda)`.
 struct Kkt {
+    x: Vector3<f64>,
     fa: f64,
     fb: f64,
     ga: Vector3<f64>,
@@ -196,10 +216,10 @@ struct Kkt {
 
 impl Kkt {
     fn at(a: &Placed, b: &Placed, x: Vector3<f64>, _lambda: f64) -> Kkt {
-        let x = [x[0], x[1], x[2]];
-        let (fa, ga, ha) = a.value_gradient_hessian(x);
-        let (fb, gb, hb) = b.value_gradient_hessian(x);
-        Kkt { fa, fb, ga, gb, ha, hb }
+        let point = [x[0], x[1], x[2]];
+        let (fa, ga, ha) = a.value_gradient_hessian(point);
+        let (fb, gb, hb) = b.value_gradient_hessian(point);
+        Kkt { x, fa, fb, ga, gb, ha, hb }
     }
 
     fn lagrangian_gradient(&self, lambda: f64) -> Vector3<f64> {
@@ -243,6 +263,62 @@ fn saddle_solve(h: &Matrix3<f64>, c: &Vector3<f64>, g: &Vector3<f64>, r: f64) ->
     }
     let dl = (r - c.dot(&hg)) / schur;
     Some((-(hg + hc * dl), dl))
+}
+
+/// The contact problem through its dual, `max over lambda in [0, 1] of min_x L(x, lambda)`: the
+/// dual is concave, its slope at `lambda` is `f_A - f_B` at that `lambda`'s minimiser, which falls
+/// as `lambda` grows, so bisection on its sign finds the optimum; each `min_x L` is a strictly
+/// convex problem, solved by Newton's method with backtracking on `L` (globally convergent). Ends
+/// with the same proven bound as [`detect`].
+fn by_bisection(a: &Placed, b: &Placed, from: Vector3<f64>) -> Result<(Vector3<f64>, f64, Kkt), NoConvergence> {
+    let minimise = |lambda: f64, mut x: Vector3<f64>| -> Kkt {
+        let mut state = Kkt::at(a, b, x, lambda);
+        for _ in 0..200 {
+            let mu = lambda * a.modulus + (1.0 - lambda) * b.modulus;
+            let g = state.lagrangian_gradient(lambda);
+            if g.norm_squared() / (2.0 * mu) <= 0.1 * VALUE_TOLERANCE {
+                break;
+            }
+            let h = state.ha * lambda + state.hb * (1.0 - lambda);
+            let Some(chol) = h.cholesky() else { break };
+            let dx = -chol.solve(&g);
+            let value = |k: &Kkt| lambda * k.fa + (1.0 - lambda) * k.fb;
+            let now = value(&state);
+            let mut t = 1.0;
+            loop {
+                let trial = Kkt::at(a, b, x + dx * t, lambda);
+                // Armijo: enough decrease of L along the Newton direction.
+                if value(&trial) <= now + 1e-4 * t * g.dot(&dx) || t < 1e-12 {
+                    (x, state) = (x + dx * t, trial);
+                    break;
+                }
+                t *= 0.5;
+            }
+        }
+        state.x = x;
+        state
+    };
+    let (mut lo, mut hi) = (0.0, 1.0);
+    let mut lambda = 0.5;
+    let mut state = minimise(lambda, from);
+    for _ in 0..80 {
+        if state.gap_bound(a, b, lambda) <= VALUE_TOLERANCE {
+            return Ok((state.x, lambda, state));
+        }
+        if state.fa > state.fb {
+            lo = lambda;
+        } else {
+            hi = lambda;
+        }
+        lambda = 0.5 * (lo + hi);
+        state = minimise(lambda, state.x);
+    }
+    let bound = state.gap_bound(a, b, lambda);
+    if bound <= VALUE_TOLERANCE {
+        Ok((state.x, lambda, state))
+    } else {
+        Err(NoConvergence { steps: MAX_STEPS + 80, gap_bound: bound })
+    }
 }
 
 /// A start for a pair seen for the first time: on the line between the centres, where each

@@ -39,4 +39,15 @@ impl DemSim {
         self.needs_rebuild = true;
         Ok(i)
     }
+
+    /// Removes the potential particles whose flag is false; the pairs of those that stay keep
+    /// their history.
+    pub fn remove_potentials(&mut self, keep: &[bool]) {
+        self.potentials.retain(keep);
+        self.potential_pairs.retain_spheres(keep, true);
+        self.potential_wall_pairs.retain_spheres(keep, false);
+        let mut k = keep.iter();
+        self.potential_x_at_build.retain(|_| *k.next().unwrap_or(&true));
+        self.needs_rebuild = true;
+    }
 }

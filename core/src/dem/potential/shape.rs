@@ -34,6 +34,10 @@ pub struct PotentialShape {
     pub inertia_per_density: Vec3,
     /// A radius no point of the particle lies beyond, from its centre of mass (m).
     pub bounding_radius: f64,
+    /// Points the heap measures follow the particle by (body frame): the vertices of its planes'
+    /// polytope (for the thesis's tetrahedron, the centres of the clump's spheres, as in thesis
+    /// 2.2.2.2), or its centre of mass when the planes bound no polytope.
+    pub monitor_points: Vec<Vec3>,
 }
 
 /// Grid points per axis of the integration of a shape's volume and inertia: at 120 the
@@ -78,6 +82,7 @@ impl PotentialShape {
             volume: 0.0,
             inertia_per_density: [0.0; 3],
             bounding_radius: reach_bound(&unit, r, big_r, k, [0.0; 3]),
+            monitor_points: Vec::new(),
         };
         let (volume, centroid, inertia) = given.integrate(resolution.max(8));
         if !(volume > 0.0) {
@@ -118,6 +123,7 @@ impl PotentialShape {
             volume,
             inertia_per_density: moments,
             bounding_radius: reach_bound(&planes, self.r, self.big_r, self.k, sphere_centre),
+            monitor_points: polytope_vertices(&planes).unwrap_or_else(|| vec![[0.0; 3]]),
             planes,
             ..self.clone()
         }
@@ -211,10 +217,16 @@ fn reach_bound(planes: &[(Vec3, f64)], r: f64, big_r: f64, k: f64, s: Vec3) -> f
 }
 
 /// The largest distance from the origin of a vertex of `{x : n_i . x <= d_i}` (unit normals), or
-/// None when that set is unbounded or has no vertex. It is bounded exactly when the cone
-/// `{u : n_i . u <= 0}` is `{0}`: with normals spanning space that cone is pointed, and a pointed
-/// cone other than `{0}` has an edge `+-(n_i x n_j)` on two of its planes.
+/// None when that set is unbounded or has no vertex.
 fn polytope_reach(planes: &[(Vec3, f64)]) -> Option<f64> {
+    polytope_vertices(planes)?.iter().map(|v| dot3(*v, *v).sqrt()).reduce(f64::max)
+}
+
+/// The vertices of `{x : n_i . x <= d_i}` (unit normals), or None when that set is unbounded or
+/// has no vertex. It is bounded exactly when the cone `{u : n_i . u <= 0}` is `{0}`: with normals
+/// spanning space that cone is pointed, and a pointed cone other than `{0}` has an edge
+/// `+-(n_i x n_j)` on two of its planes. A vertex met by more than three planes is listed once.
+pub fn polytope_vertices(planes: &[(Vec3, f64)]) -> Option<Vec<Vec3>> {
     let normals = Matrix3::from_fn(|i, j| planes.iter().map(|(n, _)| n[i] * n[j]).sum::<f64>());
     if planes.len() < 4 || normals.determinant().abs() < 1e-12 {
         return None;
@@ -234,7 +246,7 @@ fn polytope_reach(planes: &[(Vec3, f64)]) -> Option<f64> {
         }
     }
     let scale = planes.iter().map(|(_, d)| d.abs()).fold(0.0, f64::max).max(f64::MIN_POSITIVE);
-    let mut reach: Option<f64> = None;
+    let mut vertices: Vec<Vec3> = Vec::new();
     for i in 0..planes.len() {
         for j in i + 1..planes.len() {
             for l in j + 1..planes.len() {
@@ -246,14 +258,14 @@ fn polytope_reach(planes: &[(Vec3, f64)]) -> Option<f64> {
                 ]);
                 let Some(v) = m.lu().solve(&Vector3::new(a.1, b.1, c.1)) else { continue };
                 let v = [v[0], v[1], v[2]];
-                if planes.iter().all(|(n, d)| dot3(*n, v) <= d + 1e-9 * scale) {
-                    let distance = dot3(v, v).sqrt();
-                    reach = Some(reach.map_or(distance, |r| r.max(distance)));
+                let near = |w: &Vec3| (0..3).all(|k| (w[k] - v[k]).abs() <= 1e-9 * scale);
+                if planes.iter().all(|(n, d)| dot3(*n, v) <= d + 1e-9 * scale) && !vertices.iter().any(near) {
+                    vertices.push(v);
                 }
             }
         }
     }
-    reach
+    (!vertices.is_empty()).then_some(vertices)
 }
 
 /// `f(x) = a sum <n_i . x - d_i>^2 + b |x - s|^2 - 1` for planes `(n_i, d_i)`, sphere centre `s`
@@ -419,6 +431,27 @@ mod tests {
         assert!((shape.volume / 3.9248e-7 - 1.0).abs() < 2e-3, "volume {}", shape.volume);
         for m in shape.inertia_per_density {
             assert!((m / 3.286e-12 - 1.0).abs() < 3e-3, "inertia / density {m}");
+        }
+    }
+
+    /// The rounded tetrahedron is followed by its polytope's vertices, which are the centres of
+    /// the 4-sphere clump's spheres (thesis 2.2.2.2: the planes were chosen so).
+    #[test]
+    fn the_tetrahedron_is_followed_by_the_clumps_sphere_centres() {
+        let (r_s, r_clump) = (0.3101e-2, 0.5e-2);
+        let shape =
+            PotentialShape::new(&tetrahedron_planes(r_clump - r_s), r_s, 2f64.sqrt() * r_s, 0.65, MASS_RESOLUTION)
+                .unwrap();
+        let centres = crate::dem::clump::tetrahedral_members([0.0; 3], r_s, r_clump).unwrap();
+        assert_eq!(shape.monitor_points.len(), 4);
+        for (c, _) in centres {
+            let nearest = shape
+                .monitor_points
+                .iter()
+                .map(|p| (0..3).map(|a| (p[a] - c[a]).powi(2)).sum::<f64>().sqrt())
+                .fold(f64::INFINITY, f64::min);
+            // The body frame's origin is the integrated centre of mass, a grid's error off.
+            assert!(nearest < 1e-3 * r_clump, "sphere centre {c:?}: nearest vertex {nearest} m away");
         }
     }
 

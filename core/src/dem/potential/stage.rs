@@ -217,7 +217,10 @@ impl DemSim {
                     // Bounding spheres apart: no solve (the warm start waits for the next touch).
                     let d = sub3(b.position, a.position);
                     let reach = a.bounding_radius + b.bounding_radius;
-                    if d[0] * d[0] + d[1] * d[1] + d[2] * d[2] > reach * reach {
+                    if d[0] * d[0] + d[1] * d[1] + d[2] * d[2] > reach * reach
+                        || a.clear_of(b.position, b.bounding_radius)
+                        || b.clear_of(a.position, a.bounding_radius)
+                    {
                         return Ok(None);
                     }
                     let found = detect(a, b, start)

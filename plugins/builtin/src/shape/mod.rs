@@ -138,7 +138,7 @@ const POTENTIAL_BOX: &[ParamSpec] = &[
     ParamSpec::required("hy", "half-size along y in m"),
     ParamSpec::required("hz", "half-size along z in m"),
     ParamSpec::unset("r", "rounding radius in m (default a tenth of the smallest half-size)"),
-    ParamSpec::optional("k", 0.01, "sphericity, in (0, 1]: small keeps the faces flat"),
+    ParamSpec::optional("k", 0.05, "sphericity, in (0, 1]: small keeps the faces flat (they bow by about k r / 8)"),
 ];
 
 impl ShapeModelFactory for PotentialBoxFactory {
@@ -155,8 +155,9 @@ impl ShapeModelFactory for PotentialBoxFactory {
         let half = [params.positive("hx")?, params.positive("hy")?, params.positive("hz")?];
         let smallest = half.iter().copied().fold(f64::INFINITY, f64::min);
         let r = if params.is_set("r") { params.positive("r")? } else { 0.1 * smallest };
-        // The shadow sphere far larger than the box: its faces bow by a fraction k of it.
-        let big_r = 10.0 * (half[0] * half[0] + half[1] * half[1] + half[2] * half[2]).sqrt();
+        // The shadow sphere twice the box's half-diagonal: between a face's middle and its
+        // corners the sphere term changes by 3/4 k, which moves the face by about k r / 8.
+        let big_r = 2.0 * (half[0] * half[0] + half[1] * half[1] + half[2] * half[2]).sqrt();
         let shape = PotentialShape::new(&box_planes(half), r, big_r, params.get("k"), MASS_RESOLUTION)?;
         Ok(Box::new(Potential { name: "potential_box", params, shape: Arc::new(shape) }))
     }
