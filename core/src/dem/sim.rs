@@ -574,7 +574,8 @@ impl DemSim {
     }
 
     /// Largest stable time step estimate: `min sqrt(m / k_n)` over one-contact oscillators of
-    /// each sphere with a copy of itself and with each wall (multiply by ~0.2-0.3 for packings).
+    /// each sphere (and each free potential particle) with a copy of itself and with each wall
+    /// (multiply by ~0.2-0.3 for packings).
     pub fn critical_dt(&self) -> Option<f64> {
         let mut best: Option<f64> = None;
         let mut consider = |law: Option<u16>, info: PairInfo| {
