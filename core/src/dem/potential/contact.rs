@@ -158,6 +158,16 @@ pub struct NoConvergence {
     pub gap_bound: f64,
 }
 
+impl std::fmt::Display for NoConvergence {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "after {} steps its solution was still up to {:.3e} from the optimum (tolerance {VALUE_TOLERANCE:e})",
+            self.steps, self.gap_bound
+        )
+    }
+}
+
 /// The contact between `a` and `b`, from `start` (the previous solution) or, without one, from a
 /// guess on the line between their centres.
 pub fn detect(a: &Placed, b: &Placed, start: Option<Solution>) -> Result<Detection, NoConvergence> {

@@ -208,7 +208,7 @@ impl DemSim {
                         return Ok(None);
                     }
                     let (deepest, touch) = detect_plane(a, w.position, normal, start.map(|s| s.point))
-                        .map_err(|e| format!("potential particle {} and wall \"{}\": {e:?}", p.id[i], w.name))?;
+                        .map_err(|e| format!("potential particle {} and wall \"{}\": {e}", p.id[i], w.name))?;
                     warm[..3].copy_from_slice(&deepest);
                     warm[4] = 1.0;
                     touch.map(|t| (t, w.velocity, [0.0; 3], [0.0; 3]))
@@ -224,7 +224,7 @@ impl DemSim {
                         return Ok(None);
                     }
                     let found = detect(a, b, start)
-                        .map_err(|e| format!("potential particles {} and {}: {e:?}", p.id[i], p.id[j]))?;
+                        .map_err(|e| format!("potential particles {} and {}: {e}", p.id[i], p.id[j]))?;
                     warm[..3].copy_from_slice(&found.solution.point);
                     warm[3] = found.solution.lambda;
                     warm[4] = 1.0;
@@ -256,13 +256,13 @@ impl DemSim {
                         list.history[k * hs..k * hs + own].iter_mut().for_each(|h| *h = 0.0);
                     }
                 }
-                Err(reason) => {
-                    return Err(GraniteError::Unstable {
-                        step: self.step,
-                        time: self.time,
-                        reason: format!("the contact problem of {reason} was not solved"),
-                    })
-                }
+                Err(reason) => return Err(GraniteError::Unstable {
+                    step: self.step,
+                    time: self.time,
+                    reason: format!(
+                        "the contact problem of {reason}; the particles may overlap too deeply: lower the time step"
+                    ),
+                }),
             }
         }
         // Each law on its contacts, in pair order.
