@@ -299,3 +299,19 @@ summary("kinetic_energy", sim.diagnostics().kinetic_energy);
     assert!(get("lowest_centre") > -0.001 + 0.3101e-2, "lowest centre {}", get("lowest_centre"));
     assert!(out.join("vtk/potentials.pvd").is_file());
 }
+
+/// The thesis scene with potential particles at its small default size (300 particles) with short
+/// settling and rest times: the
+/// device opens, part of the particles flow out and are erased, and what stays is a heap at
+/// rest whose surface slopes down to the opening. The thesis's comparison with clumps runs in
+/// tests/dem_repose_scripts.rs (ignored: minutes).
+#[test]
+fn the_potential_heap_scene_forms_a_heap() {
+    let sets = [("count", "300"), ("settle_time", "0.4"), ("rest_time", "0.6")];
+    let report = common::run("dem/angle_of_repose_potential.rhai", "repose_potential_tiny", &sets, 2).unwrap();
+    let get = |k: &str| common::summary_f64(&report, k);
+    let left = get("particles_left");
+    assert!(left > 0.1 * 300.0 && left < 300.0, "{left} of 300 particles stay in the device");
+    assert!(get("angle_of_repose_deg") > 0.0, "a heap sloping down to the opening: {}°", get("angle_of_repose_deg"));
+    assert!(get("void_ratio") > 0.0);
+}

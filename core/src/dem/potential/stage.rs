@@ -90,8 +90,13 @@ impl DemSim {
         let radii = self.potentials.bounding_radii();
         let skin = self.potential_skin();
         let strides = self.potential_strides();
-        let pairs = sphere_pairs(&self.potentials.x, &radii, skin);
-        let walls = wall_pairs(&self.potentials.x, &radii, &self.walls, skin);
+        let mut pairs = sphere_pairs(&self.potentials.x, &radii, skin);
+        let mut walls = wall_pairs(&self.potentials.x, &radii, &self.walls, skin);
+        // Fixed particles (container parts) are moved, not pushed: their contacts with one
+        // another and with walls would change nothing.
+        let fixed = &self.potentials.fixed;
+        pairs.iter_mut().for_each(|block| block.retain(|&(a, b, _)| !(fixed[a as usize] && fixed[b as usize])));
+        walls.iter_mut().for_each(|block| block.retain(|&(a, _, _)| !fixed[a as usize]));
         let mut list = std::mem::take(&mut self.potential_pairs);
         let mut wall_list = std::mem::take(&mut self.potential_wall_pairs);
         let missing = self.merge_potential(&mut list, &pairs, strides, false).or(self.merge_potential(
@@ -256,13 +261,15 @@ impl DemSim {
                         list.history[k * hs..k * hs + own].iter_mut().for_each(|h| *h = 0.0);
                     }
                 }
-                Err(reason) => return Err(GraniteError::Unstable {
-                    step: self.step,
-                    time: self.time,
-                    reason: format!(
+                Err(reason) => {
+                    return Err(GraniteError::Unstable {
+                        step: self.step,
+                        time: self.time,
+                        reason: format!(
                         "the contact problem of {reason}; the particles may overlap too deeply: lower the time step"
                     ),
-                }),
+                    })
+                }
             }
         }
         // Each law on its contacts, in pair order.
