@@ -149,10 +149,11 @@ impl PotentialShape {
     /// Volume, centroid and inertia tensor per unit density of `f <= 0`, by the midpoint rule on
     /// `n`^3 cells of the bounding cube.
     fn integrate(&self, n: usize) -> (f64, Vec3, Matrix3<f64>) {
-        let reach = self.bounding_radius;
-        let c = self.sphere_centre;
-        let h = 2.0 * reach / n as f64;
-        let at = |i: usize, a: usize| c[a] - reach + (i as f64 + 0.5) * h;
+        let (lo, hi) = self.bounds();
+        // `n` cells along each axis of the bounding box: a thin plate gets as many across its
+        // thickness as along its length.
+        let h = [0, 1, 2].map(|a| (hi[a] - lo[a]) / n as f64);
+        let at = |i: usize, a: usize| lo[a] + (i as f64 + 0.5) * h[a];
         // Sums in f64 over a fixed order: the same numbers on any machine.
         let (mut count, mut first, mut second) = (0.0, [0.0; 3], Matrix3::zeros());
         for i in 0..n {
@@ -171,7 +172,7 @@ impl PotentialShape {
                 }
             }
         }
-        let cell = h * h * h;
+        let cell = h[0] * h[1] * h[2];
         let volume = count * cell;
         if count == 0.0 {
             return (0.0, [0.0; 3], Matrix3::zeros());
@@ -186,6 +187,25 @@ impl PotentialShape {
         }
         let inertia = Matrix3::identity() * s.trace() - s;
         (volume, centroid, inertia)
+    }
+
+    /// An axis-aligned box holding the particle: the bounding sphere's, narrowed to the polytope
+    /// grown by the most the surface stands off a plane, `r / sqrt(1 - k)`, when that is bounded.
+    fn bounds(&self) -> (Vec3, Vec3) {
+        let (c, reach) = (self.sphere_centre, self.bounding_radius);
+        let (mut lo, mut hi) = (c.map(|v| v - reach), c.map(|v| v + reach));
+        if self.k < 1.0 {
+            let grow = self.r / (1.0 - self.k).sqrt();
+            let grown: Vec<(Vec3, f64)> = self.planes.iter().map(|&(n, d)| (n, d + grow)).collect();
+            if let Some(vertices) = polytope_vertices(&grown) {
+                for a in 0..3 {
+                    let (min, max) = vertices.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, u), v| (l.min(v[a]), u.max(v[a])));
+                    lo[a] = lo[a].max(min);
+                    hi[a] = hi[a].min(max);
+                }
+            }
+        }
+        (lo, hi)
     }
 
     /// A triangulated surface `f = 0` for pictures: rays from the centre of mass along the
