@@ -199,7 +199,9 @@ impl PotentialShape {
             let grown: Vec<(Vec3, f64)> = self.planes.iter().map(|&(n, d)| (n, d + grow)).collect();
             if let Some(vertices) = polytope_vertices(&grown) {
                 for a in 0..3 {
-                    let (min, max) = vertices.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, u), v| (l.min(v[a]), u.max(v[a])));
+                    let (min, max) = vertices
+                        .iter()
+                        .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, u), v| (l.min(v[a]), u.max(v[a])));
                     lo[a] = lo[a].max(min);
                     hi[a] = hi[a].min(max);
                 }
