@@ -82,6 +82,19 @@ fn collide(law: &str, law_params: &[(&str, f64)], against_wall: bool, speed: f64
     (out, w0)
 }
 
+/// Given as a damping ratio (YADE's KnKsPhys `betan`, thesis table 2.7's 0.071), the dashpot
+/// gives the restitution Schwager & Pöschel's solution of the clamped linear spring-dashpot
+/// predicts for that ratio, within 1 %.
+#[test]
+fn a_damping_ratio_gives_its_restitution() {
+    let beta: f64 = 0.071;
+    let predicted = (-beta * duration(beta)).exp();
+    for wall in [false, true] {
+        let (o, _) = collide("visco_elastic", &[("kn", 1e5), ("beta_n", beta)], wall, 0.5, 2e-3);
+        assert!((o.restitution - predicted).abs() < 0.01 * predicted, "wall {wall}: e = {} for {predicted}", o.restitution);
+    }
+}
+
 #[test]
 fn sphere_sphere_and_sphere_wall_hit_the_target_restitution() {
     for target in [0.5, 0.8] {

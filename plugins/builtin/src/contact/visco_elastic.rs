@@ -1,7 +1,9 @@
 //! `visco_elastic`: linear spring and dashpot in the normal direction, clamped at zero
 //! (eqs. 2.2 and 2.40), tangential spring with Coulomb friction (2.3, 2.41). The dashpot `c_n`
 //! is derived per pair from a target restitution coefficient `e_n` and the pair's effective mass,
-//! following Schwager & Pöschel (2007), as YADE's ViscElPhys does.
+//! following Schwager & Pöschel (2007), as YADE's ViscElPhys does; or from a damping ratio
+//! `beta_n`, `c_n = 2 beta_n sqrt(m* K_n)`, as YADE's KnKsPhys does for potential particles
+//! (thesis 2.2.3, Antypov & Elliott 2011).
 
 use super::linear::{read_friction, Springs, STIFFNESS_SPECS};
 use super::restitution::damping_ratio;
@@ -22,15 +24,22 @@ const SPECS: &[ParamSpec] = &[
     STIFFNESS_SPECS[3],
     ParamSpec::optional("friction", 0.0, "inter-particle friction angle in degrees, [0, 90)"),
     ParamSpec::unset("friction_max", "upper bound: friction drawn per contact pair in [friction, friction_max]"),
-    ParamSpec::required("restitution", "normal restitution coefficient e_n in (0, 1]"),
+    ParamSpec::unset("restitution", "normal restitution coefficient e_n in (0, 1] (or give `beta_n`)"),
     ParamSpec::unset("restitution_max", "upper bound: e_n drawn per contact pair in [restitution, restitution_max]"),
+    ParamSpec::unset("beta_n", "damping ratio in [0, 1): c_n = 2 beta_n sqrt(m* kn) (or give `restitution`)"),
 ];
+
+/// How the dashpot is given.
+enum Damping {
+    Restitution(Ranged),
+    Ratio(f64),
+}
 
 struct ViscoElastic {
     params: Params,
     springs: Springs,
     friction: Ranged,
-    restitution: Ranged,
+    damping: Damping,
 }
 
 impl ContactLawFactory for ViscoElasticFactory {
@@ -46,9 +55,33 @@ impl ContactLawFactory for ViscoElasticFactory {
     fn build(&self, params: Params) -> Result<Box<dyn ContactLaw>> {
         let springs = Springs::read(&params)?;
         let friction = read_friction(&params)?;
-        let restitution = Ranged::read(&params, "restitution");
-        restitution.check(&params, "restitution", 1e-6, 1.0)?;
-        Ok(Box::new(ViscoElastic { params, springs, friction, restitution }))
+        let damping = match (params.is_set("restitution"), params.is_set("beta_n")) {
+            (true, false) => {
+                let restitution = Ranged::read(&params, "restitution");
+                restitution.check(&params, "restitution", 1e-6, 1.0)?;
+                Damping::Restitution(restitution)
+            }
+            (false, true) => {
+                let beta = params.get("beta_n");
+                if !(0.0..1.0).contains(&beta) {
+                    return Err(granite_core::GraniteError::param("beta_n", beta, "the damping ratio must be in [0, 1)"));
+                }
+                Damping::Ratio(beta)
+            }
+            (true, true) => {
+                return Err(granite_core::GraniteError::Setup(format!(
+                    "{}: give `restitution` or `beta_n`, not both",
+                    params.owner()
+                )))
+            }
+            (false, false) => {
+                return Err(granite_core::GraniteError::Setup(format!(
+                    "{}: give the dashpot as `restitution` (e_n in (0, 1]) or `beta_n` (damping ratio in [0, 1))",
+                    params.owner()
+                )))
+            }
+        };
+        Ok(Box::new(ViscoElastic { params, springs, friction, damping }))
     }
 }
 
@@ -71,7 +104,10 @@ impl ContactLaw for ViscoElastic {
     fn init_pair(&self, info: &PairInfo, out: &mut [f64]) {
         let (kn, kt) = self.springs.of(info);
         let m = info.effective_mass();
-        let x = damping_ratio(self.restitution.draw(info.seed, 1));
+        let x = match &self.damping {
+            Damping::Restitution(e) => damping_ratio(e.draw(info.seed, 1)),
+            Damping::Ratio(beta) => *beta,
+        };
         out[0] = kn;
         out[1] = kt;
         out[2] = self.friction.draw(info.seed, 0).to_radians().tan();
