@@ -91,7 +91,11 @@ fn a_damping_ratio_gives_its_restitution() {
     let predicted = (-beta * duration(beta)).exp();
     for wall in [false, true] {
         let (o, _) = collide("visco_elastic", &[("kn", 1e5), ("beta_n", beta)], wall, 0.5, 2e-3);
-        assert!((o.restitution - predicted).abs() < 0.01 * predicted, "wall {wall}: e = {} for {predicted}", o.restitution);
+        assert!(
+            (o.restitution - predicted).abs() < 0.01 * predicted,
+            "wall {wall}: e = {} for {predicted}",
+            o.restitution
+        );
     }
 }
 

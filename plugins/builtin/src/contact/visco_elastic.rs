@@ -64,7 +64,11 @@ impl ContactLawFactory for ViscoElasticFactory {
             (false, true) => {
                 let beta = params.get("beta_n");
                 if !(0.0..1.0).contains(&beta) {
-                    return Err(granite_core::GraniteError::param("beta_n", beta, "the damping ratio must be in [0, 1)"));
+                    return Err(granite_core::GraniteError::param(
+                        "beta_n",
+                        beta,
+                        "the damping ratio must be in [0, 1)",
+                    ));
                 }
                 Damping::Ratio(beta)
             }
