@@ -747,24 +747,21 @@ pub fn resin_heap(shape: &str, count: usize, settle: usize) -> Result<granite_co
         sim.add_wall(Wall::new("", WallShape::Plane { normal: n }, position, resin));
     }
     sim.skin = 0.2 * bound;
-    let props = match model.potential() {
+    let (potential, template) = (model.potential(), model.members());
+    let props = match potential {
         Some(_) => None,
-        None => Some(granite_core::dem::clump::mass_properties(&model.members(), 943.0, 400)?),
+        None => Some(granite_core::dem::clump::mass_properties(&template, 943.0, 400)?),
     };
     for k in 0..count {
         let (i, j, l) = (k % across, (k / across) % across, k / (across * across));
         let c = [(1.5 + i as f64) * spacing, (1.5 + j as f64) * spacing, (0.6 + l as f64) * spacing];
         let u = [0, 1, 2].map(|a| granite_core::ext::contact::uniform(7, (3 * k + a) as u64));
-        let (members, q) = granite_core::dem::clump::place_template(&model.members(), c, u);
-        match (&props, model.potential()) {
-            (_, Some(p)) => {
-                sim.add_potential(resin, &p, c, q, [0.0; 3], false)?;
-            }
-            (Some(props), None) => {
-                sim.add_clump_with(resin, &members, &props.transformed(&q, c))?;
-            }
-            (None, None) => unreachable!("a clump shape has mass properties"),
-        }
+        let (members, q) = granite_core::dem::clump::place_template(&template, c, u);
+        match (&potential, &props) {
+            (Some(p), _) => sim.add_potential(resin, p, c, q, [0.0; 3], false)?,
+            (None, Some(props)) => sim.add_clump_with(resin, &members, &props.transformed(&q, c))?,
+            (None, None) => return Err(granite_core::GraniteError::Other(format!("shape `{shape}` has no members"))),
+        };
     }
     sim.gravity = [0.0, 0.0, -9.81];
     sim.set_damping(0.3)?;

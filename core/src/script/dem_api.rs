@@ -964,16 +964,9 @@ fn register_measures(engine: &mut Engine) {
         let positions = {
             let st = s.lock();
             let dem = &st.sim.dem;
-            // Spheres (clump members) and the potential particles' monitor points, those of fixed
-            // ones (container parts) apart.
+            // Spheres (clump members) and the free potential particles' monitor points.
             let mut positions = dem.spheres.x.clone();
-            let p = &dem.potentials;
-            if !p.is_empty() {
-                let mobile: Vec<bool> = p.fixed.iter().map(|f| !f).collect();
-                let mut free = p.clone();
-                free.retain(&mobile);
-                positions.extend(free.monitor_positions());
-            }
+            positions.extend(dem.potentials.monitor_positions());
             positions
         };
         let r = measure(&positions, &heap, d, x_min, x_max).or_rhai()?;

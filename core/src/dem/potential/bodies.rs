@@ -122,11 +122,11 @@ impl Potentials {
         self.placed.clear();
     }
 
-    /// The world positions of every particle's monitor points (see
-    /// [`PotentialShape::monitor_points`]).
+    /// The world positions of the monitor points (see [`PotentialShape::monitor_points`]) of the
+    /// free particles: fixed ones are container parts, not grains of the heap.
     pub fn monitor_positions(&self) -> Vec<Vec3> {
         let mut out = Vec::new();
-        for i in 0..self.len() {
+        for i in (0..self.len()).filter(|&i| !self.fixed[i]) {
             let rot = self.q[i].to_rotation_matrix();
             for b in &self.shape_of(i).monitor_points {
                 let w = rot * nalgebra::Vector3::new(b[0], b[1], b[2]);

@@ -101,12 +101,8 @@ impl Placed {
     /// `(1 - k)(<n . x - d>^2 / r^2 - 1) <= k`). A cheap proof of separation for long or flat
     /// particles, whose bounding spheres reach far.
     pub fn clear_of(&self, centre: Vec3, radius: f64) -> bool {
-        let [a, _] = self.weights;
-        if a <= 0.0 {
-            return false;
-        }
-        let standoff = self.standoff;
-        self.planes.iter().any(|&(n, d)| dot3(n, centre) - d > standoff + radius)
+        // At k = 1 the stand-off is infinite: the planes prove nothing.
+        self.planes.iter().any(|&(n, d)| dot3(n, centre) - d > self.standoff + radius)
     }
 
     fn value_gradient(&self, x: Vec3) -> (f64, Vector3<f64>) {
@@ -175,7 +171,7 @@ pub fn detect(a: &Placed, b: &Placed, start: Option<Solution>) -> Result<Detecti
     let Solution { point, lambda, depths } = start.unwrap_or_else(|| first_guess(a, b));
     let mut x = Vector3::new(point[0], point[1], point[2]);
     let mut lambda = lambda.clamp(0.0, 1.0);
-    let mut state = Kkt::at(a, b, x, lambda);
+    let mut state = Kkt::at(a, b, x);
     let mut steps = 0;
     loop {
         let bound = state.gap_bound(a, b, lambda);
@@ -196,7 +192,7 @@ pub fn detect(a: &Placed, b: &Placed, start: Option<Solution>) -> Result<Detecti
         let mut t = 1.0;
         loop {
             let (x_try, l_try) = (x + dx * t, (lambda + dl * t).clamp(0.0, 1.0));
-            let trial = Kkt::at(a, b, x_try, l_try);
+            let trial = Kkt::at(a, b, x_try);
             if trial.residual(l_try) < residual || t < 1e-6 {
                 (x, lambda, state) = (x_try, l_try, trial);
                 break;
@@ -226,7 +222,7 @@ struct Kkt {
 }
 
 impl Kkt {
-    fn at(a: &Placed, b: &Placed, x: Vector3<f64>, _lambda: f64) -> Kkt {
+    fn at(a: &Placed, b: &Placed, x: Vector3<f64>) -> Kkt {
         let point = [x[0], x[1], x[2]];
         let (fa, ga, ha) = a.value_gradient_hessian(point);
         let (fb, gb, hb) = b.value_gradient_hessian(point);
@@ -291,8 +287,8 @@ fn saddle_solve(h: &Matrix3<f64>, c: &Vector3<f64>, g: &Vector3<f64>, r: f64) ->
 /// convex problem, solved by Newton's method with backtracking on `L` (globally convergent). Ends
 /// with the same proven bound as [`detect`].
 fn by_bisection(a: &Placed, b: &Placed, from: Vector3<f64>) -> Result<(Vector3<f64>, f64, Kkt), NoConvergence> {
-    let minimise = |lambda: f64, mut x: Vector3<f64>| -> Kkt {
-        let mut state = Kkt::at(a, b, x, lambda);
+    let minimise = |lambda: f64, x: Vector3<f64>| -> Kkt {
+        let mut state = Kkt::at(a, b, x);
         for _ in 0..200 {
             let mu = lambda * a.modulus + (1.0 - lambda) * b.modulus;
             let g = state.lagrangian_gradient(lambda);
@@ -306,16 +302,15 @@ fn by_bisection(a: &Placed, b: &Placed, from: Vector3<f64>) -> Result<(Vector3<f
             let now = value(&state);
             let mut t = 1.0;
             loop {
-                let trial = Kkt::at(a, b, x + dx * t, lambda);
+                let trial = Kkt::at(a, b, state.x + dx * t);
                 // Armijo: enough decrease of L along the Newton direction.
                 if value(&trial) <= now + 1e-4 * t * g.dot(&dx) || t < 1e-12 {
-                    (x, state) = (x + dx * t, trial);
+                    state = trial;
                     break;
                 }
                 t *= 0.5;
             }
         }
-        state.x = x;
         state
     };
     let (mut lo, mut hi) = (0.0, 1.0);
@@ -483,7 +478,7 @@ pub const LENGTH_TOLERANCE: f64 = 1e-11;
 
 #[cfg(test)]
 mod tests {
-    use super::super::shape::{box_planes, tetrahedron_planes, PotentialShape, MASS_RESOLUTION};
+    use super::super::shape::{box_planes, PotentialShape};
     use super::*;
     use nalgebra::{Rotation3, Unit};
 
@@ -547,9 +542,7 @@ mod tests {
     #[test]
     fn a_warm_start_takes_few_steps() {
         let (r_s, r_clump) = (0.3101e-2, 0.5e-2);
-        let tetra =
-            PotentialShape::new(&tetrahedron_planes(r_clump - r_s), r_s, 2f64.sqrt() * r_s, 0.65, MASS_RESOLUTION)
-                .unwrap();
+        let tetra = PotentialShape::rounded_tetrahedron(r_s, r_clump, 2f64.sqrt() * r_s, 0.65).unwrap();
         let turn = |angle: f64| {
             Rotation3::from_axis_angle(&Unit::new_normalize(Vector3::new(1.0, 2.0, 3.0)), angle).into_inner()
         };

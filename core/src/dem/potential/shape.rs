@@ -129,6 +129,16 @@ impl PotentialShape {
         }
     }
 
+    /// The rounded tetrahedron of thesis table 2.2: faces through the centres of the 4-sphere clump
+    /// of spheres `r_sphere` inscribed in `r_clump` (`dem::clump::tetrahedral_members`), rounding
+    /// radius `r_sphere`, shadow sphere `big_r` (the thesis: `sqrt(2) r_sphere`), sphericity `k`.
+    pub fn rounded_tetrahedron(r_sphere: f64, r_clump: f64, big_r: f64, k: f64) -> Result<PotentialShape> {
+        if !(r_sphere > 0.0 && r_clump > r_sphere) {
+            return Err(GraniteError::param("r_clump", r_clump, "needs r_clump > r_sphere > 0"));
+        }
+        PotentialShape::new(&tetrahedron_planes(r_clump - r_sphere), r_sphere, big_r, k, MASS_RESOLUTION)
+    }
+
     /// `f(x)` (body frame).
     #[inline]
     pub fn value(&self, x: Vec3) -> f64 {
@@ -446,10 +456,9 @@ mod tests {
     #[test]
     fn the_thesis_tetrahedron_has_table_2_3s_volume_and_inertia() {
         let (r_s, r_clump) = (0.3101e-2, 0.5e-2);
-        let planes = tetrahedron_planes(r_clump - r_s);
         // Table 2.2's distance, from the geometry.
-        assert!((planes[0].1 - 0.00063299).abs() < 1e-8);
-        let shape = PotentialShape::new(&planes, r_s, 2f64.sqrt() * r_s, 0.65, MASS_RESOLUTION).unwrap();
+        assert!((tetrahedron_planes(r_clump - r_s)[0].1 - 0.00063299).abs() < 1e-8);
+        let shape = PotentialShape::rounded_tetrahedron(r_s, r_clump, 2f64.sqrt() * r_s, 0.65).unwrap();
         assert!((shape.volume / 3.9248e-7 - 1.0).abs() < 2e-3, "volume {}", shape.volume);
         for m in shape.inertia_per_density {
             assert!((m / 3.286e-12 - 1.0).abs() < 3e-3, "inertia / density {m}");
@@ -461,9 +470,7 @@ mod tests {
     #[test]
     fn the_tetrahedron_is_followed_by_the_clumps_sphere_centres() {
         let (r_s, r_clump) = (0.3101e-2, 0.5e-2);
-        let shape =
-            PotentialShape::new(&tetrahedron_planes(r_clump - r_s), r_s, 2f64.sqrt() * r_s, 0.65, MASS_RESOLUTION)
-                .unwrap();
+        let shape = PotentialShape::rounded_tetrahedron(r_s, r_clump, 2f64.sqrt() * r_s, 0.65).unwrap();
         let centres = crate::dem::clump::tetrahedral_members([0.0; 3], r_s, r_clump).unwrap();
         assert_eq!(shape.monitor_points.len(), 4);
         for (c, _) in centres {

@@ -147,7 +147,11 @@ impl DemSim {
         });
         match result {
             Ok(walls) => self.potential_wall_pairs = walls,
-            Err(e) => return Err(e),
+            Err(e) => {
+                // A list that failed is gone: a later step finds its pairs again.
+                self.needs_rebuild = true;
+                return Err(e);
+            }
         }
         let p = &mut self.potentials;
         let dt = motion.dt;

@@ -3,7 +3,7 @@
 //! 2.2.2.2, table 2.2) and rounded boxes (the thesis's container parts).
 
 use granite_core::dem::clump::tetrahedral_members;
-use granite_core::dem::potential::shape::{box_planes, tetrahedron_planes, PotentialShape, MASS_RESOLUTION};
+use granite_core::dem::potential::shape::{box_planes, PotentialShape, MASS_RESOLUTION};
 use granite_core::ext::{ShapeModel, ShapeModelFactory};
 use granite_core::math::Vec3;
 use granite_core::params::{ParamSpec, Params};
@@ -121,12 +121,8 @@ impl ShapeModelFactory for PotentialTetraFactory {
     }
     fn build(&self, params: Params) -> Result<Box<dyn ShapeModel>> {
         let (r_s, r_clump) = (params.positive("r_sphere")?, params.positive("r_clump")?);
-        if !(r_clump > r_s) {
-            return Err(granite_core::GraniteError::param("r_clump", r_clump, "needs r_clump > r_sphere"));
-        }
         let big_r = if params.is_set("R") { params.positive("R")? } else { 2f64.sqrt() * r_s };
-        let planes = tetrahedron_planes(r_clump - r_s);
-        let shape = PotentialShape::new(&planes, r_s, big_r, params.get("k"), MASS_RESOLUTION)?;
+        let shape = PotentialShape::rounded_tetrahedron(r_s, r_clump, big_r, params.get("k"))?;
         Ok(Box::new(Potential { name: "potential_tetra", params, shape: Arc::new(shape) }))
     }
 }
