@@ -66,6 +66,19 @@ pub fn point_bounds(points: &[Vec3]) -> (Vec3, Vec3) {
     (lo, hi)
 }
 
+/// Turns a stress by the spin of a velocity gradient over `dt`: `sigma <- R sigma R^T` with
+/// `R = exp(W dt)`, `W = (L - L^T)/2`. This integrates the Jaumann rate `sigma_dot = W sigma - sigma W`
+/// exactly for a constant spin, so a rigid rotation keeps the invariants to round-off.
+pub fn rotate_by_spin(stress: &mut Voigt, l: &Mat3, dt: f64) {
+    // Axial vector of W dt (W a = w x a): Rotation3::new turns by its length about it.
+    let w = nalgebra::Vector3::new(0.5 * (l[7] - l[5]) * dt, 0.5 * (l[2] - l[6]) * dt, 0.5 * (l[3] - l[1]) * dt);
+    if w == nalgebra::Vector3::zeros() {
+        return;
+    }
+    let r = nalgebra::Rotation3::new(w).into_inner();
+    *stress = stress_from_matrix(&(r * stress_matrix(stress) * r.transpose()));
+}
+
 /// Velocity gradient `L_ij = d v_i / d x_j` (row-major) to the Voigt strain rate with engineering shear
 /// (thesis eq. 3.36: the off-diagonal terms are `gamma_ij = L_ij + L_ji`).
 #[inline]
@@ -146,6 +159,23 @@ pub fn partition_index(range: std::ops::Range<usize>, before: impl Fn(usize) -> 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_quarter_turn_about_z_swaps_the_normal_stresses_in_x_and_y() {
+        // v = omega x (-y, x): L_xy = -omega, L_yx = omega; a quarter turn in dt = 1.
+        let omega = std::f64::consts::FRAC_PI_2;
+        let l = [0.0, -omega, 0.0, omega, 0.0, 0.0, 0.0, 0.0, 0.0];
+        let mut s = [-100.0, -30.0, -50.0, 0.0, 0.0, 0.0];
+        rotate_by_spin(&mut s, &l, 1.0);
+        let expected = [-30.0, -100.0, -50.0, 0.0, 0.0, 0.0];
+        for c in 0..6 {
+            assert!((s[c] - expected[c]).abs() < 1e-12, "{s:?}");
+        }
+        // An eighth of a turn: the shear (sxx - syy)/2 appears, with the sign of the rotation.
+        let mut s = [-100.0, -30.0, -50.0, 0.0, 0.0, 0.0];
+        rotate_by_spin(&mut s, &l, 0.5);
+        assert!((s[XY] - (-100.0 + 30.0) / 2.0).abs() < 1e-12, "{s:?}");
+    }
 
     #[test]
     fn partition_index_finds_where_a_slices_partition_point_does() {

@@ -59,3 +59,15 @@ pub fn run_text(name: &str, source: &str) -> PathBuf {
         .unwrap_or_else(|e| panic!("{name}: {e}"));
     out
 }
+
+/// Runs a script that must fail, and returns its error message.
+#[allow(dead_code)]
+pub fn run_text_err(name: &str, source: &str) -> String {
+    let out = out_dir(name);
+    let options =
+        granite_core::script::RunOptions { out_dir: out, overrides: vec![], quiet: true, ..Default::default() };
+    match granite_core::script::run_source(&format!("{name}.rhai"), source, granite::registry(), options) {
+        Ok(_) => panic!("{name}: the script ran without an error"),
+        Err(e) => e.to_string(),
+    }
+}

@@ -6,7 +6,7 @@ use crate::math::Vec3;
 use crate::mpm::boundary::{Boundary, TimeFunction};
 use crate::mpm::mesh::Mesh;
 use crate::mpm::points::Points;
-use crate::mpm::sim::{Material, MpmSim, OutOfMeshPolicy, StressScheme};
+use crate::mpm::sim::{Material, MpmSim, OutOfMeshPolicy, StressRate, StressScheme};
 use crate::registry::{ParamMap, Registry};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
@@ -40,6 +40,8 @@ struct MpmState {
     gravity: Vec3,
     damping: f64,
     scheme: StressScheme,
+    #[serde(default)]
+    stress_rate: StressRate,
     velocity_update: String,
     velocity_update_params: ParamMap,
     dt: f64,
@@ -96,6 +98,7 @@ impl MpmSim {
             gravity: self.gravity,
             damping: self.damping,
             scheme: self.scheme,
+            stress_rate: self.stress_rate,
             velocity_update: self.velocity_update.name().to_string(),
             velocity_update_params: self.velocity_update.params(),
             dt: self.dt,
@@ -155,6 +158,7 @@ impl MpmSim {
         sim.gravity = st.gravity;
         sim.damping = st.damping;
         sim.scheme = st.scheme;
+        sim.stress_rate = st.stress_rate;
         sim.dt = st.dt;
         sim.time = st.time;
         sim.step = st.step;

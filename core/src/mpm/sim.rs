@@ -38,6 +38,34 @@ impl StressScheme {
     }
 }
 
+/// The stress rate the constitutive update integrates. The thesis (like CB-Geo) adds the law's
+/// increment to the stress as it is; under large rotations that is not objective.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub enum StressRate {
+    /// `sigma_{n+1} = sigma_n + d sigma_law` (thesis eq. 3.41).
+    #[default]
+    Plain,
+    /// Jaumann: the stress is first turned with the point's spin `W = (L - L^T)/2`, exactly
+    /// (`R = exp(W dt)`), then the law adds its increment.
+    Jaumann,
+}
+
+impl StressRate {
+    pub fn parse(name: &str) -> Result<StressRate> {
+        match name.to_ascii_lowercase().as_str() {
+            "plain" | "none" => Ok(StressRate::Plain),
+            "jaumann" => Ok(StressRate::Jaumann),
+            _ => Err(GraniteError::param("stress_rate", name, "must be \"plain\" or \"jaumann\"")),
+        }
+    }
+    pub fn name(&self) -> &'static str {
+        match self {
+            StressRate::Plain => "plain",
+            StressRate::Jaumann => "jaumann",
+        }
+    }
+}
+
 /// What happens to a point that leaves the mesh (thesis 3.4.6).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub enum OutOfMeshPolicy {
@@ -82,6 +110,7 @@ pub struct MpmSim {
     /// Cundall damping coefficient D (eq. 3.26).
     pub damping: f64,
     pub scheme: StressScheme,
+    pub stress_rate: StressRate,
     pub velocity_update: Box<dyn VelocityUpdate>,
     pub dt: f64,
     pub time: f64,
@@ -112,6 +141,7 @@ impl MpmSim {
             gravity: [0.0; 3],
             damping: 0.0,
             scheme: StressScheme::Usf,
+            stress_rate: StressRate::Plain,
             velocity_update,
             dt: 0.0,
             time: 0.0,

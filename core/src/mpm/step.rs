@@ -3,13 +3,13 @@
 
 use crate::error::{GraniteError, Result};
 use crate::ext::{G2pBatch, LawBatch, VelocityUpdate};
-use crate::math::{strain_rate_from_gradient, Mat3, Vec3, Voigt};
+use crate::math::{rotate_by_spin, strain_rate_from_gradient, Mat3, Vec3, Voigt};
 use crate::mpm::boundary::Boundary;
 use crate::mpm::grid::{scatter, Grid, NodeSums, SlabIndex};
 use crate::mpm::mesh::{Location, Mesh};
 use crate::mpm::points::Points;
 use crate::mpm::shape::{Linear2, Linear3, ShapeFunction, MAX_NODES};
-use crate::mpm::sim::{Material, MpmSim, OutOfMeshPolicy, StressScheme};
+use crate::mpm::sim::{Material, MpmSim, OutOfMeshPolicy, StressRate, StressScheme};
 use rayon::prelude::*;
 
 /// Points handled per task (and per velocity-update call).
@@ -42,32 +42,33 @@ impl MpmSim {
         let pts = &mut self.points;
         let (loc, slabs, bc, g) = (&self.loc, &self.slabs, &self.boundary, self.gravity);
         let strategy = self.velocity_update.as_ref();
+        let turn = self.stress_rate == StressRate::Jaumann;
         match self.scheme {
             StressScheme::Usl => {
                 p2g::<S>(grid, mesh, slabs, pts, loc, g, affine, Maps::MassMomentumForce);
                 grid_velocity(grid, bc, self.time);
                 grid_update(grid, bc, self.damping, dt, self.time);
-                g2p::<S>(pts, grid, mesh, loc, strategy, dt, true);
+                g2p::<S>(pts, grid, mesh, loc, strategy, dt, Some(turn));
                 stress_update(pts, &mut self.materials)?;
             }
             StressScheme::Usf => {
                 p2g::<S>(grid, mesh, slabs, pts, loc, g, affine, Maps::MassMomentum);
                 grid_velocity(grid, bc, self.time);
-                strain_update::<S>(pts, &grid.velocity, mesh, loc, dt);
+                strain_update::<S>(pts, &grid.velocity, mesh, loc, dt, turn);
                 stress_update(pts, &mut self.materials)?;
                 p2g::<S>(grid, mesh, slabs, pts, loc, g, affine, Maps::Force);
                 grid_update(grid, bc, self.damping, dt, self.time);
-                g2p::<S>(pts, grid, mesh, loc, strategy, dt, false);
+                g2p::<S>(pts, grid, mesh, loc, strategy, dt, None);
             }
             StressScheme::Musl => {
                 p2g::<S>(grid, mesh, slabs, pts, loc, g, affine, Maps::MassMomentumForce);
                 grid_velocity(grid, bc, self.time);
                 grid_update(grid, bc, self.damping, dt, self.time);
-                g2p::<S>(pts, grid, mesh, loc, strategy, dt, false);
+                g2p::<S>(pts, grid, mesh, loc, strategy, dt, None);
                 // Remap the updated point momentum (positions as at the start of the step).
                 p2g::<S>(grid, mesh, slabs, pts, loc, g, affine, Maps::Momentum);
                 grid_velocity(grid, bc, t_next);
-                strain_update::<S>(pts, &grid.velocity, mesh, loc, dt);
+                strain_update::<S>(pts, &grid.velocity, mesh, loc, dt, turn);
                 stress_update(pts, &mut self.materials)?;
             }
         }
@@ -141,6 +142,9 @@ impl MpmSim {
             return Ok(());
         }
         let first = keep.iter().position(|k| !*k).unwrap_or(0);
+        if let Some(reason) = self.left_too_fast(&keep) {
+            return Err(GraniteError::Unstable { step: self.step, time: self.time, reason });
+        }
         let what = format!(
             "{lost} material point(s) left the mesh (first: point {} at {:?})",
             self.points.id[first], self.points.x[first]
@@ -154,6 +158,32 @@ impl MpmSim {
                 Ok(())
             }
         }
+    }
+}
+
+impl MpmSim {
+    /// A point that leaves the mesh faster than the CFL condition `dt (c + |v|) < h` allows has
+    /// not flowed out: the run has blown up, and deleting the point would hide it.
+    fn left_too_fast(&self, keep: &[bool]) -> Option<String> {
+        let h = (0..self.mesh.dim).map(|a| self.mesh.cell[a]).fold(f64::INFINITY, f64::min);
+        let c = self
+            .materials
+            .iter()
+            .filter(|m| m.count > 0)
+            .filter_map(|m| m.law.wave_speed(m.density))
+            .fold(0.0, f64::max);
+        let limit = (h / self.dt - c).max(0.0);
+        let p = &self.points;
+        let speed = |i: usize| p.v[i].iter().map(|x| x * x).sum::<f64>().sqrt();
+        let i = (0..keep.len()).find(|&i| !keep[i] && speed(i) > limit)?;
+        Some(format!(
+            "material point {} left the mesh at {:.4e} m/s, above the CFL limit h/dt - c_p = {limit:.4e} m/s \
+             (h = {h:.4e} m, dt = {:.4e} s, c_p = {c:.4e} m/s): the run has blown up (a smaller time step or a \
+             more dissipative velocity update may help)",
+            p.id[i],
+            speed(i),
+            self.dt
+        ))
     }
 }
 
@@ -388,7 +418,8 @@ fn velocity_gradient<S: ShapeFunction>(
     l
 }
 
-/// Strain increment (3.36-3.38) and volume update (3.39-3.40) of one point from a nodal velocity.
+/// Strain increment (3.36-3.38) and volume update (3.39-3.40) of one point from a nodal velocity;
+/// with `turn`, the stress is turned by the point's spin (the Jaumann rate) before the law adds to it.
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
 fn apply_strain<S: ShapeFunction>(
@@ -401,7 +432,11 @@ fn apply_strain<S: ShapeFunction>(
     dstrain: &mut Voigt,
     strain: &mut Voigt,
     volume: &mut f64,
+    turn: Option<&mut Voigt>,
 ) {
+    if let Some(stress) = turn {
+        rotate_by_spin(stress, l, dt);
+    }
     let rate = strain_rate_from_gradient(l);
     for c in 0..6 {
         dstrain[c] = rate[c] * dt;
@@ -419,24 +454,30 @@ fn centre_gradients<S: ShapeFunction>(mesh: &Mesh) -> [Vec3; MAX_NODES] {
 }
 
 /// Strain and volume update from a nodal velocity field (USF: V^i, MUSL: remapped velocity).
-fn strain_update<S: ShapeFunction>(pts: &mut Points, vel: &[Vec3], mesh: &Mesh, loc: &[Location], dt: f64) {
+fn strain_update<S: ShapeFunction>(pts: &mut Points, vel: &[Vec3], mesh: &Mesh, loc: &[Location], dt: f64, turn: bool) {
     let off = node_offsets::<S>(mesh);
     let dn0 = centre_gradients::<S>(mesh);
-    (pts.dstrain.par_iter_mut(), pts.strain.par_iter_mut(), pts.volume.par_iter_mut(), loc.par_iter())
+    (
+        pts.dstrain.par_iter_mut(),
+        pts.strain.par_iter_mut(),
+        pts.volume.par_iter_mut(),
+        pts.stress.par_iter_mut(),
+        loc.par_iter(),
+    )
         .into_par_iter()
         .with_min_len(MIN_PER_TASK)
-        .for_each(|(de, e, vol, l)| {
+        .for_each(|(de, e, vol, stress, l)| {
             let mut n = [0.0; MAX_NODES];
             let mut dn = [[0.0; 3]; MAX_NODES];
             S::eval(l.xi, mesh.cell, &mut n, &mut dn);
             let base = mesh.cell_base_node(l.cell);
             let lg = velocity_gradient::<S>(vel, base, &off, &dn);
-            apply_strain::<S>(&lg, vel, base, &off, &dn0, dt, de, e, vol);
+            apply_strain::<S>(&lg, vel, base, &off, &dn0, dt, de, e, vol, turn.then_some(stress));
         });
 }
 
-/// Grid-to-particle transfer (3.28-3.34 through the velocity-update strategy) and, for USL, the
-/// strain from the updated grid velocity.
+/// Grid-to-particle transfer (3.28-3.34 through the velocity-update strategy) and, for USL
+/// (`strain` is `Some(turn)`), the strain from the updated grid velocity.
 fn g2p<S: ShapeFunction>(
     pts: &mut Points,
     grid: &Grid,
@@ -444,8 +485,10 @@ fn g2p<S: ShapeFunction>(
     loc: &[Location],
     strategy: &dyn VelocityUpdate,
     dt: f64,
-    with_strain: bool,
+    strain: Option<bool>,
 ) {
+    let with_strain = strain.is_some();
+    let turn = strain == Some(true);
     let off = node_offsets::<S>(mesh);
     let dn0 = centre_gradients::<S>(mesh);
     let affine = strategy.affine();
@@ -458,11 +501,12 @@ fn g2p<S: ShapeFunction>(
         pts.dstrain.par_chunks_mut(CHUNK),
         pts.strain.par_chunks_mut(CHUNK),
         pts.volume.par_chunks_mut(CHUNK),
+        pts.stress.par_chunks_mut(CHUNK),
         loc.par_chunks(CHUNK),
     )
         .into_par_iter()
         .with_min_len(MIN_CHUNKS_PER_TASK)
-        .for_each(|(x, v, c, de, e, vol, l)| {
+        .for_each(|(x, v, c, de, e, vol, stress, l)| {
             let len = x.len();
             let mut v_pic = [[0.0; 3]; CHUNK];
             let mut dv = [[0.0; 3]; CHUNK];
@@ -489,7 +533,8 @@ fn g2p<S: ShapeFunction>(
                         c[p] = lg;
                     }
                     if with_strain {
-                        apply_strain::<S>(&lg, vel, base, &off, &dn0, dt, &mut de[p], &mut e[p], &mut vol[p]);
+                        let turned = turn.then_some(&mut stress[p]);
+                        apply_strain::<S>(&lg, vel, base, &off, &dn0, dt, &mut de[p], &mut e[p], &mut vol[p], turned);
                     }
                 }
             }

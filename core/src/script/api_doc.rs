@@ -82,6 +82,7 @@ pub static API: &[ApiDoc] = &[
     f("MpmSim", "initial_stress", &["sim.initial_stress([sxx, syy, szz, sxy, syz, sxz])"], NONE, "a uniform stress on every point (tension positive)"),
     f("MpmSim", "geostatic_stress", &["sim.geostatic_stress(surface, k0)"], NONE, "vertical stress -rho g (surface - height), horizontal k0 times it"),
     f("MpmSim", "scheme", &["sim.scheme(\"USF\" | \"USL\" | \"MUSL\")"], NONE, "stress update scheme"),
+    f("MpmSim", "stress_rate", &["sim.stress_rate(\"plain\" | \"jaumann\")"], NONE, "the stress rate the laws integrate: plain increments (the thesis, default) or Jaumann (the stress turned with the point's spin first)"),
     f("MpmSim", "velocity_update", &["sim.velocity_update(name)", "sim.velocity_update(name, #{ flip_ratio })"], &["flip_ratio"], "PIC, FLIP, NFLIP, FLIPX, NFLIPX or APIC"),
     f("MpmSim", "mesh", &["sim.mesh(#{ origin, cell, cells })"], MESH, "replaces the mesh; points stay, boundary conditions are cleared"),
     f("MpmSim", "on_leave", &["sim.on_leave(\"delete\" | \"stop\")"], NONE, "what happens to points leaving the mesh"),

@@ -12,7 +12,7 @@ use crate::math::{deviatoric_strain_norm, p_q, Vec3, Voigt};
 use crate::mpm::boundary::{Face, FrictionConstraint, NodalForce, TimeFunction, VelocityConstraint};
 use crate::mpm::fill::{cell_points, Layout};
 use crate::mpm::sim::Snapshot;
-use crate::mpm::{Boundary, Mesh, MpmSim, OutOfMeshPolicy, StressScheme};
+use crate::mpm::{Boundary, Mesh, MpmSim, OutOfMeshPolicy, StressRate, StressScheme};
 use crate::registry::ParamMap;
 use rhai::{Array, Dynamic, Engine, FnPtr, Map, NativeCallContext};
 use std::io::Write;
@@ -716,6 +716,10 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
     });
     engine.register_fn("scheme", |s: &mut SimHandle, name: &str| {
         s.lock().sim.mpm.scheme = StressScheme::parse(name).or_rhai()?;
+        Ok::<_, Box<rhai::EvalAltResult>>(())
+    });
+    engine.register_fn("stress_rate", |s: &mut SimHandle, name: &str| {
+        s.lock().sim.mpm.stress_rate = StressRate::parse(name).or_rhai()?;
         Ok::<_, Box<rhai::EvalAltResult>>(())
     });
     fn set_update(s: &mut SimHandle, name: &str, opts: Map) -> RhaiResult<()> {
