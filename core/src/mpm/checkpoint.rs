@@ -6,7 +6,7 @@ use crate::math::Vec3;
 use crate::mpm::boundary::{Boundary, TimeFunction};
 use crate::mpm::mesh::Mesh;
 use crate::mpm::points::Points;
-use crate::mpm::sim::{Material, MpmSim, OutOfMeshPolicy, StressRate, StressScheme};
+use crate::mpm::sim::{Material, MpmSim, OutOfMeshPolicy, ShapeFunctions, StressRate, StressScheme};
 use crate::registry::{ParamMap, Registry};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
@@ -42,6 +42,8 @@ struct MpmState {
     scheme: StressScheme,
     #[serde(default)]
     stress_rate: StressRate,
+    #[serde(default)]
+    shape: ShapeFunctions,
     velocity_update: String,
     velocity_update_params: ParamMap,
     dt: f64,
@@ -99,6 +101,7 @@ impl MpmSim {
             damping: self.damping,
             scheme: self.scheme,
             stress_rate: self.stress_rate,
+            shape: self.shape,
             velocity_update: self.velocity_update.name().to_string(),
             velocity_update_params: self.velocity_update.params(),
             dt: self.dt,
@@ -159,6 +162,7 @@ impl MpmSim {
         sim.damping = st.damping;
         sim.scheme = st.scheme;
         sim.stress_rate = st.stress_rate;
+        sim.shape = st.shape;
         sim.dt = st.dt;
         sim.time = st.time;
         sim.step = st.step;

@@ -1,12 +1,15 @@
 //! Nodal fields and the deterministic parallel particle-to-grid scatter.
 //!
-//! Points are bucketed by slab (layer of cells along the last axis, see [`Mesh`]). Slabs of equal
-//! parity touch disjoint node planes, so all even slabs scatter in parallel, then all odd ones.
-//! Every node therefore sums its contributions in the same order whatever the thread count:
-//! results are bit-identical for 1 or N threads, without f64 atomics.
+//! A point talks to a window of `span` node planes along the last axis (2 for linear shape
+//! functions, 3 or 4 for GIMP and B-splines). Points are bucketed by slab, the first plane of
+//! their window; slabs `span` apart touch disjoint node planes, so slabs of one colour (their
+//! index modulo `span`) scatter in parallel, one colour after the other. Every node therefore
+//! sums its contributions in the same order whatever the thread count: results are
+//! bit-identical for 1 or N threads, without f64 atomics.
 
 use crate::math::Vec3;
-use crate::mpm::mesh::{Location, Mesh};
+use crate::mpm::mesh::Mesh;
+use crate::mpm::shape::Weights;
 use rayon::prelude::*;
 
 /// What points scatter to a node.
@@ -44,26 +47,28 @@ pub struct SlabIndex {
     pub order: Vec<u32>,
     /// `order[start[s]..start[s + 1]]` are the points in slab `s`.
     pub start: Vec<usize>,
+    /// Node planes of a window.
+    pub span: usize,
 }
 
 impl SlabIndex {
-    /// Counting sort of the points by slab (stable, so deterministic).
-    pub fn build(&mut self, mesh: &Mesh, loc: &[Location]) {
-        let slabs = mesh.slab_count();
+    /// Counting sort of the points by slab (stable, so deterministic); `span` node planes per window.
+    pub fn build(&mut self, mesh: &Mesh, span: usize, points: usize, slab_of: impl Fn(usize) -> usize) {
+        let slabs = mesh.cells[mesh.slab_axis()] + 2 - span;
+        self.span = span;
         self.start.clear();
         self.start.resize(slabs + 1, 0);
-        let stride = mesh.cells[0] * if mesh.dim == 3 { mesh.cells[1] } else { 1 };
-        for l in loc {
-            self.start[l.cell as usize / stride + 1] += 1;
+        for p in 0..points {
+            self.start[slab_of(p) + 1] += 1;
         }
         for s in 0..slabs {
             self.start[s + 1] += self.start[s];
         }
         let mut next = self.start.clone();
         self.order.clear();
-        self.order.resize(loc.len(), 0);
-        for (p, l) in loc.iter().enumerate() {
-            let s = l.cell as usize / stride;
+        self.order.resize(points, 0);
+        for p in 0..points {
+            let s = slab_of(p);
             self.order[next[s]] = p as u32;
             next[s] += 1;
         }
@@ -72,27 +77,33 @@ impl SlabIndex {
     pub fn slab(&self, s: usize) -> &[u32] {
         &self.order[self.start[s]..self.start[s + 1]]
     }
+
+    pub fn slab_count(&self) -> usize {
+        self.start.len().saturating_sub(1)
+    }
 }
 
-/// Runs `add(point, window, window_first_node)` for every point, where `window` is the slice of
-/// nodal sums covering the two node planes of the point's slab.
+/// Runs `add(point, window, window_first_node, scratch)` for every point, where `window` is the
+/// slice of nodal sums covering the node planes of the point's slab, and `scratch` weights to
+/// reuse (one per task: they are large for the wider shape functions).
 pub fn scatter<F>(sums: &mut [NodeSums], mesh: &Mesh, slabs: &SlabIndex, add: F)
 where
-    F: Fn(usize, &mut [NodeSums], usize) + Sync,
+    F: Fn(usize, &mut [NodeSums], usize, &mut Weights) + Sync,
 {
     let plane = mesh.nodes_per_plane();
-    let nslabs = mesh.slab_count();
+    let (nslabs, span) = (slabs.slab_count(), slabs.span);
     // Enough slabs per task that a task has a few thousand points to scatter.
     let per_slab = slabs.order.len() / nslabs.max(1);
     let min_windows = (4096 / per_slab.max(1)).max(1);
-    for parity in 0..2 {
-        let body = &mut sums[parity * plane..];
-        body.par_chunks_mut(2 * plane).enumerate().with_min_len(min_windows).for_each(|(j, window)| {
-            let s = 2 * j + parity;
+    for colour in 0..span.min(nslabs) {
+        let body = &mut sums[colour * plane..];
+        body.par_chunks_mut(span * plane).enumerate().with_min_len(min_windows).for_each(|(j, window)| {
+            let s = span * j + colour;
             if s < nslabs {
                 let first = s * plane;
+                let mut scratch = Weights::default();
                 for &p in slabs.slab(s) {
-                    add(p as usize, window, first);
+                    add(p as usize, window, first, &mut scratch);
                 }
             }
         });

@@ -17,11 +17,11 @@ pub struct Mesh {
     pub cells: [usize; 3],
 }
 
-/// Where a point sits: its cell and its local coordinates in [-1, 1] (thesis eq. 3.10).
+/// Where a point sits: its position in cell lengths from the origin along each axis, in
+/// `[0, cells]` (nodes at the integers; 0 on the unused z axis of 2D meshes).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Location {
-    pub cell: u32,
-    pub xi: Vec3,
+    pub t: Vec3,
 }
 
 impl Mesh {
@@ -120,32 +120,17 @@ impl Mesh {
         [c % self.cells[0], (c / self.cells[0]) % self.cells[1], c / (self.cells[0] * self.cells[1])]
     }
 
-    /// Index of the node at the lower corner of a cell (its node 0).
-    pub fn cell_base_node(&self, cell: u32) -> usize {
-        self.node_index(self.cell_ijk(cell))
-    }
-
-    pub fn cell_slab(&self, cell: u32) -> usize {
-        self.cell_ijk(cell)[self.slab_axis()]
-    }
-
-    /// Cell and local coordinates of a position; `None` outside the mesh. Points on the upper
-    /// boundary belong to the last cell.
+    /// Cell coordinates of a position; `None` outside the mesh (its boundary belongs to it).
     #[inline]
     pub fn locate(&self, x: Vec3) -> Option<Location> {
-        let mut ijk = [0usize; 3];
-        let mut xi = [0.0; 3];
+        let mut t = [0.0; 3];
         for a in 0..self.dim {
-            let t = (x[a] - self.origin[a]) / self.cell[a];
-            if !(t >= 0.0 && t <= self.cells[a] as f64) {
+            t[a] = (x[a] - self.origin[a]) / self.cell[a];
+            if !(t[a] >= 0.0 && t[a] <= self.cells[a] as f64) {
                 return None;
             }
-            let c = (t.floor() as usize).min(self.cells[a] - 1);
-            ijk[a] = c;
-            xi[a] = 2.0 * (t - c as f64) - 1.0;
         }
-        let cell = ijk[0] + self.cells[0] * (ijk[1] + self.cells[1] * ijk[2]);
-        Some(Location { cell: cell as u32, xi })
+        Some(Location { t })
     }
 
     pub fn contains(&self, x: Vec3) -> bool {
@@ -158,14 +143,12 @@ mod tests {
     use super::*;
 
     #[test]
-    fn locate_maps_cell_corners_to_local_minus_one_and_one() {
+    fn locate_gives_cell_coordinates_and_keeps_the_boundary_in_the_mesh() {
         let m = Mesh::new(2, [1.0, 2.0, 0.0], [0.5, 0.25, 1.0], [4, 8, 1]).unwrap();
-        let loc = m.locate([1.5, 2.25, 0.0]).unwrap();
-        assert_eq!(m.cell_ijk(loc.cell), [1, 1, 0]);
-        assert!((loc.xi[0] + 1.0).abs() < 1e-12 && (loc.xi[1] + 1.0).abs() < 1e-12);
+        let loc = m.locate([1.5, 2.3, 0.0]).unwrap();
+        assert!((loc.t[0] - 1.0).abs() < 1e-12 && (loc.t[1] - 1.2).abs() < 1e-12 && loc.t[2] == 0.0);
         let top = m.locate(m.upper()).unwrap();
-        assert_eq!(m.cell_ijk(top.cell), [3, 7, 0]);
-        assert!((top.xi[0] - 1.0).abs() < 1e-12);
+        assert!((top.t[0] - 4.0).abs() < 1e-12 && (top.t[1] - 8.0).abs() < 1e-12);
         assert!(m.locate([0.99, 2.5, 0.0]).is_none());
     }
 }

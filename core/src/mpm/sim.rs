@@ -66,6 +66,91 @@ impl StressRate {
     }
 }
 
+/// The shape functions of the mesh (see `shape.rs`).
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub enum ShapeFunctions {
+    /// Thesis eqs. 3.11-3.16.
+    #[default]
+    Linear,
+    /// uGIMP with points of a fixed size: `half_length` (m) is half a point's side.
+    Gimp {
+        half_length: f64,
+    },
+    QuadraticBspline,
+    CubicBspline,
+}
+
+impl ShapeFunctions {
+    pub const NAMES: &'static str = "\"linear\", \"gimp\", \"bspline2\" or \"bspline3\"";
+
+    /// `half_length` is needed for GIMP only.
+    pub fn parse(name: &str, half_length: Option<f64>) -> Result<ShapeFunctions> {
+        match name.to_ascii_lowercase().as_str() {
+            "linear" => Ok(ShapeFunctions::Linear),
+            "gimp" => match half_length {
+                Some(h) if h > 0.0 && h.is_finite() => Ok(ShapeFunctions::Gimp { half_length: h }),
+                Some(h) => Err(GraniteError::param("point_size", 2.0 * h, "must be > 0")),
+                None => Err(GraniteError::Setup(
+                    "GIMP needs the size of a point: give #{ point_size } or create the points first".into(),
+                )),
+            },
+            "bspline2" => Ok(ShapeFunctions::QuadraticBspline),
+            "bspline3" => Ok(ShapeFunctions::CubicBspline),
+            _ => Err(GraniteError::param("shape_functions", name, &format!("must be {}", Self::NAMES))),
+        }
+    }
+
+    pub fn name(&self) -> &'static str {
+        match self {
+            ShapeFunctions::Linear => "linear",
+            ShapeFunctions::Gimp { .. } => "gimp",
+            ShapeFunctions::QuadraticBspline => "bspline2",
+            ShapeFunctions::CubicBspline => "bspline3",
+        }
+    }
+
+    /// Nodes a point talks to along one axis.
+    pub fn span(&self) -> usize {
+        match self {
+            ShapeFunctions::Linear => 2,
+            ShapeFunctions::Gimp { .. } | ShapeFunctions::QuadraticBspline => 3,
+            ShapeFunctions::CubicBspline => 4,
+        }
+    }
+
+    /// Whether a mesh is large enough, and for GIMP whether its points fit a cell: a point
+    /// larger than a cell would talk to more than three nodes per axis.
+    pub fn check(&self, mesh: &Mesh) -> Result<()> {
+        let fewest = (0..mesh.dim).map(|a| mesh.cells[a]).min().unwrap_or(1);
+        if fewest + 1 < self.span() {
+            return Err(GraniteError::Setup(format!(
+                "{} shape functions need at least {} cells along every axis; this mesh has {fewest}",
+                self.name(),
+                self.span() - 1
+            )));
+        }
+        if let ShapeFunctions::Gimp { half_length } = self {
+            let h = (0..mesh.dim).map(|a| mesh.cell[a]).fold(f64::INFINITY, f64::min);
+            if 2.0 * half_length > h * (1.0 + 1e-12) {
+                return Err(GraniteError::param(
+                    "point_size",
+                    2.0 * half_length,
+                    &format!("GIMP points must not be larger than a cell ({h} m)"),
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// Half a point's size in cells along each axis (GIMP; zero for the others).
+    pub fn half_in_cells(&self, mesh: &Mesh) -> Vec3 {
+        match self {
+            ShapeFunctions::Gimp { half_length } => [0, 1, 2].map(|a| half_length / mesh.cell[a]),
+            _ => [0.0; 3],
+        }
+    }
+}
+
 /// What happens to a point that leaves the mesh (thesis 3.4.6).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub enum OutOfMeshPolicy {
@@ -111,6 +196,7 @@ pub struct MpmSim {
     pub damping: f64,
     pub scheme: StressScheme,
     pub stress_rate: StressRate,
+    pub shape: ShapeFunctions,
     pub velocity_update: Box<dyn VelocityUpdate>,
     pub dt: f64,
     pub time: f64,
@@ -142,6 +228,7 @@ impl MpmSim {
             damping: 0.0,
             scheme: StressScheme::Usf,
             stress_rate: StressRate::Plain,
+            shape: ShapeFunctions::Linear,
             velocity_update,
             dt: 0.0,
             time: 0.0,
@@ -328,6 +415,7 @@ impl MpmSim {
     pub fn validate(&self) -> Result<()> {
         crate::params::require_time_step(self.dt)?;
         self.check_dt(self.dt)?;
+        self.shape.check(&self.mesh)?;
         if !(self.damping >= 0.0 && self.damping < 1.0) {
             return Err(GraniteError::param("damping", self.damping, "must be in [0, 1)"));
         }

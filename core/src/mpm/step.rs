@@ -8,8 +8,11 @@ use crate::mpm::boundary::Boundary;
 use crate::mpm::grid::{scatter, Grid, NodeSums, SlabIndex};
 use crate::mpm::mesh::{Location, Mesh};
 use crate::mpm::points::Points;
-use crate::mpm::shape::{Linear2, Linear3, ShapeFunction, MAX_NODES};
-use crate::mpm::sim::{Material, MpmSim, OutOfMeshPolicy, StressRate, StressScheme};
+use crate::mpm::shape::{
+    first_plane, node_offsets, Basis, CubicBspline, Gimp, Linear, QuadraticBspline, ShapeFunction, Tensor, Weights,
+    MAX_NODES,
+};
+use crate::mpm::sim::{Material, MpmSim, OutOfMeshPolicy, ShapeFunctions, StressRate, StressScheme};
 use rayon::prelude::*;
 
 /// Points handled per task (and per velocity-update call).
@@ -21,54 +24,75 @@ const MIN_CHUNKS_PER_TASK: usize = MIN_PER_TASK / CHUNK;
 /// Nodes lighter than this fraction of the lightest point are treated as empty.
 const MASS_EPS: f64 = 1e-12;
 
+/// Calls `$sim.$method::<S>()` with the shape functions `S` of the simulation's choice and mesh.
+macro_rules! with_shape_functions {
+    ($sim:expr, $method:ident) => {
+        match ($sim.shape, $sim.mesh.dim) {
+            (ShapeFunctions::Linear, 3) => $sim.$method::<Tensor<Linear, 3>>(),
+            (ShapeFunctions::Linear, _) => $sim.$method::<Tensor<Linear, 2>>(),
+            (ShapeFunctions::Gimp { .. }, 3) => $sim.$method::<Tensor<Gimp, 3>>(),
+            (ShapeFunctions::Gimp { .. }, _) => $sim.$method::<Tensor<Gimp, 2>>(),
+            (ShapeFunctions::QuadraticBspline, 3) => $sim.$method::<Tensor<QuadraticBspline, 3>>(),
+            (ShapeFunctions::QuadraticBspline, _) => $sim.$method::<Tensor<QuadraticBspline, 2>>(),
+            (ShapeFunctions::CubicBspline, 3) => $sim.$method::<Tensor<CubicBspline, 3>>(),
+            (ShapeFunctions::CubicBspline, _) => $sim.$method::<Tensor<CubicBspline, 2>>(),
+        }
+    };
+}
+
 impl MpmSim {
     /// Advances the simulation by one time step.
     pub fn step(&mut self) -> Result<()> {
-        match self.mesh.dim {
-            3 => self.step_with::<Linear3>(),
-            _ => self.step_with::<Linear2>(),
-        }
+        with_shape_functions!(self, step_with)
+    }
+
+    /// Locates the points and sorts them into slabs for the scatter.
+    fn place<S: ShapeFunction>(&mut self) -> Result<()> {
+        self.shape.check(&self.mesh)?;
+        locate(&self.mesh, &self.points, &mut self.loc)?;
+        self.grid.resize(self.mesh.node_count());
+        let (mesh, loc) = (&self.mesh, &self.loc);
+        self.slabs.build(mesh, S::SPAN, loc.len(), |p| first_plane::<S>(mesh, loc[p].t));
+        Ok(())
     }
 
     fn step_with<S: ShapeFunction>(&mut self) -> Result<()> {
         let dt = self.dt;
         let t_next = self.time + dt;
-        locate(&self.mesh, &self.points, &mut self.loc)?;
-        self.grid.resize(self.mesh.node_count());
-        self.slabs.build(&self.mesh, &self.loc);
+        self.place::<S>()?;
         let affine = self.velocity_update.affine();
-        let mesh = &self.mesh;
+        let at = Placement { mesh: &self.mesh, loc: &self.loc, half: self.shape.half_in_cells(&self.mesh) };
         let grid = &mut self.grid;
         let pts = &mut self.points;
-        let (loc, slabs, bc, g) = (&self.loc, &self.slabs, &self.boundary, self.gravity);
+        let (slabs, bc, g) = (&self.slabs, &self.boundary, self.gravity);
         let strategy = self.velocity_update.as_ref();
         let turn = self.stress_rate == StressRate::Jaumann;
         match self.scheme {
             StressScheme::Usl => {
-                p2g::<S>(grid, mesh, slabs, pts, loc, g, affine, Maps::MassMomentumForce);
+                p2g::<S>(grid, &at, slabs, pts, g, affine, Maps::MassMomentumForce);
                 grid_velocity(grid, bc, self.time);
                 grid_update(grid, bc, self.damping, dt, self.time);
-                g2p::<S>(pts, grid, mesh, loc, strategy, dt, Some(turn));
+                g2p::<S>(pts, grid, &at, strategy, dt, Some(turn));
                 stress_update(pts, &mut self.materials)?;
             }
             StressScheme::Usf => {
-                p2g::<S>(grid, mesh, slabs, pts, loc, g, affine, Maps::MassMomentum);
+                p2g::<S>(grid, &at, slabs, pts, g, affine, Maps::MassMomentum);
                 grid_velocity(grid, bc, self.time);
-                strain_update::<S>(pts, &grid.velocity, mesh, loc, dt, turn);
+                strain_update::<S>(pts, &grid.velocity, &at, dt, turn);
                 stress_update(pts, &mut self.materials)?;
-                p2g::<S>(grid, mesh, slabs, pts, loc, g, affine, Maps::Force);
+                p2g::<S>(grid, &at, slabs, pts, g, affine, Maps::Force);
                 grid_update(grid, bc, self.damping, dt, self.time);
-                g2p::<S>(pts, grid, mesh, loc, strategy, dt, None);
+                g2p::<S>(pts, grid, &at, strategy, dt, None);
             }
             StressScheme::Musl => {
-                p2g::<S>(grid, mesh, slabs, pts, loc, g, affine, Maps::MassMomentumForce);
+                p2g::<S>(grid, &at, slabs, pts, g, affine, Maps::MassMomentumForce);
                 grid_velocity(grid, bc, self.time);
                 grid_update(grid, bc, self.damping, dt, self.time);
-                g2p::<S>(pts, grid, mesh, loc, strategy, dt, None);
+                g2p::<S>(pts, grid, &at, strategy, dt, None);
                 // Remap the updated point momentum (positions as at the start of the step).
-                p2g::<S>(grid, mesh, slabs, pts, loc, g, affine, Maps::Momentum);
+                p2g::<S>(grid, &at, slabs, pts, g, affine, Maps::Momentum);
                 grid_velocity(grid, bc, t_next);
-                strain_update::<S>(pts, &grid.velocity, mesh, loc, dt, turn);
+                strain_update::<S>(pts, &grid.velocity, &at, dt, turn);
                 stress_update(pts, &mut self.materials)?;
             }
         }
@@ -86,16 +110,16 @@ impl MpmSim {
     /// Maps the points' mass, momentum and forces to the grid (eqs. 3.17, 3.18, 3.21, 3.23) without
     /// advancing time, and returns the nodal sums: for inspection and conservation checks.
     pub fn map_to_grid(&mut self) -> Result<&[NodeSums]> {
-        locate(&self.mesh, &self.points, &mut self.loc)?;
-        self.grid.resize(self.mesh.node_count());
-        self.slabs.build(&self.mesh, &self.loc);
-        let affine = self.velocity_update.affine();
-        let (mesh, pts, loc, slabs) = (&self.mesh, &self.points, &self.loc, &self.slabs);
-        match mesh.dim {
-            3 => p2g::<Linear3>(&mut self.grid, mesh, slabs, pts, loc, self.gravity, affine, Maps::MassMomentumForce),
-            _ => p2g::<Linear2>(&mut self.grid, mesh, slabs, pts, loc, self.gravity, affine, Maps::MassMomentumForce),
-        }
+        with_shape_functions!(self, map_with)?;
         Ok(&self.grid.sums)
+    }
+
+    fn map_with<S: ShapeFunction>(&mut self) -> Result<()> {
+        self.place::<S>()?;
+        let affine = self.velocity_update.affine();
+        let at = Placement { mesh: &self.mesh, loc: &self.loc, half: self.shape.half_in_cells(&self.mesh) };
+        p2g::<S>(&mut self.grid, &at, &self.slabs, &self.points, self.gravity, affine, Maps::MassMomentumForce);
+        Ok(())
     }
 
     /// Stops a run whose points stopped being finite, or move faster than a cell per step: past
@@ -189,7 +213,7 @@ impl MpmSim {
 
 /// Cell and local coordinates of every point (eq. 3.10).
 fn locate(mesh: &Mesh, points: &Points, loc: &mut Vec<Location>) -> Result<()> {
-    loc.resize(points.len(), Location { cell: 0, xi: [0.0; 3] });
+    loc.resize(points.len(), Location { t: [0.0; 3] });
     let outside = loc
         .par_iter_mut()
         .zip(points.x.par_iter())
@@ -208,14 +232,21 @@ fn locate(mesh: &Mesh, points: &Points, loc: &mut Vec<Location>) -> Result<()> {
     Ok(())
 }
 
-/// Node index offsets, relative to a cell's first node, of the nodes a point talks to.
-fn node_offsets<S: ShapeFunction>(mesh: &Mesh) -> [usize; MAX_NODES] {
-    let n = mesh.nodes_per_axis();
-    let mut off = [0; MAX_NODES];
-    for (k, o) in S::offsets().iter().enumerate() {
-        off[k] = o[0] + n[0] * (o[1] + n[1] * o[2]);
+/// Where the points are, and what the shape functions need besides.
+struct Placement<'a> {
+    mesh: &'a Mesh,
+    loc: &'a [Location],
+    /// GIMP's half point length in cells per axis.
+    half: Vec3,
+}
+
+impl Placement<'_> {
+    /// Weights of point `p`, and the index of its window's first node.
+    #[inline(always)]
+    fn weights<S: ShapeFunction>(&self, p: usize, w: &mut Weights) -> usize {
+        S::eval(self.loc[p].t, self.mesh, self.half, w);
+        self.mesh.node_index(w.first)
     }
-    off
 }
 
 #[derive(Clone, Copy, PartialEq, Eq)]
@@ -228,13 +259,11 @@ enum Maps {
 
 /// Particle-to-grid transfer: mass (3.17), momentum (3.18, with the APIC affine term when asked),
 /// gravity (3.21) and internal force (3.23) from the points' current stress.
-#[allow(clippy::too_many_arguments)]
 fn p2g<S: ShapeFunction>(
     grid: &mut Grid,
-    mesh: &Mesh,
+    at: &Placement,
     slabs: &SlabIndex,
     pts: &Points,
-    loc: &[Location],
     gravity: Vec3,
     affine: bool,
     maps: Maps,
@@ -256,14 +285,9 @@ fn p2g<S: ShapeFunction>(
             s.force = [0.0; 3];
         }
     });
-    let off = node_offsets::<S>(mesh);
-    let h = mesh.cell;
-    scatter(&mut grid.sums, mesh, slabs, |p, window: &mut [NodeSums], first| {
-        let l = loc[p];
-        let mut n = [0.0; MAX_NODES];
-        let mut dn = [[0.0; 3]; MAX_NODES];
-        S::eval(l.xi, h, &mut n, &mut dn);
-        let base = mesh.cell_base_node(l.cell) - first;
+    let off = node_offsets::<S>(at.mesh);
+    scatter(&mut grid.sums, at.mesh, slabs, |p, window: &mut [NodeSums], first, w| {
+        let base = at.weights::<S>(p, w) - first;
         let m = pts.mass[p];
         let v = pts.v[p];
         let c = &pts.affine[p];
@@ -271,34 +295,27 @@ fn p2g<S: ShapeFunction>(
         let vol = pts.volume[p];
         for k in 0..S::NODES {
             let node = &mut window[base + off[k]];
-            let w = n[k];
+            let n = w.n[k];
             if do_mass {
-                node.mass += m * w;
+                node.mass += m * n;
             }
             if do_momentum {
                 let mut vk = v;
                 if affine {
-                    // x_i - x_p in global coordinates, from the local position in the cell.
-                    let o = S::offsets()[k];
-                    let d = [
-                        (o[0] as f64 - 0.5 * (l.xi[0] + 1.0)) * h[0],
-                        (o[1] as f64 - 0.5 * (l.xi[1] + 1.0)) * h[1],
-                        (o[2] as f64 - 0.5 * (l.xi[2] + 1.0)) * h[2],
-                    ];
-                    let d = if mesh.dim == 2 { [d[0], d[1], 0.0] } else { d };
+                    let d = w.d[k];
                     for a in 0..3 {
                         vk[a] += c[3 * a] * d[0] + c[3 * a + 1] * d[1] + c[3 * a + 2] * d[2];
                     }
                 }
                 for a in 0..3 {
-                    node.momentum[a] += m * w * vk[a];
+                    node.momentum[a] += m * n * vk[a];
                 }
             }
             if do_force {
-                let g = dn[k];
-                node.force[0] += m * w * gravity[0] - vol * (s[0] * g[0] + s[3] * g[1] + s[5] * g[2]);
-                node.force[1] += m * w * gravity[1] - vol * (s[3] * g[0] + s[1] * g[1] + s[4] * g[2]);
-                node.force[2] += m * w * gravity[2] - vol * (s[5] * g[0] + s[4] * g[1] + s[2] * g[2]);
+                let g = w.dn[k];
+                node.force[0] += m * n * gravity[0] - vol * (s[0] * g[0] + s[3] * g[1] + s[5] * g[2]);
+                node.force[1] += m * n * gravity[1] - vol * (s[3] * g[0] + s[1] * g[1] + s[4] * g[2]);
+                node.force[2] += m * n * gravity[2] - vol * (s[5] * g[0] + s[4] * g[1] + s[2] * g[2]);
             }
         }
     });
@@ -399,12 +416,7 @@ fn grid_update(grid: &mut Grid, bc: &Boundary, damping: f64, dt: f64, t: f64) {
 
 /// Velocity gradient `L_ab = sum_i v_i,a dN_i/dx_b` at a point.
 #[inline(always)]
-fn velocity_gradient<S: ShapeFunction>(
-    vel: &[Vec3],
-    base: usize,
-    off: &[usize; MAX_NODES],
-    dn: &[Vec3; MAX_NODES],
-) -> Mat3 {
+fn velocity_gradient<S: ShapeFunction>(vel: &[Vec3], base: usize, off: &[usize; MAX_NODES], dn: &[Vec3]) -> Mat3 {
     let mut l = [0.0; 9];
     for k in 0..S::NODES {
         let v = vel[base + off[k]];
@@ -416,6 +428,29 @@ fn velocity_gradient<S: ShapeFunction>(
         }
     }
     l
+}
+
+/// APIC's affine matrix `C_p = B_p D_p^-1`, `B_p = sum_i N_i v_i d_i^T` (Jiang et al. 2015), with
+/// `D_p` diagonal for a tensor-product basis; an axis without spread (2D's z) gets no column.
+#[inline(always)]
+fn affine_from_moments<S: ShapeFunction>(vel: &[Vec3], base: usize, off: &[usize; MAX_NODES], w: &Weights) -> Mat3 {
+    let mut c = [0.0; 9];
+    for k in 0..S::NODES {
+        let v = vel[base + off[k]];
+        let (n, d) = (w.n[k], w.d[k]);
+        for a in 0..3 {
+            for b in 0..3 {
+                c[3 * a + b] += n * v[a] * d[b];
+            }
+        }
+    }
+    for b in 0..3 {
+        let inv = if w.moment[b] > 0.0 { 1.0 / w.moment[b] } else { 0.0 };
+        for a in 0..3 {
+            c[3 * a + b] *= inv;
+        }
+    }
+    c
 }
 
 /// Strain increment (3.36-3.38) and volume update (3.39-3.40) of one point from a nodal velocity;
@@ -442,37 +477,45 @@ fn apply_strain<S: ShapeFunction>(
         dstrain[c] = rate[c] * dt;
         strain[c] += dstrain[c];
     }
-    let lc = velocity_gradient::<S>(vel, base, off, dn_centre);
-    *volume *= 1.0 + dt * (lc[0] + lc[4] + lc[8]);
+    let divergence = if S::Basis::VOLUME_AT_CELL_CENTRE {
+        let lc = velocity_gradient::<S>(vel, base, off, dn_centre);
+        lc[0] + lc[4] + lc[8]
+    } else {
+        l[0] + l[4] + l[8]
+    };
+    *volume *= 1.0 + dt * divergence;
 }
 
+/// Gradients at the centre of a cell, relative to its lower corner node (linear functions).
 fn centre_gradients<S: ShapeFunction>(mesh: &Mesh) -> [Vec3; MAX_NODES] {
-    let mut n = [0.0; MAX_NODES];
-    let mut dn = [[0.0; 3]; MAX_NODES];
-    S::eval([0.0; 3], mesh.cell, &mut n, &mut dn);
-    dn
+    let mut w = Weights::default();
+    if S::Basis::VOLUME_AT_CELL_CENTRE {
+        S::eval([0.5, 0.5, if S::DIM == 3 { 0.5 } else { 0.0 }], mesh, [0.0; 3], &mut w);
+    }
+    w.dn
 }
 
 /// Strain and volume update from a nodal velocity field (USF: V^i, MUSL: remapped velocity).
-fn strain_update<S: ShapeFunction>(pts: &mut Points, vel: &[Vec3], mesh: &Mesh, loc: &[Location], dt: f64, turn: bool) {
-    let off = node_offsets::<S>(mesh);
-    let dn0 = centre_gradients::<S>(mesh);
+fn strain_update<S: ShapeFunction>(pts: &mut Points, vel: &[Vec3], at: &Placement, dt: f64, turn: bool) {
+    let off = node_offsets::<S>(at.mesh);
+    let dn0 = centre_gradients::<S>(at.mesh);
     (
-        pts.dstrain.par_iter_mut(),
-        pts.strain.par_iter_mut(),
-        pts.volume.par_iter_mut(),
-        pts.stress.par_iter_mut(),
-        loc.par_iter(),
+        pts.dstrain.par_chunks_mut(CHUNK),
+        pts.strain.par_chunks_mut(CHUNK),
+        pts.volume.par_chunks_mut(CHUNK),
+        pts.stress.par_chunks_mut(CHUNK),
     )
         .into_par_iter()
-        .with_min_len(MIN_PER_TASK)
-        .for_each(|(de, e, vol, stress, l)| {
-            let mut n = [0.0; MAX_NODES];
-            let mut dn = [[0.0; 3]; MAX_NODES];
-            S::eval(l.xi, mesh.cell, &mut n, &mut dn);
-            let base = mesh.cell_base_node(l.cell);
-            let lg = velocity_gradient::<S>(vel, base, &off, &dn);
-            apply_strain::<S>(&lg, vel, base, &off, &dn0, dt, de, e, vol, turn.then_some(stress));
+        .enumerate()
+        .with_min_len(MIN_CHUNKS_PER_TASK)
+        .for_each(|(j, (de, e, vol, stress))| {
+            let mut w = Weights::default();
+            for p in 0..de.len() {
+                let base = at.weights::<S>(j * CHUNK + p, &mut w);
+                let lg = velocity_gradient::<S>(vel, base, &off, &w.dn);
+                let turned = turn.then_some(&mut stress[p]);
+                apply_strain::<S>(&lg, vel, base, &off, &dn0, dt, &mut de[p], &mut e[p], &mut vol[p], turned);
+            }
         });
 }
 
@@ -481,18 +524,17 @@ fn strain_update<S: ShapeFunction>(pts: &mut Points, vel: &[Vec3], mesh: &Mesh, 
 fn g2p<S: ShapeFunction>(
     pts: &mut Points,
     grid: &Grid,
-    mesh: &Mesh,
-    loc: &[Location],
+    at: &Placement,
     strategy: &dyn VelocityUpdate,
     dt: f64,
     strain: Option<bool>,
 ) {
     let with_strain = strain.is_some();
     let turn = strain == Some(true);
-    let off = node_offsets::<S>(mesh);
-    let dn0 = centre_gradients::<S>(mesh);
+    let off = node_offsets::<S>(at.mesh);
+    let dn0 = centre_gradients::<S>(at.mesh);
     let affine = strategy.affine();
-    let need_gradient = affine || with_strain;
+    let need_gradient = (affine && !S::Basis::AFFINE_FROM_MOMENTS) || with_strain;
     let (vel, acc) = (&grid.velocity_new, &grid.accel);
     (
         pts.x.par_chunks_mut(CHUNK),
@@ -502,34 +544,35 @@ fn g2p<S: ShapeFunction>(
         pts.strain.par_chunks_mut(CHUNK),
         pts.volume.par_chunks_mut(CHUNK),
         pts.stress.par_chunks_mut(CHUNK),
-        loc.par_chunks(CHUNK),
     )
         .into_par_iter()
+        .enumerate()
         .with_min_len(MIN_CHUNKS_PER_TASK)
-        .for_each(|(x, v, c, de, e, vol, stress, l)| {
+        .for_each(|(j, (x, v, c, de, e, vol, stress))| {
             let len = x.len();
+            let mut w = Weights::default();
             let mut v_pic = [[0.0; 3]; CHUNK];
             let mut dv = [[0.0; 3]; CHUNK];
             let mut v_new = [[0.0; 3]; CHUNK];
             let mut v_move = [[0.0; 3]; CHUNK];
             for p in 0..len {
-                let mut n = [0.0; MAX_NODES];
-                let mut dn = [[0.0; 3]; MAX_NODES];
-                S::eval(l[p].xi, mesh.cell, &mut n, &mut dn);
-                let base = mesh.cell_base_node(l[p].cell);
+                let base = at.weights::<S>(j * CHUNK + p, &mut w);
                 let (mut vp, mut dvp) = ([0.0; 3], [0.0; 3]);
                 for k in 0..S::NODES {
                     let i = base + off[k];
                     for a in 0..3 {
-                        vp[a] += vel[i][a] * n[k];
-                        dvp[a] += acc[i][a] * n[k];
+                        vp[a] += vel[i][a] * w.n[k];
+                        dvp[a] += acc[i][a] * w.n[k];
                     }
                 }
                 v_pic[p] = vp;
                 dv[p] = [dvp[0] * dt, dvp[1] * dt, dvp[2] * dt];
+                if affine && S::Basis::AFFINE_FROM_MOMENTS {
+                    c[p] = affine_from_moments::<S>(vel, base, &off, &w);
+                }
                 if need_gradient {
-                    let lg = velocity_gradient::<S>(vel, base, &off, &dn);
-                    if affine {
+                    let lg = velocity_gradient::<S>(vel, base, &off, &w.dn);
+                    if affine && !S::Basis::AFFINE_FROM_MOMENTS {
                         c[p] = lg;
                     }
                     if with_strain {
