@@ -58,10 +58,10 @@ pub trait Basis: Send + Sync + 'static {
 pub struct Linear;
 /// uGIMP with a fixed point size.
 pub struct Gimp;
-/// Quadratic B-spline with an open knot vector.
-pub struct QuadraticBspline;
-/// Cubic B-spline with an open knot vector.
-pub struct CubicBspline;
+/// B-spline of degree `P` with an open knot vector.
+pub struct Bspline<const P: usize>;
+pub type QuadraticBspline = Bspline<2>;
+pub type CubicBspline = Bspline<3>;
 
 impl Basis for Linear {
     const SPAN: usize = 2;
@@ -189,29 +189,16 @@ impl<const P: usize> OpenSpline<P> {
     }
 }
 
-impl Basis for QuadraticBspline {
-    const SPAN: usize = 3;
-    const NAME: &'static str = "bspline2";
+impl<const P: usize> Basis for Bspline<P> {
+    const SPAN: usize = P + 1;
+    const NAME: &'static str = if P == 2 { "bspline2" } else { "bspline3" };
     const AFFINE_FROM_MOMENTS: bool = true;
     #[inline(always)]
     fn first(t: f64, cells: usize) -> usize {
-        OpenSpline::<2>::span(t, cells) - 2
+        OpenSpline::<P>::span(t, cells) - P
     }
     fn eval(t: f64, cells: usize, _half: f64) -> Axis {
-        OpenSpline::<2>::eval(t, cells)
-    }
-}
-
-impl Basis for CubicBspline {
-    const SPAN: usize = 4;
-    const NAME: &'static str = "bspline3";
-    const AFFINE_FROM_MOMENTS: bool = true;
-    #[inline(always)]
-    fn first(t: f64, cells: usize) -> usize {
-        OpenSpline::<3>::span(t, cells) - 3
-    }
-    fn eval(t: f64, cells: usize, _half: f64) -> Axis {
-        OpenSpline::<3>::eval(t, cells)
+        OpenSpline::<P>::eval(t, cells)
     }
 }
 
