@@ -163,3 +163,26 @@ fn wide_shape_functions_give_the_same_points_on_one_and_two_threads() {
         assert_eq!(points(1), points(2), "{shape}");
     }
 }
+
+#[test]
+fn the_body_front_ignores_a_point_thrown_ahead_where_the_voxel_width_follows_it() {
+    // A 1 m block of 400 points and one point of the same volume 2.9 m ahead: eq. 5.6's L_x
+    // reaches the lone point; the x holding 99 % of the mass stays at the block's last column.
+    let src = r#"
+let sim = mpm(#{ dim: 2, origin: [0.0, 0.0], cell: 0.1, cells: [40, 10] });
+let m = sim.material("linear_elastic", #{ density: 1000.0, young: 1e6, poisson: 0.3 });
+sim.fill_box(m, [0.0, 0.0], [1.0, 1.0], #{ per_cell: 2, layout: "regular" });
+sim.add_points(m, [[3.85, 0.025]], 0.0025);
+sim.track_runout(1.0, 1.0);
+let d = sim.diagnostics();
+summary("voxel", d.runout_normalised);
+summary("front", d.front_runout_normalised);
+"#;
+    let out = run_text("runout_front", src);
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    let (voxel, front) = (summary["voxel"].as_f64().unwrap(), summary["front"].as_f64().unwrap());
+    assert!((voxel - 2.9).abs() < 1e-9, "L~ from the voxelised width: {voxel}");
+    // 99 % of 401 points: the 397th from the left, in the block's last column of points (x = 0.975).
+    assert!((front - (0.975 - 1.0)).abs() < 1e-9, "front {front}");
+}

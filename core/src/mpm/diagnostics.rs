@@ -57,6 +57,23 @@ impl MpmSim {
         d
     }
 
+    /// The x below which `fraction` of the mass lies, from the mesh origin: a body front that
+    /// isolated points thrown ahead do not move (eq. 5.6's voxelised width follows the farthest).
+    pub fn mass_front(&self, fraction: f64) -> f64 {
+        let p = &self.points;
+        let mut order: Vec<usize> = (0..p.len()).collect();
+        order.sort_by(|&a, &b| p.x[a][0].total_cmp(&p.x[b][0]));
+        let total: f64 = p.mass.iter().sum();
+        let mut below = 0.0;
+        for &i in &order {
+            below += p.mass[i];
+            if below >= fraction * total {
+                return p.x[i][0] - self.mesh.origin[0];
+            }
+        }
+        order.last().map_or(0.0, |&i| p.x[i][0] - self.mesh.origin[0])
+    }
+
     /// Width of the material measured from the mesh origin, voxelised by cells (eq. 5.6).
     pub fn voxel_width(&self) -> f64 {
         let h = self.mesh.cell[0];

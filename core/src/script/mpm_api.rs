@@ -29,12 +29,14 @@ pub struct Runout {
 }
 
 impl Runout {
-    /// `(L_x, d_r, L~, t~)` of eqs. 5.6-5.9.
-    pub fn measure(&self, sim: &MpmSim) -> (f64, f64, f64, f64) {
+    /// `(L_x, d_r, L~, t~)` of eqs. 5.6-5.9, and the body front's `L~` (the x holding 99 % of
+    /// the mass in place of L_x).
+    pub fn measure(&self, sim: &MpmSim) -> (f64, f64, f64, f64, f64) {
         let lx = sim.voxel_width();
         let dr = lx - self.width0;
         let g = crate::math::norm3(sim.gravity).max(f64::MIN_POSITIVE);
-        (lx, dr, dr / self.width0, (sim.time - self.t0) / (self.height0 / g).sqrt())
+        let front = (sim.mass_front(0.99) - self.width0) / self.width0;
+        (lx, dr, dr / self.width0, (sim.time - self.t0) / (self.height0 / g).sqrt(), front)
     }
 }
 
@@ -118,9 +120,9 @@ impl ScriptSim for MpmScene {
             sim.deleted_points as f64,
         ];
         if let Some(r) = &self.runout {
-            let (lx, dr, l_norm, t_norm) = r.measure(sim);
-            cols.extend(["lx", "runout", "runout_normalised", "time_normalised"]);
-            vals.extend([lx, dr, l_norm, t_norm]);
+            let (lx, dr, l_norm, t_norm, front) = r.measure(sim);
+            cols.extend(["lx", "runout", "runout_normalised", "time_normalised", "front_runout_normalised"]);
+            vals.extend([lx, dr, l_norm, t_norm, front]);
         }
         (cols, vals)
     }
@@ -207,8 +209,14 @@ impl ScriptSim for MpmScene {
             ("deleted_points", sim.deleted_points as f64),
         ];
         if let Some(r) = &self.runout {
-            let (lx, dr, ln, tn) = r.measure(sim);
-            out.extend([("lx", lx), ("runout", dr), ("runout_normalised", ln), ("time_normalised", tn)]);
+            let (lx, dr, ln, tn, front) = r.measure(sim);
+            out.extend([
+                ("lx", lx),
+                ("runout", dr),
+                ("runout_normalised", ln),
+                ("time_normalised", tn),
+                ("front_runout_normalised", front),
+            ]);
         }
         out
     }
