@@ -70,10 +70,6 @@ impl Mesh {
         self.dim - 1
     }
 
-    pub fn slab_count(&self) -> usize {
-        self.cells[self.slab_axis()]
-    }
-
     /// Nodes in one node plane normal to the slab axis.
     pub fn nodes_per_plane(&self) -> usize {
         let n = self.nodes_per_axis();
@@ -82,6 +78,11 @@ impl Mesh {
         } else {
             n[0]
         }
+    }
+
+    /// The smallest cell size over the active axes.
+    pub fn min_cell(&self) -> f64 {
+        self.cell[..self.dim].iter().copied().fold(f64::INFINITY, f64::min)
     }
 
     pub fn cell_volume(&self) -> f64 {

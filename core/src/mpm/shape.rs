@@ -40,8 +40,6 @@ pub struct Axis {
 
 pub trait Basis: Send + Sync + 'static {
     const SPAN: usize;
-    /// Name used in scripts.
-    const NAME: &'static str;
     /// APIC's affine matrix from the moments, `C_p = B_p D_p^-1` (Jiang et al. 2015); otherwise
     /// the velocity gradient, which is what `B_p D_p^-1` reduces to for multilinear functions.
     const AFFINE_FROM_MOMENTS: bool = false;
@@ -65,7 +63,6 @@ pub type CubicBspline = Bspline<3>;
 
 impl Basis for Linear {
     const SPAN: usize = 2;
-    const NAME: &'static str = "linear";
     const VOLUME_AT_CELL_CENTRE: bool = true;
     #[inline(always)]
     fn first(t: f64, cells: usize) -> usize {
@@ -81,7 +78,6 @@ impl Basis for Linear {
 
 impl Basis for Gimp {
     const SPAN: usize = 3;
-    const NAME: &'static str = "gimp";
     #[inline(always)]
     fn first(t: f64, cells: usize) -> usize {
         ((t + 0.5) as usize).saturating_sub(1).min(cells - 2)
@@ -191,7 +187,6 @@ impl<const P: usize> OpenSpline<P> {
 
 impl<const P: usize> Basis for Bspline<P> {
     const SPAN: usize = P + 1;
-    const NAME: &'static str = if P == 2 { "bspline2" } else { "bspline3" };
     const AFFINE_FROM_MOMENTS: bool = true;
     #[inline(always)]
     fn first(t: f64, cells: usize) -> usize {
@@ -302,20 +297,21 @@ mod tests {
     /// Partition of unity, linear completeness and the consistency of gradients, in one dimension
     /// (the tensor product inherits them), at many positions including both mesh edges.
     fn check_complete<B: Basis>(cells: usize, half: f64) {
+        let name = std::any::type_name::<B>();
         let samples = 400;
         for s in 0..=samples {
             let t = cells as f64 * s as f64 / samples as f64;
             let ax = B::eval(t, cells, half);
-            assert!(ax.first + B::SPAN <= cells + 1, "{}: window past the mesh at t = {t}", B::NAME);
+            assert!(ax.first + B::SPAN <= cells + 1, "{name}: window past the mesh at t = {t}");
             let sum: f64 = ax.n[..B::SPAN].iter().sum();
             let dsum: f64 = ax.dn[..B::SPAN].iter().sum();
             let first_moment: f64 = (0..B::SPAN).map(|k| ax.n[k] * ax.d[k]).sum();
             let slope: f64 = (0..B::SPAN).map(|k| ax.dn[k] * (ax.d[k] + t)).sum();
-            assert!((sum - 1.0).abs() < 1e-13, "{} at t = {t}: sum N = {sum}", B::NAME);
-            assert!(dsum.abs() < 1e-12, "{} at t = {t}: sum dN = {dsum}", B::NAME);
-            assert!(first_moment.abs() < 1e-13, "{} at t = {t}: sum N (x_i - x) = {first_moment}", B::NAME);
-            assert!((slope - 1.0).abs() < 1e-12, "{} at t = {t}: sum dN x_i = {slope}", B::NAME);
-            assert!(ax.n[..B::SPAN].iter().all(|&v| v > -1e-14), "{} at t = {t}: {:?}", B::NAME, ax.n);
+            assert!((sum - 1.0).abs() < 1e-13, "{name} at t = {t}: sum N = {sum}");
+            assert!(dsum.abs() < 1e-12, "{name} at t = {t}: sum dN = {dsum}");
+            assert!(first_moment.abs() < 1e-13, "{name} at t = {t}: sum N (x_i - x) = {first_moment}");
+            assert!((slope - 1.0).abs() < 1e-12, "{name} at t = {t}: sum dN x_i = {slope}");
+            assert!(ax.n[..B::SPAN].iter().all(|&v| v > -1e-14), "{name} at t = {t}: {:?}", ax.n);
             // The derivative is the derivative: central difference away from breakpoints.
             let e = 1e-7;
             if t > e && t < cells as f64 - e {
@@ -323,7 +319,7 @@ mod tests {
                 if lo.first == ax.first && hi.first == ax.first {
                     for k in 0..B::SPAN {
                         let fd = (hi.n[k] - lo.n[k]) / (2.0 * e);
-                        assert!((fd - ax.dn[k]).abs() < 1e-5, "{} at t = {t}: dN {} vs {fd}", B::NAME, ax.dn[k]);
+                        assert!((fd - ax.dn[k]).abs() < 1e-5, "{name} at t = {t}: dN {} vs {fd}", ax.dn[k]);
                     }
                 }
             }

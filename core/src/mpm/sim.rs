@@ -53,15 +53,9 @@ pub enum StressRate {
 impl StressRate {
     pub fn parse(name: &str) -> Result<StressRate> {
         match name.to_ascii_lowercase().as_str() {
-            "plain" | "none" => Ok(StressRate::Plain),
+            "plain" => Ok(StressRate::Plain),
             "jaumann" => Ok(StressRate::Jaumann),
             _ => Err(GraniteError::param("stress_rate", name, "must be \"plain\" or \"jaumann\"")),
-        }
-    }
-    pub fn name(&self) -> &'static str {
-        match self {
-            StressRate::Plain => "plain",
-            StressRate::Jaumann => "jaumann",
         }
     }
 }
@@ -130,7 +124,7 @@ impl ShapeFunctions {
             )));
         }
         if let ShapeFunctions::Gimp { half_length } = self {
-            let h = (0..mesh.dim).map(|a| mesh.cell[a]).fold(f64::INFINITY, f64::min);
+            let h = mesh.min_cell();
             if 2.0 * half_length > h * (1.0 + 1e-12) {
                 return Err(GraniteError::param(
                     "point_size",
@@ -387,7 +381,7 @@ impl MpmSim {
 
     /// Stable time step of explicit MPM: the cell crossing time of the fastest P wave.
     pub fn critical_dt(&self) -> Option<f64> {
-        let h = self.mesh.cell[..self.mesh.dim].iter().cloned().fold(f64::INFINITY, f64::min);
+        let h = self.mesh.min_cell();
         self.materials
             .iter()
             .filter(|m| m.count > 0)

@@ -127,7 +127,7 @@ impl MpmSim {
     /// point skips over grid nodes, and a stable run never gets there.
     fn check_stable(&self) -> Result<()> {
         let p = &self.points;
-        let cell = (0..self.mesh.dim).map(|a| self.mesh.cell[a]).fold(f64::INFINITY, f64::min);
+        let cell = self.mesh.min_cell();
         let fastest2 = (cell / self.dt).powi(2);
         let speed2 = |i: usize| p.v[i].iter().map(|c| c * c).sum::<f64>();
         let finite = |i: usize| {
@@ -158,6 +158,26 @@ impl MpmSim {
         Err(GraniteError::Unstable { step: self.step, time: self.time, reason })
     }
 
+    /// A point that leaves the mesh faster than the CFL condition `dt (c + |v|) < h` allows has
+    /// not flowed out: the run has blown up, and deleting the point would hide it.
+    fn left_too_fast(&self, keep: &[bool]) -> Option<String> {
+        let h = self.mesh.min_cell();
+        // critical_dt() is h / c_p of the fastest material.
+        let c = self.critical_dt().map_or(0.0, |dt| h / dt);
+        let limit = (h / self.dt - c).max(0.0);
+        let p = &self.points;
+        let speed = |i: usize| p.v[i].iter().map(|x| x * x).sum::<f64>().sqrt();
+        let i = (0..keep.len()).find(|&i| !keep[i] && speed(i) > limit)?;
+        Some(format!(
+            "material point {} left the mesh at {:.4e} m/s, above the CFL limit h/dt - c_p = {limit:.4e} m/s \
+             (h = {h:.4e} m, dt = {:.4e} s, c_p = {c:.4e} m/s): the run has blown up (a smaller time step or a \
+             more dissipative velocity update may help)",
+            p.id[i],
+            speed(i),
+            self.dt
+        ))
+    }
+
     fn handle_out_of_mesh(&mut self) -> Result<()> {
         let mesh = &self.mesh;
         let keep: Vec<bool> = self.points.x.par_iter().map(|x| mesh.contains(*x)).collect();
@@ -182,32 +202,6 @@ impl MpmSim {
                 Ok(())
             }
         }
-    }
-}
-
-impl MpmSim {
-    /// A point that leaves the mesh faster than the CFL condition `dt (c + |v|) < h` allows has
-    /// not flowed out: the run has blown up, and deleting the point would hide it.
-    fn left_too_fast(&self, keep: &[bool]) -> Option<String> {
-        let h = (0..self.mesh.dim).map(|a| self.mesh.cell[a]).fold(f64::INFINITY, f64::min);
-        let c = self
-            .materials
-            .iter()
-            .filter(|m| m.count > 0)
-            .filter_map(|m| m.law.wave_speed(m.density))
-            .fold(0.0, f64::max);
-        let limit = (h / self.dt - c).max(0.0);
-        let p = &self.points;
-        let speed = |i: usize| p.v[i].iter().map(|x| x * x).sum::<f64>().sqrt();
-        let i = (0..keep.len()).find(|&i| !keep[i] && speed(i) > limit)?;
-        Some(format!(
-            "material point {} left the mesh at {:.4e} m/s, above the CFL limit h/dt - c_p = {limit:.4e} m/s \
-             (h = {h:.4e} m, dt = {:.4e} s, c_p = {c:.4e} m/s): the run has blown up (a smaller time step or a \
-             more dissipative velocity update may help)",
-            p.id[i],
-            speed(i),
-            self.dt
-        ))
     }
 }
 
