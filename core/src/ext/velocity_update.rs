@@ -2,7 +2,7 @@
 //! velocity are built from grid quantities interpolated at the point.
 
 use crate::error::Result;
-use crate::math::Vec3;
+use crate::math::{Vec3, Voigt};
 use crate::params::{ParamSpec, Params};
 
 /// Interpolated grid quantities for a chunk of points, and the outputs the strategy writes.
@@ -11,8 +11,13 @@ pub struct G2pBatch<'a> {
     pub v_old: &'a [Vec3],
     /// `sum_i V~_i N_i` (eq. 3.28): the updated grid velocity interpolated at the point.
     pub v_pic: &'a [Vec3],
-    /// `sum_i a_i N_i dt` (eq. 3.30): the grid velocity increment interpolated at the point.
+    /// `sum_i a_i N_i dt` (eq. 3.30): the grid velocity increment interpolated at the point, with
+    /// `a_i = (V~_i - V_i)/dt` as applied (constraints included), so `v_pic - dv_grid` is the
+    /// grid velocity before this step's forces, interpolated at the point.
     pub dv_grid: &'a [Vec3],
+    /// Accumulated strain of each point (tension positive): its volumetric part tells a dilated
+    /// point from a compressed one (ASFLIP's separation test).
+    pub strain: &'a [Voigt],
     /// Velocity the point carries into the next step.
     pub v_new: &'a mut [Vec3],
     /// Velocity that moves the point this step: `x += v_move dt`.

@@ -34,6 +34,8 @@ pub fn unit_of(column: &str) -> Option<&'static str> {
         "max_height" | "max_x" | "lx" | "runout" => "m",
         "p" | "q" | "mean_stress" | "deviatoric_stress" => "Pa",
         _ if c.ends_with("_energy") || c.starts_with("energy_") || c == "boundary_work" => "J (2D MPM: J/m)",
+        _ if c.starts_with("angular_momentum_") => "kg m^2/s (2D MPM: kg m/s)",
+        _ if c.starts_with("momentum_") => "kg m/s (2D MPM: kg/s)",
         _ if c.starts_with("stress_") || c.starts_with("sigma_") || c.starts_with("q_") || c.starts_with("p_") => "Pa",
         _ => return None,
     })

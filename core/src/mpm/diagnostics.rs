@@ -8,6 +8,11 @@ pub struct Diagnostics {
     pub points: usize,
     pub mass: f64,
     pub momentum: Vec3,
+    /// Angular momentum about the coordinate origin: `sum m x × v`, plus, for the affine updates
+    /// (APIC, ASFLIP) on B-splines, the spin of each point's affine velocity field,
+    /// `m axial(B - B^T)` with `B = C D` (Jiang et al. 2015; `D` its value away from the mesh
+    /// edges). With linear or GIMP functions the affine part is not counted.
+    pub angular_momentum: Vec3,
     /// Eq. 3.47.
     pub kinetic_energy: f64,
     /// Eqs. 3.45-3.46: `sum v/2 sigma : eps`.
@@ -41,11 +46,23 @@ impl MpmSim {
             ..Default::default()
         };
         let g = self.gravity;
+        let affine_moment = if self.velocity_update.affine() { self.shape.interior_moment(&self.mesh) } else { None };
         for i in 0..p.len() {
             let (m, v, x) = (p.mass[i], p.v[i], p.x[i]);
             d.mass += m;
             for a in 0..3 {
                 d.momentum[a] += m * v[a];
+            }
+            d.angular_momentum[0] += m * (x[1] * v[2] - x[2] * v[1]);
+            d.angular_momentum[1] += m * (x[2] * v[0] - x[0] * v[2]);
+            d.angular_momentum[2] += m * (x[0] * v[1] - x[1] * v[0]);
+            if let Some(dm) = affine_moment {
+                // B = C D, row-major; the field's spin about the point is m (B_kj - B_jk) e_i.
+                let c = &p.affine[i];
+                let b = |r: usize, col: usize| c[3 * r + col] * dm[col];
+                d.angular_momentum[0] += m * (b(2, 1) - b(1, 2));
+                d.angular_momentum[1] += m * (b(0, 2) - b(2, 0));
+                d.angular_momentum[2] += m * (b(1, 0) - b(0, 1));
             }
             d.kinetic_energy += 0.5 * m * (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
             d.elastic_energy += 0.5 * p.volume[i] * stress_strain_work(&p.stress[i], &p.strain[i]);

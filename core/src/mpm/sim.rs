@@ -103,6 +103,22 @@ impl ShapeFunctions {
         }
     }
 
+    /// APIC's `D_p = sum_i N_i d_i d_i^T` per axis where it is the same for every point (B-splines
+    /// away from the mesh edges, Jiang et al. 2015: h^2/4 quadratic, h^2/3 cubic); None for bases
+    /// whose `D_p` moves with the point.
+    pub fn interior_moment(&self, mesh: &Mesh) -> Option<Vec3> {
+        let factor = match self {
+            ShapeFunctions::QuadraticBspline => 0.25,
+            ShapeFunctions::CubicBspline => 1.0 / 3.0,
+            ShapeFunctions::Linear | ShapeFunctions::Gimp { .. } => return None,
+        };
+        let mut d = [0.0; 3];
+        for a in 0..mesh.dim {
+            d[a] = factor * mesh.cell[a] * mesh.cell[a];
+        }
+        Some(d)
+    }
+
     /// Nodes a point talks to along one axis.
     pub fn span(&self) -> usize {
         match self {

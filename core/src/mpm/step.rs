@@ -579,6 +579,7 @@ fn g2p<S: ShapeFunction>(
                 v_old: v,
                 v_pic: &v_pic[..len],
                 dv_grid: &dv[..len],
+                strain: e,
                 v_new: &mut v_new[..len],
                 v_move: &mut v_move[..len],
             });

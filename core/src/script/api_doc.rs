@@ -84,7 +84,7 @@ pub static API: &[ApiDoc] = &[
     f("MpmSim", "scheme", &["sim.scheme(\"USF\" | \"USL\" | \"MUSL\")"], NONE, "stress update scheme"),
     f("MpmSim", "shape_functions", &["sim.shape_functions(name)", "sim.shape_functions(\"gimp\", #{ point_size })"], &["point_size"], "\"linear\" (default), \"gimp\" (uGIMP; point_size in m, default from the points' mean volume), \"bspline2\" or \"bspline3\" (B-splines, open at the mesh edges)"),
     f("MpmSim", "stress_rate", &["sim.stress_rate(\"plain\" | \"jaumann\")"], NONE, "the stress rate the laws integrate: plain increments (the thesis, default) or Jaumann (the stress turned with the point's spin first)"),
-    f("MpmSim", "velocity_update", &["sim.velocity_update(name)", "sim.velocity_update(name, #{ flip_ratio })"], &["flip_ratio"], "PIC, FLIP, NFLIP, FLIPX, NFLIPX or APIC"),
+    f("MpmSim", "velocity_update", &["sim.velocity_update(name)", "sim.velocity_update(name, #{ flip_ratio })", "sim.velocity_update(\"ASFLIP\", #{ alpha, beta_min, beta_max })"], &["flip_ratio", "alpha", "beta_min", "beta_max"], "PIC, FLIP, NFLIP, FLIPX, NFLIPX, APIC or ASFLIP (Fei et al. 2021); `granite plugins` lists their parameters"),
     f("MpmSim", "mesh", &["sim.mesh(#{ origin, cell, cells })"], MESH, "replaces the mesh; points stay, boundary conditions are cleared"),
     f("MpmSim", "on_leave", &["sim.on_leave(\"delete\" | \"stop\")"], NONE, "what happens to points leaving the mesh"),
     f("MpmSim", "fix", &["sim.fix(selector, axis)", "sim.fix(selector, axis, value)"], NONE, "zero (or prescribed: number, [[t, v], ...] table or |t| function) velocity of nodes along an axis"),
