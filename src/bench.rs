@@ -173,7 +173,7 @@ pub fn periodic_rve(count: usize, pressure: f64) -> Result<granite_core::dem::De
     sim.damping = 0.4;
     sim.set_dt(0.3 * sim.critical_dt().unwrap_or(1e-6))?;
     let goal = AxisGoal::Stress { target: -pressure, max_rate: 5.0 };
-    sim.cell_control = Some(CellControl { axes: [goal; 3], shear: vec![], relax_steps: 200.0 });
+    sim.cell_control = Some(CellControl::new([goal; 3], vec![], 200.0));
     for round in 0.. {
         for _ in 0..500 {
             sim.step()?;
@@ -303,11 +303,11 @@ pub fn dem(counts: &[usize], steps: usize, threads: &[usize], repeat: usize) -> 
     }
     println!("granite bench dem: 1500-sphere periodic RVE at 100 kPa, constant-volume simple shear, best of {repeat}");
     let mut rve = periodic_rve(1500, 1e5)?;
-    rve.cell_control = Some(granite_core::dem::cell::CellControl {
-        axes: [granite_core::dem::cell::AxisGoal::Rate(0.0); 3],
-        shear: vec![(0, 2, 1.0)],
-        relax_steps: 200.0,
-    });
+    rve.cell_control = Some(granite_core::dem::cell::CellControl::new(
+        [granite_core::dem::cell::AxisGoal::Rate(0.0); 3],
+        vec![(0, 2, 1.0)],
+        200.0,
+    ));
     let timed = best_of(threads, repeat, || -> Result<(f64, usize)> {
         let mut sim = rve.clone();
         let t = Instant::now();

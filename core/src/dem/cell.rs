@@ -133,8 +133,8 @@ mod tests {
 pub enum AxisGoal {
     /// Prescribed strain rate `L_aa` (1/s; negative compresses).
     Rate(f64),
-    /// Servo on the stress `sigma_aa` (Pa, tension positive): the strain rate is the error over
-    /// the packing's stiffness along that axis and a relaxation time, at most `max_rate`.
+    /// Servo on the stress `sigma_aa` (Pa, tension positive): a proportional-integral control of
+    /// the strain rate, scaled by the packing's stiffness along that axis, at most `max_rate`.
     Stress { target: f64, max_rate: f64 },
 }
 
@@ -145,29 +145,54 @@ pub struct CellControl {
     pub axes: [AxisGoal; 3],
     /// Prescribed off-diagonal `L_ij` (shear rates), e.g. `(0, 2, rate)` for x velocity along z.
     pub shear: Vec<(usize, usize, f64)>,
-    /// Steps over which the servo closes a stress error (its relaxation time, in time steps).
+    /// Steps over which the servo's proportional part closes a stress error (its relaxation
+    /// time, in time steps).
     pub relax_steps: f64,
+    /// The integral part of each servoed axis's strain rate (1/s).
+    #[serde(default)]
+    pub integral: [f64; 3],
 }
 
 impl CellControl {
+    /// Integral time over proportional time: 4 makes the loop critically damped when the
+    /// stiffness is right (error'' + error'/tau + error/(4 tau^2) = 0 has a double root).
+    const INTEGRAL_OVER_PROPORTIONAL: f64 = 4.0;
+
+    pub fn new(axes: [AxisGoal; 3], shear: Vec<(usize, usize, f64)>, relax_steps: f64) -> CellControl {
+        CellControl { axes, shear, relax_steps, integral: [0.0; 3] }
+    }
+
     /// The velocity gradient for the current stress (Voigt, tension positive), given the
-    /// packing's stiffness along each axis (`d sigma_aa / d eps_aa`, Pa) and the time step: a
-    /// stress error is closed in about `relax_steps` steps, so the servo cannot outrun the contacts
-    /// (a loose cloud with no contact is squeezed at `max_rate`).
-    pub fn velocity_gradient(&self, stress: &crate::math::Voigt, stiffness: [f64; 3], dt: f64) -> Matrix3<f64> {
+    /// packing's stiffness along each axis (`d sigma_aa / d eps_aa`, Pa) and the time step.
+    ///
+    /// Each servoed axis runs a proportional-integral control, both parts scaled by the
+    /// stiffness: the proportional part closes an error in about `relax_steps` steps, so the
+    /// servo cannot outrun the contacts; the integral part learns the rate a steady load needs
+    /// (a sample dilating under a triaxial's axial compression), which a proportional servo can
+    /// only give by holding an error proportional to that rate. The integral stops growing while
+    /// the rate is at `max_rate` (no wind-up while a loose cloud is squeezed), and a cloud with
+    /// no contact is squeezed at `max_rate`.
+    pub fn velocity_gradient(&mut self, stress: &crate::math::Voigt, stiffness: [f64; 3], dt: f64) -> Matrix3<f64> {
         let mut l = Matrix3::zeros();
+        let tau = self.relax_steps.max(1.0) * dt;
         for a in 0..3 {
             l[(a, a)] = match self.axes[a] {
                 AxisGoal::Rate(r) => r,
                 AxisGoal::Stress { target, max_rate } => {
                     // Too little compression (stress above a negative target): compress.
                     let error = target - stress[a];
-                    let rate = if stiffness[a] > 0.0 {
-                        error / (stiffness[a] * self.relax_steps.max(1.0) * dt)
+                    if stiffness[a] > 0.0 {
+                        let proportional = error / (stiffness[a] * tau);
+                        let growth = proportional * dt / (Self::INTEGRAL_OVER_PROPORTIONAL * tau);
+                        let integral = self.integral[a] + growth;
+                        if (proportional + integral).abs() < max_rate || growth * integral < 0.0 {
+                            self.integral[a] = integral.clamp(-max_rate, max_rate);
+                        }
+                        (proportional + self.integral[a]).clamp(-max_rate, max_rate)
                     } else {
+                        self.integral[a] = 0.0;
                         error.signum() * max_rate
-                    };
-                    rate.clamp(-max_rate, max_rate)
+                    }
                 }
             };
         }

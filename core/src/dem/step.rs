@@ -35,12 +35,12 @@ impl DemSim {
         }
         let servo =
             self.cell_control.as_ref().is_some_and(|c| c.axes.iter().any(|a| matches!(a, AxisGoal::Stress { .. })));
-        if let (Some(control), Some(cell)) = (&self.cell_control, &self.cell) {
+        if let (Some(_), Some(cell)) = (&self.cell_control, &self.cell) {
             let (stress, stiffness) =
                 if servo { self.stress_and_axis_stiffness(cell.volume()) } else { ([0.0; 6], [0.0; 3]) };
-            let l = control.velocity_gradient(&stress, stiffness, self.dt);
-            if let Some(cell) = self.cell.as_mut() {
-                cell.velocity_gradient = l;
+            let dt = self.dt;
+            if let (Some(control), Some(cell)) = (self.cell_control.as_mut(), self.cell.as_mut()) {
+                cell.velocity_gradient = control.velocity_gradient(&stress, stiffness, dt);
             }
         }
         let parallel = self.in_parallel();

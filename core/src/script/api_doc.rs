@@ -156,7 +156,7 @@ pub static API: &[ApiDoc] = &[
     // DEM: periodic cell and measures.
     f("DemSim", "periodic", &["sim.periodic([lx, ly, lz])"], NONE, "makes the domain a periodic cell"),
     f("DemSim", "cell_velocity_gradient", &["sim.cell_velocity_gradient([[Lxx, Lxy, Lxz], ...])"], NONE, "a prescribed velocity gradient of the cell"),
-    f("DemSim", "cell_control", &["sim.cell_control(#{ x: #{ stress, max_rate } or #{ rate }, y, z, xy, ..., relax_steps })"], &["x", "y", "z", "xy", "xz", "yz", "yx", "zx", "zy", "relax_steps"], "stress or strain-rate control of the cell per axis"),
+    f("DemSim", "cell_control", &["sim.cell_control(#{ x: #{ stress, max_rate } or #{ rate }, y, z, xy, ..., relax_steps })"], &["x", "y", "z", "xy", "xz", "yz", "yx", "zx", "zy", "relax_steps"], "stress (a proportional-integral servo closing an error in about relax_steps steps, default 200) or strain-rate control of the cell per axis"),
     f("DemSim", "cell_stress", &["sim.cell_stress()"], NONE, "Love-Weber stress of the cell"),
     f("DemSim", "stress_reached", &["sim.stress_reached(tolerance)"], NONE, "whether the controlled stresses are within a relative tolerance"),
     f("DemSim", "cell_size", &["sim.cell_size()"], NONE, "lengths of the cell's base vectors"),

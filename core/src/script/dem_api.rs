@@ -882,7 +882,7 @@ fn register_cell(engine: &mut Engine) {
                 _ => return err(format!("cell_control `{k}`: give exactly one of `rate` and `stress`")),
             };
         }
-        s.lock().sim.dem.cell_control = Some(CellControl { axes, shear, relax_steps });
+        s.lock().sim.dem.cell_control = Some(CellControl::new(axes, shear, relax_steps));
         Ok(())
     });
     engine.register_fn("cell_stress", |s: &mut DemHandle| {
