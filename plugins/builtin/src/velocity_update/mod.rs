@@ -195,3 +195,52 @@ pub fn by_name(name: &str, flip_ratio: f64) -> granite_core::Result<Box<dyn Velo
     }
     reg.build_velocity_update(name, &given)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use granite_core::math::{Vec3, Voigt};
+
+    /// Runs a strategy on one point; returns (new velocity, displacement velocity).
+    fn one_point(update: &dyn VelocityUpdate, v_old: Vec3, v_pic: Vec3, dv: Vec3, strain: Voigt) -> (Vec3, Vec3) {
+        let (mut v_new, mut v_move) = ([[0.0; 3]], [[0.0; 3]]);
+        update.update(G2pBatch {
+            v_old: &[v_old],
+            v_pic: &[v_pic],
+            dv_grid: &[dv],
+            strain: &[strain],
+            v_new: &mut v_new,
+            v_move: &mut v_move,
+        });
+        (v_new[0], v_move[0])
+    }
+
+    fn asflip(alpha: f64, beta_min: f64, beta_max: f64) -> Box<dyn VelocityUpdate> {
+        let mut reg = Registry::new();
+        register(&mut reg);
+        let given: ParamMap =
+            [("alpha", alpha), ("beta_min", beta_min), ("beta_max", beta_max)].map(|(k, v)| (k.into(), v)).into();
+        reg.build_velocity_update("ASFLIP", &given).unwrap()
+    }
+
+    #[test]
+    fn asflip_spans_apic_and_flip_and_moves_dilated_points_with_their_own_velocity() {
+        let (v_old, v_pic, dv) = ([1.0, -2.0, 0.5], [0.4, 0.3, -0.1], [0.1, 0.2, 0.05]);
+        let compressed = [-1e-3, -1e-3, 0.0, 0.0, 0.0, 0.0];
+        let dilated = [2e-3, -1e-3, 0.0, 0.0, 0.0, 0.0];
+        let flip: Vec3 = std::array::from_fn(|a| v_old[a] + dv[a]);
+        // alpha = 0: APIC's velocity; alpha = 1: FLIP's (the grid's increment added to the old).
+        assert_eq!(one_point(asflip(0.0, 0.0, 1.0).as_ref(), v_old, v_pic, dv, compressed), (v_pic, v_pic));
+        let (v, moved) = one_point(asflip(1.0, 0.0, 1.0).as_ref(), v_old, v_pic, dv, compressed);
+        let close = |a: Vec3, b: Vec3| (0..3).all(|k| (a[k] - b[k]).abs() < 1e-15);
+        assert!(close(v, flip) && close(moved, v_pic), "{v:?} {moved:?}");
+        // A dilated point moves with beta_max of its deviation: all of it, its FLIP velocity.
+        let (_, moved) = one_point(asflip(1.0, 0.0, 1.0).as_ref(), v_old, v_pic, dv, dilated);
+        assert!(close(moved, flip), "{moved:?}");
+        // beta_max below beta_min is refused.
+        let mut reg = Registry::new();
+        register(&mut reg);
+        let given: ParamMap = [("beta_min", 0.5), ("beta_max", 0.2)].map(|(k, v)| (k.into(), v)).into();
+        assert!(reg.build_velocity_update("ASFLIP", &given).is_err());
+    }
+}
