@@ -85,24 +85,30 @@ fn a_checkpoint_says_which_granite_wrote_it_and_a_newer_format_is_refused() {
         writer.contains(env!("CARGO_PKG_VERSION")) && writer.contains(env!("GRANITE_GIT_COMMIT")),
         "written by {writer}"
     );
-    assert_eq!(header["version"], 2);
+    assert_eq!(header["version"], 3);
     // The same file as a future granite would write it.
-    let newer = text.replacen("\"version\":2", "\"version\":3", 1).replacen(writer, "granite 9.9.9 (future)", 1);
+    let newer = text.replacen("\"version\":3", "\"version\":4", 1).replacen(writer, "granite 9.9.9 (future)", 1);
     let future = dir.join("future.json");
     std::fs::write(&future, newer).unwrap();
     let e = run("ckpt_future", &load_script("mpm_load", &future)).unwrap_err();
-    assert!(e.contains("granite 9.9.9 (future)") && e.contains("version 3") && e.contains("versions 1 to 2"), "{e}");
+    assert!(e.contains("granite 9.9.9 (future)") && e.contains("version 4") && e.contains("versions 1 to 3"), "{e}");
 }
 
-/// Formats released before: a DEM state of version 2 and an MPM checkpoint of version 1, written
-/// by granite before checkpoints carried a checksum, load through their upgrade path and run on.
+/// Formats released before load through their upgrade path and run on: a DEM state of version 2
+/// and an MPM checkpoint of version 1, written before checkpoints carried a checksum; a DEM state
+/// of version 3 (a periodic cell whose stress servo had no integral part yet, saved
+/// mid-compaction) and an MPM checkpoint of version 2 (before shape functions and stress rates),
+/// both written by granite 5416ea0.
 #[test]
 fn checkpoints_of_every_released_format_load_and_run() {
     // Each file, how to load it, and what summary.json must then say.
     let cases = [
         ("dem_state_v2.json", "dem_load", "particles", "\"particles\": 3", "\"steps\": 100"),
+        ("dem_state_v3.json", "dem_load", "particles", "\"particles\": 60", "\"step\": 3100"),
         // Written at step 50 with 4 points (2 x 2 cells, one point each).
         ("mpm_checkpoint_v1.json", "mpm_load", "points", "\"points\": 4", "\"step\": 150"),
+        // Written at step 50 with 16 points (2 x 2 cells, four points each).
+        ("mpm_checkpoint_v2.json", "mpm_load", "points", "\"points\": 16", "\"step\": 150"),
     ];
     for (file, load, count, has_count, has_steps) in cases {
         let path = common::root().join("tests").join("checkpoints").join(file);

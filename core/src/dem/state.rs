@@ -15,12 +15,14 @@ use serde::{Deserialize, Serialize};
 use std::path::Path;
 
 const FORMAT: &str = "granite-dem-state";
+/// 4: a stress-controlled cell keeps its servo's integral part.
 /// 3: the file is an envelope (`io::checkpoint_file`: writer, CRC-32) around the state of 2.
 /// 2: a pair of spheres is stored under its larger index (`a > b`); 1 stored it under the smaller.
 /// Bump it whenever `DemState` changes, and read the older ones through an upgrade path.
-const VERSION: u32 = 3;
-/// The oldest version read: 2, whose state is 3's (external loads and the energy tracker, added
-/// since, default to none).
+const VERSION: u32 = 4;
+/// The oldest version read: 2, whose state is 4's less what was added since: external loads and
+/// the energy tracker (none), the servo's integral part (zero: the servo learns it again within a
+/// few of its relaxation times).
 const OLDEST: u32 = 2;
 
 /// A contact law by registry name and parameters (rebuilt from the registry on load).

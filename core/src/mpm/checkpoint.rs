@@ -12,10 +12,12 @@ use serde::{Deserialize, Serialize};
 use std::path::Path;
 
 const FORMAT: &str = "granite-mpm-checkpoint";
+/// 3: the shape functions and the stress rate are part of the state.
 /// 2: the file is an envelope (`io::checkpoint_file`: writer, CRC-32) around the state of 1.
 /// Bump it whenever `MpmState` changes, and read the older ones through an upgrade path.
-const VERSION: u32 = 2;
-/// The oldest version read: 1, whose state is 2's.
+const VERSION: u32 = 3;
+/// The oldest version read: 1, whose state is 3's without the shape functions and stress rate
+/// (read as the linear functions and plain rate that granite then had).
 const OLDEST: u32 = 1;
 
 #[derive(Serialize, Deserialize)]
