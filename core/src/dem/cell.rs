@@ -185,6 +185,8 @@ impl CellControl {
                         let proportional = error / (stiffness[a] * tau);
                         let growth = proportional * dt / (Self::INTEGRAL_OVER_PROPORTIONAL * tau);
                         let integral = self.integral[a] + growth;
+                        // Integrate while the rate is within its bound, or when the error draws the
+                        // integral towards zero without carrying it across.
                         if (proportional + integral).abs() < max_rate || growth * integral < 0.0 {
                             self.integral[a] = integral.clamp(-max_rate, max_rate);
                         }
