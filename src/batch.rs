@@ -184,7 +184,7 @@ pub fn run(
                         format!("FAILED: {}", outcome.error)
                     };
                     let params: Vec<String> = outcome.job.overrides.iter().map(|(k, v)| format!("{k}={v}")).collect();
-                    eprintln!("granite batch: run {} [{}] {status}", outcome.job.index, params.join(" "));
+                    granite_core::errln!("granite batch: run {} [{}] {status}", outcome.job.index, params.join(" "));
                 }
                 results.lock().unwrap_or_else(|p| p.into_inner()).push(outcome);
             });

@@ -98,7 +98,7 @@ fn measure(label: &str, threads: &[usize], steps: usize, build: &(dyn Fn() -> Re
         })?;
         let rate = points as f64 * steps as f64 / secs;
         let speedup = speedup_over(&mut base, rate);
-        println!(
+        granite_core::outln!(
             "{label:<34} threads {n}  points {points:>7}  steps {steps:>4}  {:>8.3} s  {:>7.2} M point-updates/s  {:>6.2} M/s per thread  speed-up {speedup:.2}x",
             secs,
             rate / 1e6,
@@ -109,7 +109,7 @@ fn measure(label: &str, threads: &[usize], steps: usize, build: &(dyn Fn() -> Re
 }
 
 pub fn mpm(points: usize, steps: usize, threads: &[usize]) -> Result<()> {
-    println!("granite bench mpm (USF + FLIP, linear shape functions)");
+    granite_core::outln!("granite bench mpm (USF + FLIP, linear shape functions)");
     measure("3D linear-elastic block", threads, steps, &|| elastic_block(points))?;
     let cell = (2.0 / (points as f64 / 4.0)).sqrt();
     measure("2D Mohr-Coulomb column (table 5.1)", threads, steps, &|| mohr_coulomb_column(cell))?;
@@ -245,7 +245,7 @@ pub fn machine_reference(threads: &[usize], repeat: usize) -> Result<()> {
             }
         }
     }
-    println!("machine reference: the same work on every thread, each on its own data (ideal speed-up = threads)");
+    granite_core::outln!("machine reference: the same work on every thread, each on its own data (ideal speed-up = threads)");
     for (name, len, work) in [("arithmetic", 1000, arithmetic as fn(&mut [f64])), ("cache-bound", 65_536, cache_bound)]
     {
         let timed = best_of(threads, repeat, || -> Result<(f64, ())> {
@@ -259,7 +259,7 @@ pub fn machine_reference(threads: &[usize], repeat: usize) -> Result<()> {
             Ok((t.elapsed().as_secs_f64(), ()))
         })?;
         for (t, speedup) in timed.iter().zip(same_work_per_thread_speedups(&timed)) {
-            println!("  {name:<11}  threads {}  {:>7.2} ms{speedup}", t.threads, t.best * 1e3);
+            granite_core::outln!("  {name:<11}  threads {}  {:>7.2} ms{speedup}", t.threads, t.best * 1e3);
         }
     }
     Ok(())
@@ -271,7 +271,7 @@ pub fn machine_reference(threads: &[usize], repeat: usize) -> Result<()> {
 /// also timed in interleaved windows against the ceiling of the moment (see [`windows`]).
 pub fn dem(counts: &[usize], steps: usize, threads: &[usize], repeat: usize) -> Result<()> {
     machine_reference(threads, repeat)?;
-    println!("granite bench dem: gravity deposition (linear law, Cundall 0.4, skin 0.5 r), best of {repeat}");
+    granite_core::outln!("granite bench dem: gravity deposition (linear law, Cundall 0.4, skin 0.5 r), best of {repeat}");
     for &count in counts {
         let timed = best_of(threads, repeat, || -> Result<(f64, (usize, u64, usize))> {
             let mut sim = gravity_deposition(count)?;
@@ -289,7 +289,7 @@ pub fn dem(counts: &[usize], steps: usize, threads: &[usize], repeat: usize) -> 
         for Timed { threads: n, best, worst, out: (particles, rebuilds, contacts) } in timed {
             let rate = particles as f64 * steps as f64 / best;
             let speedup = speedup_over(&mut base, rate);
-            println!(
+            granite_core::outln!(
                 "N = {particles:>6}  threads {n}  {steps} steps  {best:>7.3} s ({worst:.3})  {:>7.2} M particle-steps/s  {:>6.2} M/s per thread  speed-up {speedup:.2}x  ({rebuilds} list rebuilds, {contacts} contacts at the end)",
                 rate / 1e6,
                 rate / 1e6 / n as f64
@@ -301,7 +301,7 @@ pub fn dem(counts: &[usize], steps: usize, threads: &[usize], repeat: usize) -> 
             print_windows(&format!("N = {:>6}  ", state.spheres.len()), &state, threads, repeat)?;
         }
     }
-    println!("granite bench dem: 1500-sphere periodic RVE at 100 kPa, constant-volume simple shear, best of {repeat}");
+    granite_core::outln!("granite bench dem: 1500-sphere periodic RVE at 100 kPa, constant-volume simple shear, best of {repeat}");
     let mut rve = periodic_rve(1500, 1e5)?;
     rve.cell_control = Some(granite_core::dem::cell::CellControl::new(
         [granite_core::dem::cell::AxisGoal::Rate(0.0); 3],
@@ -320,7 +320,7 @@ pub fn dem(counts: &[usize], steps: usize, threads: &[usize], repeat: usize) -> 
     for Timed { threads: n, best, worst, out: contacts } in timed {
         let per_step = best / steps as f64;
         let speedup = speedup_over(&mut base, 1.0 / per_step);
-        println!(
+        granite_core::outln!(
             "N = {:>6}  threads {n}  {steps} steps  {:>7.4} ms per step ({:.4})  {:>6.2} M particle-steps/s  speed-up {speedup:.2}x  ({contacts} contacts)",
             rve.spheres.len(),
             per_step * 1e3,
@@ -345,7 +345,7 @@ pub fn dem(counts: &[usize], steps: usize, threads: &[usize], repeat: usize) -> 
         Ok((t.elapsed().as_secs_f64(), ()))
     })?;
     for (t, speedup) in timed.iter().zip(same_work_per_thread_speedups(&timed)) {
-        println!(
+        granite_core::outln!(
             "the same RVE, one copy per thread (nothing shared)  threads {}  {:>7.4} ms per step{speedup}",
             t.threads,
             t.best / steps as f64 * 1e3
@@ -358,7 +358,7 @@ pub fn dem(counts: &[usize], steps: usize, threads: &[usize], repeat: usize) -> 
 fn print_windows(label: &str, state: &granite_core::dem::DemSim, threads: &[usize], repeat: usize) -> Result<()> {
     for &n in threads.iter().filter(|&&n| n > 1) {
         let w = windows(state, n, WINDOWS, repeat)?;
-        println!(
+        granite_core::outln!(
             "{label}interleaved windows ({WINDOWS} x {WINDOW_STEPS} steps)  threads {n}  speed-up {:.2}x, one copy per thread {:.2}x: the parallel step gets {:.0} % of what this machine gives independent copies",
             w.speedup,
             w.ceiling,
@@ -513,7 +513,7 @@ pub fn mpmxdem_mpi(comm: granite_core::comm::Comm, repeat: usize) -> Result<()> 
     let rve = bench_rve()?;
     let first = rank == 0;
     if first {
-        println!(
+        granite_core::outln!(
             "granite bench mpmxdem over MPI: 16 points x {}-sphere RVEs, {MPM_STEPS} MPM steps x {DEM_STEPS} DEM steps, \
              {size} processes of 1 thread against 1 process of {size} threads",
             rve.spheres.len()
@@ -561,13 +561,13 @@ pub fn mpmxdem_mpi(comm: granite_core::comm::Comm, repeat: usize) -> Result<()> 
     let sphere_steps = (16 * rve.spheres.len() * DEM_STEPS * MPM_STEPS) as f64;
     let per_step = |s: f64| 1e6 * s / MPM_STEPS as f64;
     let (t_threads, t_spread) = (fastest(&threaded), fastest(&spread));
-    println!(
+    granite_core::outln!(
         "1 process, {size} threads    {t_threads:>7.3} s ({:.3})  {:>6.2} M sphere-steps/s  {:>8.0} us per MPM step",
         slowest(&threaded),
         sphere_steps / t_threads / 1e6,
         per_step(t_threads)
     );
-    println!(
+    granite_core::outln!(
         "{size} processes, 1 thread  {t_spread:>7.3} s ({:.3})  {:>6.2} M sphere-steps/s  {:>8.0} us per MPM step: {:.1} % of the threaded rate",
         slowest(&spread),
         sphere_steps / t_spread / 1e6,
@@ -575,12 +575,12 @@ pub fn mpmxdem_mpi(comm: granite_core::comm::Comm, repeat: usize) -> Result<()> 
         100.0 * t_threads / t_spread
     );
     let Some(report) = last_report else {
-        println!("  one process: all of each MPM step in its RVEs and the MPM, no communication");
+        granite_core::outln!("  one process: all of each MPM step in its RVEs and the MPM, no communication");
         return Ok(());
     };
     let stages = report.stages.max(1) as f64;
     for r in 0..size {
-        println!(
+        granite_core::outln!(
             "  rank {r}: {} RVEs; per MPM step {:>8.0} us in its RVEs, {:>6.0} us in the all-gather (waiting included), {:.0} bytes received",
             report.points[r],
             1e6 * report.busy_s[r] / stages,
@@ -594,7 +594,7 @@ pub fn mpmxdem_mpi(comm: granite_core::comm::Comm, repeat: usize) -> Result<()> 
 pub fn mpmxdem(threads: &[usize], repeat: usize) -> Result<()> {
     // What a second core can give right now: the 2-thread figure below is read against it.
     machine_reference(threads, repeat)?;
-    println!(
+    granite_core::outln!(
         "granite bench mpmxdem: 16 points x 125-sphere RVEs, {MPM_STEPS} MPM steps x {DEM_STEPS} DEM steps, oedometric"
     );
     let rve = bench_rve()?;
@@ -623,14 +623,14 @@ pub fn mpmxdem(threads: &[usize], repeat: usize) -> Result<()> {
         let sphere_steps = (points * rve.spheres.len() * DEM_STEPS * MPM_STEPS) as f64;
         let rate = sphere_steps / secs;
         let speedup = speedup_over(&mut base, rate);
-        println!(
+        granite_core::outln!(
             "threads {n}  {points} RVEs  {secs:>7.3} s ({worst:.3})  {:>6.2} M sphere-steps/s  {:>6.2} M/s per thread  speed-up {speedup:.2}x  memory per RVE {:.3} MB",
             rate / 1e6,
             rate / 1e6 / n as f64,
             bytes as f64 / 1e6
         );
         if let Some(&RvesAlone { wall: alone, busy }) = alone_best.get(&n) {
-            println!(
+            granite_core::outln!(
                 "           the same RVEs stepped alone (no MPM)  {alone:>7.3} s  {:>6.2} M sphere-steps/s: the coupled run does {:.1} % of that",
                 sphere_steps / alone / 1e6,
                 100.0 * alone / secs
@@ -638,7 +638,7 @@ pub fn mpmxdem(threads: &[usize], repeat: usize) -> Result<()> {
             // Where a second thread's time goes: waiting for work (the code's share of a
             // speed-up short of the thread count), or the same work running slower (the machine's).
             if let (true, Some(one)) = (n > 1, alone_best.get(&1)) {
-                println!(
+                granite_core::outln!(
                     "           in that run the threads were inside RVE steps {:.1} % of the time, and the same RVE steps took {:.2}x their time on 1 thread",
                     100.0 * busy / (alone * n as f64),
                     busy / one.busy
@@ -649,7 +649,7 @@ pub fn mpmxdem(threads: &[usize], repeat: usize) -> Result<()> {
     let mut big = periodic_rve(1000, 1e5)?;
     // As the dem_rve law holds its RVEs: stepped sequentially, without the parallel gather's lists.
     big.set_sequential(true);
-    println!("memory of a 1000-sphere RVE: {:.3} MB", big.memory_bytes() as f64 / 1e6);
+    granite_core::outln!("memory of a 1000-sphere RVE: {:.3} MB", big.memory_bytes() as f64 / 1e6);
     Ok(())
 }
 
@@ -665,7 +665,7 @@ pub fn triaxial(threads: &[usize], axial_strain: f64) -> Result<()> {
         ));
     }
     let root = std::path::PathBuf::from("out/bench_triaxial");
-    println!(
+    granite_core::outln!(
         "granite bench triaxial: one MPM cell, 8 points x RVE of prepare_rve defaults, to {:.1} % axial strain",
         100.0 * axial_strain
     );
@@ -675,7 +675,7 @@ pub fn triaxial(threads: &[usize], axial_strain: f64) -> Result<()> {
         prepared.summary.get("file").and_then(|v| v.as_str()).map(std::path::PathBuf::from).ok_or_else(|| {
             granite_core::GraniteError::Other("prepare_rve.rhai did not report its saved `file`".into())
         })?;
-    println!("RVE prepared in {:.1} s: {}", t.elapsed().as_secs_f64(), rve.display());
+    granite_core::outln!("RVE prepared in {:.1} s: {}", t.elapsed().as_secs_f64(), rve.display());
     let mut base = None;
     for &n in threads {
         let sets = vec![
@@ -694,7 +694,7 @@ pub fn triaxial(threads: &[usize], axial_strain: f64) -> Result<()> {
         let number = |key: &str| report.summary.get(key).and_then(|v| v.as_f64()).unwrap_or(f64::NAN);
         let rate = number("dem_sphere_steps") / secs;
         let speedup = speedup_over(&mut base, rate);
-        println!(
+        granite_core::outln!(
             "threads {n}  wall {secs:>8.1} s  {:>6.2} M sphere-steps/s  {:>6.2} M/s per thread  speed-up {speedup:.2}x  memory per {}-sphere RVE {:.3} MB  final q {:.4e} Pa",
             rate / 1e6,
             rate / 1e6 / n as f64,
@@ -776,7 +776,7 @@ pub fn resin_heap(shape: &str, count: usize, settle: usize) -> Result<granite_co
 /// grain-step (fastest and slowest of `repeat` windows, alternating), and for potential particles
 /// the share of detection and of the law with the sums.
 pub fn potential(count: usize, steps: usize, repeat: usize) -> Result<()> {
-    println!("granite bench potential: a heap of {count} JGS resin grains (thesis table 2.7), settled, then {steps} steps, one thread, best of {repeat}");
+    granite_core::outln!("granite bench potential: a heap of {count} JGS resin grains (thesis table 2.7), settled, then {steps} steps, one thread, best of {repeat}");
     pool(1)?.install(|| -> Result<()> {
         let settle = 6000;
         let heaps = [("4-sphere clumps", resin_heap("tetra", count, settle)?), ("potential particles", resin_heap("potential_tetra", count, settle)?)];
@@ -800,7 +800,7 @@ pub fn potential(count: usize, steps: usize, repeat: usize) -> Result<()> {
         let per = |secs: f64| secs / (count * steps) as f64 * 1e6;
         for (k, (label, heap)) in heaps.iter().enumerate() {
             let contacts = heap.pairs.touching_count() + heap.wall_pairs.touching_count() + heap.potential_contact_count();
-            println!(
+            granite_core::outln!(
                 "{label:<20} {:>7.3} us a grain-step ({:.3})  {} contacts at the start, {:.2} a grain",
                 per(times[k].0),
                 per(times[k].1),
@@ -808,7 +808,7 @@ pub fn potential(count: usize, steps: usize, repeat: usize) -> Result<()> {
                 contacts as f64 / count as f64
             );
         }
-        println!(
+        granite_core::outln!(
             "potential particles: {:.2} times the clumps' time a grain-step (target: at most 5; YADE: about 100, thesis figure 2.8); detection {:.0} %, law and sums {:.0} % of the step",
             times[1].0 / times[0].0,
             100.0 * split[0] / times[1].0,

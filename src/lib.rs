@@ -79,7 +79,7 @@ pub fn end_among(comm: &granite_core::comm::Comm, error: Option<&granite_core::G
     };
     if !comm.meet(grace) {
         let why = error.map(|e| e.to_string()).unwrap_or_default();
-        eprintln!(
+        granite_core::errln!(
             "granite: error on rank {} of {}: {why}\ngranite: the other processes did not stop with it within {END_GRACE_S} s: aborting the run",
             comm.rank(),
             comm.size()

@@ -128,11 +128,11 @@ fn main() -> ExitCode {
         Command::Run { script, set, list_params: true, plugins, .. } => {
             match granite::describe_params(&script, set, plugins) {
                 Ok(table) => {
-                    print!("{table}");
+                    granite_core::out!("{table}");
                     ExitCode::SUCCESS
                 }
                 Err(e) => {
-                    eprintln!("granite: error: {e}");
+                    granite_core::errln!("granite: error: {e}");
                     ExitCode::FAILURE
                 }
             }
@@ -144,7 +144,7 @@ fn main() -> ExitCode {
                 Ok(Some((universe, comm))) => (Some(universe), (comm.size() > 1).then_some(comm)),
                 Ok(None) => (None, None),
                 Err(e) => {
-                    eprintln!("granite: error: MPI: {e}");
+                    granite_core::errln!("granite: error: MPI: {e}");
                     return ExitCode::FAILURE;
                 }
             };
@@ -152,7 +152,7 @@ fn main() -> ExitCode {
             let comm = None;
             #[cfg(not(feature = "mpi"))]
             if let Some(n) = granite::launched_processes().filter(|&n| n > 1) {
-                eprintln!(
+                granite_core::errln!(
                     "granite: error: started as one of {n} MPI processes, but this granite was built without MPI: \
                      each process would run the whole simulation and write the same files. Build it with \
                      `cargo build --release --features mpi` (see README, Over MPI)"
@@ -167,7 +167,7 @@ fn main() -> ExitCode {
                 None => match granite::signals::install() {
                     Ok(flag) => Some(flag),
                     Err(e) => {
-                        eprintln!("granite: error: {e}");
+                        granite_core::errln!("granite: error: {e}");
                         return ExitCode::FAILURE;
                     }
                 },
@@ -183,22 +183,22 @@ fn main() -> ExitCode {
             };
             let result = granite::run_request(&script, request);
             if let (Some(signal), Err(e)) = (granite::signals::received(), &result) {
-                eprintln!("granite: {e}");
+                granite_core::errln!("granite: {e}");
                 return ExitCode::from((128 + signal).clamp(0, 255) as u8);
             }
             let code = match &result {
                 Ok(report) => {
                     if !quiet && first {
-                        println!("granite: done; outputs in {}", report.out_dir.display());
+                        granite_core::outln!("granite: done; outputs in {}", report.out_dir.display());
                         for (k, v) in &report.summary {
-                            println!("  {k} = {v}");
+                            granite_core::outln!("  {k} = {v}");
                         }
                     }
                     ExitCode::SUCCESS
                 }
                 Err(e) => {
                     if first {
-                        eprintln!("granite: error: {e}");
+                        granite_core::errln!("granite: error: {e}");
                     }
                     ExitCode::FAILURE
                 }
@@ -214,14 +214,14 @@ fn main() -> ExitCode {
                 let (_universe, comm) = match granite::mpi_comm::start() {
                     Ok(started) => started,
                     Err(e) => {
-                        eprintln!("granite: error: MPI: {e}");
+                        granite_core::errln!("granite: error: MPI: {e}");
                         return ExitCode::FAILURE;
                     }
                 };
                 return match granite::bench::mpmxdem_mpi(comm, repeat) {
                     Ok(()) => ExitCode::SUCCESS,
                     Err(e) => {
-                        eprintln!("granite: bench failed: {e}");
+                        granite_core::errln!("granite: bench failed: {e}");
                         ExitCode::FAILURE
                     }
                 };
@@ -238,7 +238,7 @@ fn main() -> ExitCode {
                     granite::bench::potential(count, dem_steps, repeat)
                 }
                 other => {
-                    eprintln!(
+                    granite_core::errln!(
                         "granite: unknown benchmark `{other}`; available: mpm, dem, mpmxdem, triaxial, potential"
                     );
                     return ExitCode::from(2);
@@ -247,7 +247,7 @@ fn main() -> ExitCode {
             match result {
                 Ok(()) => ExitCode::SUCCESS,
                 Err(e) => {
-                    eprintln!("granite: bench failed: {e}");
+                    granite_core::errln!("granite: bench failed: {e}");
                     ExitCode::FAILURE
                 }
             }
@@ -260,14 +260,14 @@ fn main() -> ExitCode {
             let exe = match std::env::current_exe() {
                 Ok(e) => e,
                 Err(e) => {
-                    eprintln!("granite: cannot find the granite executable: {e}");
+                    granite_core::errln!("granite: cannot find the granite executable: {e}");
                     return ExitCode::FAILURE;
                 }
             };
             match granite::batch::run(&exe, &script, &params, &out, jobs, quiet) {
                 Ok(outcomes) => {
                     let failed = outcomes.iter().filter(|o| o.exit_code != Some(0)).count();
-                    println!(
+                    granite_core::outln!(
                         "granite batch: {} runs, {} ok, {failed} failed; summary in {}",
                         outcomes.len(),
                         outcomes.len() - failed,
@@ -280,18 +280,18 @@ fn main() -> ExitCode {
                     }
                 }
                 Err(e) => {
-                    eprintln!("granite: error: {e}");
+                    granite_core::errln!("granite: error: {e}");
                     ExitCode::FAILURE
                 }
             }
         }
         Command::Plot { csv, x, y, out } => match granite_core::io::plot::plot(&csv, &x, &y, out) {
             Ok(path) => {
-                println!("granite: wrote {}", path.display());
+                granite_core::outln!("granite: wrote {}", path.display());
                 ExitCode::SUCCESS
             }
             Err(e) => {
-                eprintln!("granite: error: {e}");
+                granite_core::errln!("granite: error: {e}");
                 ExitCode::FAILURE
             }
         },
@@ -309,41 +309,41 @@ fn main() -> ExitCode {
             match granite::repl::run(script.as_deref(), options) {
                 Ok(0) => ExitCode::SUCCESS,
                 Ok(failed) => {
-                    eprintln!("granite: {failed} input(s) failed");
+                    granite_core::errln!("granite: {failed} input(s) failed");
                     ExitCode::FAILURE
                 }
                 Err(e) => {
-                    eprintln!("granite: error: {e}");
+                    granite_core::errln!("granite: error: {e}");
                     ExitCode::FAILURE
                 }
             }
         }
         Command::Api { name: None } => {
-            print!("{}", granite_core::script::api_doc::markdown());
+            granite_core::out!("{}", granite_core::script::api_doc::markdown());
             ExitCode::SUCCESS
         }
         Command::Api { name: Some(name) } => {
             let found = granite_core::script::api_doc::lookup(&name);
             if found.is_empty() {
                 let word = name.rsplit('.').next().unwrap_or(&name);
-                eprintln!(
+                granite_core::errln!(
                     "granite: no function or property `{name}` in the API{}",
                     granite_core::script::api_doc::did_you_mean(word)
                 );
                 return ExitCode::FAILURE;
             }
             for d in found {
-                print!("{}", granite_core::script::api_doc::help_text(d));
+                granite_core::out!("{}", granite_core::script::api_doc::help_text(d));
             }
             ExitCode::SUCCESS
         }
         Command::Plugins { plugins } => match granite::plugin_listing(&plugins) {
             Ok(listing) => {
-                print!("{listing}");
+                granite_core::out!("{listing}");
                 ExitCode::SUCCESS
             }
             Err(e) => {
-                eprintln!("granite: error: {e}");
+                granite_core::errln!("granite: error: {e}");
                 ExitCode::FAILURE
             }
         },

@@ -26,17 +26,17 @@ const HELP: &str = "granite repl: the script API one input at a time (variables 
 pub fn run(script: Option<&Path>, options: RunOptions) -> Result<usize> {
     let mut session = ReplSession::new(crate::registry(), options)?;
     if let Err(e) = ctrlc::set_handler(session.pause_handle()) {
-        eprintln!("granite: Ctrl-C will not pause runs ({e})");
+        granite_core::errln!("granite: Ctrl-C will not pause runs ({e})");
     }
     let mut failures = 0;
     if let Some(path) = script {
         let source = std::fs::read_to_string(path).map_err(|e| granite_core::error::GraniteError::io(path, e))?;
         match session.eval(&source, false) {
             Outcome::Error(e) => {
-                eprintln!("{}: {e}", path.display());
+                granite_core::errln!("{}: {e}", path.display());
                 failures += 1;
             }
-            Outcome::Interrupted(e) => eprintln!("{}: {e}", path.display()),
+            Outcome::Interrupted(e) => granite_core::errln!("{}: {e}", path.display()),
             _ => {}
         }
     }
@@ -44,7 +44,7 @@ pub fn run(script: Option<&Path>, options: RunOptions) -> Result<usize> {
     let mut reader = Input::new(interactive, Box::new(session.pause_handle()));
     reader.load_history();
     if interactive {
-        println!("{HELP}");
+        granite_core::outln!("{HELP}");
     }
     let mut pending = String::new();
     loop {
@@ -52,7 +52,13 @@ pub fn run(script: Option<&Path>, options: RunOptions) -> Result<usize> {
         reader.know(session.variables());
         // At the end of the input, what is pending is evaluated as it stands.
         let line = match reader.read(prompt) {
-            Some(line) => line,
+            Some(Ok(line)) => line,
+            Some(Err(why)) => {
+                // The input goes on: one bad line (a file in another encoding) is not the end.
+                failures += 1;
+                granite_core::errln!("error: {why}; the line was skipped");
+                continue;
+            }
             None if !pending.is_empty() => String::new(),
             None => break,
         };
@@ -65,28 +71,28 @@ pub fn run(script: Option<&Path>, options: RunOptions) -> Result<usize> {
                 "" => continue,
                 ":quit" | ":q" | "exit" | "quit" => break,
                 ":help" | "help" => {
-                    println!("{HELP}");
+                    granite_core::outln!("{HELP}");
                     continue;
                 }
                 _ if trimmed.starts_with(":help ") => {
-                    print!("{}", ensure_newline(session.help(trimmed[":help".len()..].trim())));
+                    granite_core::out!("{}", ensure_newline(session.help(trimmed[":help".len()..].trim())));
                     continue;
                 }
                 _ if trimmed == ":api" || trimmed.starts_with(":api ") => {
                     let filter = trimmed[":api".len()..].trim();
                     let found = session.api(filter);
                     if found.is_empty() {
-                        println!("no call of the API matches `{filter}`");
+                        granite_core::outln!("no call of the API matches `{filter}`");
                     }
                     for line in found {
-                        println!("  {line}");
+                        granite_core::outln!("  {line}");
                     }
                     continue;
                 }
                 _ if trimmed.starts_with(':') => {
                     // No Rhai input starts with a colon: a mistyped command.
                     failures += 1;
-                    eprintln!(
+                    granite_core::errln!(
                         "error: unknown command `{trimmed}`; the commands are :help [NAME], :api [text] and :quit"
                     );
                     continue;
@@ -99,13 +105,13 @@ pub fn run(script: Option<&Path>, options: RunOptions) -> Result<usize> {
         pending.push('\n');
         match session.eval(&pending, !finishing) {
             Outcome::Incomplete => continue,
-            Outcome::Value(Some(v)) => println!("{v}"),
+            Outcome::Value(Some(v)) => granite_core::outln!("{v}"),
             Outcome::Value(None) => {}
             Outcome::Error(e) => {
                 failures += 1;
-                eprintln!("error: {e}");
+                granite_core::errln!("error: {e}");
             }
-            Outcome::Interrupted(e) => eprintln!("{e}"),
+            Outcome::Interrupted(e) => granite_core::errln!("{e}"),
         }
         reader.remember(pending.trim_end());
         pending.clear();
@@ -185,23 +191,33 @@ impl Input {
         }
     }
 
-    fn read(&mut self, prompt: &str) -> Option<String> {
+    /// The next line; an error for a line that is not text (invalid UTF-8); None at the end.
+    fn read(&mut self, prompt: &str) -> Option<std::result::Result<String, String>> {
         match self {
             Input::Editor(editor, on_ctrl_c) => loop {
                 match editor.readline(prompt) {
-                    Ok(line) => return Some(line),
+                    Ok(line) => return Some(Ok(line)),
                     Err(rustyline::error::ReadlineError::Interrupted) => {
                         on_ctrl_c();
-                        println!("(Ctrl-C pauses background runs; :quit or Ctrl-D leaves)");
+                        granite_core::outln!("(Ctrl-C pauses background runs; :quit or Ctrl-D leaves)");
+                    }
+                    Err(rustyline::error::ReadlineError::Io(e)) if e.kind() == std::io::ErrorKind::InvalidData => {
+                        return Some(Err(format!("the input is not valid UTF-8 text ({e})")))
                     }
                     Err(_) => return None,
                 }
             },
             Input::Plain(stdin) => {
-                let mut line = String::new();
-                match stdin.read_line(&mut line) {
+                let mut bytes = Vec::new();
+                match stdin.read_until(b'\n', &mut bytes) {
                     Ok(0) | Err(_) => None,
-                    Ok(_) => Some(line.trim_end_matches(['\n', '\r']).to_string()),
+                    Ok(_) => Some(match String::from_utf8(bytes) {
+                        Ok(line) => Ok(line.trim_end_matches(['\n', '\r']).to_string()),
+                        Err(e) => Err(format!(
+                            "the input line is not valid UTF-8 text (byte {} is not); granite reads scripts as UTF-8",
+                            e.utf8_error().valid_up_to() + 1
+                        )),
+                    }),
                 }
             }
         }

@@ -39,8 +39,14 @@ fn inconsistent_checkpoints_are_refused_with_the_reason() {
     let good = file["state"].clone();
     let nodes = sim.mesh.node_count();
     type Edit = fn(&mut serde_json::Value);
-    let edits: [(&str, Edit, String); 4] = [
+    let max_step = i64::MAX;
+    let id_1 = sim.points.id[1];
+    let edits: [(&str, Edit, String); 7] = [
         ("short stress", |s| drop(s["points"]["stress"].as_array_mut().unwrap().pop()), "`stress` has".into()),
+        // Scripts read the step as a signed integer: u64::MAX would show as -1.
+        ("step", |s| s["step"] = u64::MAX.into(), format!("a step up to {max_step}")),
+        ("repeated id", |s| s["points"]["id"][1] = s["points"]["id"][0].clone(), "two points have id".into()),
+        ("volume", |s| s["points"]["volume"][1] = (-1.0).into(), format!("point id {id_1}: mass")),
         ("point count", |s| s["materials"][0]["count"] = 1_000_000.into(), "counts 1000000 points".into()),
         (
             "node",

@@ -269,3 +269,26 @@ fn ctrl_c_stops_a_loop_at_the_prompt() {
     assert_eq!(errors.matches("interrupted by Ctrl-C").count(), 2, "{errors}");
     assert_eq!(status, Some(0), "an interrupted input is not a failure: {errors}");
 }
+
+/// A line that is not UTF-8 text (a file in Latin-1 piped in) is reported and skipped; the
+/// inputs after it run.
+#[test]
+fn a_line_of_invalid_utf8_is_reported_and_the_session_goes_on() {
+    let out = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("target/test-out/repl_utf8");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_granite"))
+        .args(["repl", "--quiet", "--out"])
+        .arg(&out)
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut stdin = child.stdin.take().unwrap();
+    stdin.write_all(b"print_line(\"before\");\nprint_line(\"caf\xe9\");\nprint_line(\"after\");\n").unwrap();
+    drop(stdin);
+    let done = child.wait_with_output().unwrap();
+    let (stdout, stderr) = (String::from_utf8_lossy(&done.stdout), String::from_utf8_lossy(&done.stderr));
+    assert_eq!(stdout.lines().collect::<Vec<_>>(), ["before", "after"], "{stderr}");
+    assert!(stderr.contains("not valid UTF-8") && stderr.contains("byte 16"), "{stderr}");
+    assert_eq!(done.status.code(), Some(1), "a piped session with a failed input exits 1");
+}

@@ -1,7 +1,7 @@
 //! Signals during `granite run`, sent for real: SIGINT and SIGTERM stop the run at its next step
 //! with its outputs, summary.json and provenance.json written (status `interrupted`), a checkpoint
 //! when the script asked for one, a line saying where it stopped, and exit code 130 or 143; a
-//! second signal ends the process at once.
+//! second signal, a second or more after the first, ends the process at once.
 #![cfg(unix)]
 
 mod common;
@@ -103,7 +103,12 @@ fn a_second_signal_ends_the_process_at_once() {
         assert!(started.elapsed() < Duration::from_secs(60), "the run did not stop");
         std::thread::sleep(Duration::from_millis(1));
     }
+    // A signal within a second of the first repeats it (`timeout` signals twice): held there
+    // until that second has passed, the process then gets a second signal of its own.
+    signal(&child, libc::SIGSTOP);
+    std::thread::sleep(Duration::from_millis(1100));
     signal(&child, libc::SIGINT);
+    signal(&child, libc::SIGCONT);
     let (exit, stderr) = finish(child);
     assert_eq!(exit, 130, "{stderr}");
     assert!(stderr.contains("a second signal: stopped at once"), "{stderr}");

@@ -161,14 +161,27 @@ impl DemSim {
         let state = serde_json::to_string(&self.to_state())
             .map_err(|e| GraniteError::Other(format!("{}: {e}", path.display())))?;
         let text = crate::io::checkpoint_file::seal(FORMAT, VERSION, written_by, &state);
-        std::fs::write(path, text).map_err(|e| GraniteError::io(path, e))
+        crate::io::durable::replace_keeping_previous(path, text.as_bytes())
     }
 
     /// Reads a state written by [`DemSim::save`] (this version or an older one); a damaged file or
     /// one from a newer granite is refused. Contact laws are rebuilt from `registry`.
     pub fn load(path: &Path, registry: &dyn ContactLawSource) -> Result<DemSim> {
         let text = std::fs::read_to_string(path).map_err(|e| GraniteError::io(path, e))?;
-        let opened = crate::io::checkpoint_file::open(path, &text, FORMAT, VERSION, OLDEST)?;
+        Self::from_state_text(path, &text, registry)
+    }
+
+    /// [`DemSim::load`] of the newest whole state: `path`, or the one written before it
+    /// (`ck.prev.json`) when `path` is missing, cut or damaged; then also why the older one was
+    /// taken.
+    pub fn load_newest(path: &Path, registry: &dyn ContactLawSource) -> Result<(DemSim, Option<String>)> {
+        let whole = |p: &Path, text: &str| crate::io::checkpoint_file::open(p, text, FORMAT, VERSION, OLDEST).map(|_| ());
+        let (read, text, note) = crate::io::durable::read_newest(path, whole)?;
+        Ok((Self::from_state_text(&read, &text, registry)?, note))
+    }
+
+    fn from_state_text(path: &Path, text: &str, registry: &dyn ContactLawSource) -> Result<DemSim> {
+        let opened = crate::io::checkpoint_file::open(path, text, FORMAT, VERSION, OLDEST)?;
         let st: DemState = serde_json::from_str(opened.state)
             .map_err(|e| GraniteError::Other(format!("{} is not a granite DEM state: {e}", path.display())))?;
         Self::from_state(st, &from_registry(registry), &path.display().to_string())
@@ -284,23 +297,33 @@ fn check_consistent(sim: &DemSim) -> std::result::Result<(), String> {
         ("clump", s.clump.len()),
     ];
     same_length("spheres", "x", n, &lengths)?;
+    crate::loaded::unique_ids("spheres", &s.id)?;
+    crate::loaded::step_and_time(sim.step, sim.time)?;
     let finite = |v: &Vec3| v.iter().all(|c| c.is_finite());
     let positive = |x: f64| x.is_finite() && x > 0.0;
+    for (m, material) in sim.materials.iter().enumerate() {
+        if !positive(material.density) {
+            return Err(format!("material {m} (\"{}\"): density {} (must be finite and > 0)", material.name, material.density));
+        }
+    }
     for i in 0..n {
-        if !(positive(s.radius[i]) && positive(s.mass[i]) && positive(s.inertia[i])) {
+        let id = s.id[i];
+        // A radius whose sphere has no finite volume (1e300 m) would overflow every measure.
+        let volume = 4.0 / 3.0 * std::f64::consts::PI * s.radius[i].powi(3);
+        if !(positive(s.radius[i]) && positive(volume) && positive(s.mass[i]) && positive(s.inertia[i])) {
             return Err(format!(
-                "sphere {i}: radius {}, mass {}, inertia {} (each must be finite and > 0)",
+                "sphere id {id}: radius {}, mass {}, inertia {} (each must be > 0, with a finite volume and mass)",
                 s.radius[i], s.mass[i], s.inertia[i]
             ));
         }
         if !(finite(&s.x[i]) && finite(&s.v[i]) && finite(&s.w[i])) {
-            return Err(format!("sphere {i}: non-finite position or velocity"));
+            return Err(format!("sphere id {id}: non-finite position or velocity"));
         }
         if s.material[i] as usize >= sim.materials.len() {
-            return Err(format!("sphere {i}: material {} of {}", s.material[i], sim.materials.len()));
+            return Err(format!("sphere id {id}: material {} of {}", s.material[i], sim.materials.len()));
         }
         if s.clump[i] != crate::dem::particles::FREE && s.clump[i] as usize >= sim.clumps.len() {
-            return Err(format!("sphere {i}: clump {} of {}", s.clump[i], sim.clumps.len()));
+            return Err(format!("sphere id {id}: clump {} of {}", s.clump[i], sim.clumps.len()));
         }
     }
     let c = &sim.clumps;

@@ -1,6 +1,7 @@
 //! Output files of the output contract: `series.csv`, `summary.json`, `vtk/`.
 
 pub mod checkpoint_file;
+pub mod durable;
 pub mod plot;
 pub mod series;
 pub mod vtk;
@@ -11,8 +12,9 @@ pub use vtk::VtkWriter;
 use crate::error::{GraniteError, Result};
 use std::path::Path;
 
-/// Writes `summary.json` (a flat object of named results, in insertion order).
+/// Writes `summary.json` (a flat object of named results, in insertion order), replacing the
+/// file whole or not at all.
 pub fn write_summary(path: &Path, values: &indexmap::IndexMap<String, serde_json::Value>) -> Result<()> {
     let text = serde_json::to_string_pretty(values).map_err(|e| GraniteError::Other(e.to_string()))?;
-    std::fs::write(path, text + "\n").map_err(|e| GraniteError::io(path, e))
+    durable::replace(path, (text + "\n").as_bytes(), durable::Flush::ToDisk)
 }

@@ -55,11 +55,20 @@ fn axis_label(names: &[&str], unit: Option<&str>) -> String {
 /// unit: one quantity per axis.
 pub fn plot(csv: &Path, x: &str, ys: &[String], out: Option<PathBuf>) -> Result<PathBuf> {
     let (header, rows) = read_csv(csv)?;
+    // A file that is not a series (a mistyped path) must not have its first line printed.
+    let names_only = header.iter().all(|h| {
+        (1..=64).contains(&h.len()) && h.chars().all(|c| c.is_ascii_alphanumeric() || "_-. ()[]/".contains(c))
+    });
+    let known = if names_only {
+        header.join(", ")
+    } else {
+        "none: its first line is not a row of column names (is it a series file of granite?)".into()
+    };
     let col = |name: &str| {
         header.iter().position(|h| h == name).ok_or_else(|| GraniteError::Unknown {
             kind: format!("column of {}", csv.display()),
             name: name.into(),
-            known: header.join(", "),
+            known: known.clone(),
         })
     };
     let xi = col(x)?;

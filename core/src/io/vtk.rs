@@ -77,19 +77,43 @@ impl VtkWriter {
     /// A new series in `dir`. Frames of an earlier run with the same stem are removed first: a
     /// shorter new run would otherwise leave the old run's later frames beside its own.
     pub fn new(dir: &Path, stem: &str) -> Result<VtkWriter> {
+        Self::keeping(dir, stem, Vec::new())
+    }
+
+    /// The series `stem` in `dir` continued by a run resumed at `time`: the frames its `.pvd`
+    /// lists before that time are kept (the resumed run writes the later ones again), the others
+    /// removed, and new frames numbered after the kept ones.
+    pub fn resume(dir: &Path, stem: &str, time: f64) -> Result<VtkWriter> {
+        let pvd = std::fs::read_to_string(dir.join(format!("{stem}.pvd"))).unwrap_or_default();
+        let attribute = |line: &str, name: &str| -> Option<String> {
+            let start = line.find(&format!("{name}=\""))? + name.len() + 2;
+            Some(line[start..].split('"').next()?.to_string())
+        };
+        let mut kept = Vec::new();
+        for line in pvd.lines().filter(|l| l.trim_start().starts_with("<DataSet")) {
+            let (Some(t), Some(file)) = (attribute(line, "timestep"), attribute(line, "file")) else { break };
+            // Frames are numbered in order: the first one missing or too late ends the run's part.
+            let expected = frame_index(stem, &file) == Some(kept.len());
+            match t.parse::<f64>() {
+                Ok(t) if t < time && expected && dir.join(&file).is_file() => kept.push((t, file)),
+                _ => break,
+            }
+        }
+        Self::keeping(dir, stem, kept)
+    }
+
+    /// A series in `dir` whose first frames are `kept`; other frames of `stem` found there, left by
+    /// an earlier run, are removed (a shorter new run would otherwise leave them beside its own).
+    fn keeping(dir: &Path, stem: &str, kept: Vec<(f64, String)>) -> Result<VtkWriter> {
         std::fs::create_dir_all(dir).map_err(|e| GraniteError::io(dir, e))?;
         let entries = std::fs::read_dir(dir).map_err(|e| GraniteError::io(dir, e))?;
         for entry in entries.flatten() {
             let name = entry.file_name().to_string_lossy().to_string();
-            let frame = name.strip_prefix(stem).and_then(|rest| rest.strip_prefix('_')).is_some_and(|rest| {
-                let (digits, ext) = rest.split_once('.').unwrap_or((rest, ""));
-                digits.len() == 6 && digits.bytes().all(|b| b.is_ascii_digit()) && (ext == "vtu" || ext == "vtp")
-            });
-            if frame {
+            if frame_index(stem, &name).is_some_and(|k| k >= kept.len()) {
                 let _ = std::fs::remove_file(entry.path());
             }
         }
-        Ok(VtkWriter { dir: dir.to_path_buf(), stem: stem.into(), frames: Vec::new(), encoding: Encoding::default() })
+        Ok(VtkWriter { dir: dir.to_path_buf(), stem: stem.into(), frames: kept, encoding: Encoding::default() })
     }
 
     pub fn frames(&self) -> usize {
@@ -111,7 +135,7 @@ impl VtkWriter {
     fn write(&mut self, time: f64, extension: &str, bytes: &[u8]) -> Result<PathBuf> {
         let name = format!("{}_{:06}.{extension}", self.stem, self.frames.len());
         let path = self.dir.join(&name);
-        std::fs::write(&path, bytes).map_err(|e| GraniteError::io(&path, e))?;
+        super::durable::replace(&path, bytes, super::durable::Flush::ToSystem)?;
         self.frames.push((time, name));
         let mut pvd =
             String::from("<?xml version=\"1.0\"?>\n<VTKFile type=\"Collection\" version=\"0.1\">\n<Collection>\n");
@@ -120,8 +144,20 @@ impl VtkWriter {
         }
         pvd.push_str("</Collection>\n</VTKFile>\n");
         let pvd_path = self.dir.join(format!("{}.pvd", self.stem));
-        std::fs::write(&pvd_path, pvd).map_err(|e| GraniteError::io(&pvd_path, e))?;
+        super::durable::replace(&pvd_path, pvd.as_bytes(), super::durable::Flush::ToSystem)?;
         Ok(path)
+    }
+}
+
+/// The number of frame file `name` of series `stem` (`points_000012.vtu` → 12).
+fn frame_index(stem: &str, name: &str) -> Option<usize> {
+    let rest = name.strip_prefix(stem)?.strip_prefix('_')?;
+    let (digits, ext) = rest.split_once('.')?;
+    let frame = digits.len() == 6 && digits.bytes().all(|b| b.is_ascii_digit()) && (ext == "vtu" || ext == "vtp");
+    if frame {
+        digits.parse().ok()
+    } else {
+        None
     }
 }
 

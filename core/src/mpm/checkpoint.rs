@@ -116,13 +116,26 @@ impl MpmSim {
         let state =
             serde_json::to_string(&state).map_err(|e| GraniteError::Other(format!("{}: {e}", path.display())))?;
         let text = crate::io::checkpoint_file::seal(FORMAT, VERSION, written_by, &state);
-        std::fs::write(path, text).map_err(|e| GraniteError::io(path, e))
+        crate::io::durable::replace_keeping_previous(path, text.as_bytes())
     }
 
     /// Reads a checkpoint; laws and velocity updates are rebuilt from `registry`, laws with
     /// objects (an RVE per point) get them back from the checkpoint.
     pub fn load(path: &Path, registry: &Registry) -> Result<MpmSim> {
         let text = std::fs::read_to_string(path).map_err(|e| GraniteError::io(path, e))?;
+        Self::from_checkpoint_text(path, &text, registry)
+    }
+
+    /// [`MpmSim::load`] of the newest whole checkpoint: `path`, or the one written before it
+    /// (`ck.prev.json`) when `path` is missing, cut or damaged; then also why the older one was
+    /// taken.
+    pub fn load_newest(path: &Path, registry: &Registry) -> Result<(MpmSim, Option<String>)> {
+        let whole = |p: &Path, text: &str| crate::io::checkpoint_file::open(p, text, FORMAT, VERSION, OLDEST).map(|_| ());
+        let (read, text, note) = crate::io::durable::read_newest(path, whole)?;
+        Ok((Self::from_checkpoint_text(&read, &text, registry)?, note))
+    }
+
+    fn from_checkpoint_text(path: &Path, text: &str, registry: &Registry) -> Result<MpmSim> {
         let opened = crate::io::checkpoint_file::open(path, &text, FORMAT, VERSION, OLDEST)?;
         let st: MpmState = serde_json::from_str(opened.state)
             .map_err(|e| GraniteError::Other(format!("{} is not a granite MPM checkpoint: {e}", path.display())))?;
@@ -195,14 +208,20 @@ fn check_consistent(sim: &MpmSim) -> std::result::Result<(), String> {
         ("affine", p.affine.len()),
     ];
     crate::loaded::same_length("points", "x", n, &lengths)?;
+    crate::loaded::unique_ids("points", &p.id)?;
+    crate::loaded::step_and_time(sim.step, sim.time)?;
     let positive = |x: f64| x.is_finite() && x > 0.0;
     for i in 0..n {
+        let id = p.id[i];
         if !(positive(p.mass[i]) && positive(p.volume[i])) {
-            return Err(format!("point {i}: mass {}, volume {} (each must be finite and > 0)", p.mass[i], p.volume[i]));
+            return Err(format!(
+                "point id {id}: mass {}, volume {} (each must be finite and > 0)",
+                p.mass[i], p.volume[i]
+            ));
         }
         let values = p.x[i].iter().chain(&p.v[i]).chain(&p.stress[i]).chain(&p.strain[i]);
         if !values.into_iter().all(|c| c.is_finite()) {
-            return Err(format!("point {i}: a non-finite position, velocity, stress or strain"));
+            return Err(format!("point id {id}: a non-finite position, velocity, stress or strain"));
         }
     }
     // Points are stored material by material, `count` of each, in material order.

@@ -465,7 +465,7 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
     engine.register_fn("material", |s: &mut DemHandle, opts: Map| s.material(opts));
     engine.register_fn("save", |s: &mut DemHandle, file: &str| {
         let mut st = s.lock();
-        let path = st.points_path(file);
+        let path = st.script_file_path("save", file)?;
         let ctx = st.ctx.clone();
         st.sim.save_state(&path, &ctx).map(|_| path.display().to_string()).or_rhai()
     });
@@ -478,7 +478,10 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
                  RVE: `granite run scripts/mpmxdem/prepare_rve.rhai` writes out/prepare_rve/rve.json)"
             )))
         })?;
-        let dem = DemSim::load(&path, &*c.registry()).or_rhai()?;
+        let (dem, fallback) = DemSim::load_newest(&path, &*c.registry()).or_rhai()?;
+        if let Some(why) = fallback {
+            c.warn(&why);
+        }
         Ok::<_, Box<rhai::EvalAltResult>>(Handle::new(
             DemScene { dem, driven: Vec::new(), auto_skin: false, check_overlaps: true, overlaps_checked_for: None },
             c.clone(),

@@ -87,6 +87,11 @@ impl<S: ScriptSim> State<S> {
             if index > 1 || self.ctx.options.folder_per_simulation {
                 self.output.dir = self.output.dir.join(format!("sim{index}"));
             }
+            // A simulation first writes before its first step: one that has steps behind it was
+            // loaded from a checkpoint, and continues the outputs of the run that wrote it.
+            if self.sim.steps() > 0 {
+                self.output.resumes_at = Some((self.sim.steps(), self.sim.time()));
+            }
             self.output_claimed = true;
         }
     }
@@ -98,14 +103,26 @@ impl<S: ScriptSim> State<S> {
         all.extend(self.columns.iter().map(|(n, _)| n.as_str()));
         vals.extend_from_slice(extra);
         let tag = self.sim.series_tag();
-        self.output.write_series(self.sim.steps(), &all, &vals, tag)
+        let written = self.output.write_series(self.sim.steps(), &all, &vals, tag);
+        written.map_err(|e| self.output_failed(e))
     }
 
     fn write_vtk(&mut self) -> Result<()> {
         self.claim_output();
         let (x, fields) = self.sim.vtk_frame();
         let poly = self.sim.vtk_poly();
-        self.output.write_vtk(self.sim.steps(), self.sim.time(), &x, &fields, &poly)
+        let written = self.output.write_vtk(self.sim.steps(), self.sim.time(), &x, &fields, &poly);
+        written.map_err(|e| self.output_failed(e))
+    }
+
+    /// An output that could not be written (a full disk, a lost folder): the run stops with the
+    /// step it was at, the file and the cause; what was written before stays as it was.
+    fn output_failed(&self, e: GraniteError) -> GraniteError {
+        GraniteError::Other(format!(
+            "at step {} (t = {:.6e} s) an output could not be written: {e}; the outputs written before are kept",
+            self.sim.steps(),
+            self.sim.time()
+        ))
     }
 
     /// Where a file the script names is written: relative paths in this simulation's output
@@ -119,11 +136,18 @@ impl<S: ScriptSim> State<S> {
         path
     }
 
+    /// [`State::points_path`] of a file the script names for something it writes, checked by
+    /// [`super::output::check_script_file`].
+    pub fn script_file_path(&mut self, call: &str, file: &str) -> RhaiResult<std::path::PathBuf> {
+        super::output::check_script_file(call, file).or_else(|e| err(e))?;
+        Ok(self.points_path(file))
+    }
+
     /// Writes the checkpoint the script asked for, if it asked; its path.
     fn write_checkpoint(&mut self) -> Result<Option<std::path::PathBuf>> {
         let Some((_, file)) = self.checkpoint.clone() else { return Ok(None) };
         let path = self.points_path(&file);
-        self.sim.save_state(&path, &self.ctx)?;
+        self.sim.save_state(&path, &self.ctx).map_err(|e| self.output_failed(e))?;
         Ok(Some(path))
     }
 
@@ -387,7 +411,7 @@ impl<S: ScriptSim> Handle<S> {
                 let stopped = plan.stop.as_ref().is_some_and(|s| s.load(Ordering::SeqCst));
                 let interrupted = st.ctx.pause_requests() != plan.pauses_at_start;
                 if interrupted && !stopped {
-                    eprintln!("granite: paused at step {} (t = {:.6e} s)", st.sim.steps(), st.sim.time());
+                    crate::errln!("granite: paused at step {} (t = {:.6e} s)", st.sim.steps(), st.sim.time());
                 }
                 (st.sim.time(), st.driven.clone(), stopped || interrupted, st.ctx.stop_requested())
             };
@@ -509,7 +533,7 @@ impl<S: ScriptSim> Handle<S> {
                 Err(e) => Some(super::describe(e, &engine)),
             };
             if let Some(e) = &report {
-                eprintln!("granite: the background run stopped: {e}");
+                crate::errln!("granite: the background run stopped: {e}");
             }
             let (slot, cv) = &*done;
             *slot.lock().unwrap_or_else(|p| p.into_inner()) = Ending { ended: true, result: Some(result) };
@@ -622,7 +646,7 @@ impl Progress {
             last.set(Instant::now());
             let rate = done as f64 / self.start.elapsed().as_secs_f64().max(1e-9);
             let eta = (self.total - done) as f64 / rate.max(1e-9);
-            eprintln!(
+            crate::errln!(
                 "step {done}/{} ({:.0}%)  t = {time:.4e} s  {rate:.0} steps/s  ETA {eta:.0} s",
                 self.total,
                 100.0 * done as f64 / self.total as f64
@@ -688,7 +712,7 @@ pub fn register_common<S: ScriptSim>(engine: &mut Engine) {
     });
     engine.register_fn("write_points", |s: &mut Handle<S>, file: &str| {
         let mut st = s.lock();
-        let path = st.points_path(file);
+        let path = st.script_file_path("write_points", file)?;
         let written = if st.output.writes { st.sim.write_points(&path) } else { Ok(()) };
         crate::comm::agree(st.ctx.comm(), 0, written).map(|_| path.display().to_string()).or_rhai()
     });
@@ -706,6 +730,7 @@ pub fn register_common<S: ScriptSim>(engine: &mut Engine) {
         if n < 1 {
             return err(format!("checkpoint_every(n, file) needs n >= 1 steps, got {n}"));
         }
+        super::output::check_script_file("checkpoint_every", file).or_else(|e| err(e))?;
         s.lock().checkpoint = Some((n as u64, file.to_string()));
         Ok(())
     });

@@ -81,8 +81,10 @@ impl ScriptContext {
     /// directory, else from the output folder or one of its simulation folders (where
     /// `sim.save` wrote it).
     pub(crate) fn input_path(&self, file: &str) -> std::result::Result<PathBuf, String> {
+        // A checkpoint whose newest file was lost still has the one before (`io::durable`).
+        let exists = |p: &Path| p.is_file() || crate::io::durable::previous_path(p).is_file();
         let given = Path::new(file);
-        if given.is_file() || given.is_absolute() {
+        if exists(given) || given.is_absolute() {
             return Ok(given.to_path_buf());
         }
         let out = &self.options.out_dir;
@@ -96,7 +98,7 @@ impl ScriptContext {
             sims.sort();
             looked.extend(sims.into_iter().map(|d| d.join(file)));
         }
-        looked.iter().find(|p| p.is_file()).cloned().ok_or_else(|| {
+        looked.iter().find(|p| exists(p)).cloned().ok_or_else(|| {
             format!(
                 "no file `{file}` in the working directory ({}) nor in the output folder {} or its simulation folders",
                 std::env::current_dir().map(|d| d.display().to_string()).unwrap_or_default(),
@@ -294,7 +296,7 @@ impl ScriptContext {
     /// `warnings` (the first [`MAX_WARNINGS_KEPT`], then a count of the rest).
     pub fn warn(&self, text: &str) {
         if self.writes_files() {
-            eprintln!("granite: {text}");
+            crate::errln!("granite: {text}");
         }
         let mut warnings = self.warnings.lock().unwrap();
         warnings.1 += 1;
@@ -415,7 +417,13 @@ fn build_engine(ctx: &Arc<ScriptContext>) -> Engine {
     let c = ctx.clone();
     engine.register_fn("out_dir", move || c.options.out_dir.display().to_string());
     if ctx.writes_files() {
-        engine.register_fn("print_line", |s: &str| println!("{s}"));
+        engine.register_fn("print_line", |s: &str| crate::outln!("{s}"));
+        // Rhai's own print and debug panic on a closed standard output.
+        engine.on_print(|s| crate::outln!("{s}"));
+        engine.on_debug(|s, source, pos| match source {
+            Some(source) => crate::errln!("{source} @ {pos:?} | {s}"),
+            None => crate::errln!("{pos:?} | {s}"),
+        });
     } else {
         // The other processes of an MPI run run the same script: one of them speaks.
         engine.register_fn("print_line", |_: &str| {});
@@ -424,6 +432,7 @@ fn build_engine(ctx: &Arc<ScriptContext>) -> Engine {
     }
     let c = ctx.clone();
     engine.register_fn("plot", move |csv: &str, x: &str, ys: rhai::Array, out: &str| -> RhaiResult<String> {
+        output::check_script_file("plot", out).or_else(|e| err(e))?;
         let dir = &c.options.out_dir;
         let ys: Vec<String> = ys.iter().map(|y| y.to_string()).collect();
         let drawn = if c.writes_files() {
@@ -548,8 +557,17 @@ pub fn run_source(name: &str, source: &str, registry: Registry, options: RunOpti
     }
     summary.insert("wall_time_s".into(), Value::from(started.elapsed().as_secs_f64()));
     if ctx.writes_files() {
-        crate::io::write_summary(&out_dir.join("summary.json"), &summary)?;
-        write_provenance(&out_dir, name, source, &ctx, started_at, summary.get("status"))?;
+        let records = crate::io::write_summary(&out_dir.join("summary.json"), &summary)
+            .and_then(|()| write_provenance(&out_dir, name, source, &ctx, started_at, summary.get("status")));
+        if let Err(e) = records {
+            // The run's own error comes first: it is what failed first (a full disk fails the
+            // run's outputs before its summary).
+            let ended = match &outcome {
+                Ok(()) => format!("the run itself ended {status}"),
+                Err(run) => format!("the run had stopped: {run}"),
+            };
+            return Err(GraniteError::Other(format!("{ended}; then its records could not be written: {e}")));
+        }
     }
     match outcome {
         Ok(()) => Ok(RunReport { out_dir, summary }),
@@ -662,8 +680,10 @@ pub(crate) fn describe(e: &EvalAltResult, engine: &Engine) -> String {
             "{what}: a script's arrays hold at most {MAX_ARRAY_SIZE} elements, its strings {MAX_STRING_SIZE} bytes \
              and its maps {MAX_MAP_SIZE} entries (particles and points live in the simulation, not in script arrays)"
         ),
-        EvalAltResult::ErrorTerminated(_, _) => {
-            format!("{INTERRUPTED}: the input stopped here; simulations keep their state")
+        // The token says what stopped it: Ctrl-C at the prompt, or a signal naming itself.
+        EvalAltResult::ErrorTerminated(token, _) => {
+            let why = token.clone().into_string().unwrap_or_else(|_| INTERRUPTED.to_string());
+            format!("{why}: the input stopped here; simulations keep their state")
         }
         other => {
             let s = other.to_string();

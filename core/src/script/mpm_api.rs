@@ -269,7 +269,7 @@ impl ScriptSim for MpmScene {
             let report = spread.report()?;
             if ctx.writes_files() {
                 if !ctx.options.quiet {
-                    eprintln!("granite: material \"{}\": {}", m.name, report.line());
+                    crate::errln!("granite: material \"{}\": {}", m.name, report.line());
                 }
                 for (key, value) in report.summary() {
                     ctx.set_summary(&key, value);
@@ -692,7 +692,7 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
     });
     engine.register_fn("save", |s: &mut SimHandle, file: &str| {
         let mut st = s.lock();
-        let path = st.points_path(file);
+        let path = st.script_file_path("save", file)?;
         let ctx = st.ctx.clone();
         st.sim.save_state(&path, &ctx).map(|_| path.display().to_string()).or_rhai()
     });
@@ -702,7 +702,10 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
         let path = c
             .input_path(file)
             .map_err(|why| super::convert::to_rhai(GraniteError::Setup(format!("mpm_load: {why}"))))?;
-        let mut mpm = MpmSim::load(&path, &c.registry()).or_rhai()?;
+        let (mut mpm, fallback) = MpmSim::load_newest(&path, &c.registry()).or_rhai()?;
+        if let Some(why) = fallback {
+            c.warn(&why);
+        }
         if let Some(comm) = &c.options.comm {
             mpm.set_communicator(comm.clone());
         }

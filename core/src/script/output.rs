@@ -22,6 +22,9 @@ pub struct Output {
     pub vtk_every: Option<u64>,
     pub last_series_step: Option<u64>,
     pub last_vtk_step: Option<u64>,
+    /// The step and time a simulation loaded from a checkpoint starts at: its series continue
+    /// the files of the run it resumes, and the VTK series keeps that run's earlier frames.
+    pub resumes_at: Option<(u64, f64)>,
 }
 
 impl Output {
@@ -37,6 +40,7 @@ impl Output {
             vtk_every: None,
             last_series_step: None,
             last_vtk_step: None,
+            resumes_at: None,
         }
     }
 
@@ -55,18 +59,56 @@ impl Output {
             Some(w) => w.columns().len() != cols.len() || w.columns().iter().zip(cols).any(|(a, b)| a != b),
         };
         if needs_new {
-            let name = match &self.series {
-                None => "series.csv".to_string(),
-                Some(_) => format!("series_{tag}.csv"),
+            let columns: Vec<String> = cols.iter().map(|s| s.to_string()).collect();
+            let first = self.series.is_none();
+            let resumed = if first { self.resumed_series(&columns)? } else { None };
+            self.series = match resumed {
+                Some(resumed) => Some(resumed),
+                None => {
+                    // A resumed run whose columns match no earlier file leaves series.csv alone.
+                    let taken = self.resumes_at.is_some() && self.dir.join("series.csv").exists();
+                    let name = if first && !taken { "series.csv".to_string() } else { format!("series_{tag}.csv") };
+                    Some(SeriesWriter::create(&self.dir.join(name), columns)?)
+                }
             };
-            self.series =
-                Some(SeriesWriter::create(&self.dir.join(name), cols.iter().map(|s| s.to_string()).collect())?);
         }
         if let Some(w) = self.series.as_mut() {
             w.write(vals)?;
         }
         self.last_series_step = Some(step);
         Ok(())
+    }
+
+    /// For a resumed simulation, the earlier series file with these columns (`series.csv`, then
+    /// `series_*.csv`), continued from the step it resumes at.
+    fn resumed_series(&self, columns: &[String]) -> Result<Option<SeriesWriter>> {
+        let Some((step, _)) = self.resumes_at else { return Ok(None) };
+        let mut files = vec![self.dir.join("series.csv")];
+        if let Ok(entries) = std::fs::read_dir(&self.dir) {
+            let mut more: Vec<_> = entries
+                .flatten()
+                .map(|e| e.path())
+                .filter(|p| p.file_name().is_some_and(|n| n.to_string_lossy().starts_with("series_")))
+                .filter(|p| p.extension().is_some_and(|e| e == "csv"))
+                .collect();
+            more.sort();
+            files.extend(more);
+        }
+        for file in files {
+            if let Some(series) = SeriesWriter::resume(&file, columns, step)? {
+                return Ok(Some(series));
+            }
+        }
+        Ok(None)
+    }
+
+    /// A VTK series of this simulation: a new one, or for a resumed simulation the earlier run's,
+    /// continued after its frames before the resumed time.
+    fn vtk_series(&self, dir: &std::path::Path, stem: &str) -> Result<VtkWriter> {
+        match self.resumes_at {
+            Some((_, time)) => VtkWriter::resume(dir, stem, time),
+            None => VtkWriter::new(dir, stem),
+        }
     }
 
     /// One frame: the points, and each poly-data series (`vtk/<prefix><name>_N.vtp`, its own
@@ -88,7 +130,7 @@ impl Output {
         }
         let dir = self.dir.join("vtk");
         if self.vtk.is_none() {
-            self.vtk = Some(VtkWriter::new(&dir, "points")?);
+            self.vtk = Some(self.vtk_series(&dir, "points")?);
         }
         if let Some(w) = self.vtk.as_mut() {
             w.encoding = self.vtk_encoding;
@@ -98,7 +140,8 @@ impl Output {
             let k = match self.poly.iter().position(|(n, _)| n == name) {
                 Some(k) => k,
                 None => {
-                    self.poly.push((name.to_string(), VtkWriter::new(&dir, name)?));
+                    let series = self.vtk_series(&dir, name)?;
+                    self.poly.push((name.to_string(), series));
                     self.poly.len() - 1
                 }
             };
@@ -108,5 +151,59 @@ impl Output {
         }
         self.last_vtk_step = Some(step);
         Ok(())
+    }
+}
+
+/// Checks a file name a script gives for something it writes (`sim.save`, `write_points`,
+/// `checkpoint_every`, `plot`): a relative path inside the simulation's output folder, not one of
+/// the files the run itself writes there. Outputs stay in the output folder so that the folder
+/// holds the whole run (to copy, resume, compare in a batch) and a script cannot overwrite files
+/// elsewhere with the user's rights.
+pub fn check_script_file(call: &str, file: &str) -> std::result::Result<(), String> {
+    use std::path::Component;
+    let path = std::path::Path::new(file);
+    let inside = !file.trim().is_empty()
+        && path.components().all(|c| matches!(c, Component::Normal(_) | Component::CurDir))
+        && path.file_name().is_some();
+    if !inside {
+        return Err(format!(
+            "{call}(\"{file}\"): files a script writes go into its output folder: give a relative path without `..` \
+             (e.g. \"state.json\" or \"checkpoints/ck.json\"); choose the folder with --out"
+        ));
+    }
+    let name = path.file_name().map(|n| n.to_string_lossy().to_lowercase()).unwrap_or_default();
+    let top = path.components().count() == 1;
+    let first = path.components().next().map(|c| c.as_os_str().to_string_lossy().to_string()).unwrap_or_default();
+    let run_file = top
+        && (matches!(
+            name.as_str(),
+            "series.csv" | "summary.json" | "provenance.json" | "last_good_points.csv" | "batch_summary.csv" | "stdout.log" | "stderr.log"
+        ) || (name.starts_with("series_") && name.ends_with(".csv")));
+    if run_file || first == "vtk" || name.ends_with(".partial") {
+        return Err(format!(
+            "{call}(\"{file}\"): the run writes that file itself (series*.csv, summary.json, provenance.json, \
+             last_good_points.csv, vtk/): give another name"
+        ));
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::check_script_file;
+
+    #[test]
+    fn script_files_stay_in_the_output_folder_and_off_the_run_own_files() {
+        for ok in ["ck.json", "./ck.json", "checkpoints/ck.json", "points_end.csv", "rve.json"] {
+            assert!(check_script_file("save", ok).is_ok(), "{ok}");
+        }
+        for outside in ["", "/tmp/ck.json", "../ck.json", "a/../../ck.json", "/etc/passwd", "."] {
+            let e = check_script_file("save", outside).unwrap_err();
+            assert!(e.contains("relative path without `..`"), "{outside}: {e}");
+        }
+        for own in ["series.csv", "series_runout.csv", "Summary.json", "provenance.json", "vtk/points.pvd"] {
+            let e = check_script_file("checkpoint_every", own).unwrap_err();
+            assert!(e.contains("the run writes that file itself"), "{own}: {e}");
+        }
     }
 }

@@ -1,0 +1,342 @@
+//! Long runs that never lose data, tried as a user's runs meet trouble: killed (SIGKILL) while
+//! checkpointing, a disk that fills up, a file-size limit, standard error closed or full, a
+//! resume into the folder of the run it continues, `timeout -s INT` (a signal sent twice).
+#![cfg(unix)]
+
+mod common;
+use granite_core::mpm::MpmSim;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+/// A small MPM block settling under gravity; `EXTRA` is replaced by each test's outputs.
+const BLOCK: &str = r#"
+let resume = param("resume", false);
+let steps = param("steps", 100000);
+let sim = if resume {
+    mpm_load("ck.json")
+} else {
+    let s = mpm(#{ dim: 2, origin: [0.0, 0.0], cell: 0.05, cells: [CELLS, CELLS] });
+    let soil = s.material("linear_elastic", #{ density: 1800.0, young: 1e6, poisson: 0.3 });
+    s.fill_box(soil, [0.0, 0.0], [SIDE, SIDE], #{ per_cell: 2 });
+    s.fix("x-", "x"); s.fix("y-", "y");
+    s.gravity([0.0, -9.81]);
+    s.dt(1e-4);
+    s
+};
+EXTRA
+sim.run_steps(steps);
+summary("end_step", sim.step);
+"#;
+
+fn block(cells: usize, extra: &str) -> String {
+    BLOCK
+        .replace("CELLS", &cells.to_string())
+        .replace("SIDE", &format!("{:.2}", cells as f64 * 0.05 / 2.0))
+        .replace("EXTRA", extra)
+}
+
+fn write_script(dir: &Path, source: &str) -> PathBuf {
+    std::fs::create_dir_all(dir).unwrap();
+    let path = dir.join("block.rhai");
+    std::fs::write(&path, source).unwrap();
+    path
+}
+
+fn granite() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_granite"))
+}
+
+fn json(path: &Path) -> serde_json::Value {
+    let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    serde_json::from_str(&text).unwrap_or_else(|e| panic!("{}: {e}: {text:?}", path.display()))
+}
+
+/// Every line of a series file is a whole row: its header's column count of numbers, each row
+/// ending with a line end. The steps of its rows.
+fn whole_rows(path: &Path) -> Vec<f64> {
+    let text = std::fs::read_to_string(path).unwrap();
+    assert!(text.ends_with('\n'), "{} ends inside a row", path.display());
+    let (header, rows) = common::read_csv(path);
+    for row in &rows {
+        assert!(row.len() == header.len() && row.iter().all(|v| v.is_finite()), "{}: {row:?}", path.display());
+    }
+    rows.iter().map(|r| r[common::column(&header, "step")]).collect()
+}
+
+#[test]
+fn a_run_killed_while_checkpointing_always_leaves_a_loadable_checkpoint_and_its_earlier_rows() {
+    // 1600 points: a checkpoint of about 0.5 MB, written and flushed at every step, so that most
+    // kills fall inside a checkpoint's write.
+    let base = common::out_dir("durability_kill");
+    let script = write_script(&base, &block(40, "sim.series_every(1);\nsim.checkpoint_every(1, \"ck.json\");"));
+    let out = base.join("run");
+    let registry = granite::registry();
+    // Kill times spread over the first 0.4 s of the runs, the same ones every time.
+    let mut lcg: u64 = 0x9e37_79b9_7f4a_7c15;
+    let (trials, mut with_checkpoint, mut fell_back) = (100, 0, 0);
+    for trial in 0..trials {
+        lcg = lcg.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1_442_695_040_888_963_407);
+        let delay = Duration::from_millis(40 + (lcg >> 33) % 360);
+        let _ = std::fs::remove_dir_all(&out);
+        let mut child = granite()
+            .args(["run", "--quiet", "--threads", "1", "--out"])
+            .arg(&out)
+            .arg(&script)
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap();
+        std::thread::sleep(delay);
+        child.kill().unwrap();
+        child.wait().unwrap();
+        let ck = out.join("ck.json");
+        if !ck.exists() && !out.join("ck.prev.json").exists() {
+            continue; // killed before its first checkpoint was whole
+        }
+        with_checkpoint += 1;
+        // The newest checkpoint is never a cut one: it is replaced whole or not at all.
+        let sim = MpmSim::load(&ck, &registry)
+            .unwrap_or_else(|e| panic!("trial {trial} (killed after {delay:?}): ck.json: {e}"));
+        let (newest, note) = MpmSim::load_newest(&ck, &registry).unwrap();
+        fell_back += usize::from(note.is_some());
+        assert_eq!(newest.step, sim.step);
+        // The rows before the checkpoint's step are all there (its own row follows it).
+        let steps = whole_rows_allowing_cut_end(&out.join("series.csv"));
+        let expected: Vec<f64> = (0..sim.step).map(|s| s as f64).collect();
+        assert!(
+            steps.len() >= expected.len() && steps[..expected.len()] == expected[..],
+            "trial {trial}: {} rows for a checkpoint at step {}",
+            steps.len(),
+            sim.step
+        );
+    }
+    println!("{with_checkpoint} of {trials} runs killed after their first checkpoint; all loaded");
+    assert!(with_checkpoint >= trials * 3 / 4, "only {with_checkpoint} of {trials} runs got to a checkpoint");
+    assert_eq!(fell_back, 0, "ck.json itself loaded every time");
+}
+
+/// The steps of a series file's whole rows; a kill may cut its last row (a resume drops it).
+fn whole_rows_allowing_cut_end(path: &Path) -> Vec<f64> {
+    let text = std::fs::read_to_string(path).unwrap_or_default();
+    let whole = &text[..text.rfind('\n').map_or(0, |i| i + 1)];
+    whole.lines().skip(1).map(|l| l.split(',').next().unwrap().parse::<f64>().unwrap()).collect()
+}
+
+/// Whether this machine lets a test mount a file system of its own in a private namespace.
+fn can_mount_tmpfs() -> bool {
+    Command::new("unshare")
+        .args(["-rm", "sh", "-c", "d=$(mktemp -d) && mount -t tmpfs -o size=1m none \"$d\""])
+        .stderr(Stdio::null())
+        .status()
+        .is_ok_and(|s| s.success())
+}
+
+#[test]
+fn a_full_disk_fails_the_run_with_the_file_and_step_and_keeps_a_checkpoint_and_whole_rows() {
+    if !can_mount_tmpfs() {
+        println!("skipped: `unshare -rm` with a tmpfs mount is not allowed here (the file-size-limit test covers the same path)");
+        return;
+    }
+    // 400 points (a checkpoint of about 0.13 MB) writing a VTK frame every step into 2 MB.
+    let base = common::out_dir("durability_disk_full");
+    let script = write_script(
+        &base,
+        &block(20, "sim.series_every(1);\nsim.vtk_every(1);\nsim.checkpoint_every(5, \"ck.json\");"),
+    );
+    let kept = base.join("kept");
+    let status = Command::new("unshare")
+        .args(["-rm", "sh", "-c"])
+        .arg(
+            "d=$(mktemp -d) && mount -t tmpfs -o size=2m none \"$d\" && \
+             \"$0\" run --quiet --threads 1 --out \"$d/out\" \"$1\" >\"$2/stdout.txt\" 2>\"$2/stderr.txt\"; \
+             echo $? >\"$2/code.txt\"; cp -a \"$d/out\" \"$2/out\"",
+        )
+        .arg(env!("CARGO_BIN_EXE_granite"))
+        .arg(&script)
+        .arg(&base)
+        .status()
+        .unwrap();
+    assert!(status.success());
+    let code = std::fs::read_to_string(base.join("code.txt")).unwrap();
+    let stderr = std::fs::read_to_string(base.join("stderr.txt")).unwrap();
+    assert_eq!(code.trim(), "1", "{stderr}");
+    // The message says which file failed first, at which step, and why.
+    assert!(stderr.contains("No space left on device"), "{stderr}");
+    let step: u64 = stderr
+        .split("at step ")
+        .nth(1)
+        .and_then(|s| s.split_whitespace().next())
+        .and_then(|s| s.parse().ok())
+        .unwrap_or_else(|| panic!("no step in {stderr}"));
+    assert!(stderr.contains("/out/"), "the file is named: {stderr}");
+    let out = kept.join("out").canonicalize().unwrap_or_else(|_| base.join("out"));
+    let ck = out.join("ck.json");
+    let sim = MpmSim::load(&ck, &granite::registry()).unwrap_or_else(|e| panic!("{e}; {stderr}"));
+    assert!(sim.step > 0 && sim.step <= step, "checkpoint at {} for a failure at {step}", sim.step);
+    let rows = whole_rows(&out.join("series.csv"));
+    assert!(rows.len() as u64 >= sim.step, "{} rows, checkpoint at step {}", rows.len(), sim.step);
+    let summary = json(&out.join("summary.json"));
+    assert_eq!(summary["status"], "failed", "{summary}");
+    assert!(summary["error"].as_str().unwrap().contains("No space left on device"), "{summary}");
+    // Nothing half-written is left under a real name: each frame the .pvd lists opens whole.
+    let pvd = std::fs::read_to_string(out.join("vtk/points.pvd")).unwrap();
+    for file in pvd.split("file=\"").skip(1).map(|s| s.split('"').next().unwrap()) {
+        let frame = std::fs::read(out.join("vtk").join(file)).unwrap();
+        assert!(frame.ends_with(b"</VTKFile>\n"), "{file} is cut");
+    }
+}
+
+#[test]
+fn a_file_size_limit_fails_the_run_naming_the_file_the_step_and_the_cause() {
+    // `ulimit -f 200`: 100 kB a file; the checkpoint of 1600 points is larger.
+    let base = common::out_dir("durability_fsize");
+    let script = write_script(&base, &block(40, "sim.series_every(1);\nsim.checkpoint_every(20, \"ck.json\");"));
+    let out = base.join("out");
+    let run = Command::new("sh")
+        .args(["-c", "ulimit -f 200 && exec \"$0\" run --quiet --threads 1 --out \"$1\" \"$2\""])
+        .arg(env!("CARGO_BIN_EXE_granite"))
+        .arg(&out)
+        .arg(&script)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert_eq!(run.status.code(), Some(1), "{stderr}");
+    assert!(
+        stderr.contains("at step 20 ") && stderr.contains("ck.json") && stderr.contains("File too large"),
+        "{stderr}"
+    );
+    assert!(!out.join("ck.json").exists() && !out.join(".ck.json.partial").exists(), "no cut checkpoint is left");
+    assert_eq!(whole_rows(&out.join("series.csv")), (0..20).map(|s| s as f64).collect::<Vec<_>>());
+    let summary = json(&out.join("summary.json"));
+    assert_eq!(summary["status"], "failed");
+    assert!(summary["error"].as_str().unwrap().contains("at step 20"), "{summary}");
+}
+
+#[test]
+fn a_resumed_run_continues_the_series_and_the_frames_of_the_run_it_resumes() {
+    let out = common::out_dir("durability_resume");
+    let outputs = "sim.series_every(10);\nsim.vtk_every(100);\nif !resume { sim.checkpoint_every(200, \"ck.json\"); }";
+    let source = block(10, outputs);
+    let run = |pairs: &[(&str, &str)]| {
+        let options = granite_core::script::RunOptions {
+            out_dir: out.clone(),
+            overrides: common::sets(pairs),
+            quiet: true,
+            ..Default::default()
+        };
+        granite_core::script::run_source("block.rhai", &source, granite::registry(), options).unwrap()
+    };
+    run(&[("steps", "300")]);
+    let first = std::fs::read_to_string(out.join("series.csv")).unwrap();
+    // Resumed from the checkpoint of step 200, to step 400.
+    let report = run(&[("resume", "true"), ("steps", "200")]);
+    assert_eq!(report.summary["end_step"], 400);
+    let steps = whole_rows(&out.join("series.csv"));
+    assert_eq!(steps, (0..=40).map(|k| 10.0 * k as f64).collect::<Vec<_>>(), "one row every 10 steps, none twice");
+    // The rows before step 200 are the first run's, byte for byte.
+    let resumed = std::fs::read_to_string(out.join("series.csv")).unwrap();
+    let before: String = first.lines().take(21).map(|l| format!("{l}\n")).collect();
+    assert!(resumed.starts_with(&before));
+    // Frames of steps 0 and 100 from the first run, 200 to 400 from the resumed one, in order.
+    let pvd = std::fs::read_to_string(out.join("vtk/points.pvd")).unwrap();
+    let times: Vec<f64> =
+        pvd.split("timestep=\"").skip(1).map(|s| s.split('"').next().unwrap().parse().unwrap()).collect();
+    let dt = 1e-4;
+    assert_eq!(times.len(), 5, "{pvd}");
+    for (k, t) in times.iter().enumerate() {
+        assert!((t - 100.0 * k as f64 * dt).abs() < 1e-9, "frame {k} at t = {t}");
+    }
+    for k in 0..5 {
+        assert!(out.join(format!("vtk/points_{k:06}.vtu")).is_file());
+    }
+    assert!(!out.join("vtk/points_000005.vtu").exists());
+}
+
+#[test]
+fn standard_error_and_output_closed_or_full_never_fail_a_run() {
+    // APIC on linear shape functions warns; print_line writes to standard output.
+    let base = common::out_dir("durability_stderr");
+    let script = write_script(&base, &block(4, "sim.velocity_update(\"APIC\");\nprint_line(\"hello\");"));
+    for (name, stdout, stderr) in [
+        ("full", std::fs::File::create("/dev/full").unwrap(), std::fs::File::create("/dev/full").unwrap()),
+    ] {
+        let out = base.join(name);
+        let run = granite()
+            .args(["run", "--threads", "1", "--set", "steps=50", "--out"])
+            .arg(&out)
+            .arg(&script)
+            .stdout(stdout)
+            .stderr(stderr)
+            .status()
+            .unwrap();
+        assert_eq!(run.code(), Some(0), "{name}");
+        let summary = json(&out.join("summary.json"));
+        assert_eq!(summary["status"], "ok");
+        let warnings = summary["warnings"].as_array().unwrap();
+        assert!(warnings.iter().any(|w| w.as_str().unwrap().contains("APIC")), "{summary}");
+    }
+    // Closed: the reader of a pipe has left.
+    let out = base.join("closed");
+    let mut child = granite()
+        .args(["run", "--threads", "1", "--set", "steps=50", "--out"])
+        .arg(&out)
+        .arg(&script)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    drop(child.stdout.take());
+    drop(child.stderr.take());
+    assert_eq!(child.wait().unwrap().code(), Some(0));
+    assert_eq!(json(&out.join("summary.json"))["status"], "ok");
+}
+
+#[test]
+fn timeout_s_int_which_signals_twice_still_ends_the_run_cleanly() {
+    let base = common::out_dir("durability_timeout");
+    let script = write_script(&base, &block(20, "sim.series_every(100);\nsim.checkpoint_every(1000000, \"ck.json\");"));
+    for k in 0..3 {
+        let out = base.join(format!("run{k}"));
+        let started = Instant::now();
+        let run = Command::new("timeout")
+            .args(["--preserve-status", "-s", "INT", "1.5"])
+            .arg(env!("CARGO_BIN_EXE_granite"))
+            .args(["run", "--quiet", "--threads", "1", "--out"])
+            .arg(&out)
+            .arg(&script)
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&run.stderr);
+        assert_eq!(run.status.code(), Some(130), "{stderr}");
+        assert!(started.elapsed() < Duration::from_secs(30));
+        let summary = json(&out.join("summary.json"));
+        assert_eq!(summary["status"], "interrupted", "{summary}");
+        assert_eq!(summary["signal"], "SIGINT");
+        MpmSim::load(&out.join("ck.json"), &granite::registry()).unwrap();
+    }
+}
+
+#[test]
+fn scripts_cannot_write_over_the_run_own_files_or_outside_its_folder() {
+    let base = common::out_dir("durability_paths");
+    for (extra, expected) in [
+        ("sim.checkpoint_every(5, \"series.csv\");", "the run writes that file itself"),
+        ("sim.checkpoint_every(5, \"vtk/points.pvd\");", "the run writes that file itself"),
+        ("sim.save(\"../escaped.json\");", "relative path without `..`"),
+        ("sim.write_points(\"/tmp/granite_points.csv\");", "relative path without `..`"),
+        ("plot(\"series.csv\", \"time\", [\"kinetic_energy\"], \"/tmp/granite_plot.svg\");", "relative path"),
+    ] {
+        let e = common::run_text_err("durability_paths", &block(2, extra).replace("param(\"steps\", 100000)", "10"));
+        assert!(e.contains(expected) && e.contains("line "), "{extra}: {e}");
+    }
+    assert!(!base.parent().unwrap().join("escaped.json").exists());
+    // An error about a file that is not a series does not print its content.
+    let secret = common::out_dir("durability_secret");
+    std::fs::create_dir_all(&secret).unwrap();
+    let file = secret.join("passwd");
+    std::fs::write(&file, "root:x:0:0:hunter2:/root:/bin/bash\n").unwrap();
+    let e = common::run_text_err("durability_plot", &format!("plot({:?}, \"time\", [\"x\"], \"p.svg\");", file));
+    assert!(e.contains("no column") || e.contains("unknown column"), "{e}");
+    assert!(!e.contains("hunter2"), "{e}");
+}
