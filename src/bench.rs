@@ -245,7 +245,9 @@ pub fn machine_reference(threads: &[usize], repeat: usize) -> Result<()> {
             }
         }
     }
-    granite_core::outln!("machine reference: the same work on every thread, each on its own data (ideal speed-up = threads)");
+    granite_core::outln!(
+        "machine reference: the same work on every thread, each on its own data (ideal speed-up = threads)"
+    );
     for (name, len, work) in [("arithmetic", 1000, arithmetic as fn(&mut [f64])), ("cache-bound", 65_536, cache_bound)]
     {
         let timed = best_of(threads, repeat, || -> Result<(f64, ())> {
@@ -271,7 +273,9 @@ pub fn machine_reference(threads: &[usize], repeat: usize) -> Result<()> {
 /// also timed in interleaved windows against the ceiling of the moment (see [`windows`]).
 pub fn dem(counts: &[usize], steps: usize, threads: &[usize], repeat: usize) -> Result<()> {
     machine_reference(threads, repeat)?;
-    granite_core::outln!("granite bench dem: gravity deposition (linear law, Cundall 0.4, skin 0.5 r), best of {repeat}");
+    granite_core::outln!(
+        "granite bench dem: gravity deposition (linear law, Cundall 0.4, skin 0.5 r), best of {repeat}"
+    );
     for &count in counts {
         let timed = best_of(threads, repeat, || -> Result<(f64, (usize, u64, usize))> {
             let mut sim = gravity_deposition(count)?;
@@ -301,7 +305,9 @@ pub fn dem(counts: &[usize], steps: usize, threads: &[usize], repeat: usize) -> 
             print_windows(&format!("N = {:>6}  ", state.spheres.len()), &state, threads, repeat)?;
         }
     }
-    granite_core::outln!("granite bench dem: 1500-sphere periodic RVE at 100 kPa, constant-volume simple shear, best of {repeat}");
+    granite_core::outln!(
+        "granite bench dem: 1500-sphere periodic RVE at 100 kPa, constant-volume simple shear, best of {repeat}"
+    );
     let mut rve = periodic_rve(1500, 1e5)?;
     rve.cell_control = Some(granite_core::dem::cell::CellControl::new(
         [granite_core::dem::cell::AxisGoal::Rate(0.0); 3],

@@ -177,6 +177,14 @@ pub fn parse_threads(s: &str) -> std::result::Result<usize, String> {
     }
 }
 
+/// A duration in seconds: a number > 0.
+pub fn parse_seconds(s: &str) -> std::result::Result<std::time::Duration, String> {
+    match s.trim().parse::<f64>() {
+        Ok(x) if x > 0.0 && x.is_finite() && x < 1e9 => Ok(std::time::Duration::from_secs_f64(x)),
+        _ => Err(format!("expected a number of seconds > 0, got `{s}`")),
+    }
+}
+
 /// A strain: a number in (0, 1).
 pub fn parse_strain(s: &str) -> std::result::Result<f64, String> {
     match s.trim().parse::<f64>() {

@@ -105,6 +105,10 @@ enum Command {
         out: Option<PathBuf>,
         #[arg(long)]
         quiet: bool,
+        /// Stop a run still going after this many seconds (SIGTERM: it writes its outputs and
+        /// checkpoint), reported `timed out`.
+        #[arg(long, value_name = "SECONDS", value_parser = granite::parse_seconds)]
+        run_timeout: Option<std::time::Duration>,
     },
     /// Plot series.csv columns against another column, as SVG or PNG (by the output file's extension; text drawn with a built-in font).
     Plot {
@@ -252,7 +256,7 @@ fn main() -> ExitCode {
                 }
             }
         }
-        Command::Batch { script, params, jobs, out, quiet } => {
+        Command::Batch { script, params, jobs, out, quiet, run_timeout } => {
             let out = out.unwrap_or_else(|| {
                 let stem = script.file_stem().map(|s| s.to_string_lossy().to_string()).unwrap_or_else(|| "run".into());
                 PathBuf::from("out").join(format!("{stem}_batch"))
@@ -264,16 +268,35 @@ fn main() -> ExitCode {
                     return ExitCode::FAILURE;
                 }
             };
-            match granite::batch::run(&exe, &script, &params, &out, jobs, quiet) {
+            // SIGINT and SIGTERM stop the batch: passed on to its runs, which stop cleanly.
+            let stop = match granite::signals::install() {
+                Ok(flag) => Some(flag),
+                Err(e) => {
+                    granite_core::errln!("granite: error: {e}");
+                    return ExitCode::FAILURE;
+                }
+            };
+            let options = granite::batch::BatchOptions { jobs, quiet, run_timeout, stop };
+            match granite::batch::run(&exe, &script, &params, &out, &options) {
                 Ok(outcomes) => {
-                    let failed = outcomes.iter().filter(|o| o.exit_code != Some(0)).count();
+                    use granite::batch::Status;
+                    let count = |s: Status| outcomes.iter().filter(|o| o.status == s).count();
+                    let ok = count(Status::Ok);
+                    let mut counts = format!("{ok} ok, {} failed", count(Status::Failed));
+                    for s in [Status::Interrupted, Status::TimedOut, Status::NotRun] {
+                        if count(s) > 0 {
+                            counts.push_str(&format!(", {} {}", count(s), s.name()));
+                        }
+                    }
                     granite_core::outln!(
-                        "granite batch: {} runs, {} ok, {failed} failed; summary in {}",
+                        "granite batch: {} runs, {counts}; summary in {}",
                         outcomes.len(),
-                        outcomes.len() - failed,
                         out.join("batch_summary.csv").display()
                     );
-                    if failed > 0 {
+                    if let Some(signal) = granite::signals::received() {
+                        granite_core::errln!("granite batch: stopped by {}", granite_core::script::signal_name(signal));
+                        ExitCode::from((128 + signal).clamp(0, 255) as u8)
+                    } else if ok < outcomes.len() {
                         ExitCode::FAILURE
                     } else {
                         ExitCode::SUCCESS

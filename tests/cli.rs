@@ -336,3 +336,89 @@ fn warnings_reach_stderr_under_quiet_summary_json_and_the_batch_summary() {
     assert!(rows[0][column].contains("left the mesh"), "{:?}", &rows[0]);
     assert_eq!(&rows[1][column], "", "the run at rest has none");
 }
+
+/// A batch stopped by SIGTERM passes the signal on to its runs, which stop cleanly, lists the
+/// runs it did not start, writes batch_summary.csv and exits 143; a run past --run-timeout is
+/// stopped and reported; a summary value named like a parameter gets a column of its own; the
+/// error column holds a run's whole error message.
+#[cfg(unix)]
+#[test]
+fn a_batch_passes_signals_on_limits_run_time_and_keeps_one_header_per_column() {
+    let dir = common::out_dir("cli_batch_signal");
+    std::fs::create_dir_all(&dir).unwrap();
+    let script = dir.join("endless.rhai");
+    std::fs::write(
+        &script,
+        r#"let k = param("k", 1);
+let steps = param("steps", 100000000);
+let sim = mpm(#{ dim: 2, origin: [0.0, 0.0], cell: 0.1, cells: [10, 10] });
+let soil = sim.material("linear_elastic", #{ density: 1800.0, young: 1e6, poisson: 0.3 });
+sim.fill_box(soil, [0.0, 0.0], [0.5, 0.5], #{ per_cell: 2 });
+sim.fix("y-", "y");
+sim.gravity([0.0, -9.81]);
+sim.dt(1e-5);
+sim.series_every(100);
+summary("k", k);
+if k == 3 { throw "a first line\nand a second line"; }
+sim.run_steps(steps);
+"#,
+    )
+    .unwrap();
+    let params = dir.join("params.toml");
+    std::fs::write(&params, "[grid]\nk = [1, 2, 3, 4]\n").unwrap();
+    let batch = |out: &str, extra: &[&str]| {
+        let mut cmd = granite();
+        cmd.args(["batch", "--quiet", "--jobs", "2", "--params"]).arg(&params).arg("--out").arg(dir.join(out));
+        cmd.args(extra).arg(&script);
+        cmd
+    };
+    let mut child = batch("stopped", &[]).stdout(std::process::Stdio::null()).spawn().unwrap();
+    let started = std::time::Instant::now();
+    while !(1..=2).all(|k| dir.join(format!("stopped/run_{:03}/series.csv", k - 1)).exists()) {
+        assert!(started.elapsed() < std::time::Duration::from_secs(60), "the runs did not start");
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    assert_eq!(unsafe { libc::kill(child.id() as i32, libc::SIGTERM) }, 0);
+    let status = child.wait().unwrap();
+    assert_eq!(status.code(), Some(143));
+    let mut csv = csv::Reader::from_path(dir.join("stopped/batch_summary.csv")).unwrap();
+    let header: Vec<String> = csv.headers().unwrap().iter().map(String::from).collect();
+    let mut unique = header.clone();
+    unique.sort();
+    unique.dedup();
+    assert_eq!(unique.len(), header.len(), "a column twice: {header:?}");
+    assert!(header.contains(&"k".to_string()) && header.contains(&"summary_k".to_string()), "{header:?}");
+    let rows: Vec<csv::StringRecord> = csv.records().map(|r| r.unwrap()).collect();
+    let col = |name: &str| header.iter().position(|h| h == name).unwrap();
+    let statuses: Vec<&str> = rows.iter().map(|r| &r[col("status")]).collect();
+    assert_eq!(statuses, ["interrupted", "interrupted", "not run", "not run"]);
+    for k in 0..2 {
+        let summary: serde_json::Value = serde_json::from_str(
+            &std::fs::read_to_string(dir.join(format!("stopped/run_{k:03}/summary.json"))).unwrap(),
+        )
+        .unwrap();
+        assert_eq!((summary["status"].as_str(), summary["signal"].as_str()), (Some("interrupted"), Some("SIGTERM")));
+    }
+    // A time limit, and a run failing with an error of two lines.
+    let out = batch("limited", &["--run-timeout", "1"]).output().unwrap();
+    assert_eq!(out.status.code(), Some(1));
+    let mut csv = csv::Reader::from_path(dir.join("limited/batch_summary.csv")).unwrap();
+    let header: Vec<String> = csv.headers().unwrap().iter().map(String::from).collect();
+    let rows: Vec<csv::StringRecord> = csv.records().map(|r| r.unwrap()).collect();
+    let col = |name: &str| header.iter().position(|h| h == name).unwrap();
+    let statuses: Vec<&str> = rows.iter().map(|r| &r[col("status")]).collect();
+    assert_eq!(statuses, ["timed out", "timed out", "failed", "timed out"]);
+    let error = &rows[2][col("error")];
+    assert!(error.contains("a first line\nand a second line"), "{error}");
+    assert!(rows[0][col("error")].contains("--run-timeout"), "{}", &rows[0][col("error")]);
+}
+
+/// A misspelt parameter name in a batch file is refused before any run starts.
+#[test]
+fn batch_refuses_a_misspelt_parameter_before_any_run() {
+    let (dir, out) = batch("cli_batch_misspelt", "[grid]\nduraton = [0.02, 0.04]\n");
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("declares no parameter `duraton` (did you mean `duration`?)"), "{err}");
+    assert!(!dir.join("runs/run_000").exists(), "no run started");
+}

@@ -43,7 +43,11 @@ fn inconsistent_state_files_are_refused_with_the_reason() {
         ("step", |s| s["step"] = u64::MAX.into(), format!("a step up to {}", i64::MAX)),
         // A radius without a finite volume.
         ("huge radius", |s| s["spheres"]["radius"][7] = 1e300.into(), format!("sphere id {id_7}: radius 1")),
-        ("density", |s| s["materials"][0]["density"] = (-2600.0).into(), "density -2600 (must be finite and > 0)".into()),
+        (
+            "density",
+            |s| s["materials"][0]["density"] = (-2600.0).into(),
+            "density -2600 (must be finite and > 0)".into(),
+        ),
         // Two spheres under one id: one would be reported, moved or erased as the other.
         ("repeated id", |s| s["spheres"]["id"][1] = s["spheres"]["id"][0].clone(), "two spheres have id".into()),
         ("pair index", |s| s["pairs"]["b"][0] = 99_999.into(), format!("an index beyond the {n} spheres")),
@@ -63,7 +67,11 @@ fn inconsistent_state_files_are_refused_with_the_reason() {
         ),
         ("short history", |s| drop(s["pairs"]["history"].as_array_mut().unwrap().pop()), "history values for".into()),
         ("contact law", |s| s["pairs"]["law"][0] = 7.into(), format!("contact law 7 of {laws}")),
-        ("material", |s| s["spheres"]["material"][3] = 2.into(), format!("sphere id {id_3}: material 2 of {materials}")),
+        (
+            "material",
+            |s| s["spheres"]["material"][3] = 2.into(),
+            format!("sphere id {id_3}: material 2 of {materials}"),
+        ),
         ("mass", |s| s["spheres"]["mass"][5] = 0.0.into(), format!("sphere id {id_5}: radius")),
     ];
     for (what, edit, says) in edits {

@@ -258,9 +258,9 @@ fn standard_error_and_output_closed_or_full_never_fail_a_run() {
     // APIC on linear shape functions warns; print_line writes to standard output.
     let base = common::out_dir("durability_stderr");
     let script = write_script(&base, &block(4, "sim.velocity_update(\"APIC\");\nprint_line(\"hello\");"));
-    for (name, stdout, stderr) in [
-        ("full", std::fs::File::create("/dev/full").unwrap(), std::fs::File::create("/dev/full").unwrap()),
-    ] {
+    for (name, stdout, stderr) in
+        [("full", std::fs::File::create("/dev/full").unwrap(), std::fs::File::create("/dev/full").unwrap())]
+    {
         let out = base.join(name);
         let run = granite()
             .args(["run", "--threads", "1", "--set", "steps=50", "--out"])

@@ -175,7 +175,8 @@ impl DemSim {
     /// (`ck.prev.json`) when `path` is missing, cut or damaged; then also why the older one was
     /// taken.
     pub fn load_newest(path: &Path, registry: &dyn ContactLawSource) -> Result<(DemSim, Option<String>)> {
-        let whole = |p: &Path, text: &str| crate::io::checkpoint_file::open(p, text, FORMAT, VERSION, OLDEST).map(|_| ());
+        let whole =
+            |p: &Path, text: &str| crate::io::checkpoint_file::open(p, text, FORMAT, VERSION, OLDEST).map(|_| ());
         let (read, text, note) = crate::io::durable::read_newest(path, whole)?;
         Ok((Self::from_state_text(&read, &text, registry)?, note))
     }
@@ -303,7 +304,10 @@ fn check_consistent(sim: &DemSim) -> std::result::Result<(), String> {
     let positive = |x: f64| x.is_finite() && x > 0.0;
     for (m, material) in sim.materials.iter().enumerate() {
         if !positive(material.density) {
-            return Err(format!("material {m} (\"{}\"): density {} (must be finite and > 0)", material.name, material.density));
+            return Err(format!(
+                "material {m} (\"{}\"): density {} (must be finite and > 0)",
+                material.name, material.density
+            ));
         }
     }
     for i in 0..n {

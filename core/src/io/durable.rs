@@ -67,7 +67,8 @@ pub fn replace_keeping_previous(path: &Path, bytes: &[u8]) -> Result<()> {
         let prev = previous_path(path);
         let prev_partial = partial_path(&prev);
         let _ = std::fs::remove_file(&prev_partial);
-        let linked = std::fs::hard_link(path, &prev_partial).or_else(|_| std::fs::copy(path, &prev_partial).map(|_| ()));
+        let linked =
+            std::fs::hard_link(path, &prev_partial).or_else(|_| std::fs::copy(path, &prev_partial).map(|_| ()));
         match linked.and_then(|()| std::fs::rename(&prev_partial, &prev)) {
             Ok(()) => {}
             // No room for a copy (a file system without hard links, full): the new checkpoint
@@ -108,7 +109,10 @@ fn sync_folder(path: &Path) {
 /// The text of the checkpoint at `path`, or of the one before it when `path` is missing or fails
 /// `check` (cut, damaged); the path read, and what was wrong with the newer file if the older one
 /// was taken. Both failing is an error naming both.
-pub fn read_newest(path: &Path, check: impl Fn(&Path, &str) -> Result<()>) -> Result<(PathBuf, String, Option<String>)> {
+pub fn read_newest(
+    path: &Path,
+    check: impl Fn(&Path, &str) -> Result<()>,
+) -> Result<(PathBuf, String, Option<String>)> {
     let read = |p: &Path| -> Result<String> {
         let text = std::fs::read_to_string(p).map_err(|e| GraniteError::io(p, e))?;
         check(p, &text)?;
@@ -131,7 +135,9 @@ pub fn read_newest(path: &Path, check: impl Fn(&Path, &str) -> Result<()>) -> Re
             );
             Ok((prev, text, Some(why)))
         }
-        Err(older) => Err(GraniteError::Other(format!("{newest}; the previous checkpoint cannot be used either: {older}"))),
+        Err(older) => {
+            Err(GraniteError::Other(format!("{newest}; the previous checkpoint cannot be used either: {older}")))
+        }
     }
 }
 

@@ -42,7 +42,11 @@ impl SeriesWriter {
         for line in lines {
             // A row cut by a killed writer has no line end.
             let before = line.ends_with('\n')
-                && line.split(',').next().and_then(|s| s.trim().parse::<f64>().ok()).is_some_and(|s| s < from_step as f64);
+                && line
+                    .split(',')
+                    .next()
+                    .and_then(|s| s.trim().parse::<f64>().ok())
+                    .is_some_and(|s| s < from_step as f64);
             if !before {
                 break;
             }

@@ -130,7 +130,8 @@ impl MpmSim {
     /// (`ck.prev.json`) when `path` is missing, cut or damaged; then also why the older one was
     /// taken.
     pub fn load_newest(path: &Path, registry: &Registry) -> Result<(MpmSim, Option<String>)> {
-        let whole = |p: &Path, text: &str| crate::io::checkpoint_file::open(p, text, FORMAT, VERSION, OLDEST).map(|_| ());
+        let whole =
+            |p: &Path, text: &str| crate::io::checkpoint_file::open(p, text, FORMAT, VERSION, OLDEST).map(|_| ());
         let (read, text, note) = crate::io::durable::read_newest(path, whole)?;
         Ok((Self::from_checkpoint_text(&read, &text, registry)?, note))
     }

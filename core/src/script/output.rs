@@ -177,7 +177,13 @@ pub fn check_script_file(call: &str, file: &str) -> std::result::Result<(), Stri
     let run_file = top
         && (matches!(
             name.as_str(),
-            "series.csv" | "summary.json" | "provenance.json" | "last_good_points.csv" | "batch_summary.csv" | "stdout.log" | "stderr.log"
+            "series.csv"
+                | "summary.json"
+                | "provenance.json"
+                | "last_good_points.csv"
+                | "batch_summary.csv"
+                | "stdout.log"
+                | "stderr.log"
         ) || (name.starts_with("series_") && name.ends_with(".csv")));
     if run_file || first == "vtk" || name.ends_with(".partial") {
         return Err(format!(
