@@ -199,7 +199,7 @@ pub fn plugin_listing(libraries: &[PathBuf]) -> Result<String> {
     use std::fmt::Write;
     let mut reg = registry();
     for lib in libraries {
-        granite_core::plugin::load_plugin(lib, &mut reg)?;
+        granite_core::plugin::load_plugin(lib, &mut reg, false)?;
     }
     let mut out = String::from("constitutive laws (sim.material(NAME, #{ density: ..., PARAMS })):\n");
     for name in reg.law_names() {

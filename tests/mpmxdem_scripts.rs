@@ -20,6 +20,10 @@ fn prepare_and_run_the_one_cell_triaxial() {
     .unwrap();
     let (h, rows) = read_csv(&tri.out_dir.join("series.csv"));
     let (q, axial, p_col) = (column(&h, "q"), column(&h, "axial_strain"), column(&h, "p"));
+    // The points start at the RVE's stress as it was saved: a loaded sample reports its contact
+    // forces before any step.
+    let p0 = rows[0][p_col];
+    assert!((p0 + p).abs() < 1e-9 * p.abs(), "step 0: p = {p0} for an RVE saved at {}", -p);
     let last = rows.last().unwrap();
     assert!(last[axial] > 0.0019, "axial strain reached {}", last[axial]);
     // Compression at constant lateral stress: q grows and p = sigma_lat + q / 3.

@@ -174,3 +174,82 @@ fn plugins_command_lists_a_library() {
         text.lines().skip(law + 1).take(4).map(|l| l.split_whitespace().next().unwrap_or("")).collect();
     assert_eq!(params, ["young", "poisson", "alpha", "k"], "{text}");
 }
+
+/// A plugin law does not silently take the name of a law already registered (a built-in one, or
+/// one of a plugin loaded before): refused unless asked for with `replace: true`.
+#[test]
+fn a_plugin_law_replaces_a_registered_name_only_when_asked() {
+    let lib = build_plugin(&[], "plugin-test");
+    let twice = format!("load_plugin(\"{0}\");\nload_plugin(\"{0}\");", lib.display());
+    let e = common::run_text_err("plugin_twice", &twice);
+    assert!(
+        e.contains("a law named `drucker_prager` is already registered")
+            && e.contains("replace: true")
+            && e.contains("line 2"),
+        "{e}"
+    );
+    let replaced = format!(
+        "load_plugin(\"{0}\");\nlet n = load_plugin(\"{0}\", #{{ replace: true }});\nsummary(\"law\", n);",
+        lib.display()
+    );
+    let out = common::run_text("plugin_replace", &replaced);
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(summary["law"], "drucker_prager");
+}
+
+/// A table whose declared parameter count does not match its list of names is refused before
+/// any name past the list is read (a hand-written table; `export_law!` cannot get it wrong).
+#[test]
+fn a_plugin_table_declaring_more_parameters_than_it_names_is_refused() {
+    use granite_plugin_abi::{CStrPtr, ErrorBuffer, LawTable, LawTableV1, ABI_VERSION};
+    use std::ffi::c_void;
+    unsafe extern "C" fn create(_: *const f64, _: usize, _: *mut ErrorBuffer) -> *mut c_void {
+        std::ptr::null_mut()
+    }
+    unsafe extern "C" fn update(
+        _: *const c_void,
+        _: usize,
+        _: *mut f64,
+        _: *const f64,
+        _: *mut f64,
+        _: *mut ErrorBuffer,
+    ) -> i32 {
+        1
+    }
+    unsafe extern "C" fn destroy(_: *mut c_void) {}
+    unsafe extern "C" fn wave_speed(_: *const c_void, _: f64) -> f64 {
+        f64::NAN
+    }
+    static NAMES: [CStrPtr; 3] = [CStrPtr(c"young".as_ptr()), CStrPtr(c"poisson".as_ptr()), CStrPtr(std::ptr::null())];
+    static NONE: [CStrPtr; 1] = [CStrPtr(std::ptr::null())];
+    let table = |param_count: usize| LawTable {
+        head: LawTableV1 {
+            abi_version: ABI_VERSION,
+            table_size: std::mem::size_of::<LawTable>() as u32,
+            name: CStrPtr(c"lying".as_ptr()),
+            version: CStrPtr(c"1".as_ptr()),
+            param_count,
+            param_names: NAMES.as_ptr(),
+            state_count: 0,
+            state_names: NONE.as_ptr(),
+            create,
+            update,
+            destroy,
+        },
+        wave_speed,
+    };
+    for (count, says) in [(7, "declares 7 parameters and names 2"), (1, "declares 1 parameters and names more than 1")]
+    {
+        let lying: &'static LawTable = Box::leak(Box::new(table(count)));
+        let mut registry = granite::registry();
+        let e = unsafe { granite_core::plugin::register_table(lying, "liar.so".into(), &mut registry, false) };
+        let e = e.err().expect("refused").to_string();
+        assert!(e.contains("liar.so") && e.contains(says), "{e}");
+        assert!(registry.law_factory("lying").is_err());
+    }
+    let honest: &'static LawTable = Box::leak(Box::new(table(2)));
+    let mut registry = granite::registry();
+    unsafe { granite_core::plugin::register_table(honest, "honest.so".into(), &mut registry, false) }.unwrap();
+    assert_eq!(registry.law_factory("lying").unwrap().param_specs().len(), 2);
+}

@@ -40,8 +40,14 @@ pub struct NativeLawFactory {
     state_names: Vec<&'static str>,
 }
 
-/// Loads a plugin library and registers its law; returns the law's name and version.
-pub fn load_plugin(path: &Path, registry: &mut Registry) -> Result<(String, String)> {
+/// Loads a plugin library and registers its law; returns the law's name and version. A law
+/// whose name the registry already has (a built-in law, another plugin's) is refused unless
+/// `replace` is set.
+///
+/// The library's code runs in this process with the user's rights, as any program they start:
+/// load only libraries you trust. Panics inside it are caught (each export of `export_law!`
+/// catches them), unless it was built with `panic = "abort"`, which ends the process.
+pub fn load_plugin(path: &Path, registry: &mut Registry, replace: bool) -> Result<(String, String)> {
     let library = path.display().to_string();
     let lib = unsafe { libloading::Library::new(path) }
         .map_err(|e| GraniteError::Other(format!("plugin {library}: cannot load the library: {e}")))?;
@@ -57,13 +63,28 @@ pub fn load_plugin(path: &Path, registry: &mut Registry) -> Result<(String, Stri
     if table.is_null() {
         return Err(GraniteError::Other(format!("plugin {library}: `granite_law_table` returned null")));
     }
+    // SAFETY: the library exported the table as a static of the plugin ABI.
+    unsafe { register_table(table, library, registry, replace) }
+}
+
+/// Registers the law of a plugin table (what `load_plugin` found in a library).
+///
+/// # Safety
+/// `table` points to a static table laid out as `granite_plugin_abi` says for the version it
+/// declares, whose strings and functions live as long as the process.
+pub unsafe fn register_table(
+    table: *const LawTable,
+    library: String,
+    registry: &mut Registry,
+    replace: bool,
+) -> Result<(String, String)> {
     // Every version's table starts with version 1's fields (the version and size first); what
     // came later is read only from a table that declares its version.
     let head: &'static LawTableV1 = unsafe { &*(table as *const LawTableV1) };
     let (abi, size) = (head.abi_version, head.table_size as usize);
     let expected = match abi {
         1 => std::mem::size_of::<LawTableV1>(),
-        ABI_VERSION => std::mem::size_of::<LawTable>(),
+        2 | ABI_VERSION => std::mem::size_of::<LawTable>(),
         _ => {
             return Err(GraniteError::Other(format!(
                 "plugin {library}: built for plugin ABI version {abi}, this granite reads versions 1 to {ABI_VERSION}: rebuild it against granite-plugin-abi"
@@ -83,14 +104,44 @@ pub fn load_plugin(path: &Path, registry: &mut Registry) -> Result<(String, Stri
     if name.is_empty() {
         return Err(GraniteError::Other(format!("plugin {library}: the law has no name")));
     }
-    let list = |ptr: *const granite_plugin_abi::CStrPtr, n: usize| -> Vec<&'static str> {
-        (0..n).map(|k| unsafe { text(*ptr.add(k)) }).collect()
+    let list = |ptr: *const granite_plugin_abi::CStrPtr, n: usize, what: &str| -> Result<Vec<&'static str>> {
+        if n > 0 && ptr.is_null() {
+            return Err(GraniteError::Other(format!(
+                "plugin {library}: {n} {what} declared and no list of their names"
+            )));
+        }
+        if abi >= 3 {
+            // The list ends with a null pointer: its names are read up to it, never past the
+            // declared count, so a count larger than the list is found before anything is read
+            // beyond it.
+            let named = (0..=n).find(|&k| unsafe { (*ptr.add(k)).0.is_null() });
+            if named != Some(n) {
+                let held = named.map_or(format!("more than {n}"), |k| k.to_string());
+                return Err(GraniteError::Other(format!(
+                    "plugin {library}: its table declares {n} {what} and names {held}: a table not made by \
+                     granite_plugin_abi::export_law!, or a damaged one"
+                )));
+            }
+        }
+        Ok((0..n).map(|k| unsafe { text(*ptr.add(k)) }).collect())
     };
-    let specs = list(table.param_names, table.param_count)
+    let specs = list(table.param_names, table.param_count, "parameters")?
         .into_iter()
         .map(|p| ParamSpec::required(p, "a parameter of the plugin law"))
         .collect();
-    let state_names = list(table.state_names, table.state_count);
+    let state_names = list(table.state_names, table.state_count, "state variables")?;
+    if let Ok(existing) = registry.law_factory(&name) {
+        if !replace {
+            return Err(GraniteError::Other(format!(
+                "plugin {library}: a law named `{}` is already registered ({}); a plugin does not replace a law \
+                 silently: rename the plugin's law, or load it with load_plugin(path, #{{ replace: true }})",
+                existing.name(),
+                existing.description()
+            )));
+        }
+        let old = existing.name().to_string();
+        registry.remove_law(&old);
+    }
     registry.add_law(Arc::new(NativeLawFactory {
         table: functions,
         name: name.clone(),

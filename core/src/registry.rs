@@ -50,6 +50,11 @@ impl Registry {
         self.laws.insert(factory.name().to_string(), factory);
     }
 
+    /// Takes a law out (a plugin replacing it on request).
+    pub fn remove_law(&mut self, name: &str) {
+        self.laws.shift_remove(name);
+    }
+
     pub fn add_velocity_update(&mut self, factory: Arc<dyn VelocityUpdateFactory>) {
         self.velocity_updates.insert(factory.name().to_string(), factory);
     }

@@ -237,7 +237,9 @@ impl PairList {
                 old += 1;
             }
             (out.a[k], out.b[k], out.shift[k]) = (a, b, shift);
-            // Forces are recomputed every step.
+            // Forces are recomputed every step; a kept pair keeps its force until then, so that
+            // what is measured between two steps (the cell's stress, a saved state) does not
+            // depend on whether the list was rebuilt (`sim.skin`) since the last one.
             out.force[k] = [0.0; 3];
             let (params, history) = (&mut out.params[k * ps..(k + 1) * ps], &mut out.history[k * hs..(k + 1) * hs]);
             if same_layout && old < self.len() && key(old) == (a, b, shift) {
@@ -245,6 +247,7 @@ impl PairList {
                 params.copy_from_slice(&self.params[old * ps..(old + 1) * ps]);
                 history.copy_from_slice(&self.history[old * hs..(old + 1) * hs]);
                 out.touching[k] = self.touching[old];
+                out.force[k] = self.force[old];
             } else {
                 params.fill(0.0);
                 history.fill(0.0);

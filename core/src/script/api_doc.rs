@@ -41,7 +41,7 @@ pub static API: &[ApiDoc] = &[
     f("", "out_dir", &["out_dir()"], NONE, "this run's output folder"),
     f("", "print_line", &["print_line(text)"], NONE, "prints a line on standard output"),
     f("", "plot", &["plot(csv, x, [ys], file)"], NONE, "a line plot of columns of a CSV of the output folder: SVG, or PNG when `file` ends in .png"),
-    f("", "load_plugin", &["load_plugin(path)"], NONE, "loads a native constitutive-law plugin (a .so); returns the laws it adds"),
+    f("", "load_plugin", &["load_plugin(path)", "load_plugin(path, #{ replace })"], &["replace"], "loads a native constitutive-law plugin (a .so) and returns its law's name; its code runs with your rights: load only libraries you trust. A law of a name already registered (built in, another plugin's) is refused unless `replace: true`"),
     f("", "mpm", &["mpm(#{ dim, origin, cell, cells, velocity_update })"], &["dim", "origin", "cell", "cells", "velocity_update"], "a new MPM simulation on a regular mesh: `cell` a size or one per axis, `cells` a count per axis"),
     f("", "mpm_load", &["mpm_load(path)"], NONE, "an MPM simulation from a checkpoint written by `sim.save` (path from the working directory)"),
     f("", "dem", &["dem()", "dem(#{ seed, skin })"], &["seed", "skin"], "a new DEM simulation; the Verlet skin defaults to half the smallest radius"),

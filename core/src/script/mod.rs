@@ -217,9 +217,9 @@ impl ScriptContext {
     }
 
     /// Loads a native law plugin into this script's registry.
-    pub fn load_plugin(&self, path: &Path) -> Result<(String, String)> {
+    pub fn load_plugin(&self, path: &Path, replace: bool) -> Result<(String, String)> {
         let mut reg = self.registry.write().unwrap_or_else(|p| p.into_inner());
-        let (name, version) = crate::plugin::load_plugin(path, &mut reg)?;
+        let (name, version) = crate::plugin::load_plugin(path, &mut reg, replace)?;
         self.plugins.lock().unwrap().push((path.display().to_string(), name.clone(), version.clone()));
         Ok((name, version))
     }
@@ -412,7 +412,16 @@ fn build_engine(ctx: &Arc<ScriptContext>) -> Engine {
     });
     let c = ctx.clone();
     engine.register_fn("load_plugin", move |path: &str| -> RhaiResult<String> {
-        c.load_plugin(Path::new(path)).map(|(name, _)| name).map_err(convert::to_rhai)
+        c.load_plugin(Path::new(path), false).map(|(name, _)| name).map_err(convert::to_rhai)
+    });
+    let c = ctx.clone();
+    engine.register_fn("load_plugin", move |path: &str, opts: rhai::Map| -> RhaiResult<String> {
+        convert::api_options(&opts, "", "load_plugin")?;
+        let replace = match opts.get("replace") {
+            None => false,
+            Some(v) => v.as_bool().map_err(|_| convert::to_rhai(GraniteError::param("replace", v, "true or false")))?,
+        };
+        c.load_plugin(Path::new(path), replace).map(|(name, _)| name).map_err(convert::to_rhai)
     });
     let c = ctx.clone();
     engine.register_fn("out_dir", move || c.options.out_dir.display().to_string());
@@ -461,7 +470,7 @@ pub(crate) fn prepare(registry: Registry, options: RunOptions) -> Result<(Arc<Sc
     let plugins = options.plugins.clone();
     let ctx = Arc::new(ScriptContext::new(registry, options));
     for p in &plugins {
-        ctx.load_plugin(p)?;
+        ctx.load_plugin(p, false)?;
     }
     let engine = Arc::new(build_engine(&ctx));
     *ctx.engine.lock().unwrap() = Arc::downgrade(&engine);

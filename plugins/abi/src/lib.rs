@@ -12,9 +12,11 @@
 
 use std::ffi::{c_char, c_void};
 
-/// Bumped whenever [`LawTable`] changes. 2 added `wave_speed`; granite still loads version-1
-/// tables ([`LawTableV1`]), whose laws report no wave speed.
-pub const ABI_VERSION: u32 = 2;
+/// Bumped whenever [`LawTable`] or what it promises changes. 2 added `wave_speed`; 3 ends the
+/// lists of parameter and state names with a null pointer, so that granite checks the counts the
+/// table declares against the names it holds. granite still loads tables of versions 1
+/// ([`LawTableV1`]; its laws report no wave speed) and 2, trusting their counts.
+pub const ABI_VERSION: u32 = 3;
 
 /// Where a function writes an error message (UTF-8, truncated to the buffer).
 #[repr(C)]
@@ -63,8 +65,10 @@ pub struct LawTableV1 {
     pub name: CStrPtr,
     pub version: CStrPtr,
     pub param_count: usize,
+    /// `param_count` names, then (from version 3) a null pointer.
     pub param_names: *const CStrPtr,
     pub state_count: usize,
+    /// `state_count` names, then (from version 3) a null pointer.
     pub state_names: *const CStrPtr,
     /// Builds a law from `param_count` values; null with a message on error.
     pub create: unsafe extern "C" fn(params: *const f64, count: usize, err: *mut ErrorBuffer) -> *mut c_void,
@@ -103,8 +107,10 @@ pub trait NativeLaw: Sized + Send + Sync + 'static {
 #[macro_export]
 macro_rules! export_law {
     ($ty:ty, name = $name:expr, version = $version:expr, params = [$($p:expr),* $(,)?], state = [$($s:expr),* $(,)?]) => {
-        static GRANITE_PARAMS: &[$crate::CStrPtr] = &[$($crate::CStrPtr(concat!($p, "\0").as_ptr() as *const ::std::ffi::c_char)),*];
-        static GRANITE_STATE: &[$crate::CStrPtr] = &[$($crate::CStrPtr(concat!($s, "\0").as_ptr() as *const ::std::ffi::c_char)),*];
+        // Each list ends with a null pointer (ABI version 3): granite counts the names against
+        // the declared counts.
+        static GRANITE_PARAMS: &[$crate::CStrPtr] = &[$($crate::CStrPtr(concat!($p, "\0").as_ptr() as *const ::std::ffi::c_char),)* $crate::CStrPtr(::std::ptr::null())];
+        static GRANITE_STATE: &[$crate::CStrPtr] = &[$($crate::CStrPtr(concat!($s, "\0").as_ptr() as *const ::std::ffi::c_char),)* $crate::CStrPtr(::std::ptr::null())];
 
         unsafe extern "C" fn granite_create(params: *const f64, count: usize, err: *mut $crate::ErrorBuffer) -> *mut ::std::ffi::c_void {
             let result = ::std::panic::catch_unwind(|| {
@@ -136,7 +142,7 @@ macro_rules! export_law {
                 let law = unsafe { &*(law as *const $ty) };
                 let stress = unsafe { ::std::slice::from_raw_parts_mut(stress as *mut [f64; 6], n) };
                 let dstrain = unsafe { ::std::slice::from_raw_parts(dstrain as *const [f64; 6], n) };
-                let per = GRANITE_STATE.len();
+                let per = GRANITE_STATE.len() - 1;
                 let state = if per == 0 { &mut [][..] } else { unsafe { ::std::slice::from_raw_parts_mut(state, n * per) } };
                 <$ty as $crate::NativeLaw>::update(law, stress, dstrain, state)
             }));
