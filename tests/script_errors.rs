@@ -281,3 +281,33 @@ fn a_replaced_mesh_without_boundaries_is_said_and_one_with_them_is_not() {
     assert!(run("mesh_bare", "").contains("none was set since"));
     assert!(!run("mesh_bounded", "sim.fix(\"y-\", \"y\");\n").contains("warnings"));
 }
+
+/// A material belongs to the simulation that made it: given to another one, it is refused,
+/// naming both, instead of taking that simulation's material of the same index.
+#[test]
+fn a_material_of_one_simulation_is_refused_by_another() {
+    let dem = "let a = dem();\nlet glass = a.material(#{ name: \"glass\", density: 2500.0 });\n\
+               let b = dem();\nlet steel = b.material(#{ name: \"steel\", density: 7800.0 });\n";
+    for (call, line) in [
+        ("b.sphere(glass, [0.0, 0.0, 0.0], 0.01);", 5),
+        ("b.clump_cloud(glass, [0.0, 0.0, 0.0], [0.1, 0.1, 0.1], #{ count: 3, r_sphere: 0.005, r_clump: 0.01 });", 5),
+        ("b.wall_plane(glass, [0.0, 0.0, 0.0], [0.0, 0.0, 1.0]);", 5),
+        ("b.contact_law(\"linear\", glass, steel, #{ kn: 1e5 });", 5),
+    ] {
+        let e = run_err("material_of_another_dem", &format!("{dem}{call}"), &[]);
+        assert!(
+            e.contains("material \"glass\" belongs to simulation #1, not to this one (#2)")
+                && e.contains(&format!("line {line}")),
+            "{call}: {e}"
+        );
+    }
+    let mpm = "let a = mpm(#{ dim: 2, cell: 0.1, cells: [4, 4] });\n\
+               let sand = a.material(\"linear_elastic\", #{ name: \"sand\", density: 1800.0, young: 1e6, poisson: 0.3 });\n\
+               let b = mpm(#{ dim: 2, cell: 0.1, cells: [4, 4] });\n\
+               b.fill_box(sand, [0.0, 0.0], [0.2, 0.2]);";
+    let e = run_err("material_of_another_mpm", mpm, &[]);
+    assert!(
+        e.contains("material \"sand\" belongs to simulation #1, not to this one (#2)") && e.contains("line 4"),
+        "{e}"
+    );
+}

@@ -42,11 +42,15 @@ pub type DemHandle = Handle<DemScene>;
 pub struct DemMaterialHandle {
     index: u16,
     name: String,
+    /// The simulation that made it (`Handle::serial`).
+    sim: u64,
 }
 
 impl DemMaterialHandle {
-    pub(super) fn index(&self) -> u16 {
-        self.index
+    /// Its index in `s`'s materials; an error when it is another simulation's material.
+    pub(super) fn index_in(&self, s: &DemHandle) -> RhaiResult<u16> {
+        s.owns(self.sim, &format!("material \"{}\"", self.name))?;
+        Ok(self.index)
     }
     pub(super) fn name(&self) -> &str {
         &self.name
@@ -383,7 +387,7 @@ impl Handle<DemScene> {
         let elastic = super::convert::elastic_from(&opts, &format!("material \"{name}\""))?;
         let index = st.sim.dem.add_material(&name, density).or_rhai()?;
         st.sim.dem.set_material_elastic(index, elastic).or_rhai()?;
-        Ok(DemMaterialHandle { index, name })
+        Ok(DemMaterialHandle { index, name, sim: self.serial() })
     }
 
     fn contact_law(&mut self, law: &str, pair: Option<(u16, u16)>, opts: Map) -> RhaiResult<()> {
@@ -394,15 +398,16 @@ impl Handle<DemScene> {
     }
 
     fn add_generated(&mut self, m: &DemMaterialHandle, spheres: Vec<(Vec3, f64)>) -> RhaiResult<i64> {
+        let index = m.index_in(self)?;
         let mut st = self.lock();
         for (x, r) in &spheres {
-            st.sim.dem.add_sphere(m.index, *x, *r, [0.0; 3]).or_rhai()?;
+            st.sim.dem.add_sphere(index, *x, *r, [0.0; 3]).or_rhai()?;
         }
         Ok(spheres.len() as i64)
     }
 
-    fn add_wall(&mut self, mat: &DemMaterialHandle, name: String, shape: WallShape, position: Vec3) -> i64 {
-        let wall = Wall::new(&name, shape, position, mat.index);
+    fn add_wall(&mut self, mat: &DemMaterialHandle, name: String, shape: WallShape, position: Vec3) -> RhaiResult<i64> {
+        let wall = Wall::new(&name, shape, position, mat.index_in(self)?);
         let mut st = self.lock();
         let twin = st.sim.dem.walls.iter().position(|w| w.same_surface(&wall));
         let index = st.sim.dem.add_wall(wall);
@@ -413,7 +418,7 @@ impl Handle<DemScene> {
                 st.sim.dem.walls[twin].name
             ));
         }
-        index as i64
+        Ok(index as i64)
     }
 
     /// The six walls of a box (or five, open at the top), lower corner `lo`, upper `hi`.
@@ -434,7 +439,7 @@ impl Handle<DemScene> {
                 let mut n = [0.0; 3];
                 n[a] = if upper { -1.0 } else { 1.0 };
                 let name = format!("{}{}", ["x", "y", "z"][a], if upper { "+" } else { "-" });
-                out.push(Dynamic::from(self.add_wall(m, name, WallShape::Plane { normal: n }, point)));
+                out.push(Dynamic::from(self.add_wall(m, name, WallShape::Plane { normal: n }, point)?));
             }
         }
         Ok(out)
@@ -491,7 +496,8 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
     engine.register_fn(
         "contact_law",
         |s: &mut DemHandle, law: &str, a: DemMaterialHandle, b: DemMaterialHandle, opts: Map| {
-            s.contact_law(law, Some((a.index, b.index)), opts)
+            let pair = (a.index_in(s)?, b.index_in(s)?);
+            s.contact_law(law, Some(pair), opts)
         },
     );
     fn sphere(s: &mut DemHandle, m: DemMaterialHandle, x: Dynamic, r: Dynamic, opts: Map) -> RhaiResult<i64> {
@@ -502,8 +508,9 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
             Some(v) => vector(v, 3, "velocity")?,
             None => [0.0; 3],
         };
+        let index = m.index_in(s)?;
         let mut st = s.lock();
-        let i = st.sim.dem.add_sphere(m.index, x, r, v).or_rhai()?;
+        let i = st.sim.dem.add_sphere(index, x, r, v).or_rhai()?;
         if let Some(f) = get(&opts, "fixed") {
             st.sim.dem.spheres.blocked[i] = if f.is_bool() {
                 if f.as_bool().unwrap_or(false) {
@@ -550,7 +557,8 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
             }
             list.push(([v[0], v[1], v[2]], v[3]));
         }
-        s.lock().sim.dem.add_clump(m.index, &list, [0.0; 3], CLUMP_VOXELS).map(|c| c as i64).or_rhai()
+        let index = m.index_in(s)?;
+        s.lock().sim.dem.add_clump(index, &list, [0.0; 3], CLUMP_VOXELS).map(|c| c as i64).or_rhai()
     });
     engine.register_fn(
         "tetra_clump",
@@ -559,7 +567,8 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
             let members =
                 crate::dem::clump::tetrahedral_members(c, finite(&r_sphere, "r_sphere")?, finite(&r_clump, "r_clump")?)
                     .or_rhai()?;
-            s.lock().sim.dem.add_clump(m.index, &members, [0.0; 3], CLUMP_VOXELS).map(|c| c as i64).or_rhai()
+            let index = m.index_in(s)?;
+            s.lock().sim.dem.add_clump(index, &members, [0.0; 3], CLUMP_VOXELS).map(|c| c as i64).or_rhai()
         },
     );
     engine.register_fn(
@@ -595,16 +604,17 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
                 let centres: Vec<_> = centres.iter().map(|(c, _)| *c).collect();
                 return super::potential_api::add_cloud(s, &m, &potential, &centres, seed);
             }
-            let density = s.lock().sim.dem.materials[m.index as usize].density;
+            let index = m.index_in(s)?;
+            let density = s.lock().sim.dem.materials[index as usize].density;
             let props = crate::dem::clump::mass_properties(&template, density, CLUMP_VOXELS).or_rhai()?;
             let mut st = s.lock();
             for (k, (c, _)) in centres.iter().enumerate() {
                 let u = [0, 1, 2].map(|j| crate::ext::contact::uniform(seed ^ 0xC1u64, (3 * k + j) as u64));
                 let (members, q) = crate::dem::clump::place_template(&template, *c, u);
                 if members.len() == 1 {
-                    st.sim.dem.add_sphere(m.index, members[0].0, members[0].1, [0.0; 3]).or_rhai()?;
+                    st.sim.dem.add_sphere(index, members[0].0, members[0].1, [0.0; 3]).or_rhai()?;
                 } else {
-                    st.sim.dem.add_clump_with(m.index, &members, &props.transformed(&q, *c)).or_rhai()?;
+                    st.sim.dem.add_clump_with(index, &members, &props.transformed(&q, *c)).or_rhai()?;
                 }
             }
             Ok::<_, Box<rhai::EvalAltResult>>(count as i64)
@@ -628,7 +638,7 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
     });
     engine.register_fn("wall_plane", |s: &mut DemHandle, m: DemMaterialHandle, point: Dynamic, normal: Dynamic| {
         let (p, n) = (vector(&point, 3, "point")?, unit(vector(&normal, 3, "normal")?, "normal")?);
-        Ok::<_, Box<rhai::EvalAltResult>>(s.add_wall(&m, "plane".into(), WallShape::Plane { normal: n }, p))
+        s.add_wall(&m, "plane".into(), WallShape::Plane { normal: n }, p)
     });
     engine.register_fn(
         "wall_rect",
@@ -643,7 +653,7 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
             if (u[0] * v[0] + u[1] * v[1] + u[2] * v[2]).abs() > 1e-9 {
                 return err("rectangle sides `u` and `v` must be orthogonal");
             }
-            Ok(s.add_wall(&m, "rect".into(), WallShape::Rect { u, v, half: [h[0], h[1]] }, c))
+            s.add_wall(&m, "rect".into(), WallShape::Rect { u, v, half: [h[0], h[1]] }, c)
         },
     );
     engine.register_fn(
@@ -655,7 +665,7 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
             if !(r > 0.0) {
                 return err("disk radius must be > 0");
             }
-            Ok(s.add_wall(&m, "disk".into(), WallShape::Disk { normal: n, radius: r }, c))
+            s.add_wall(&m, "disk".into(), WallShape::Disk { normal: n, radius: r }, c)
         },
     );
     engine.register_fn(
@@ -667,7 +677,7 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
             if !(r > 0.0 && l > 0.0) {
                 return err("cylinder radius and length must be > 0");
             }
-            Ok(s.add_wall(&m, "cylinder".into(), WallShape::Cylinder { axis: a, radius: r, length: l }, b))
+            s.add_wall(&m, "cylinder".into(), WallShape::Cylinder { axis: a, radius: r, length: l }, b)
         },
     );
     engine.register_fn("box_walls", |s: &mut DemHandle, m: DemMaterialHandle, lo: Dynamic, hi: Dynamic, opts: Map| {

@@ -175,7 +175,7 @@ fn register_bodies(engine: &mut Engine) {
                             "`material` of set_body is a material made by sim.material(...)".into(),
                         ))
                     })?
-                    .index(),
+                    .index_in(s)?,
             ),
             None => None,
         };
@@ -265,7 +265,7 @@ fn register_live_changes(engine: &mut Engine) {
         Ok::<_, Box<rhai::EvalAltResult>>(law_map(name, params))
     });
     engine.register_fn("contact_law_params", |s: &mut DemHandle, a: DemMaterialHandle, b: DemMaterialHandle| {
-        let (name, params) = s.law_params(Some((a.index(), b.index())))?;
+        let (name, params) = s.law_params(Some((a.index_in(s)?, b.index_in(s)?)))?;
         Ok::<_, Box<rhai::EvalAltResult>>(law_map(name, params))
     });
     engine.register_fn("set_contact_params", |s: &mut DemHandle, changes: Map| s.set_contact_params(None, changes));
@@ -273,7 +273,7 @@ fn register_live_changes(engine: &mut Engine) {
     engine.register_fn("set_contact_params", |s: &mut DemHandle, m: DemMaterialHandle, changes: Map| {
         let count = s.lock().sim.dem.materials.len() as u16;
         for other in 0..count {
-            let pair = Some((m.index(), other));
+            let pair = Some((m.index_in(s)?, other));
             if s.lock().sim.dem.law_index(pair).is_some() {
                 s.set_contact_params(pair, changes.clone())?;
             }
@@ -283,7 +283,8 @@ fn register_live_changes(engine: &mut Engine) {
     engine.register_fn(
         "set_contact_params",
         |s: &mut DemHandle, a: DemMaterialHandle, b: DemMaterialHandle, changes: Map| {
-            s.set_contact_params(Some((a.index(), b.index())), changes)
+            let pair = (a.index_in(s)?, b.index_in(s)?);
+            s.set_contact_params(Some(pair), changes)
         },
     );
     engine.register_fn("set_material", |s: &mut DemHandle, m: DemMaterialHandle, opts: Map| {
@@ -292,6 +293,7 @@ fn register_live_changes(engine: &mut Engine) {
         if elastic.is_none() {
             return err("set_material: give `young` and `poisson`, or `rigid: true`");
         }
-        s.lock().sim.dem.set_material_elastic(m.index(), elastic).or_rhai()
+        let index = m.index_in(s)?;
+        s.lock().sim.dem.set_material_elastic(index, elastic).or_rhai()
     });
 }

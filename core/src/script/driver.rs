@@ -209,6 +209,8 @@ impl<S: ScriptSim> State<S> {
 pub struct Handle<S: ScriptSim>(Arc<Shared<S>>);
 
 pub struct Shared<S: ScriptSim> {
+    /// Which simulation of the session this is (1, 2, ...): the handles of its materials carry it.
+    serial: u64,
     state: Mutex<State<S>>,
     /// Threads other than a background run's waiting for the state: the run lets them in
     /// between two steps (a plain mutex may hand it straight back to the running loop).
@@ -301,7 +303,25 @@ impl<S: ScriptSim> Handle<S> {
             checkpoint: None,
             background: None,
         };
-        Handle(Arc::new(Shared { state: Mutex::new(state), waiting: AtomicUsize::new(0) }))
+        let serial = state.ctx.next_simulation_serial();
+        Handle(Arc::new(Shared { serial, state: Mutex::new(state), waiting: AtomicUsize::new(0) }))
+    }
+
+    /// Which simulation of the session this is (1, 2, ...).
+    pub fn serial(&self) -> u64 {
+        self.0.serial
+    }
+
+    /// Checks that a handle made by simulation `owner` (a material) is used with this one.
+    pub fn owns(&self, owner: u64, what: &str) -> RhaiResult<()> {
+        if owner == self.serial() {
+            return Ok(());
+        }
+        err(format!(
+            "{what} belongs to simulation #{owner}, not to this one (#{}): a material is used by the simulation \
+             that made it; make one for this simulation with its own material(...)",
+            self.serial()
+        ))
     }
 
     /// The state; while blocked here a thread counts as waiting, so a background run lets it in

@@ -151,6 +151,8 @@ pub struct ScriptContext {
     listing_done: std::sync::atomic::AtomicBool,
     /// Warnings kept for summary.json, and how many there were in all.
     warnings: Mutex<(Vec<String>, usize)>,
+    /// Simulations made so far (their handles' serial numbers).
+    simulations: std::sync::atomic::AtomicU64,
 }
 
 /// Warnings summary.json lists in full; past these it counts them.
@@ -171,7 +173,13 @@ impl ScriptContext {
             background: Mutex::new(Vec::new()),
             listing_done: std::sync::atomic::AtomicBool::new(false),
             warnings: Mutex::new((Vec::new(), 0)),
+            simulations: std::sync::atomic::AtomicU64::new(0),
         }
+    }
+
+    /// The serial number of a new simulation handle.
+    pub(crate) fn next_simulation_serial(&self) -> u64 {
+        self.simulations.fetch_add(1, std::sync::atomic::Ordering::SeqCst) + 1
     }
 
     /// Pauses every run at its next step (Ctrl-C).

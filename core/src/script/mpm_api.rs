@@ -61,14 +61,22 @@ pub type SimHandle = Handle<MpmScene>;
 pub struct MaterialHandle {
     index: usize,
     name: String,
+    /// The simulation that made it (`Handle::serial`).
+    sim: u64,
 }
 
 impl MaterialHandle {
     pub(super) fn name(&self) -> &str {
         &self.name
     }
-    pub(super) fn new(index: usize, name: String) -> MaterialHandle {
-        MaterialHandle { index, name }
+    /// Its index in `s`'s materials; an error when it is another simulation's material.
+    fn index_in(&self, s: &SimHandle) -> RhaiResult<usize> {
+        s.owns(self.sim, &format!("material \"{}\"", self.name))?;
+        Ok(self.index)
+    }
+
+    pub(super) fn new(index: usize, name: String, sim: u64) -> MaterialHandle {
+        MaterialHandle { index, name, sim }
     }
 }
 
@@ -430,7 +438,7 @@ impl Handle<MpmScene> {
         let (params, objects) = law_inputs(&opts, law)?;
         let law_obj = st.ctx.registry().build_law_with(law, &params, &objects).or_rhai()?;
         let index = st.sim.mpm.add_material(&name, density, law_obj).or_rhai()?;
-        Ok(MaterialHandle { index, name })
+        Ok(MaterialHandle { index, name, sim: self.serial() })
     }
 
     /// New values for some parameters of a material's law, between two steps. The law is rebuilt
@@ -442,9 +450,10 @@ impl Handle<MpmScene> {
                 m.name
             ));
         }
+        let index = m.index_in(self)?;
         let mut guard = self.lock();
         let st = &mut *guard;
-        let Some(material) = st.sim.mpm.materials.get(m.index) else {
+        let Some(material) = st.sim.mpm.materials.get(index) else {
             return err(format!("material \"{}\" does not belong to this simulation", m.name));
         };
         let law = material.law.name().to_string();
@@ -458,10 +467,10 @@ impl Handle<MpmScene> {
             material.law.params().iter().filter(|(_, v)| !v.is_nan()).map(|(k, v)| (k.to_string(), v)).collect();
         params.extend(param_map(&opts, &[], &law)?);
         let rebuilt = st.ctx.registry().build_law(&law, &params).or_rhai()?;
-        let old = std::mem::replace(&mut st.sim.mpm.materials[m.index].law, rebuilt);
+        let old = std::mem::replace(&mut st.sim.mpm.materials[index].law, rebuilt);
         // A stiffer law may need a smaller time step: refuse the change rather than blow up.
         if let Err(e) = st.sim.mpm.validate() {
-            st.sim.mpm.materials[m.index].law = old;
+            st.sim.mpm.materials[index].law = old;
             return err(format!("set_material(\"{}\") refused: {e}", m.name));
         }
         Ok(())
@@ -500,6 +509,7 @@ impl Handle<MpmScene> {
         opts: Map,
     ) -> RhaiResult<i64> {
         api_options(&opts, "MpmSim", "fill_box")?;
+        let material = mat.index_in(self)?;
         let mut st = self.lock();
         let dim = st.sim.mpm.dim();
         let per_dir = match get(&opts, "per_cell") {
@@ -543,7 +553,7 @@ impl Handle<MpmScene> {
         if xs.is_empty() {
             return err("the region holds no material point: check its bounds against the mesh");
         }
-        st.sim.mpm.add_points(mat.index, &xs, &vols, v, stress).or_rhai()?;
+        st.sim.mpm.add_points(material, &xs, &vols, v, stress).or_rhai()?;
         Ok(xs.len() as i64)
     }
 
@@ -677,8 +687,9 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
     engine.register_fn("material", |s: &mut SimHandle, law: &str, opts: Map| s.material(law, opts));
     engine.register_fn("set_material", |s: &mut SimHandle, m: MaterialHandle, opts: Map| s.set_material(&m, opts));
     engine.register_fn("memory_per_point", |s: &mut SimHandle, m: MaterialHandle| -> RhaiResult<i64> {
+        let index = m.index_in(s)?;
         let st = s.lock();
-        match st.sim.mpm.materials.get(m.index) {
+        match st.sim.mpm.materials.get(index) {
             Some(material) => Ok(material.law.bytes_per_point() as i64),
             None => err(format!("material \"{}\" does not belong to this simulation", m.name)),
         }
@@ -721,11 +732,12 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
     });
     engine.register_fn("add_points", |s: &mut SimHandle, m: MaterialHandle, positions: Array, volume: Dynamic| {
         let volume = finite(&volume, "volume")?;
+        let index = m.index_in(s)?;
         let mut st = s.lock();
         let dim = st.sim.mpm.dim();
         let xs = positions.iter().map(|p| vector(p, dim, "position")).collect::<RhaiResult<Vec<_>>>()?;
         let vols = vec![volume; xs.len()];
-        st.sim.mpm.add_points(m.index, &xs, &vols, [0.0; 3], [0.0; 6]).or_rhai()
+        st.sim.mpm.add_points(index, &xs, &vols, [0.0; 3], [0.0; 6]).or_rhai()
     });
     engine.register_fn(
         "fill_region",

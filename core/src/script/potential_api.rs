@@ -87,7 +87,7 @@ pub(super) fn register(engine: &mut Engine) {
         };
         let mut st = s.lock();
         let dem = &mut st.sim.dem;
-        let i = dem.add_potential(m.index(), &shape, centre, q, v, fixed).or_rhai()?;
+        let i = dem.add_potential(m.index_in(s)?, &shape, centre, q, v, fixed).or_rhai()?;
         dem.potentials.w[i] = spin;
         Ok::<_, Box<rhai::EvalAltResult>>(dem.potentials.id[i] as i64)
     });
@@ -135,7 +135,7 @@ pub(super) fn add_cloud(
     for (k, c) in centres.iter().enumerate() {
         let u = [0, 1, 2].map(|j| crate::ext::contact::uniform(seed ^ 0xC1u64, (3 * k + j) as u64));
         let (_, q) = crate::dem::clump::place_template(&[], *c, u);
-        st.sim.dem.add_potential(m.index(), shape, *c, q, [0.0; 3], false).or_rhai()?;
+        st.sim.dem.add_potential(m.index_in(s)?, shape, *c, q, [0.0; 3], false).or_rhai()?;
     }
     Ok(centres.len() as i64)
 }

@@ -136,7 +136,7 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
             };
             let mut st = s.lock();
             let index = st.sim.mpm.add_material(name, density, Box::new(law)).or_rhai()?;
-            Ok(super::mpm_api::MaterialHandle::new(index, name.to_string()))
+            Ok(super::mpm_api::MaterialHandle::new(index, name.to_string(), s.serial()))
         },
     );
 }

@@ -14,7 +14,8 @@
 //!   default) is the undamped law.
 //!
 //! The moduli: `young` and `poisson` given to the law serve both bodies (a wall included, as a
-//! body of the same material); left out, each body's material gives its own
+//! body of the same material), except a body whose material is rigid (`rigid: true`): rigidity
+//! belongs to the body and stays. Left out, each body's material gives its own
 //! (`sim.material(#{ young, poisson })`, a modulus of infinity for a rigid wall).
 
 use super::tangential::{beyond_limit, dot, minus_along, rotate_into_plane, scaled};
@@ -99,10 +100,15 @@ fn effective_radius(info: &PairInfo) -> f64 {
 }
 
 impl HertzMindlin {
-    /// The two bodies' moduli: the law's own for both, else each material's.
+    /// The two bodies' moduli: the law's own for both (a rigid body staying rigid), else each
+    /// material's.
     fn moduli(&self, info: &PairInfo) -> std::result::Result<[Elastic; 2], String> {
         if let Some(own) = self.own {
-            return Ok([own, own]);
+            let body = |material: Option<Elastic>| match material {
+                Some(rigid) if rigid.young.is_infinite() => rigid,
+                _ => own,
+            };
+            return Ok([body(info.elastic[0]), body(info.elastic[1])]);
         }
         match info.elastic {
             [Some(a), Some(b)] => Ok([a, b]),
