@@ -167,7 +167,9 @@ pub fn periodic_rve(count: usize, pressure: f64) -> Result<granite_core::dem::De
         |phi: f64| reg.build_contact_law("linear", &params(&[("young", 1e8), ("kt_ratio", 0.5), ("friction", phi)]));
     sim.set_contact_law(law(5.0)?, None)?;
     sim.set_cell(Some(PeriodicCell::new_box([side; 3])));
-    for (x, radius) in cloud([0.0; 3], [side; 3], count, &Psd::Uniform { min: 0.7 * r, max: 1.3 * r }, 1, &[])? {
+    for (x, radius) in
+        cloud([0.0; 3], [side; 3], count, &Psd::Uniform { min: 0.7 * r, max: 1.3 * r }, 1, &[], &|| None)?
+    {
         sim.add_sphere(m, x, radius, [0.0; 3])?;
     }
     sim.damping = 0.4;

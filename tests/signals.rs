@@ -113,3 +113,42 @@ fn a_second_signal_ends_the_process_at_once() {
     assert_eq!(exit, 130, "{stderr}");
     assert!(stderr.contains("a second signal: stopped at once"), "{stderr}");
 }
+
+/// A signal is honoured within a second during a long generation call (a cloud that cannot fit
+/// tries for minutes) and during script code, and the message names the signal.
+#[test]
+fn signals_stop_long_calls_and_script_code_naming_the_signal() {
+    let cases = [
+        (
+            "signal_cloud",
+            "let sim = dem();\nlet m = sim.material(#{ density: 2500.0 });\n\
+             sim.cloud(m, [0.0, 0.0, 0.0], [0.1, 0.1, 0.1], #{ count: 1000000, radius: 0.004 });\n",
+            "while placing spheres",
+        ),
+        ("signal_loop", "let x = 0;\nloop { x += 1; }\n", "line 2"),
+    ];
+    for (name, source, says) in cases {
+        let out = common::out_dir(name);
+        std::fs::create_dir_all(&out).unwrap();
+        let script = out.join("busy.rhai");
+        std::fs::write(&script, source).unwrap();
+        let child = Command::new(env!("CARGO_BIN_EXE_granite"))
+            .args(["run", "--quiet", "--threads", "1", "--out"])
+            .arg(&out)
+            .arg(&script)
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap();
+        // Busy by then: the process started and is inside the call or the loop.
+        std::thread::sleep(Duration::from_millis(800));
+        let sent = Instant::now();
+        signal(&child, libc::SIGTERM);
+        let (exit, stderr) = finish(child);
+        let took = sent.elapsed();
+        assert_eq!(exit, 143, "{name}: {stderr}");
+        assert!(stderr.contains("stopped by SIGTERM") && stderr.contains(says), "{name}: {stderr}");
+        assert!(!stderr.contains("Ctrl-C"), "{name}: {stderr}");
+        assert!(took < Duration::from_secs(5), "{name}: {took:?} after the signal");
+        assert_eq!(json(&out.join("summary.json"))["status"], "interrupted");
+    }
+}

@@ -79,6 +79,8 @@ impl Psd {
 
 /// Non-overlapping spheres at random positions inside the box `[lo, hi]` (each sphere entirely
 /// inside), avoiding `existing` spheres too. Fails with a clear error when the box is too full.
+/// `interrupted` is asked every few thousand tries (a few milliseconds): a message from it (a
+/// signal asking the run to stop) ends the call with that message.
 pub fn cloud(
     lo: Vec3,
     hi: Vec3,
@@ -86,6 +88,7 @@ pub fn cloud(
     psd: &Psd,
     seed: u64,
     existing: &[(Vec3, f64)],
+    interrupted: &dyn Fn() -> Option<String>,
 ) -> Result<Vec<(Vec3, f64)>> {
     psd.validate()?;
     crate::memory::check(
@@ -126,6 +129,14 @@ pub fn cloud(
     let mut attempts = 0;
     while placed.len() - first_new < count {
         attempts += 1;
+        if attempts % 4096 == 0 {
+            if let Some(why) = interrupted() {
+                return Err(GraniteError::Other(format!(
+                    "{why} while placing spheres (sim.cloud: {} of {count} placed); nothing was added",
+                    placed.len() - first_new
+                )));
+            }
+        }
         if attempts > max_attempts {
             return Err(GraniteError::Setup(format!(
                 "could place only {} of {count} non-overlapping spheres in the box: enlarge it or ask for fewer",
@@ -210,8 +221,8 @@ mod tests {
     #[test]
     fn cloud_is_reproducible_and_overlap_free() {
         let psd = Psd::Uniform { min: 0.01, max: 0.02 };
-        let a = cloud([0.0; 3], [0.5, 0.5, 0.5], 300, &psd, 7, &[]).unwrap();
-        let b = cloud([0.0; 3], [0.5, 0.5, 0.5], 300, &psd, 7, &[]).unwrap();
+        let a = cloud([0.0; 3], [0.5, 0.5, 0.5], 300, &psd, 7, &[], &|| None).unwrap();
+        let b = cloud([0.0; 3], [0.5, 0.5, 0.5], 300, &psd, 7, &[], &|| None).unwrap();
         assert_eq!(a, b);
         for i in 0..a.len() {
             for j in i + 1..a.len() {

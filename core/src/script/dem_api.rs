@@ -536,16 +536,16 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
             return err(format!("`count` must be >= 0, got {count}"));
         }
         let psd = psd_from(&opts)?;
-        let (seed, existing) = {
+        let (seed, existing, ctx) = {
             let st = s.lock();
             let seed = match get(&opts, "seed") {
                 Some(v) => integer(v, "seed")? as u64,
                 None => st.sim.dem.seed,
             };
             let sp = &st.sim.dem.spheres;
-            (seed, sp.x.iter().copied().zip(sp.radius.iter().copied()).collect::<Vec<_>>())
+            (seed, sp.x.iter().copied().zip(sp.radius.iter().copied()).collect::<Vec<_>>(), st.ctx.clone())
         };
-        let made = cloud(lo, hi, count as usize, &psd, seed, &existing).or_rhai()?;
+        let made = cloud(lo, hi, count as usize, &psd, seed, &existing, &|| ctx.interrupted()).or_rhai()?;
         s.add_generated(&m, made)
     });
     engine.register_fn("clump", |s: &mut DemHandle, m: DemMaterialHandle, members: Array| {
@@ -599,7 +599,9 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
                 }
                 None => existing,
             };
-            let centres = cloud(lo, hi, count, &Psd::Uniform { min: bound, max: bound }, seed, &existing).or_rhai()?;
+            let ctx = s.lock().ctx.clone();
+            let psd = Psd::Uniform { min: bound, max: bound };
+            let centres = cloud(lo, hi, count, &psd, seed, &existing, &|| ctx.interrupted()).or_rhai()?;
             if let Some(potential) = shape.potential() {
                 let centres: Vec<_> = centres.iter().map(|(c, _)| *c).collect();
                 return super::potential_api::add_cloud(s, &m, &potential, &centres, seed);

@@ -67,6 +67,15 @@ impl ScriptContext {
         self.options.comm.as_ref().is_none_or(|c| c.rank() == 0)
     }
 
+    /// Why script code (and the long calls it makes, such as `sim.cloud`) must stop now, if it
+    /// must: Ctrl-C pressed while a REPL input is evaluated, or a signal asking the run to stop.
+    pub fn interrupted(&self) -> Option<String> {
+        match INTERRUPTIBLE_SINCE.get() {
+            Some(presses) if self.pause_requests() != presses => Some(INTERRUPTED.to_string()),
+            _ => self.stop_requested().map(|s| format!("stopped by {}", signal_name(s))),
+        }
+    }
+
     /// The signal that asked the run to stop, if one did.
     pub fn stop_requested(&self) -> Option<i32> {
         self.options.stop_signal.map(|s| s.load(std::sync::atomic::Ordering::SeqCst)).filter(|&s| s != 0)
@@ -383,12 +392,9 @@ fn build_engine(ctx: &Arc<ScriptContext>) -> Engine {
     let c = ctx.clone();
     // Checked at every operation: a loop of runs does only a few between two runs, and the
     // check outside the REPL is one thread-local read.
-    engine.on_progress(move |_| match INTERRUPTIBLE_SINCE.get() {
-        Some(presses) if c.pause_requests() != presses => Some(Dynamic::from(INTERRUPTED)),
-        // A signal stops `granite run` between steps (see the driver) and its script here, at
-        // the next operation, should it be busy outside any run.
-        _ => c.stop_requested().map(|s| Dynamic::from(format!("stopped by {}", signal_name(s)))),
-    });
+    // A signal stops `granite run` between steps (see the driver) and its script here, at the
+    // next operation, should it be busy outside any run.
+    engine.on_progress(move |_| c.interrupted().map(Dynamic::from));
     // param(name, default) and param(name, default, limits), for each kind of default.
     macro_rules! register_param {
         ($kind:ty, $to_dynamic:expr) => {
