@@ -53,3 +53,36 @@ fn a_script_cannot_abort_granite_through_its_own_arrays_and_strings() {
     let e = fails("limits_string", "let s = \"ab\";\nfor i in 0..40 { s += s; }\n");
     assert!(e.contains("line 2") && e.contains("strings 100000000 bytes"), "{e}");
 }
+
+/// The memory check reads the process's own limits: under `ulimit -v` a lattice the machine could
+/// hold but the limit cannot (4.9 million spheres, about 5 GB at the measured 1 029 bytes a
+/// sphere, under 3 GB) is refused at once with the numbers, not aborted in the allocator.
+#[cfg(unix)]
+#[test]
+fn an_address_space_limit_is_part_of_the_memory_check() {
+    let dir = common::out_dir("limits_ulimit");
+    std::fs::create_dir_all(&dir).unwrap();
+    let script = dir.join("lattice.rhai");
+    std::fs::write(
+        &script,
+        "let sim = dem();\nlet m = sim.material(#{ name: \"g\", density: 2500.0 });\n\
+         sim.lattice(m, [0.0, 0.0, 0.0], [1.7, 1.7, 1.7], #{ spacing: 0.01, radius: 0.004 });\n",
+    )
+    .unwrap();
+    let run = std::process::Command::new("sh")
+        .args(["-c", "ulimit -v 3000000 && exec \"$0\" run --quiet --threads 1 --out \"$1\" \"$2\""])
+        .arg(env!("CARGO_BIN_EXE_granite"))
+        .arg(dir.join("out"))
+        .arg(&script)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert_eq!(run.status.code(), Some(1), "{stderr}");
+    assert!(
+        stderr.contains("line 3") && stderr.contains("4.913e6 spheres") && stderr.contains("ulimit -v"),
+        "{stderr}"
+    );
+    let available: f64 =
+        stderr.split("more than the ").nth(1).and_then(|s| s.split(' ').next()).unwrap().parse().unwrap();
+    assert!(available < 3.1, "{available} GB reported under a 3 GB limit: {stderr}");
+}
