@@ -311,3 +311,15 @@ fn a_material_of_one_simulation_is_refused_by_another() {
         "{e}"
     );
 }
+
+/// A script's series column may not take the name of a column granite writes (two
+/// `volumetric_strain` columns of opposite signs were written before).
+#[test]
+fn a_series_column_with_the_name_of_one_of_granite_is_refused() {
+    let e = run_err(
+        "series_column_twice",
+        "let sim = dem();\nsim.periodic([0.01, 0.01, 0.01]);\nsim.series_column(\"volumetric_strain\", |s| 0.0);",
+        &[],
+    );
+    assert!(e.contains("already has a column `volumetric_strain`") && e.contains("line 3"), "{e}");
+}

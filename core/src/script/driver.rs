@@ -742,6 +742,13 @@ pub fn register_common<S: ScriptSim>(engine: &mut Engine) {
         if st.output.last_series_step.is_some() {
             return err(format!("series_column(\"{name}\", ...) must come before the first run: the columns of series.csv are fixed by its first row"));
         }
+        // Two columns of one name would be read as one, whichever a reader takes.
+        let (engine_columns, _) = st.sim.series_row();
+        if engine_columns.contains(&name) || st.columns.iter().any(|(n, _)| n == name) {
+            return err(format!(
+                "series_column(\"{name}\", ...): series.csv already has a column `{name}`; give this one another name"
+            ));
+        }
         st.columns.push((name.to_string(), f));
         Ok(())
     });
