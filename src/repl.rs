@@ -168,7 +168,10 @@ enum Input {
 impl Input {
     fn new(interactive: bool, on_ctrl_c: Box<dyn Fn()>) -> Input {
         if interactive {
-            if let Ok(mut editor) = Editor::new() {
+            // Tab completes what all candidates share, a second Tab lists them (as bash and
+            // IPython do), instead of cycling through them one at a time.
+            let config = rustyline::Config::builder().completion_type(rustyline::CompletionType::List).build();
+            if let Ok(mut editor) = Editor::with_config(config) {
                 editor.set_helper(Some(Completion::default()));
                 return Input::Editor(Box::new(editor), on_ctrl_c);
             }

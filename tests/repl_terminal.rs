@@ -42,6 +42,17 @@ fn tab_completes_and_history_is_kept() {
     type_in(&mut p, "([0.0, 0.0, -9.81]); print_line(`g = ${sim.diagnostics().particles}`);");
     type_in(&mut p, "\r");
     p.exp_string("g = 0").expect("the completed call ran");
+    // Several candidates: a second Tab lists them all at once (`sim.run` + Tab, Tab lists
+    // run, run_steps, run_until), instead of inserting one.
+    type_in(&mut p, "sim.dt(1e-6); sim.run_");
+    type_in(&mut p, "\t");
+    type_in(&mut p, "\t");
+    p.exp_string("run_steps").expect("the candidates listed");
+    p.exp_string("run_until").expect("the candidates listed");
+    // The line is still as typed (cycling would have made it `sim.run_until`): finish it.
+    type_in(&mut p, "steps(0); print_line(`kept ${40 + 2}`);");
+    type_in(&mut p, "\r");
+    p.exp_string("kept 42").expect("the line was left as typed");
     // An option key of the open map: `#{ dens` + Tab becomes `#{ density`.
     type_in(&mut p, "let m = sim.material(#{ dens");
     type_in(&mut p, "\t");
