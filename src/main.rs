@@ -34,6 +34,10 @@ enum Command {
         /// List the script's parameters (value, limits, comment) instead of running it.
         #[arg(long)]
         list_params: bool,
+        /// Under mpirun: end the run on every process when one waits this many seconds for the
+        /// others (one of them frozen or lost), with status failed.
+        #[arg(long, value_name = "SECONDS", value_parser = granite::parse_seconds)]
+        mpi_timeout: Option<std::time::Duration>,
     },
     /// Interactive session: the script API one input at a time; Ctrl-C pauses a run.
     Repl {
@@ -141,10 +145,19 @@ fn main() -> ExitCode {
                 }
             }
         }
-        Command::Run { script, set, out, threads, quiet, plugins, .. } => {
+        Command::Run { script, set, out, threads, quiet, plugins, mpi_timeout, .. } => {
             // MPI starts only under a launcher: a plain `granite run` of an MPI build is a plain run.
             #[cfg(feature = "mpi")]
-            let (_universe, comm) = match granite::launched_by_mpirun().then(granite::mpi_comm::start).transpose() {
+            let mpi = || {
+                let timeout =
+                    mpi_timeout.unwrap_or(std::time::Duration::from_secs_f64(granite::mpi_comm::DEFAULT_TIMEOUT_S));
+                let out_dir = out.clone().unwrap_or_else(|| granite::default_out_dir(&script));
+                granite::mpi_comm::start(timeout, Some(&out_dir))
+            };
+            #[cfg(not(feature = "mpi"))]
+            let _ = mpi_timeout;
+            #[cfg(feature = "mpi")]
+            let (_universe, comm) = match granite::launched_by_mpirun().then(mpi).transpose() {
                 Ok(Some((universe, comm))) => (Some(universe), (comm.size() > 1).then_some(comm)),
                 Ok(None) => (None, None),
                 Err(e) => {
@@ -215,7 +228,8 @@ fn main() -> ExitCode {
         Command::Bench { which, points, steps, particles, dem_steps, threads, axial_strain, repeat } => {
             #[cfg(feature = "mpi")]
             if which == "mpmxdem" && granite::launched_by_mpirun() {
-                let (_universe, comm) = match granite::mpi_comm::start() {
+                let timeout = std::time::Duration::from_secs_f64(granite::mpi_comm::DEFAULT_TIMEOUT_S);
+                let (_universe, comm) = match granite::mpi_comm::start(timeout, None) {
                     Ok(started) => started,
                     Err(e) => {
                         granite_core::errln!("granite: error: MPI: {e}");

@@ -16,6 +16,84 @@ const PIECE: usize = 1 << 30;
 /// MPI_COMM_WORLD of this run.
 pub struct MpiComm {
     world: SimpleCommunicator,
+    watch: Arc<Watch>,
+}
+
+/// How long this process has waited in an operation with the others: a watchdog thread ends the
+/// run when one waits past the timeout (a process frozen, killed without its launcher noticing,
+/// or stuck in a loop, would otherwise leave every other one waiting without limit).
+pub struct Watch {
+    /// When the present wait began (ms since `origin`), 0 outside any.
+    since_ms: std::sync::atomic::AtomicU64,
+    /// Which operation it is.
+    operation: std::sync::Mutex<&'static str>,
+    origin: Instant,
+    timeout: Duration,
+    /// Where the run's summary.json goes (every process may write it there: the one that speaks
+    /// may be the one that hangs); None for a benchmark.
+    summary: Option<std::path::PathBuf>,
+}
+
+/// Default of `--mpi-timeout`: far beyond any wait of a working run (an MPM step of the thesis
+/// column takes well under a second, a checkpoint of thousands of RVEs seconds), short enough
+/// that a hung run does not hold a cluster's nodes for hours.
+pub const DEFAULT_TIMEOUT_S: f64 = 300.0;
+
+/// The wait of one operation: started when made, ended when dropped; None inside another
+/// operation (a gather made of broadcasts), whose wait goes on.
+struct Waiting<'a>(Option<&'a Watch>);
+
+impl Drop for Waiting<'_> {
+    fn drop(&mut self) {
+        if let Some(watch) = self.0 {
+            watch.since_ms.store(0, std::sync::atomic::Ordering::SeqCst);
+        }
+    }
+}
+
+impl Watch {
+    fn enter(&self, operation: &'static str) -> Waiting<'_> {
+        let now = self.origin.elapsed().as_millis() as u64 + 1;
+        let ordering = std::sync::atomic::Ordering::SeqCst;
+        if self.since_ms.compare_exchange(0, now, ordering, ordering).is_err() {
+            return Waiting(None);
+        }
+        *self.operation.lock().unwrap_or_else(|p| p.into_inner()) = operation;
+        Waiting(Some(self))
+    }
+
+    /// Checks once a second; past the timeout, says so, records the run as failed and ends this
+    /// process, which makes the launcher end the others (their files, checkpoints included,
+    /// stay as they were last written whole).
+    fn guard(self: Arc<Self>, rank: usize, size: usize) {
+        std::thread::spawn(move || loop {
+            std::thread::sleep(Duration::from_millis(250));
+            let since = self.since_ms.load(std::sync::atomic::Ordering::SeqCst);
+            if since == 0 {
+                continue;
+            }
+            let waited = Duration::from_millis(self.origin.elapsed().as_millis() as u64 + 1 - since);
+            if waited < self.timeout {
+                continue;
+            }
+            let operation = *self.operation.lock().unwrap_or_else(|p| p.into_inner());
+            let message = format!(
+                "rank {rank} of {size} waited {:.0} s for the other processes in {operation} (--mpi-timeout {:.0} s): \
+                 one of them stopped answering; the run is ended on every process, its last checkpoint kept",
+                waited.as_secs_f64(),
+                self.timeout.as_secs_f64()
+            );
+            granite_core::errln!("granite: error: {message}");
+            let mut summary = indexmap::IndexMap::new();
+            summary.insert("status".to_string(), serde_json::Value::from("failed"));
+            summary.insert("error".to_string(), serde_json::Value::from(message));
+            if let Some(path) = &self.summary {
+                let _ = granite_core::io::write_summary(path, &summary);
+            }
+            // SAFETY: ends this process at once; the launcher then ends the others.
+            unsafe { libc::_exit(1) };
+        });
+    }
 }
 
 // SAFETY: MPI is initialised with at least MPI_THREAD_SERIALIZED (checked in `start`), and the
@@ -26,7 +104,10 @@ unsafe impl Sync for MpiComm {}
 
 /// Initialises MPI. Returns the universe (MPI is finalised when it is dropped) and the world
 /// communicator, or an error saying why MPI cannot be used.
-pub fn start() -> Result<(mpi::environment::Universe, Comm), String> {
+pub fn start(
+    timeout: Duration,
+    out_dir: Option<&std::path::Path>,
+) -> Result<(mpi::environment::Universe, Comm), String> {
     let (universe, threading) = mpi::initialize_with_threading(mpi::Threading::Serialized)
         .ok_or_else(|| "MPI was initialised already".to_string())?;
     if threading < mpi::Threading::Serialized {
@@ -35,7 +116,15 @@ pub fn start() -> Result<(mpi::environment::Universe, Comm), String> {
         ));
     }
     let world = universe.world();
-    Ok((universe, Comm(Arc::new(MpiComm { world }))))
+    let watch = Arc::new(Watch {
+        since_ms: std::sync::atomic::AtomicU64::new(0),
+        operation: std::sync::Mutex::new(""),
+        origin: Instant::now(),
+        timeout,
+        summary: out_dir.map(|d| d.join("summary.json")),
+    });
+    watch.clone().guard(world.rank() as usize, world.size() as usize);
+    Ok((universe, Comm(Arc::new(MpiComm { world, watch }))))
 }
 
 fn counts_of(lengths: &[usize]) -> (Vec<i32>, Vec<i32>) {
@@ -108,6 +197,7 @@ impl Communicator for MpiComm {
     }
 
     fn all_gather(&self, mine: &[u8]) -> Vec<Vec<u8>> {
+        let _waiting = self.watch.enter("a gather of every process's data");
         let lengths = self.lengths(mine.len());
         if !Self::fits(&lengths) {
             // Rare (per-step messages are kilobytes): one rank after the other, by broadcast.
@@ -125,6 +215,7 @@ impl Communicator for MpiComm {
     }
 
     fn exchange(&self, outgoing: Vec<Vec<u8>>) -> Vec<Vec<u8>> {
+        let _waiting = self.watch.enter("an exchange of RVEs or results");
         let size = self.size();
         let send_lengths: Vec<u64> = outgoing.iter().map(|b| b.len() as u64).collect();
         let mut receive_lengths = vec![0u64; size];
@@ -168,6 +259,7 @@ impl Communicator for MpiComm {
     }
 
     fn gather_to_root(&self, mine: &[u8]) -> Option<Vec<Vec<u8>>> {
+        let _waiting = self.watch.enter("a gather to the first process (a checkpoint)");
         // Point to point and in pieces: a checkpoint's objects may exceed 32-bit counts.
         if self.rank() == 0 {
             let mut all = vec![mine.to_vec()];
@@ -182,6 +274,7 @@ impl Communicator for MpiComm {
     }
 
     fn broadcast(&self, root: usize, bytes: Vec<u8>) -> Vec<u8> {
+        let _waiting = self.watch.enter("a broadcast");
         let process = self.world.process_at_rank(root as i32);
         let mut len = bytes.len() as u64;
         process.broadcast_into(&mut len);

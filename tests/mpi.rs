@@ -11,14 +11,14 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::sync::OnceLock;
 
-/// A small RVE (80 spheres at 1 kPa), prepared once for every test of this file.
+/// A small RVE (100 spheres at 1 kPa), prepared once for every test of this file.
 fn rve() -> &'static Path {
     static RVE: OnceLock<PathBuf> = OnceLock::new();
     RVE.get_or_init(|| {
         let prep = run(
             "mpmxdem/prepare_rve.rhai",
             "mpi_rve",
-            &[("count", "80"), ("p_init", "1000"), ("vertical_axis", "1")],
+            &[("count", "100"), ("p_init", "1000"), ("vertical_axis", "1")],
             2,
         )
         .expect("preparing the RVE");
@@ -159,4 +159,58 @@ fn a_checkpoint_the_first_process_cannot_write_stops_every_process() {
     assert_eq!(summary["status"], "failed");
     let error = summary["error"].as_str().unwrap();
     assert!(error.contains("half.json") && error.contains("line"), "names the file and the script line: {error}");
+}
+
+/// A process that stops answering (here frozen by SIGSTOP) ends the run on every process once
+/// another has waited `--mpi-timeout` seconds for it, with status failed and the cause named,
+/// instead of leaving them waiting without limit.
+#[test]
+fn a_frozen_process_ends_the_run_on_every_process_after_the_timeout() {
+    let rve = rve().to_str().unwrap();
+    let out = out_dir("mpi_frozen");
+    let mut cmd = Command::new("mpirun");
+    let version = Command::new("mpirun").arg("--version").output().expect("mpirun on the PATH (Open MPI)");
+    if String::from_utf8_lossy(&version.stdout).contains("Open MPI") {
+        cmd.args(["--allow-run-as-root", "--oversubscribe"]);
+        cmd.env("OMPI_MCA_mpi_yield_when_idle", "1");
+    }
+    cmd.args(["-np", "2", env!("CARGO_BIN_EXE_granite"), "run"]).arg(test_script("spread_column.rhai"));
+    cmd.args(["--quiet", "--threads", "1", "--mpi-timeout", "3", "--out"]).arg(&out);
+    cmd.args(["--set", &format!("rve={rve}"), "--set", "steps=1000000"]);
+    let mut child = cmd.stderr(std::process::Stdio::piped()).spawn().expect("running mpirun");
+    // Both processes step once series.csv has rows past its first.
+    let started = std::time::Instant::now();
+    while std::fs::read_to_string(out.join("series.csv")).map_or(0, |t| t.lines().count()) < 3 {
+        assert!(started.elapsed() < std::time::Duration::from_secs(120), "the run did not start");
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+    // The granite processes of this run: their command lines name its folder (so does mpirun's).
+    let listed = Command::new("pgrep").args(["-f", &format!("granite run .*{}", out.display())]).output().unwrap();
+    let pids: Vec<i32> = String::from_utf8_lossy(&listed.stdout)
+        .lines()
+        .filter_map(|l| l.trim().parse().ok())
+        .filter(|&pid| pid != child.id() as i32)
+        .collect();
+    assert_eq!(pids.len(), 2, "{pids:?}");
+    assert_eq!(unsafe { libc::kill(pids[1], libc::SIGSTOP) }, 0);
+    let frozen = std::time::Instant::now();
+    let finished = child.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&finished.stderr);
+    assert_ne!(finished.status.code(), Some(0), "{stderr}");
+    assert!(frozen.elapsed() < std::time::Duration::from_secs(60), "{:?} after the freeze", frozen.elapsed());
+    assert!(stderr.contains("stopped answering") && stderr.contains("--mpi-timeout 3 s"), "{stderr}");
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(summary["status"], "failed", "{summary}");
+    assert!(summary["error"].as_str().unwrap().contains("stopped answering"), "{summary}");
+    // The launcher ends the frozen one too (a moment after it returns; a zombie counts as gone).
+    let gone = |pid: i32| {
+        std::fs::read_to_string(format!("/proc/{pid}/stat"))
+            .map_or(true, |s| s.rsplit(')').next().and_then(|r| r.split_whitespace().next()) == Some("Z"))
+    };
+    let waited = std::time::Instant::now();
+    while !pids.iter().all(|&pid| gone(pid)) {
+        assert!(waited.elapsed() < std::time::Duration::from_secs(30), "a process of the run is still there: {pids:?}");
+        std::thread::sleep(std::time::Duration::from_millis(100));
+    }
 }
