@@ -75,3 +75,31 @@ fn tab_completes_and_history_is_kept() {
     p.exp_eof().unwrap();
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// Lines typed while a run goes on at the prompt are kept and evaluated in order once it ends.
+#[test]
+fn lines_typed_during_a_run_are_kept() {
+    let dir = std::env::temp_dir().join(format!("granite_repl_typeahead_{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let Some(mut p) = start(&dir.join("history"), &dir.join("out")) else { return };
+    p.send_line(
+        "let sim = mpm(#{ dim: 2, cell: 0.1, cells: [10, 10] }); \
+         let m = sim.material(\"linear_elastic\", #{ density: 1000.0, young: 1e6, poisson: 0.3 }); \
+         sim.fill_box(m, [0.0, 0.0], [1.0, 0.5]); sim.gravity([0.0, -9.81]); sim.dt(1e-5);",
+    )
+    .unwrap();
+    p.exp_string("granite> ").unwrap();
+    // A run of a second or more at the prompt, and two lines typed meanwhile.
+    p.send_line("let t0 = timestamp(); sim.run_steps(200000); print_line(`ran ${sim.step} for ${t0.elapsed > 0.5}`);").unwrap();
+    std::thread::sleep(std::time::Duration::from_millis(300));
+    type_in(&mut p, "print_line(`first ${1 + 1}`);\r");
+    type_in(&mut p, "print_line(`second ${2 + 2}`);\r");
+    // The run outlasted the typing (else the test would prove nothing).
+    p.exp_string("ran 200000 for true").expect("the run ended, after more than 0.5 s");
+    p.exp_string("first 2").expect("the first line typed during the run");
+    p.exp_string("second 4").expect("the second line typed during the run");
+    p.send_line(":quit").unwrap();
+    p.exp_eof().unwrap();
+    let _ = std::fs::remove_dir_all(&dir);
+}
