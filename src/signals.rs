@@ -16,6 +16,8 @@ static FIRST_AT_MS: AtomicI64 = AtomicI64::new(0);
 const REPEAT_WINDOW_MS: i64 = 1000;
 
 #[cfg(unix)]
+// time_t and c_long are 32-bit on some targets.
+#[allow(clippy::unnecessary_cast)]
 fn monotonic_ms() -> i64 {
     let mut t = libc::timespec { tv_sec: 0, tv_nsec: 0 };
     // SAFETY: clock_gettime is async-signal-safe and writes only `t`.

@@ -193,15 +193,8 @@ fn a_file_size_limit_fails_the_run_naming_the_file_the_step_and_the_cause() {
     let base = common::out_dir("durability_fsize");
     let script = write_script(&base, &block(40, "sim.series_every(1);\nsim.checkpoint_every(20, \"ck.json\");"));
     let out = base.join("out");
-    let run = Command::new("sh")
-        .args(["-c", "ulimit -f 200 && exec \"$0\" run --quiet --threads 1 --out \"$1\" \"$2\""])
-        .arg(env!("CARGO_BIN_EXE_granite"))
-        .arg(&out)
-        .arg(&script)
-        .output()
-        .unwrap();
-    let stderr = String::from_utf8_lossy(&run.stderr);
-    assert_eq!(run.status.code(), Some(1), "{stderr}");
+    let (code, stderr) = common::run_under_limit("ulimit -f 200", &script, &out);
+    assert_eq!(code, Some(1), "{stderr}");
     assert!(
         stderr.contains("at step 20 ") && stderr.contains("ck.json") && stderr.contains("File too large"),
         "{stderr}"
@@ -258,24 +251,22 @@ fn standard_error_and_output_closed_or_full_never_fail_a_run() {
     // APIC on linear shape functions warns; print_line writes to standard output.
     let base = common::out_dir("durability_stderr");
     let script = write_script(&base, &block(4, "sim.velocity_update(\"APIC\");\nprint_line(\"hello\");"));
-    for (name, stdout, stderr) in
-        [("full", std::fs::File::create("/dev/full").unwrap(), std::fs::File::create("/dev/full").unwrap())]
-    {
-        let out = base.join(name);
-        let run = granite()
-            .args(["run", "--threads", "1", "--set", "steps=50", "--out"])
-            .arg(&out)
-            .arg(&script)
-            .stdout(stdout)
-            .stderr(stderr)
-            .status()
-            .unwrap();
-        assert_eq!(run.code(), Some(0), "{name}");
-        let summary = json(&out.join("summary.json"));
-        assert_eq!(summary["status"], "ok");
-        let warnings = summary["warnings"].as_array().unwrap();
-        assert!(warnings.iter().any(|w| w.as_str().unwrap().contains("APIC")), "{summary}");
-    }
+    // Full: every write fails with "No space left on device".
+    let out = base.join("full");
+    let full = || std::fs::File::create("/dev/full").unwrap();
+    let run = granite()
+        .args(["run", "--threads", "1", "--set", "steps=50", "--out"])
+        .arg(&out)
+        .arg(&script)
+        .stdout(full())
+        .stderr(full())
+        .status()
+        .unwrap();
+    assert_eq!(run.code(), Some(0));
+    let summary = json(&out.join("summary.json"));
+    assert_eq!(summary["status"], "ok");
+    let warnings = summary["warnings"].as_array().unwrap();
+    assert!(warnings.iter().any(|w| w.as_str().unwrap().contains("APIC")), "the warning is kept: {summary}");
     // Closed: the reader of a pipe has left.
     let out = base.join("closed");
     let mut child = granite()

@@ -69,15 +69,8 @@ fn an_address_space_limit_is_part_of_the_memory_check() {
          sim.lattice(m, [0.0, 0.0, 0.0], [1.7, 1.7, 1.7], #{ spacing: 0.01, radius: 0.004 });\n",
     )
     .unwrap();
-    let run = std::process::Command::new("sh")
-        .args(["-c", "ulimit -v 3000000 && exec \"$0\" run --quiet --threads 1 --out \"$1\" \"$2\""])
-        .arg(env!("CARGO_BIN_EXE_granite"))
-        .arg(dir.join("out"))
-        .arg(&script)
-        .output()
-        .unwrap();
-    let stderr = String::from_utf8_lossy(&run.stderr);
-    assert_eq!(run.status.code(), Some(1), "{stderr}");
+    let (code, stderr) = common::run_under_limit("ulimit -v 3000000", &script, &dir.join("out"));
+    assert_eq!(code, Some(1), "{stderr}");
     assert!(
         stderr.contains("line 3") && stderr.contains("4.913e6 spheres") && stderr.contains("ulimit -v"),
         "{stderr}"

@@ -177,7 +177,7 @@ fn a_frozen_process_ends_the_run_on_every_process_after_the_timeout() {
     cmd.args(["-np", "2", env!("CARGO_BIN_EXE_granite"), "run"]).arg(test_script("spread_column.rhai"));
     cmd.args(["--quiet", "--threads", "1", "--mpi-timeout", "3", "--out"]).arg(&out);
     cmd.args(["--set", &format!("rve={rve}"), "--set", "steps=1000000"]);
-    let mut child = cmd.stderr(std::process::Stdio::piped()).spawn().expect("running mpirun");
+    let child = cmd.stderr(std::process::Stdio::piped()).spawn().expect("running mpirun");
     // Both processes step once series.csv has rows past its first.
     let started = std::time::Instant::now();
     while std::fs::read_to_string(out.join("series.csv")).map_or(0, |t| t.lines().count()) < 3 {

@@ -244,7 +244,7 @@ fn a_plugin_table_declaring_more_parameters_than_it_names_is_refused() {
         let lying: &'static LawTable = Box::leak(Box::new(table(count)));
         let mut registry = granite::registry();
         let e = unsafe { granite_core::plugin::register_table(lying, "liar.so".into(), &mut registry, false) };
-        let e = e.err().expect("refused").to_string();
+        let e = e.expect_err("refused").to_string();
         assert!(e.contains("liar.so") && e.contains(says), "{e}");
         assert!(registry.law_factory("lying").is_err());
     }

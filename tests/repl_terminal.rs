@@ -91,7 +91,8 @@ fn lines_typed_during_a_run_are_kept() {
     .unwrap();
     p.exp_string("granite> ").unwrap();
     // A run of a second or more at the prompt, and two lines typed meanwhile.
-    p.send_line("let t0 = timestamp(); sim.run_steps(200000); print_line(`ran ${sim.step} for ${t0.elapsed > 0.5}`);").unwrap();
+    p.send_line("let t0 = timestamp(); sim.run_steps(200000); print_line(`ran ${sim.step} for ${t0.elapsed > 0.5}`);")
+        .unwrap();
     std::thread::sleep(std::time::Duration::from_millis(300));
     type_in(&mut p, "print_line(`first ${1 + 1}`);\r");
     type_in(&mut p, "print_line(`second ${2 + 2}`);\r");

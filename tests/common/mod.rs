@@ -71,3 +71,17 @@ pub fn run_text_err(name: &str, source: &str) -> String {
         Err(e) => e.to_string(),
     }
 }
+
+/// `granite run SCRIPT --out OUT` (quiet, one thread) under a shell limit such as `ulimit -f 200`;
+/// the exit code and stderr.
+#[cfg(unix)]
+pub fn run_under_limit(limit: &str, script: &Path, out: &Path) -> (Option<i32>, String) {
+    let run = std::process::Command::new("sh")
+        .args(["-c", &format!("{limit} && exec \"$0\" run --quiet --threads 1 --out \"$1\" \"$2\"")])
+        .arg(env!("CARGO_BIN_EXE_granite"))
+        .arg(out)
+        .arg(script)
+        .output()
+        .unwrap();
+    (run.status.code(), String::from_utf8_lossy(&run.stderr).into_owned())
+}

@@ -137,7 +137,7 @@ impl MpmSim {
     }
 
     fn from_checkpoint_text(path: &Path, text: &str, registry: &Registry) -> Result<MpmSim> {
-        let opened = crate::io::checkpoint_file::open(path, &text, FORMAT, VERSION, OLDEST)?;
+        let opened = crate::io::checkpoint_file::open(path, text, FORMAT, VERSION, OLDEST)?;
         let st: MpmState = serde_json::from_str(opened.state)
             .map_err(|e| GraniteError::Other(format!("{} is not a granite MPM checkpoint: {e}", path.display())))?;
         if st.format != FORMAT || !(OLDEST..=VERSION).contains(&st.version) {

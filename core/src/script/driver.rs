@@ -139,7 +139,7 @@ impl<S: ScriptSim> State<S> {
     /// [`State::points_path`] of a file the script names for something it writes, checked by
     /// [`super::output::check_script_file`].
     pub fn script_file_path(&mut self, call: &str, file: &str) -> RhaiResult<std::path::PathBuf> {
-        super::output::check_script_file(call, file).or_else(|e| err(e))?;
+        super::output::check_script_file(call, file).or_else(err)?;
         Ok(self.points_path(file))
     }
 
@@ -757,7 +757,7 @@ pub fn register_common<S: ScriptSim>(engine: &mut Engine) {
         if n < 1 {
             return err(format!("checkpoint_every(n, file) needs n >= 1 steps, got {n}"));
         }
-        super::output::check_script_file("checkpoint_every", file).or_else(|e| err(e))?;
+        super::output::check_script_file("checkpoint_every", file).or_else(err)?;
         s.lock().checkpoint = Some((n as u64, file.to_string()));
         Ok(())
     });

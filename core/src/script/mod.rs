@@ -455,7 +455,7 @@ fn build_engine(ctx: &Arc<ScriptContext>) -> Engine {
     }
     let c = ctx.clone();
     engine.register_fn("plot", move |csv: &str, x: &str, ys: rhai::Array, out: &str| -> RhaiResult<String> {
-        output::check_script_file("plot", out).or_else(|e| err(e))?;
+        output::check_script_file("plot", out).or_else(err)?;
         let dir = &c.options.out_dir;
         let ys: Vec<String> = ys.iter().map(|y| y.to_string()).collect();
         let drawn = if c.writes_files() {
