@@ -172,8 +172,14 @@ pub fn check_script_file(call: &str, file: &str) -> std::result::Result<(), Stri
         ));
     }
     let name = path.file_name().map(|n| n.to_string_lossy().to_lowercase()).unwrap_or_default();
-    let top = path.components().count() == 1;
-    let first = path.components().next().map(|c| c.as_os_str().to_string_lossy().to_string()).unwrap_or_default();
+    // `./series.csv` is `series.csv`.
+    let parts: Vec<String> = path
+        .components()
+        .filter(|c| matches!(c, Component::Normal(_)))
+        .map(|c| c.as_os_str().to_string_lossy().to_lowercase())
+        .collect();
+    let top = parts.len() == 1;
+    let first = parts.first().cloned().unwrap_or_default();
     let run_file = top
         && (matches!(
             name.as_str(),
@@ -207,7 +213,15 @@ mod tests {
             let e = check_script_file("save", outside).unwrap_err();
             assert!(e.contains("relative path without `..`"), "{outside}: {e}");
         }
-        for own in ["series.csv", "series_runout.csv", "Summary.json", "provenance.json", "vtk/points.pvd"] {
+        for own in [
+            "series.csv",
+            "./series.csv",
+            "series_runout.csv",
+            "Summary.json",
+            "provenance.json",
+            "vtk/points.pvd",
+            "./vtk/x.vtu",
+        ] {
             let e = check_script_file("checkpoint_every", own).unwrap_err();
             assert!(e.contains("the run writes that file itself"), "{own}: {e}");
         }
