@@ -91,13 +91,13 @@ fn lines_typed_during_a_run_are_kept() {
     .unwrap();
     p.exp_string("granite> ").unwrap();
     // A run of a second or more at the prompt, and two lines typed meanwhile.
-    p.send_line("let t0 = timestamp(); sim.run_steps(200000); print_line(`ran ${sim.step} for ${t0.elapsed > 0.5}`);")
+    p.send_line("let t0 = timestamp(); sim.run_steps(300000); print_line(`ran ${sim.step} for ${t0.elapsed > 0.5}`);")
         .unwrap();
     std::thread::sleep(std::time::Duration::from_millis(300));
     type_in(&mut p, "print_line(`first ${1 + 1}`);\r");
     type_in(&mut p, "print_line(`second ${2 + 2}`);\r");
     // The run outlasted the typing (else the test would prove nothing).
-    p.exp_string("ran 200000 for true").expect("the run ended, after more than 0.5 s");
+    p.exp_string("ran 300000 for true").expect("the run ended, after more than 0.5 s");
     p.exp_string("first 2").expect("the first line typed during the run");
     p.exp_string("second 4").expect("the second line typed during the run");
     p.send_line(":quit").unwrap();

@@ -121,26 +121,30 @@ fn signals_stop_long_calls_and_script_code_naming_the_signal() {
     let cases = [
         (
             "signal_cloud",
-            "let sim = dem();\nlet m = sim.material(#{ density: 2500.0 });\n\
+            "let sim = dem();\nlet m = sim.material(#{ density: 2500.0 });\nprint_line(\"busy\");\n\
              sim.cloud(m, [0.0, 0.0, 0.0], [0.1, 0.1, 0.1], #{ count: 1000000, radius: 0.004 });\n",
             "while placing spheres",
         ),
-        ("signal_loop", "let x = 0;\nloop { x += 1; }\n", "line 2"),
+        ("signal_loop", "print_line(\"busy\");\nlet x = 0;\nloop { x += 1; }\n", "line 3"),
     ];
     for (name, source, says) in cases {
         let out = common::out_dir(name);
         std::fs::create_dir_all(&out).unwrap();
         let script = out.join("busy.rhai");
         std::fs::write(&script, source).unwrap();
-        let child = Command::new(env!("CARGO_BIN_EXE_granite"))
+        let mut child = Command::new(env!("CARGO_BIN_EXE_granite"))
             .args(["run", "--quiet", "--threads", "1", "--out"])
             .arg(&out)
             .arg(&script)
+            .stdout(Stdio::piped())
             .stderr(Stdio::piped())
             .spawn()
             .unwrap();
-        // Busy by then: the process started and is inside the call or the loop.
-        std::thread::sleep(Duration::from_millis(800));
+        // The script says when it starts the call or the loop; a moment later it is busy in it.
+        let mut said = String::new();
+        std::io::BufRead::read_line(&mut std::io::BufReader::new(child.stdout.take().unwrap()), &mut said).unwrap();
+        assert_eq!(said.trim(), "busy");
+        std::thread::sleep(Duration::from_millis(300));
         let sent = Instant::now();
         signal(&child, libc::SIGTERM);
         let (exit, stderr) = finish(child);
