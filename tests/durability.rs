@@ -331,3 +331,34 @@ fn scripts_cannot_write_over_the_run_own_files_or_outside_its_folder() {
     assert!(e.contains("no column") || e.contains("unknown column"), "{e}");
     assert!(!e.contains("hunter2"), "{e}");
 }
+
+/// A checkpoint cut after it was written (a disk that lied about its flush, a copy cut short) is
+/// not resumed from: the one before it is, with a warning, and provenance.json says which file
+/// and step the run continued from.
+#[test]
+fn a_cut_checkpoint_falls_back_on_the_one_before_and_provenance_names_it() {
+    let out = common::out_dir("durability_fallback");
+    let source = block(10, "if !resume { sim.checkpoint_every(200, \"ck.json\"); }");
+    let run = |pairs: &[(&str, &str)]| {
+        let options = granite_core::script::RunOptions {
+            out_dir: out.clone(),
+            overrides: common::sets(pairs),
+            quiet: true,
+            ..Default::default()
+        };
+        granite_core::script::run_source("block.rhai", &source, granite::registry(), options).unwrap()
+    };
+    run(&[("steps", "450")]);
+    let ck = out.join("ck.json");
+    let text = std::fs::read(&ck).unwrap();
+    std::fs::write(&ck, &text[..text.len() / 2]).unwrap();
+    let report = run(&[("resume", "true"), ("steps", "10")]);
+    assert_eq!(report.summary["end_step"], 210, "resumed from the checkpoint of step 200");
+    let warnings = report.summary["warnings"].as_array().unwrap();
+    assert!(warnings.iter().any(|w| w.as_str().unwrap().contains("ck.prev.json was loaded instead")), "{warnings:?}");
+    let provenance = json(&out.join("provenance.json"));
+    let loaded = &provenance["loaded"][0];
+    assert_eq!(loaded["step"], 200, "{provenance}");
+    assert!(loaded["file"].as_str().unwrap().ends_with("ck.prev.json"), "{loaded}");
+    assert!(loaded["fallback"].as_str().unwrap().contains("ck.json"), "{loaded}");
+}

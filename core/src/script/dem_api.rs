@@ -484,9 +484,7 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
             )))
         })?;
         let (dem, fallback) = DemSim::load_newest(&path, &*c.registry()).or_rhai()?;
-        if let Some(why) = fallback {
-            c.warn(&why);
-        }
+        c.record_load(&path, dem.step, fallback);
         Ok::<_, Box<rhai::EvalAltResult>>(Handle::new(
             DemScene { dem, driven: Vec::new(), auto_skin: false, check_overlaps: true, overlaps_checked_for: None },
             c.clone(),

@@ -143,6 +143,9 @@ pub struct ScriptContext {
     registry: std::sync::RwLock<Registry>,
     /// Native plugins loaded by this script: (library, law, version).
     plugins: Mutex<Vec<(String, String, String)>>,
+    /// States and checkpoints the script loaded (`mpm_load`, `dem_load`): the file read, its
+    /// step, and why an older file was read instead of the one named, for provenance.json.
+    loaded: Mutex<Vec<Value>>,
     pub options: RunOptions,
     declared: Mutex<IndexMap<String, Declared>>,
     summary: Mutex<IndexMap<String, Value>>,
@@ -172,6 +175,7 @@ impl ScriptContext {
         ScriptContext {
             registry: std::sync::RwLock::new(registry),
             plugins: Mutex::new(Vec::new()),
+            loaded: Mutex::new(Vec::new()),
             options,
             declared: Mutex::new(IndexMap::new()),
             summary: Mutex::new(IndexMap::new()),
@@ -320,6 +324,24 @@ impl ScriptContext {
         if warnings.0.len() < MAX_WARNINGS_KEPT {
             warnings.0.push(text.to_string());
         }
+    }
+
+    /// Records a state or checkpoint the script loaded (see `loaded`), and warns when an older
+    /// file than the one named was read.
+    pub(crate) fn record_load(&self, path: &Path, step: u64, fallback: Option<String>) {
+        if let Some(why) = &fallback {
+            self.warn(why);
+        }
+        // The file read: the one named, or the one before it (`io::durable::read_newest`).
+        let read = match fallback {
+            Some(_) => crate::io::durable::previous_path(path),
+            None => path.to_path_buf(),
+        };
+        let mut entry = serde_json::json!({ "file": read.display().to_string(), "step": step });
+        if let Some(why) = fallback {
+            entry["fallback"] = Value::from(why);
+        }
+        self.loaded.lock().unwrap().push(entry);
     }
 
     pub fn set_summary(&self, name: &str, value: Value) {
@@ -677,6 +699,7 @@ fn write_provenance(
         Value::from(ctx.options.overrides.iter().map(|(k, v)| format!("{k}={v}")).collect::<Vec<_>>()),
     );
     p.insert("plugins".to_string(), plugins);
+    p.insert("loaded".to_string(), Value::from(ctx.loaded.lock().unwrap().clone()));
     p.insert("threads".to_string(), Value::from(rayon::current_num_threads()));
     p.insert("processes".to_string(), Value::from(ctx.options.comm.as_ref().map_or(1, |c| c.size())));
     p.insert("started".to_string(), Value::from(iso8601(started)));

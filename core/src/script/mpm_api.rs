@@ -714,9 +714,7 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
             .input_path(file)
             .map_err(|why| super::convert::to_rhai(GraniteError::Setup(format!("mpm_load: {why}"))))?;
         let (mut mpm, fallback) = MpmSim::load_newest(&path, &c.registry()).or_rhai()?;
-        if let Some(why) = fallback {
-            c.warn(&why);
-        }
+        c.record_load(&path, mpm.step, fallback);
         if let Some(comm) = &c.options.comm {
             mpm.set_communicator(comm.clone());
         }
