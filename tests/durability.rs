@@ -36,6 +36,18 @@ fn block(cells: usize, extra: &str) -> String {
         .replace("EXTRA", extra)
 }
 
+/// Runs `source` in this process into `out` (the same folder every time: runs that resume one
+/// another) with `--set` values `pairs`.
+fn run_in(out: &Path, source: &str, pairs: &[(&str, &str)]) -> granite_core::script::RunReport {
+    let options = granite_core::script::RunOptions {
+        out_dir: out.to_path_buf(),
+        overrides: common::sets(pairs),
+        quiet: true,
+        ..Default::default()
+    };
+    granite_core::script::run_source("block.rhai", source, granite::registry(), options).unwrap()
+}
+
 fn write_script(dir: &Path, source: &str) -> PathBuf {
     std::fs::create_dir_all(dir).unwrap();
     let path = dir.join("block.rhai");
@@ -211,15 +223,7 @@ fn a_resumed_run_continues_the_series_and_the_frames_of_the_run_it_resumes() {
     let out = common::out_dir("durability_resume");
     let outputs = "sim.series_every(10);\nsim.vtk_every(100);\nif !resume { sim.checkpoint_every(200, \"ck.json\"); }";
     let source = block(10, outputs);
-    let run = |pairs: &[(&str, &str)]| {
-        let options = granite_core::script::RunOptions {
-            out_dir: out.clone(),
-            overrides: common::sets(pairs),
-            quiet: true,
-            ..Default::default()
-        };
-        granite_core::script::run_source("block.rhai", &source, granite::registry(), options).unwrap()
-    };
+    let run = |pairs: &[(&str, &str)]| run_in(&out, &source, pairs);
     run(&[("steps", "300")]);
     let first = std::fs::read_to_string(out.join("series.csv")).unwrap();
     // Resumed from the checkpoint of step 200, to step 400.
@@ -339,15 +343,7 @@ fn scripts_cannot_write_over_the_run_own_files_or_outside_its_folder() {
 fn a_cut_checkpoint_falls_back_on_the_one_before_and_provenance_names_it() {
     let out = common::out_dir("durability_fallback");
     let source = block(10, "if !resume { sim.checkpoint_every(200, \"ck.json\"); }");
-    let run = |pairs: &[(&str, &str)]| {
-        let options = granite_core::script::RunOptions {
-            out_dir: out.clone(),
-            overrides: common::sets(pairs),
-            quiet: true,
-            ..Default::default()
-        };
-        granite_core::script::run_source("block.rhai", &source, granite::registry(), options).unwrap()
-    };
+    let run = |pairs: &[(&str, &str)]| run_in(&out, &source, pairs);
     run(&[("steps", "450")]);
     let ck = out.join("ck.json");
     let text = std::fs::read(&ck).unwrap();
