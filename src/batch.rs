@@ -272,6 +272,8 @@ fn send(run: &mut Running, signal: i32) {
 /// folder (a failed run's folder then says why, and a batch that stops reading cannot block it).
 fn start(exe: &Path, script: &Path, job: &Job) -> std::result::Result<std::process::Child, String> {
     std::fs::create_dir_all(&job.out_dir).map_err(|e| format!("{}: {e}", job.out_dir.display()))?;
+    // A summary left by an earlier batch in this folder must not be taken for this run's.
+    let _ = std::fs::remove_file(job.out_dir.join("summary.json"));
     let log = |name: &str| {
         let path = job.out_dir.join(name);
         std::fs::File::create(&path).map_err(|e| format!("{}: {e}", path.display()))
@@ -298,11 +300,8 @@ fn start(exe: &Path, script: &Path, job: &Job) -> std::result::Result<std::proce
 
 /// The outcome of a run that ended with `exit`.
 fn finished(run: Running, exit: std::process::ExitStatus) -> Outcome {
-    let summary: Option<serde_json::Value> = std::fs::read_to_string(run.job.out_dir.join("summary.json"))
-        .ok()
-        .and_then(|t| serde_json::from_str(&t).ok())
-        // A summary left by an earlier run of this folder does not describe this one.
-        .filter(|s: &serde_json::Value| s.get("wall_time_s").is_some());
+    let summary: Option<serde_json::Value> =
+        std::fs::read_to_string(run.job.out_dir.join("summary.json")).ok().and_then(|t| serde_json::from_str(&t).ok());
     let code = exit.code();
     let status = match (code, run.timed_out, run.signalled) {
         (Some(0), _, _) => Status::Ok,
