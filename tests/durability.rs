@@ -111,7 +111,8 @@ fn a_run_killed_while_checkpointing_always_leaves_a_loadable_checkpoint_and_its_
         // The newest checkpoint is never a cut one: it is replaced whole or not at all.
         let sim = MpmSim::load(&ck, &registry)
             .unwrap_or_else(|e| panic!("trial {trial} (killed after {delay:?}): ck.json: {e}"));
-        let (newest, note) = MpmSim::load_newest(&ck, &registry).unwrap();
+        let (newest, read, note) = MpmSim::load_newest(&ck, &registry).unwrap();
+        assert_eq!(read, ck);
         fell_back += usize::from(note.is_some());
         assert_eq!(newest.step, sim.step);
         // The rows before the checkpoint's step are all there (its own row follows it).
@@ -310,6 +311,30 @@ fn timeout_s_int_which_signals_twice_still_ends_the_run_cleanly() {
         assert_eq!(summary["signal"], "SIGINT");
         MpmSim::load(&out.join("ck.json"), &granite::registry()).unwrap();
     }
+    // The same without a race: held stopped, the run is sent SIGINT and SIGTERM (two signals of
+    // different numbers do not merge), then let go; it gets both at once and stops cleanly.
+    let out = base.join("both");
+    let child = granite()
+        .args(["run", "--quiet", "--threads", "1", "--out"])
+        .arg(&out)
+        .arg(&script)
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let started = Instant::now();
+    while std::fs::read_to_string(out.join("series.csv")).map_or(0, |t| t.lines().count()) < 3 {
+        assert!(started.elapsed() < Duration::from_secs(60), "the run did not start");
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    for signal in [libc::SIGSTOP, libc::SIGINT, libc::SIGTERM, libc::SIGCONT] {
+        assert_eq!(unsafe { libc::kill(child.id() as i32, signal) }, 0);
+    }
+    let done = child.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&done.stderr);
+    assert!(!stderr.contains("a second signal"), "{stderr}");
+    let summary = json(&out.join("summary.json"));
+    assert_eq!(summary["status"], "interrupted", "{summary}");
+    MpmSim::load(&out.join("ck.json"), &granite::registry()).unwrap();
 }
 
 #[test]

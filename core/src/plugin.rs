@@ -105,10 +105,13 @@ pub unsafe fn register_table(
         return Err(GraniteError::Other(format!("plugin {library}: the law has no name")));
     }
     let list = |ptr: *const granite_plugin_abi::CStrPtr, n: usize, what: &str| -> Result<Vec<&'static str>> {
-        if n > 0 && ptr.is_null() {
-            return Err(GraniteError::Other(format!(
-                "plugin {library}: {n} {what} declared and no list of their names"
-            )));
+        if ptr.is_null() {
+            return match n {
+                0 => Ok(Vec::new()),
+                _ => Err(GraniteError::Other(format!(
+                    "plugin {library}: {n} {what} declared and no list of their names"
+                ))),
+            };
         }
         if abi >= 3 {
             // The list ends with a null pointer: its names are read up to it, never past the

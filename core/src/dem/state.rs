@@ -12,7 +12,7 @@ use crate::ext::contact::ContactLawSource;
 use crate::math::Vec3;
 use crate::params::ParamMap;
 use serde::{Deserialize, Serialize};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 const FORMAT: &str = "granite-dem-state";
 /// 4: a stress-controlled cell keeps its servo's integral part.
@@ -173,12 +173,12 @@ impl DemSim {
 
     /// [`DemSim::load`] of the newest whole state: `path`, or the one written before it
     /// (`ck.prev.json`) when `path` is missing, cut or damaged; then also why the older one was
-    /// taken.
-    pub fn load_newest(path: &Path, registry: &dyn ContactLawSource) -> Result<(DemSim, Option<String>)> {
+    /// taken, and the file read.
+    pub fn load_newest(path: &Path, registry: &dyn ContactLawSource) -> Result<(DemSim, PathBuf, Option<String>)> {
         let whole =
             |p: &Path, text: &str| crate::io::checkpoint_file::open(p, text, FORMAT, VERSION, OLDEST).map(|_| ());
         let (read, text, note) = crate::io::durable::read_newest(path, whole)?;
-        Ok((Self::from_state_text(&read, &text, registry)?, note))
+        Ok((Self::from_state_text(&read, &text, registry)?, read, note))
     }
 
     fn from_state_text(path: &Path, text: &str, registry: &dyn ContactLawSource) -> Result<DemSim> {

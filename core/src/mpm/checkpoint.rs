@@ -9,7 +9,7 @@ use crate::mpm::points::Points;
 use crate::mpm::sim::{Material, MpmSim, OutOfMeshPolicy, ShapeFunctions, StressRate, StressScheme};
 use crate::registry::{ParamMap, Registry};
 use serde::{Deserialize, Serialize};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 const FORMAT: &str = "granite-mpm-checkpoint";
 /// 3: the shape functions and the stress rate are part of the state.
@@ -128,12 +128,12 @@ impl MpmSim {
 
     /// [`MpmSim::load`] of the newest whole checkpoint: `path`, or the one written before it
     /// (`ck.prev.json`) when `path` is missing, cut or damaged; then also why the older one was
-    /// taken.
-    pub fn load_newest(path: &Path, registry: &Registry) -> Result<(MpmSim, Option<String>)> {
+    /// taken, and the file read.
+    pub fn load_newest(path: &Path, registry: &Registry) -> Result<(MpmSim, PathBuf, Option<String>)> {
         let whole =
             |p: &Path, text: &str| crate::io::checkpoint_file::open(p, text, FORMAT, VERSION, OLDEST).map(|_| ());
         let (read, text, note) = crate::io::durable::read_newest(path, whole)?;
-        Ok((Self::from_checkpoint_text(&read, &text, registry)?, note))
+        Ok((Self::from_checkpoint_text(&read, &text, registry)?, read, note))
     }
 
     fn from_checkpoint_text(path: &Path, text: &str, registry: &Registry) -> Result<MpmSim> {

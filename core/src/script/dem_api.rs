@@ -483,8 +483,8 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
                  RVE: `granite run scripts/mpmxdem/prepare_rve.rhai` writes out/prepare_rve/rve.json)"
             )))
         })?;
-        let (dem, fallback) = DemSim::load_newest(&path, &*c.registry()).or_rhai()?;
-        c.record_load(&path, dem.step, fallback);
+        let (dem, read, fallback) = DemSim::load_newest(&path, &*c.registry()).or_rhai()?;
+        c.record_load(&read, dem.step, fallback);
         Ok::<_, Box<rhai::EvalAltResult>>(Handle::new(
             DemScene { dem, driven: Vec::new(), auto_skin: false, check_overlaps: true, overlaps_checked_for: None },
             c.clone(),

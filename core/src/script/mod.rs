@@ -326,17 +326,12 @@ impl ScriptContext {
         }
     }
 
-    /// Records a state or checkpoint the script loaded (see `loaded`), and warns when an older
-    /// file than the one named was read.
-    pub(crate) fn record_load(&self, path: &Path, step: u64, fallback: Option<String>) {
+    /// Records a state or checkpoint the script loaded from file `read` (see `loaded`), and warns
+    /// when it is older than the one named.
+    pub(crate) fn record_load(&self, read: &Path, step: u64, fallback: Option<String>) {
         if let Some(why) = &fallback {
             self.warn(why);
         }
-        // The file read: the one named, or the one before it (`io::durable::read_newest`).
-        let read = match fallback {
-            Some(_) => crate::io::durable::previous_path(path),
-            None => path.to_path_buf(),
-        };
         let mut entry = serde_json::json!({ "file": read.display().to_string(), "step": step });
         if let Some(why) = fallback {
             entry["fallback"] = Value::from(why);
