@@ -118,22 +118,108 @@ fn cubic_packing(n: usize, r: f64, delta: f64, kn: f64) -> DemSim {
     sim
 }
 
+/// The same infinite packing in cells of 4, 2 and 1 spheres a side: the last two are thinner than
+/// twice the interaction reach (a sphere meets two images of its neighbour, or its own images).
 #[test]
 fn love_weber_stress_of_a_cubic_packing() {
-    let (n, r, delta, kn) = (4, 0.01, 1e-4, 1e5);
-    let mut sim = cubic_packing(n, r, delta, kn);
-    sim.step().unwrap();
-    let d = 2.0 * r - delta;
-    // Each sphere has one contact per axis direction and sign; per sphere and axis one pair pushes
-    // with kn delta over the branch d: sigma_xx = -kn delta d / d^3 (compression negative).
-    let expected = -kn * delta / (d * d);
-    assert_eq!(sim.pairs.touching_count(), 3 * n * n * n);
-    let s = sim.love_weber_stress(sim.cell_volume().unwrap());
-    for a in 0..3 {
-        assert!((s[a] - expected).abs() < 1e-9 * expected.abs(), "sigma[{a}] = {}, expected {expected}", s[a]);
+    let (r, delta, kn) = (0.01, 1e-4, 1e5);
+    for n in [4, 2, 1] {
+        let mut sim = cubic_packing(n, r, delta, kn);
+        sim.step().unwrap();
+        let d = 2.0 * r - delta;
+        // Each sphere has one contact per axis direction and sign; per sphere and axis one pair
+        // pushes with kn delta over the branch d: sigma_xx = -kn delta d / d^3 (compression
+        // negative).
+        let expected = -kn * delta / (d * d);
+        assert_eq!(sim.pairs.touching_count(), 3 * n * n * n, "{n} spheres a side");
+        let s = sim.love_weber_stress(sim.cell_volume().unwrap());
+        for a in 0..3 {
+            assert!(
+                (s[a] - expected).abs() < 1e-9 * expected.abs(),
+                "n = {n}: sigma[{a}] = {}, expected {expected}",
+                s[a]
+            );
+        }
+        for a in 3..6 {
+            assert!(s[a].abs() < 1e-9 * expected.abs());
+        }
+        assert!(sim.spheres.v.iter().flatten().all(|c| c.abs() < 1e-12), "n = {n}: the balanced lattice moved");
     }
-    for a in 3..6 {
-        assert!(s[a].abs() < 1e-9 * expected.abs());
+}
+
+/// A cell thinner than a sphere's diameter along y, sheared, with its spheres in contact with
+/// images of each other and of themselves, steps as the same packing in a cell three times as
+/// thick, whose search needs no more than the nearest images: both are one infinite packing, so
+/// stress and motion agree.
+#[test]
+fn a_thin_cell_steps_as_the_same_packing_in_a_thicker_one() {
+    let (r0, kn) = (0.01, 1e5);
+    let spacing = 1.9 * r0;
+    let (nx, nz, thick) = (4, 4, 1.6 * r0);
+    let mut seed = 99u64;
+    let mut next = || {
+        seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        (seed >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let mut spheres = Vec::new();
+    for i in 0..nx {
+        for k in 0..nz {
+            let x = [
+                (i as f64 + 0.5 + 0.05 * next()) * spacing,
+                next() * thick,
+                (k as f64 + 0.5 + 0.05 * next()) * spacing,
+            ];
+            spheres.push((x, r0 * (0.85 + 0.15 * next())));
+        }
+    }
+    let size = [nx as f64 * spacing, thick, nz as f64 * spacing];
+    let build = |copies: usize| {
+        let (mut sim, m) = sim_with_law(kn);
+        sim.set_cell(Some(PeriodicCell::new_box([size[0], copies as f64 * thick, size[2]])));
+        for c in 0..copies {
+            for (x, r) in &spheres {
+                sim.add_sphere(m, [x[0], x[1] + c as f64 * thick, x[2]], *r, [0.0; 3]).unwrap();
+            }
+        }
+        sim.skin = 0.1 * r0;
+        sim.set_dt(2e-6).unwrap();
+        // Simple shear across the thin axis: a sphere's fluctuation velocity changes by -L v dt
+        // (a free sphere keeps its whole velocity), the same in every image only where L L = 0.
+        sim.cell.as_mut().unwrap().velocity_gradient[(0, 1)] = 50.0;
+        sim
+    };
+    let (mut thin, mut thick_sim) = (build(1), build(3));
+    let reach = 2.0 * r0 + thin.skin;
+    assert!(thin.cell.as_ref().unwrap().widths()[1] < reach && 3.0 * thick >= 2.0 * reach);
+    for step in 0..400 {
+        thin.step().unwrap();
+        thick_sim.step().unwrap();
+        if step == 0 {
+            assert!(
+                (0..thin.pairs.len()).any(|k| thin.pairs.touching[k] && thin.pairs.a[k] == thin.pairs.b[k]),
+                "no sphere touches its own image: the test checks nothing there"
+            );
+        }
+    }
+    let st = thin.love_weber_stress(thin.cell_volume().unwrap());
+    let sk = thick_sim.love_weber_stress(thick_sim.cell_volume().unwrap());
+    assert!(st[1] < 0.0 && st[3].abs() > 0.0, "the packing is compressed and sheared: {st:?}");
+    let scale = st.iter().map(|v| v.abs()).fold(0.0, f64::max);
+    for a in 0..6 {
+        assert!((st[a] - sk[a]).abs() < 1e-6 * scale, "sigma[{a}]: thin cell {}, thick cell {}", st[a], sk[a]);
+    }
+    // Contacts: three copies of each in the thick cell.
+    assert_eq!(3 * thin.pairs.touching_count(), thick_sim.pairs.touching_count());
+    let n = spheres.len();
+    for i in 0..n {
+        for c in 0..3 {
+            let (a, b) = (thin.spheres.v[i], thick_sim.spheres.v[c * n + i]);
+            let dv = (0..3).map(|q| (a[q] - b[q]).abs()).fold(0.0, f64::max);
+            assert!(
+                dv < 1e-6 * (1e-3 + a.iter().map(|v| v.abs()).fold(0.0, f64::max)),
+                "sphere {i} copy {c}: {a:?} {b:?}"
+            );
+        }
     }
 }
 

@@ -175,9 +175,12 @@ pub fn sphere_pairs(x: &[Vec3], radius: &[f64], skin: f64) -> Blocks {
 }
 
 /// Candidate pairs in a periodic cell. Positions must lie in the cell (reduced coordinates in
-/// [0, 1)); the cell must be at least twice the interaction reach wide, so that at most one image
-/// of a particle is near another. Each image is found through the neighbour cell it lies in, which
-/// gives its shift directly.
+/// [0, 1)). Each image is found through the neighbour cell it lies in, which gives its shift
+/// directly. A cell thinner than twice the interaction reach (an RVE flattened by a large
+/// stretch) holds several images of a particle near another, and images of a particle near
+/// itself: the search then reaches over as many cells as the reach spans, and a pair of one
+/// particle with its own image is kept once, under the shift whose first non-zero component is
+/// positive (the opposite shift is the same contact seen from the image).
 pub fn periodic_sphere_pairs(x: &[Vec3], radius: &[f64], skin: f64, cell: &PeriodicCell) -> Blocks {
     periodic_pairs(x, radius, (skin, cell), true)
 }
@@ -186,7 +189,7 @@ pub fn periodic_sphere_pairs(x: &[Vec3], radius: &[f64], skin: f64, cell: &Perio
 /// more on every axis and `half` allows it (the whole stencil otherwise: the two agree).
 fn periodic_pairs(x: &[Vec3], radius: &[f64], (skin, cell): (f64, &PeriodicCell), half: bool) -> Blocks {
     let n = x.len();
-    if n < 2 {
+    if n == 0 {
         return Vec::new();
     }
     let r_max = radius.iter().cloned().fold(0.0, f64::max);
@@ -269,30 +272,36 @@ fn periodic_pairs(x: &[Vec3], radius: &[f64], (skin, cell): (f64, &PeriodicCell)
         });
         return vec![sorted_by_first(n, blocks)];
     }
+    // Cells to reach on each side along each axis: one when a cell is at least the reach thick,
+    // more in a cell thinner than the reach.
+    let reach_cells: [i64; 3] = [0, 1, 2].map(|a| (reach * dims[a] as f64 / widths[a]).ceil().max(1.0) as i64);
     candidates_by_particle(n, |i, found| {
         let c = coords[i];
-        for dz in -1i64..=1 {
-            for dy in -1i64..=1 {
-                for dx in -1i64..=1 {
+        let [mx, my, mz] = reach_cells;
+        for dz in -mz..=mz {
+            for dy in -my..=my {
+                for dx in -mx..=mx {
                     let d = [dx, dy, dz];
                     let mut q = [0usize; 3];
                     let mut w = [0i32; 3];
                     for a in 0..3 {
-                        (q[a], w[a]) = wrap(c[a] as i64 + d[a], dims[a]);
+                        let raw = c[a] as i64 + d[a];
+                        (q[a], w[a]) = (raw.rem_euclid(dims[a] as i64) as usize, raw.div_euclid(dims[a] as i64) as i32);
                     }
-                    // Dims of 1 or 2 reach the same cell through several offsets: each
-                    // offset is then a different image, and each is checked once.
+                    // Each offset is a different (cell, image): dims of 1 or 2, or a reach over
+                    // several cells, meet one cell through several offsets, each its own image.
                     let k = index(q);
-                    let image = image_of(w);
+                    let image = if w == [0; 3] { [0.0; 3] } else { cell.shift_vector(w) };
+                    // One particle and its own image: once, under the positive shift.
+                    let own_image = w.iter().find(|&&s| s != 0).is_some_and(|&s| s > 0);
                     let run = start[k] as usize..start[k + 1] as usize;
                     for (&j, &(xj, rj)) in items[run.clone()].iter().zip(&by_cell[run]) {
                         let j = j as usize;
                         let dv = [xj[0] + image[0] - x[i][0], xj[1] + image[1] - x[i][1], xj[2] + image[2] - x[i][2]];
                         let r = radius[i] + rj + skin;
-                        // One branch, rarely taken (`&`, not `&&`; see `sphere_pairs`). A
-                        // particle never pairs with its own image: the cell is wider than twice
-                        // the reach.
-                        if (dv[0] * dv[0] + dv[1] * dv[1] + dv[2] * dv[2] < r * r) & (j < i) {
+                        // One branch, rarely taken (`&`, not `&&`; see `sphere_pairs`).
+                        let first_above = (j < i) | ((j == i) & own_image);
+                        if (dv[0] * dv[0] + dv[1] * dv[1] + dv[2] * dv[2] < r * r) & first_above {
                             found.push((i as u32, j as u32, w));
                         }
                     }
@@ -472,5 +481,57 @@ mod periodic_tests {
             }
             assert_eq!(found.len(), brute, "shear {shear}");
         }
+    }
+
+    /// Every pair within reach over every image, by brute force: `(a, b, n)` with `a > b`, or
+    /// `a == b` under the shift whose first non-zero component is positive.
+    fn brute_force_over_images(x: &[Vec3], r: &[f64], skin: f64, cell: &PeriodicCell, span: i32) -> Vec<Candidate> {
+        let mut found = Vec::new();
+        for a in 0..x.len() {
+            for b in 0..=a {
+                for sz in -span..=span {
+                    for sy in -span..=span {
+                        for sx in -span..=span {
+                            let n = [sx, sy, sz];
+                            let positive = n.iter().find(|&&s| s != 0).is_some_and(|&s| s > 0);
+                            if b == a && !positive {
+                                continue;
+                            }
+                            let im = cell.shift_vector(n);
+                            let d2: f64 = (0..3).map(|q| (x[b][q] + im[q] - x[a][q]).powi(2)).sum();
+                            if d2 < (r[a] + r[b] + skin).powi(2) {
+                                found.push((a as u32, b as u32, n));
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        found.sort_unstable();
+        found
+    }
+
+    #[test]
+    fn a_cell_thinner_than_the_reach_has_every_image_within_it() {
+        // A flattened, sheared cell: 0.3 of the reach thick along y, 1.4 along z, so a sphere
+        // meets several images of each other sphere and of itself.
+        let mut next = uniform(4242);
+        let (r_max, skin) = (0.01, 0.002);
+        let reach = 2.0 * r_max + skin;
+        let mut cell = PeriodicCell::new_box([0.12, 0.3 * reach, 1.4 * reach]);
+        cell.h[(0, 1)] = 0.2 * 0.3 * reach;
+        cell.h[(1, 2)] = 0.1 * reach;
+        let (mut x, mut r) = (Vec::new(), Vec::new());
+        for _ in 0..40 {
+            let p = cell.h * nalgebra::Vector3::new(next(), next(), next());
+            x.push([p[0], p[1], p[2]]);
+            r.push(r_max * (0.5 + 0.5 * next()));
+        }
+        let found = periodic_sphere_pairs(&x, &r, skin, &cell).concat();
+        let brute = brute_force_over_images(&x, &r, skin, &cell, 8);
+        assert!(brute.iter().any(|c| c.0 == c.1), "no sphere meets its own image: the test checks nothing there");
+        let images_of_one_pair = |c: &Candidate| brute.iter().filter(|d| (d.0, d.1) == (c.0, c.1)).count();
+        assert!(brute.iter().any(|c| c.0 != c.1 && images_of_one_pair(c) > 2), "no pair met through several images");
+        assert_eq!(found, brute);
     }
 }

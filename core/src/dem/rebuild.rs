@@ -12,6 +12,8 @@ use crate::math::{sub3 as sub, Vec3};
 /// Most pairs a parallel piece of a rebuild's merge holds (each finds its place in the old list by
 /// bisection, so pieces can be small enough for two workers to share the merge evenly).
 const MERGE_PIECE: usize = 1024;
+/// Most images of a sphere a thin periodic cell may put within reach along one axis.
+const MAX_IMAGES_ACROSS: f64 = 64.0;
 /// Fewest spheres in a simulation renumbered in space before it first runs.
 pub(crate) const MIN_SPHERES_TO_ORDER: usize = 1024;
 
@@ -29,10 +31,12 @@ impl DemSim {
         let Some(cell) = &self.cell else { return Ok(()) };
         let reach = 2.0 * self.spheres.largest_radius() + self.skin;
         let widths = cell.widths();
-        if widths.iter().any(|&w| w < 2.0 * reach) {
+        // A thin cell is searched over as many images as the reach spans (see
+        // `periodic_sphere_pairs`); one flattened to a sliver of the reach has collapsed.
+        if widths.iter().any(|&w| !(w * MAX_IMAGES_ACROSS >= reach)) {
             return Err(GraniteError::Setup(format!(
-                "periodic cell too thin: its widths {widths:?} must be at least twice the interaction reach {reach:.4e} \
-                 (largest diameter + skin)"
+                "periodic cell collapsed: its widths {widths:?} (between opposite faces) must be at least 1/{MAX_IMAGES_ACROSS} \
+                 of the interaction reach {reach:.4e} (largest diameter + skin)"
             )));
         }
         let inv = cell.inverse();

@@ -146,6 +146,9 @@ impl DemSim {
         }
         if let Some(cell) = &mut self.cell {
             if let Some(m) = cell.flip_if_needed() {
+                // A sphere's pair with its own image (a thin cell) may come out under the
+                // negative shift; the rebuild that follows finds it under the positive one, as a
+                // new contact.
                 for s in self.pairs.shift.iter_mut() {
                     *s = shift_after_flip(&m, *s);
                 }
