@@ -35,3 +35,56 @@ fn prepare_and_run_the_one_cell_triaxial() {
     let dumps = std::fs::read_dir(tri.out_dir.join("rve_point0")).unwrap().count();
     assert!(dumps >= 1, "RVE particle dumps of point 0");
 }
+
+/// The documented small column (thesis 5.4 with the 150-sphere RVE at 250 Pa, the script's
+/// defaults: 0.2 m cells, one point each): it settles, collapses, runs out over the floor and
+/// reaches its end time, while RVEs of its front, stretched along the floor, are flattened below
+/// twice their interaction reach across it (their contacts then searched over several images).
+/// About 5 minutes on one core: `cargo test --release --test mpmxdem_scripts -- --ignored`.
+#[test]
+#[ignore = "a long run: about 5 minutes of one core"]
+fn the_small_column_collapses_and_runs_to_its_end() {
+    let prep = run(
+        "mpmxdem/prepare_rve.rhai",
+        "mpmxdem_column_rve",
+        &[("count", "150"), ("p_init", "250"), ("vertical_axis", "1")],
+        2,
+    )
+    .unwrap();
+    let rve = prep.out_dir.join("rve.json");
+    let collapse_run = run(
+        "mpmxdem/column_collapse.rhai",
+        "mpmxdem_column",
+        &[("rve", rve.to_str().unwrap()), ("final_state", "end.json")],
+        2,
+    )
+    .unwrap();
+    let (h, rows) = read_csv(&collapse_run.out_dir.join("series_runout.csv"));
+    let last = rows.last().unwrap();
+    let end = last[column(&h, "time")];
+    assert!((end - 1.3).abs() < 1e-6, "the run ended at t = {end} s, not at its settling and collapse times");
+    assert_eq!(last[column(&h, "deleted_points")], 0.0, "material points lost");
+    // A collapse, not a column that stands: the front passes the column's foot by more than a
+    // cell (the voxel runout of eq. 5.7 counts whole cells of 0.2 m).
+    let runout = summary_f64(&collapse_run, "final_normalised_runout");
+    assert!(runout >= 0.4 - 1e-9, "normalised runout {runout}");
+    let front = last[column(&h, "front_runout_normalised")];
+    assert!(front > 0.2, "front runout {front}");
+    // The RVEs that went thin: the cells' distances between opposite faces against the reach.
+    let saved: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(collapse_run.out_dir.join("end.json")).unwrap()).unwrap();
+    let rves = saved["state"]["materials"][0]["objects"]["rves"].as_array().unwrap();
+    let thin = rves
+        .iter()
+        .filter(|r| {
+            let h: Vec<f64> = r["cell"]["h"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
+            let radius = r["spheres"]["radius"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap());
+            let reach = 2.0 * radius.fold(0.0, f64::max) + r["skin"].as_f64().unwrap();
+            let cell = nalgebra::Matrix3::from_column_slice(&h);
+            let volume = cell.determinant().abs();
+            let c = |a: usize, b: usize| cell.column(a).cross(&cell.column(b)).norm();
+            [volume / c(1, 2), volume / c(2, 0), volume / c(0, 1)].iter().any(|&w| w < 2.0 * reach)
+        })
+        .count();
+    assert!(thin > 0, "no RVE went thinner than twice its reach: the run did not need thin cells");
+}
