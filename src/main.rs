@@ -130,7 +130,13 @@ enum Command {
     },
 }
 
+/// Counts the bytes the process holds, so that a script's own data is stopped with an error before
+/// it takes all the memory (see `granite_core::memory::CountingAllocator`).
+#[global_allocator]
+static ALLOCATOR: granite_core::memory::CountingAllocator = granite_core::memory::CountingAllocator;
+
 fn main() -> ExitCode {
+    granite_core::memory::CountingAllocator::installed();
     let cli = Cli::parse();
     match cli.command {
         Command::Run { script, set, list_params: true, plugins, .. } => {

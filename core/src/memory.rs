@@ -95,6 +95,85 @@ pub fn check(what: &str, count: f64, items: &str, bytes_each: f64, hint: &str) -
     Ok(())
 }
 
+/// The system allocator, counting the bytes it holds, so that a script's data can be stopped
+/// with an error before it takes all the memory (an allocation that fails aborts the process).
+/// The `granite` binary installs it; a library user may (`#[global_allocator]`), and without it
+/// [`allocated_bytes`] is None and scripts are not checked.
+pub struct CountingAllocator;
+
+/// Bytes held through [`CountingAllocator`], less what each thread has not yet passed on.
+static ALLOCATED: std::sync::atomic::AtomicIsize = std::sync::atomic::AtomicIsize::new(0);
+static COUNTING: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+/// A thread passes its count on in steps of this many bytes: the shared counter is touched once
+/// per many small allocations, not at each.
+const PASS_ON: isize = 1 << 16;
+
+thread_local! {
+    static PENDING: std::cell::Cell<isize> = const { std::cell::Cell::new(0) };
+}
+
+#[inline]
+fn count(bytes: isize) {
+    use std::sync::atomic::Ordering::Relaxed;
+    let passed = PENDING.try_with(|p| {
+        let v = p.get() + bytes;
+        if v.abs() >= PASS_ON {
+            ALLOCATED.fetch_add(v, Relaxed);
+            p.set(0);
+        } else {
+            p.set(v);
+        }
+    });
+    if passed.is_err() {
+        ALLOCATED.fetch_add(bytes, Relaxed);
+    }
+}
+
+// SAFETY: every call goes to the system allocator with the caller's arguments; the count is a
+// side effect that allocates nothing.
+unsafe impl std::alloc::GlobalAlloc for CountingAllocator {
+    unsafe fn alloc(&self, layout: std::alloc::Layout) -> *mut u8 {
+        let p = unsafe { std::alloc::System.alloc(layout) };
+        if !p.is_null() {
+            count(layout.size() as isize);
+        }
+        p
+    }
+    unsafe fn alloc_zeroed(&self, layout: std::alloc::Layout) -> *mut u8 {
+        let p = unsafe { std::alloc::System.alloc_zeroed(layout) };
+        if !p.is_null() {
+            count(layout.size() as isize);
+        }
+        p
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: std::alloc::Layout) {
+        unsafe { std::alloc::System.dealloc(ptr, layout) };
+        count(-(layout.size() as isize));
+    }
+    unsafe fn realloc(&self, ptr: *mut u8, layout: std::alloc::Layout, new_size: usize) -> *mut u8 {
+        let p = unsafe { std::alloc::System.realloc(ptr, layout, new_size) };
+        if !p.is_null() {
+            count(new_size as isize - layout.size() as isize);
+        }
+        p
+    }
+}
+
+impl CountingAllocator {
+    /// Says that this allocator is the process's (call once from `main`).
+    pub fn installed() {
+        COUNTING.store(true, std::sync::atomic::Ordering::Relaxed);
+    }
+}
+
+/// Bytes the process holds through [`CountingAllocator`] (within 64 kB a thread), or None where
+/// it is not the process's allocator.
+pub fn allocated_bytes() -> Option<f64> {
+    COUNTING
+        .load(std::sync::atomic::Ordering::Relaxed)
+        .then(|| ALLOCATED.load(std::sync::atomic::Ordering::Relaxed) as f64)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -5,6 +5,7 @@
 
 pub mod api_doc;
 pub mod convert;
+mod data_memory;
 mod dem_api;
 mod dem_console;
 pub mod driver;
@@ -388,30 +389,23 @@ thread_local! {
     pub(crate) static INTERRUPTIBLE_SINCE: std::cell::Cell<Option<u64>> = const { std::cell::Cell::new(None) };
 }
 
-/// Most elements of a script's array (16 bytes each: 160 MB), bytes of a string, entries of a map.
-pub const MAX_ARRAY_SIZE: usize = 10_000_000;
-pub const MAX_STRING_SIZE: usize = 100_000_000;
-pub const MAX_MAP_SIZE: usize = 1_000_000;
-
 /// What an input stopped by Ctrl-C ends with (see [`INTERRUPTIBLE_SINCE`]).
 pub(crate) const INTERRUPTED: &str = "interrupted by Ctrl-C";
 
 fn build_engine(ctx: &Arc<ScriptContext>) -> Engine {
     let mut engine = Engine::new();
     engine.set_max_expr_depths(128, 64);
-    // Sizes a script cannot exceed, so that it cannot abort granite by asking for more memory
-    // than there is (`a.pad(1e10, 0.0)`, a string doubled 40 times): far above what setting up a
-    // simulation from a script takes (particles and points live in the engine, not in Rhai), and
-    // no limit on operations, which would cut off a legitimate long run.
-    engine.set_max_array_size(MAX_ARRAY_SIZE);
-    engine.set_max_string_size(MAX_STRING_SIZE);
-    engine.set_max_map_size(MAX_MAP_SIZE);
+    // A script's own data may not take all the memory: `pad` and `blob` are checked before they
+    // allocate, and every operation checks what the process holds (see `data_memory`). No limit
+    // on operations, which would cut off a legitimate long run.
+    data_memory::register_sized_builtins(&mut engine);
     let c = ctx.clone();
+    let budget = data_memory::DataBudget::default();
     // Checked at every operation: a loop of runs does only a few between two runs, and the
     // check outside the REPL is one thread-local read.
     // A signal stops `granite run` between steps (see the driver) and its script here, at the
     // next operation, should it be busy outside any run.
-    engine.on_progress(move |_| c.interrupted().map(Dynamic::from));
+    engine.on_progress(move |operations| c.interrupted().or_else(|| budget.check(operations)).map(Dynamic::from));
     // param(name, default) and param(name, default, limits), for each kind of default.
     macro_rules! register_param {
         ($kind:ty, $to_dynamic:expr) => {
@@ -717,10 +711,6 @@ pub(crate) fn describe(e: &EvalAltResult, engine: &Engine) -> String {
     let msg = match inner {
         EvalAltResult::ErrorRuntime(d, _) => d.to_string(),
         EvalAltResult::ErrorFunctionNotFound(call, _) => function_not_found(call, engine),
-        EvalAltResult::ErrorDataTooLarge(what, _) => format!(
-            "{what}: a script's arrays hold at most {MAX_ARRAY_SIZE} elements, its strings {MAX_STRING_SIZE} bytes \
-             and its maps {MAX_MAP_SIZE} entries (particles and points live in the simulation, not in script arrays)"
-        ),
         // The token says what stopped it: Ctrl-C at the prompt, or a signal naming itself.
         EvalAltResult::ErrorTerminated(token, _) => {
             let why = token.clone().into_string().unwrap_or_else(|_| INTERRUPTED.to_string());
