@@ -38,7 +38,7 @@ fn inconsistent_state_files_are_refused_with_the_reason() {
     let (n, laws, materials) = (sim.spheres.len(), sim.laws.len(), sim.materials.len());
     type Edit = fn(&mut serde_json::Value);
     let (id_3, id_5, id_7) = (sim.spheres.id[3], sim.spheres.id[5], sim.spheres.id[7]);
-    let edits: [(&str, Edit, String); 11] = [
+    let edits: [(&str, Edit, String); 12] = [
         // Scripts read the step as a signed integer: u64::MAX would show as -1.
         ("step", |s| s["step"] = u64::MAX.into(), format!("a step up to {}", i64::MAX)),
         // A radius without a finite volume.
@@ -58,7 +58,16 @@ fn inconsistent_state_files_are_refused_with_the_reason() {
                 let (a, b) = (s["pairs"]["a"][0].clone(), s["pairs"]["b"][0].clone());
                 (s["pairs"]["a"][0], s["pairs"]["b"][0]) = (b, a);
             },
-            "pair 0 has a first sphere not above its second".into(),
+            "pair 0 has a first sphere below its second".into(),
+        ),
+        (
+            // A sphere meets only its own images (a thin cell), never itself.
+            "sphere with itself",
+            |s| {
+                s["pairs"]["b"][0] = s["pairs"]["a"][0].clone();
+                s["pairs"]["shift"][0] = serde_json::json!([0, 0, 0]);
+            },
+            "or is a sphere with itself".into(),
         ),
         (
             "short radii",
