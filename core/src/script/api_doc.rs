@@ -8,7 +8,8 @@
 #[derive(Debug, Clone, Copy)]
 pub struct ApiDoc {
     /// What it is called on: `""` (a global function), `"sim"` (both simulations), `"MpmSim"`,
-    /// `"DemSim"`, `"Material"` (an MPM material), `"DemMaterial"`.
+    /// `"DemSim"`, `"Material"` (an MPM material), `"DemMaterial"`, or a Rhai type (`"array"`,
+    /// `"string"`, `"blob"`) for the few of Rhai's own functions granite replaces.
     pub on: &'static str,
     pub name: &'static str,
     /// How it is called, with argument names; a property has no parentheses.
@@ -47,6 +48,12 @@ pub static API: &[ApiDoc] = &[
     f("", "dem", &["dem()", "dem(#{ seed, skin })"], &["seed", "skin"], "a new DEM simulation; the Verlet skin defaults to half the smallest radius"),
     f("", "element_test", &["element_test(law, #{ ...law parameters }, #{ stress, strain, hold, steps })"], &["stress", "strain", "hold", "steps"], "drives a law on one point without a mesh: from `stress`, the `strain` increment [xx, yy, zz, xy, yz, xz] in `steps` equal parts, the components of `hold` (#{ xx: -1e5 }) kept at those stresses; returns #{ stress, strain, p, q, state } per step"),
     f("", "dem_load", &["dem_load(path)"], NONE, "a DEM simulation from a state written by `sim.save` (path from the working directory)"),
+    // Rhai's functions that allocate what they are asked in one call, checked first against the
+    // memory the process can take.
+    f("array", "pad", &["array.pad(length, value)"], NONE, "Rhai's: fills the array up to `length` with `value`; refused beyond the memory this process can take"),
+    f("string", "pad", &["string.pad(length, character)", "string.pad(length, text)"], NONE, "Rhai's: fills the string up to `length` characters; refused beyond the memory this process can take"),
+    f("blob", "pad", &["blob.pad(length, byte)"], NONE, "Rhai's: fills the BLOB up to `length` bytes; refused beyond the memory this process can take"),
+    f("", "blob", &["blob(length)", "blob(length, byte)"], NONE, "Rhai's: a BLOB of `length` bytes (0 or `byte`); refused beyond the memory this process can take"),
     // Both simulations: running and output.
     f("sim", "run", &["sim.run()", "sim.run(steps)"], NONE, "runs in the background (until paused, or for `steps`) and returns at once"),
     f("sim", "run_steps", &["sim.run_steps(steps)"], NONE, "runs `steps` steps at the prompt (Ctrl-C pauses)"),
@@ -267,6 +274,9 @@ pub fn markdown() -> String {
         ("Material", "MPM materials"),
         ("DemSim", "DEM simulations (`dem(...)`)"),
         ("DemMaterial", "DEM materials"),
+        ("array", "Rhai's arrays"),
+        ("string", "Rhai's strings"),
+        ("blob", "Rhai's BLOBs"),
     ];
     for (on, title) in sections {
         out.push_str(&format!("\n## {title}\n\n| call | options | what it does |\n|---|---|---|\n"));
