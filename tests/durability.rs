@@ -314,18 +314,7 @@ fn timeout_s_int_which_signals_twice_still_ends_the_run_cleanly() {
     // The same without a race: held stopped, the run is sent SIGINT and SIGTERM (two signals of
     // different numbers do not merge), then let go; it gets both at once and stops cleanly.
     let out = base.join("both");
-    let child = granite()
-        .args(["run", "--quiet", "--threads", "1", "--out"])
-        .arg(&out)
-        .arg(&script)
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let started = Instant::now();
-    while std::fs::read_to_string(out.join("series.csv")).map_or(0, |t| t.lines().count()) < 3 {
-        assert!(started.elapsed() < Duration::from_secs(60), "the run did not start");
-        std::thread::sleep(Duration::from_millis(10));
-    }
+    let child = common::spawn_running(&script, &out);
     for signal in [libc::SIGSTOP, libc::SIGINT, libc::SIGTERM, libc::SIGCONT] {
         assert_eq!(unsafe { libc::kill(child.id() as i32, signal) }, 0);
     }

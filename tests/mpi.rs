@@ -179,11 +179,7 @@ fn a_frozen_process_ends_the_run_on_every_process_after_the_timeout() {
     cmd.args(["--set", &format!("rve={rve}"), "--set", "steps=1000000"]);
     let child = cmd.stderr(std::process::Stdio::piped()).spawn().expect("running mpirun");
     // Both processes step once series.csv has rows past its first.
-    let started = std::time::Instant::now();
-    while std::fs::read_to_string(out.join("series.csv")).map_or(0, |t| t.lines().count()) < 3 {
-        assert!(started.elapsed() < std::time::Duration::from_secs(120), "the run did not start");
-        std::thread::sleep(std::time::Duration::from_millis(50));
-    }
+    common::wait_until_running(&out, std::time::Duration::from_secs(120));
     // The granite processes of this run: their command lines name its folder (so does mpirun's).
     let listed = Command::new("pgrep").args(["-f", &format!("granite run .*{}", out.display())]).output().unwrap();
     let pids: Vec<i32> = String::from_utf8_lossy(&listed.stdout)

@@ -59,17 +59,22 @@ struct Repl {
     out: std::path::PathBuf,
 }
 
+/// `granite repl --quiet --out OUT` with its three streams piped.
+fn piped_repl(out: &std::path::Path) -> Command {
+    let mut command = Command::new(env!("CARGO_BIN_EXE_granite"));
+    command
+        .args(["repl", "--quiet", "--out"])
+        .arg(out)
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped());
+    command
+}
+
 impl Repl {
     fn start(name: &str) -> Repl {
         let out = std::env::temp_dir().join(format!("granite_repl_{name}_{}", std::process::id()));
-        let mut child = Command::new(env!("CARGO_BIN_EXE_granite"))
-            .args(["repl", "--quiet", "--out"])
-            .arg(&out)
-            .stdin(Stdio::piped())
-            .stdout(Stdio::piped())
-            .stderr(Stdio::piped())
-            .spawn()
-            .expect("granite starts");
+        let mut child = piped_repl(&out).spawn().expect("granite starts");
         let (tx, lines) = mpsc::channel();
         let stdout = child.stdout.take().unwrap();
         std::thread::spawn(move || {
@@ -275,14 +280,7 @@ fn ctrl_c_stops_a_loop_at_the_prompt() {
 #[test]
 fn a_line_of_invalid_utf8_is_reported_and_the_session_goes_on() {
     let out = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("target/test-out/repl_utf8");
-    let mut child = Command::new(env!("CARGO_BIN_EXE_granite"))
-        .args(["repl", "--quiet", "--out"])
-        .arg(&out)
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
+    let mut child = piped_repl(&out).spawn().unwrap();
     let mut stdin = child.stdin.take().unwrap();
     stdin.write_all(b"print_line(\"before\");\nprint_line(\"caf\xe9\");\nprint_line(\"after\");\n").unwrap();
     drop(stdin);

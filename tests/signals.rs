@@ -27,20 +27,7 @@ fn start(name: &str, source: &str) -> (Child, PathBuf) {
     std::fs::create_dir_all(&out).unwrap();
     let script = out.join("endless.rhai");
     std::fs::write(&script, source).unwrap();
-    let child = Command::new(env!("CARGO_BIN_EXE_granite"))
-        .args(["run", "--quiet", "--threads", "1", "--out"])
-        .arg(&out)
-        .arg(&script)
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    // Running once series.csv has rows past its first.
-    let started = Instant::now();
-    while std::fs::read_to_string(out.join("series.csv")).map_or(0, |t| t.lines().count()) < 3 {
-        assert!(started.elapsed() < Duration::from_secs(60), "the run did not start");
-        std::thread::sleep(Duration::from_millis(20));
-    }
-    (child, out)
+    (common::spawn_running(&script, &out), out)
 }
 
 fn signal(child: &Child, signal: i32) {

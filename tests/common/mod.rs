@@ -85,3 +85,26 @@ pub fn run_under_limit(limit: &str, script: &Path, out: &Path) -> (Option<i32>, 
         .unwrap();
     (run.status.code(), String::from_utf8_lossy(&run.stderr).into_owned())
 }
+
+/// Waits until a run writing into `out` is stepping: its series.csv has rows past its first.
+pub fn wait_until_running(out: &Path, timeout: std::time::Duration) {
+    let started = std::time::Instant::now();
+    while std::fs::read_to_string(out.join("series.csv")).map_or(0, |t| t.lines().count()) < 3 {
+        assert!(started.elapsed() < timeout, "the run in {} did not start", out.display());
+        std::thread::sleep(std::time::Duration::from_millis(10));
+    }
+}
+
+/// `granite run --quiet --threads 1 --out OUT SCRIPT` started with stderr piped, returned once
+/// it is stepping.
+pub fn spawn_running(script: &Path, out: &Path) -> std::process::Child {
+    let child = std::process::Command::new(env!("CARGO_BIN_EXE_granite"))
+        .args(["run", "--quiet", "--threads", "1", "--out"])
+        .arg(out)
+        .arg(script)
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    wait_until_running(out, std::time::Duration::from_secs(60));
+    child
+}

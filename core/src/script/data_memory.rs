@@ -88,11 +88,11 @@ pub(crate) fn register_sized_builtins(engine: &mut Engine) {
     });
     engine.register_fn("pad", |s: &mut ImmutableString, len: i64, p: &str| -> Result<(), Box<EvalAltResult>> {
         let len = fits("pad", len, 1.0)?;
-        let mut t = s.to_string();
-        let mut have = t.chars().count();
         if p.is_empty() {
             return Ok(());
         }
+        let mut t = s.to_string();
+        let mut have = t.chars().count();
         while have < len {
             for c in p.chars() {
                 if have >= len {
