@@ -2,6 +2,8 @@
 
 pub mod batch;
 pub mod bench;
+#[cfg(feature = "gpu")]
+pub mod gpu;
 #[cfg(feature = "mpi")]
 pub mod mpi_comm;
 pub mod repl;
@@ -11,9 +13,14 @@ use granite_core::script::{run_script, RunOptions, RunReport};
 use granite_core::{Registry, Result};
 use std::path::{Path, PathBuf};
 
-/// The registry every run starts from: all built-in plugins.
+/// The registry every run starts from: all built-in plugins (and, built with `--features gpu`,
+/// the GPU as a device for the RVEs of `dem_rve`).
 pub fn registry() -> Registry {
-    granite_plugins::default_registry()
+    #[allow(unused_mut)]
+    let mut registry = granite_plugins::default_registry();
+    #[cfg(feature = "gpu")]
+    registry.add_rve_device(std::sync::Arc::new(gpu::GpuDevice::new()));
+    registry
 }
 
 /// Default output folder of a script: `out/<script stem>/`.

@@ -22,6 +22,7 @@ pub struct Registry {
     velocity_updates: IndexMap<String, Arc<dyn VelocityUpdateFactory>>,
     contact_laws: IndexMap<String, Arc<dyn ContactLawFactory>>,
     shapes: IndexMap<String, Arc<dyn ShapeModelFactory>>,
+    rve_devices: IndexMap<String, Arc<dyn crate::ext::RveDevice>>,
 }
 
 /// Exact match first, then case-insensitive: `flip` finds `FLIP`.
@@ -75,6 +76,28 @@ impl Registry {
         let factory = self.contact_law_factory(name)?;
         let params = Params::resolve(&format!("contact law \"{}\"", factory.name()), factory.param_specs(), given)?;
         factory.build(params)
+    }
+
+    /// Adds a device the RVEs of `dem_rve` can run on (`device: "gpu"`).
+    pub fn add_rve_device(&mut self, device: Arc<dyn crate::ext::RveDevice>) {
+        self.rve_devices.insert(device.name().to_string(), device);
+    }
+
+    /// The RVE device of this name; "cpu" is the engine's own threads, not a device.
+    pub fn rve_device(&self, name: &str) -> Result<&Arc<dyn crate::ext::RveDevice>> {
+        lookup(&self.rve_devices, name, "RVE device").map_err(|_| {
+            let known = self.rve_devices.keys().cloned().collect::<Vec<_>>();
+            GraniteError::Setup(if name == "gpu" && known.is_empty() {
+                "device \"gpu\": this granite was built without GPU support; build it with \
+                 `cargo build --release --features gpu` (needs a Vulkan driver with 64-bit floats)"
+                    .to_string()
+            } else {
+                format!(
+                    "no RVE device \"{name}\": known are \"cpu\"{}",
+                    known.iter().map(|k| format!(", \"{k}\"")).collect::<String>()
+                )
+            })
+        })
     }
 
     pub fn add_shape(&mut self, factory: Arc<dyn ShapeModelFactory>) {
@@ -137,5 +160,8 @@ impl Registry {
 impl crate::ext::contact::ContactLawSource for Registry {
     fn build_contact_law(&self, name: &str, given: &ParamMap) -> Result<Box<dyn ContactLaw>> {
         Registry::build_contact_law(self, name, given)
+    }
+    fn rve_device(&self, name: &str) -> Result<Arc<dyn crate::ext::RveDevice>> {
+        Registry::rve_device(self, name).cloned()
     }
 }

@@ -247,7 +247,8 @@ impl DemSim {
 
     /// Values a pair holds for its law's parameters and history: the most any law keeps (at least
     /// one of each), so that pairs of different laws share one list.
-    pub(crate) fn pair_strides(&self) -> (usize, usize) {
+    /// Values per pair (parameters, history) the pair lists are laid out for: the most any law uses.
+    pub fn pair_strides(&self) -> (usize, usize) {
         let most = |count: fn(&Arc<dyn ContactLaw>) -> usize| self.laws.iter().map(count).max().unwrap_or(0).max(1);
         (most(|l| l.param_count()), most(|l| l.history_count()))
     }
@@ -685,5 +686,37 @@ impl DemSim {
             return Err(GraniteError::param("skin", self.skin, "must be >= 0"));
         }
         Ok(())
+    }
+}
+
+/// What the candidate lists were built from: an engine that steps a simulation elsewhere (an RVE
+/// on a GPU) takes it along and gives it back, so that the lists are rebuilt when this engine
+/// would have rebuilt them.
+#[derive(Debug, Clone, PartialEq)]
+pub struct VerletState {
+    pub x_at_build: Vec<Vec3>,
+    pub h_at_build: Option<nalgebra::Matrix3<f64>>,
+    pub needs_rebuild: bool,
+    pub rebuilds: u64,
+}
+
+impl DemSim {
+    pub fn verlet_state(&self) -> VerletState {
+        VerletState {
+            x_at_build: self.x_at_build.clone(),
+            h_at_build: self.h_at_build,
+            needs_rebuild: self.needs_rebuild || self.x_at_build.len() != self.spheres.len(),
+            rebuilds: self.rebuilds,
+        }
+    }
+
+    /// Takes back the state of lists built elsewhere (with the spheres' radii as they are).
+    pub fn set_verlet_state(&mut self, state: VerletState) {
+        self.needs_rebuild = state.needs_rebuild || state.x_at_build.len() != self.spheres.len();
+        self.x_at_build = state.x_at_build;
+        self.h_at_build = state.h_at_build;
+        self.rebuilds = state.rebuilds;
+        self.radius_max_at_build = self.spheres.largest_radius();
+        self.radius_min_at_build = self.spheres.smallest_radius();
     }
 }

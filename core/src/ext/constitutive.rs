@@ -60,6 +60,11 @@ pub trait ConstitutiveLaw: Send + Sync {
     fn spreadable(&self) -> bool {
         false
     }
+    /// Whether `update` takes all the material's points in one call (a law that hands them to a
+    /// device in one submission) rather than in parallel chunks.
+    fn whole_batch(&self) -> bool {
+        false
+    }
     /// Drops the objects of the points whose flag is false (they live in another process now).
     fn release_objects(&self, _keep: &[bool]) {}
     /// One point's object as JSON, to move it to another process or gather it into a checkpoint.

@@ -260,4 +260,8 @@ pub trait ContactLawSource {
         name: &str,
         given: &crate::params::ParamMap,
     ) -> crate::error::Result<Box<dyn ContactLaw>>;
+    /// The RVE device of this name (a checkpoint of RVEs that ran on one).
+    fn rve_device(&self, name: &str) -> crate::error::Result<std::sync::Arc<dyn crate::ext::RveDevice>> {
+        Err(crate::GraniteError::Setup(format!("no RVE device \"{name}\" here")))
+    }
 }

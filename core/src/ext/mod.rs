@@ -5,10 +5,12 @@
 
 pub mod constitutive;
 pub mod contact;
+pub mod rve;
 pub mod shape;
 pub mod velocity_update;
 
 pub use constitutive::{ConstitutiveLaw, ConstitutiveLawFactory, LawBatch};
 pub use contact::{ContactBatch, ContactLaw, ContactLawFactory, PairInfo};
+pub use rve::{RveBatch, RveDevice, RveOrder, RveReport};
 pub use shape::{ShapeModel, ShapeModelFactory};
 pub use velocity_update::{G2pBatch, VelocityUpdate, VelocityUpdateFactory};

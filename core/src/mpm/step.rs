@@ -611,7 +611,13 @@ fn stress_update(pts: &mut Points, materials: &mut [Material]) -> Result<()> {
             continue;
         }
         // Laws with per-point objects (an RVE per point) are expensive per point: one task each.
-        let (chunk, min_chunks) = if law.bytes_per_point() > 0 { (1, 1) } else { (CHUNK, MIN_CHUNKS_PER_TASK) };
+        let (chunk, min_chunks) = if law.whole_batch() {
+            (range.len(), 1)
+        } else if law.bytes_per_point() > 0 {
+            (1, 1)
+        } else {
+            (CHUNK, MIN_CHUNKS_PER_TASK)
+        };
         let stress = pts.stress[range.clone()].par_chunks_mut(chunk);
         let dstrain = pts.dstrain[range].par_chunks(chunk);
         let results: Vec<Result<()>> = if stride == 0 {

@@ -47,8 +47,9 @@ fn element_test(ctx: &ScriptContext, law: &str, params: Map, path: Map) -> RhaiR
         hold,
         steps: steps as usize,
     };
-    let (given, objects) = super::mpm_api::law_inputs(&params, law)?;
-    let law_obj = ctx.registry().build_law_with(law, &given, &objects).or_rhai()?;
+    let registry = ctx.registry();
+    let (given, objects) = super::mpm_api::law_inputs(&params, law, &registry)?;
+    let law_obj = registry.build_law_with(law, &given, &objects).or_rhai()?;
     law_obj.points_added(&[true]).or_rhai()?;
     let record = run(law_obj.as_ref(), &path).or_rhai()?;
     let mut out = Map::new();

@@ -369,14 +369,24 @@ pub(super) fn time_function(value: &Dynamic, name: &str) -> RhaiResult<(TimeFunc
 }
 
 /// A law's inputs from the options of `sim.material` or `element_test`: its numbers, and as
-/// objects the values that are simulations (a prepared DEM sample for `dem_rve`); `density` and
-/// `name` are the material's, not the law's.
+/// objects the values that are simulations (a prepared DEM sample for `dem_rve`) and the device
+/// a `device` string names ("cpu", the default, is none); `density` and `name` are the
+/// material's, not the law's.
 pub(super) fn law_inputs(
     opts: &Map,
     law: &str,
+    registry: &crate::registry::Registry,
 ) -> RhaiResult<(crate::registry::ParamMap, crate::ext::constitutive::ObjectMap)> {
     let mut objects = crate::ext::constitutive::ObjectMap::new();
     let mut skip = vec!["density", "name"];
+    if let Some(device) = get(opts, "device") {
+        let name = string(device, "device")?;
+        if name != "cpu" {
+            let device = registry.rve_device(&name).or_rhai()?.clone();
+            objects.insert("device".into(), Arc::new(crate::ext::rve::RveDeviceChoice(device)));
+        }
+        skip.push("device");
+    }
     for (k, v) in opts {
         if let Some(h) = v.clone().try_cast::<super::dem_api::DemHandle>() {
             let dem = h.lock().sim.prepared();
@@ -435,8 +445,11 @@ impl Handle<MpmScene> {
             Some(n) => string(n, "name")?,
             None => format!("{law}_{}", st.sim.mpm.materials.len() + 1),
         };
-        let (params, objects) = law_inputs(&opts, law)?;
-        let law_obj = st.ctx.registry().build_law_with(law, &params, &objects).or_rhai()?;
+        let law_obj = {
+            let registry = st.ctx.registry();
+            let (params, objects) = law_inputs(&opts, law, &registry)?;
+            registry.build_law_with(law, &params, &objects).or_rhai()?
+        };
         let index = st.sim.mpm.add_material(&name, density, law_obj).or_rhai()?;
         Ok(MaterialHandle { index, name, sim: self.serial() })
     }

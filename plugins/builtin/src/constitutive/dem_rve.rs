@@ -5,12 +5,13 @@
 
 use granite_core::dem::DemSim;
 use granite_core::ext::constitutive::ObjectMap;
-use granite_core::ext::{ConstitutiveLaw, ConstitutiveLawFactory, LawBatch};
+use granite_core::ext::rve::RveDeviceChoice;
+use granite_core::ext::{ConstitutiveLaw, ConstitutiveLawFactory, LawBatch, RveBatch, RveDevice, RveOrder, RveReport};
 use granite_core::math::Voigt;
 use granite_core::params::{ParamSpec, Params};
 use granite_core::{GraniteError, Result};
 use nalgebra::{Matrix3, SymmetricEigen};
-use std::sync::{Mutex, RwLock};
+use std::sync::{Arc, Mutex, RwLock};
 
 pub struct DemRveFactory;
 
@@ -56,6 +57,24 @@ pub struct DemRve {
     /// (whatever thread updated which point).
     event: Mutex<Option<(usize, String)>>,
     event_said: std::sync::atomic::AtomicBool,
+    /// Volume of the RVE's spheres (the void ratio's denominator).
+    solid_volume: f64,
+    /// The device the RVEs live on (`device: "gpu"`), or None: each point's RVE in `rves`,
+    /// stepped by the thread that updates the point.
+    device: Option<OnDevice>,
+}
+
+/// The RVEs of a material on a device.
+struct OnDevice {
+    device: Arc<dyn RveDevice>,
+    rves: Mutex<OnDeviceRves>,
+}
+
+struct OnDeviceRves {
+    /// None until the material has points.
+    batch: Option<Box<dyn RveBatch>>,
+    /// Each point's stress after its last call (P of eq. 4.3) and cell (P^min of eq. 4.2).
+    last: Vec<(Voigt, Matrix3<f64>)>,
 }
 
 impl ConstitutiveLawFactory for DemRveFactory {
@@ -86,8 +105,16 @@ impl ConstitutiveLawFactory for DemRveFactory {
         let params = Params::resolve("law \"dem_rve\"", SPECS, given)?;
         let mut objects = ObjectMap::new();
         objects.insert("rve".into(), std::sync::Arc::new(template));
+        if let Some(serde_json::Value::String(name)) = map.remove("device") {
+            objects.insert("device".into(), Arc::new(RveDeviceChoice(registry.rve_device(&name)?)));
+        }
         let law = DemRve::new(params, &objects)?;
         let serde_json::Value::Array(rves) = map.remove("rves").ok_or_else(bad)? else { return Err(bad()) };
+        if law.device.is_some() {
+            let sims = rves.into_iter().map(|v| DemSim::from_json(v, registry)).collect::<Result<Vec<_>>>()?;
+            law.take_onto_device(sims)?;
+            return Ok(Box::new(law));
+        }
         {
             let mut store = law.rves.write().map_err(|_| GraniteError::Other("RVE store poisoned".into()))?;
             for v in rves {
@@ -153,6 +180,15 @@ impl DemRve {
                 &format!("must not exceed max_dem_steps = {max_steps}"),
             ));
         }
+        let device = match objects.get("device") {
+            None => None,
+            Some(d) => {
+                let d = d.downcast_ref::<RveDeviceChoice>().ok_or_else(|| {
+                    GraniteError::Setup(format!("{}: `device` must be \"cpu\" or \"gpu\"", params.owner()))
+                })?;
+                Some(OnDevice { device: d.0.clone(), rves: Mutex::new(OnDeviceRves { batch: None, last: Vec::new() }) })
+            }
+        };
         let mut template = template;
         template.set_sequential(true);
         template.cell_control = None;
@@ -171,6 +207,8 @@ impl DemRve {
             params,
             event: Mutex::new(None),
             event_said: std::sync::atomic::AtomicBool::new(false),
+            solid_volume: volume,
+            device,
         })
     }
 }
@@ -189,13 +227,17 @@ pub struct DeformationPlan {
 impl DemRve {
     /// P^min of eq. 4.2: the RVE's weight over the area of its bottom face.
     pub fn p_min(&self, sim: &DemSim) -> f64 {
-        let Some(cell) = &sim.cell else { return 0.0 };
+        sim.cell.as_ref().map(|cell| self.p_min_of_cell(&cell.h)).unwrap_or(0.0)
+    }
+
+    /// P^min of eq. 4.2 for a cell of base vectors `h` (columns).
+    fn p_min_of_cell(&self, h: &Matrix3<f64>) -> f64 {
         let (i, j) = match self.vertical_axis {
             0 => (1, 2),
             1 => (2, 0),
             _ => (0, 1),
         };
-        let area = cell.h.column(i).cross(&cell.h.column(j)).norm();
+        let area = h.column(i).cross(&h.column(j)).norm();
         if area > 0.0 {
             self.weight / area
         } else {
@@ -247,6 +289,10 @@ impl ConstitutiveLaw for DemRve {
         STATE
     }
     fn points_added(&self, here: &[bool]) -> Result<()> {
+        if self.device.is_some() {
+            // Not spreadable: every point's RVE lives in this process.
+            return self.take_onto_device(vec![self.template.clone(); here.len()]);
+        }
         let mut rves = self.rves.write().map_err(|_| GraniteError::Other("RVE store poisoned".into()))?;
         for &here in here {
             rves.push(Mutex::new(here.then(|| Rve { sim: self.template.clone(), stress: None })));
@@ -254,7 +300,11 @@ impl ConstitutiveLaw for DemRve {
         Ok(())
     }
     fn spreadable(&self) -> bool {
-        true
+        // The device steps the whole material in one submission (see `whole_batch`).
+        self.device.is_none()
+    }
+    fn whole_batch(&self) -> bool {
+        self.device.is_some()
     }
     fn release_objects(&self, keep: &[bool]) {
         if let Ok(rves) = self.rves.read() {
@@ -272,13 +322,26 @@ impl ConstitutiveLaw for DemRve {
     fn adopt_point_object(&self, point: usize, object: serde_json::Value) -> Result<()> {
         let mut sim = DemSim::from_json_like(object, &self.template)?;
         sim.set_sequential(true);
+        if let Some(done) = self.on_device(|d| {
+            let entry = (sim.love_weber_stress(sim.cell_volume().unwrap_or(1.0)), cell_of(&sim));
+            let batch = d.batch.as_mut().ok_or_else(|| GraniteError::Other(format!("no material point {point}")))?;
+            batch.set(point, sim.clone())?;
+            d.last[point] = entry;
+            Ok(())
+        }) {
+            return done;
+        }
         let rves = self.rves.read().map_err(|_| GraniteError::Other("RVE store poisoned".into()))?;
         let slot = rves.get(point).ok_or_else(|| GraniteError::Other(format!("no material point {point}")))?;
         *slot.lock().unwrap_or_else(|e| e.into_inner()) = Some(Rve { sim, stress: None });
         Ok(())
     }
     fn save_objects_from(&self, points: Vec<serde_json::Value>) -> Result<Option<serde_json::Value>> {
-        Ok(Some(serde_json::json!({ "template": self.template.to_json()?, "rves": points })))
+        let mut saved = serde_json::json!({ "template": self.template.to_json()?, "rves": points });
+        if let Some(device) = &self.device {
+            saved["device"] = device.device.name().into();
+        }
+        Ok(Some(saved))
     }
     fn pending_event(&self) -> Option<(usize, String)> {
         self.event.lock().unwrap_or_else(|e| e.into_inner()).clone()
@@ -287,6 +350,13 @@ impl ConstitutiveLaw for DemRve {
         *self.event.lock().unwrap_or_else(|e| e.into_inner()) = event;
     }
     fn points_removed(&self, keep: &[bool]) {
+        if let Some(Err(e)) = self.on_device(|d| {
+            let mut k = keep.iter();
+            d.last.retain(|_| *k.next().unwrap_or(&true));
+            d.batch.as_mut().map(|b| b.retain(keep)).unwrap_or(Ok(()))
+        }) {
+            self.tell_once(0, format!("the device could not drop the removed points' RVEs: {e}"));
+        }
         if let Ok(mut rves) = self.rves.write() {
             let mut k = keep.iter();
             rves.retain(|_| *k.next().unwrap_or(&true));
@@ -333,13 +403,18 @@ impl ConstitutiveLaw for DemRve {
         })
     }
     fn save_objects(&self) -> Result<Option<serde_json::Value>> {
-        let count = self.rves.read().map_err(|_| GraniteError::Other("RVE store poisoned".into()))?.len();
+        let count = match self.on_device(|d| Ok(d.last.len())) {
+            Some(count) => count?,
+            None => self.rves.read().map_err(|_| GraniteError::Other("RVE store poisoned".into()))?.len(),
+        };
         let list = (0..count).map(|k| self.point_object(k)).collect::<Result<Vec<_>>>()?;
         self.save_objects_from(list)
     }
     fn update(&self, batch: LawBatch<'_>) -> Result<()> {
+        if let Some(device) = &self.device {
+            return self.update_on_device(device, batch);
+        }
         let rves = self.rves.read().map_err(|_| GraniteError::Other("RVE store poisoned".into()))?;
-        let stride = STATE.len();
         for k in 0..batch.len() {
             let index = batch.first + k;
             let mut rve = rves
@@ -350,77 +425,196 @@ impl ConstitutiveLaw for DemRve {
             let Some(Rve { sim, stress: last_stress }) = &mut *rve else {
                 return Err(GraniteError::Other(format!("the RVE of material point {index} is in another process")));
             };
-            let de = batch.dstrain[k];
-            let e = granite_core::math::strain_matrix(&de);
-            let max_strain = SymmetricEigen::new(e).eigenvalues.amax();
             let before = match *last_stress {
                 Some(stress) => stress,
                 None => sim.love_weber_stress(sim.cell_volume().unwrap_or(1.0)),
             };
-            let p = ((before[0] + before[1] + before[2]).abs() / 3.0).max(self.p_min(sim));
-            let dt = sim.dt;
-            let plan = self.plan(max_strain, p, dt);
-            let steps = plan.full_steps + u64::from(plan.last_step > 0.0);
-            if steps > self.max_steps {
-                return Err(GraniteError::Other(format!(
-                    "RVE of point {index} would need {steps} DEM steps for this increment (T = {:.3e} s, P = {p:.3e} Pa); \
-                     raise max_dem_steps or lower the MPM time step",
-                    plan.duration
-                )));
-            }
-            if let Some(cell) = sim.cell.as_mut() {
-                cell.velocity_gradient = if max_strain > 0.0 { e / plan.duration } else { Matrix3::zeros() };
-            }
+            let cell = sim.cell.as_ref().map(|c| c.h).unwrap_or_else(Matrix3::identity);
+            let order = self.order(index, &batch.dstrain[k], &before, &cell, sim.dt)?;
             *last_stress = None;
-            let of_point = |e: GraniteError| GraniteError::Other(format!("RVE of material point {index}: {e}"));
-            for _ in 0..plan.full_steps {
-                sim.step().map_err(of_point)?;
-            }
-            if plan.last_step > 0.0 {
-                sim.dt = plan.last_step;
-                let r = sim.step();
-                sim.dt = dt;
-                r.map_err(of_point)?;
-            }
-            if let Some(cell) = sim.cell.as_mut() {
-                cell.velocity_gradient = Matrix3::zeros();
-            }
-            if !sim.events.is_empty() {
-                let first = std::mem::take(&mut sim.events).swap_remove(0);
-                if !self.event_said.load(std::sync::atomic::Ordering::Relaxed) {
-                    let mut event = self.event.lock().unwrap_or_else(|e| e.into_inner());
-                    if event.as_ref().is_none_or(|(point, _)| index < *point) {
-                        *event = Some((index, first));
-                    }
-                }
-            }
-            let volume = sim.cell_volume().unwrap_or(1.0);
-            let stress: Voigt = sim.love_weber_stress(volume);
-            *last_stress = Some(stress);
-            let d = sim.coordination();
-            let no_contacts = d.contacts == 0;
-            batch.stress[k] = if no_contacts { [0.0; 6] } else { stress };
-            let (mean, q) = granite_core::math::p_q(&batch.stress[k]);
-            let st = &mut batch.state[k * stride..(k + 1) * stride];
-            st[0] = mean;
-            st[1] = q;
-            st[2] = sim.void_ratio().unwrap_or(f64::NAN);
-            st[3] = d.coordination_no_rattlers;
-            st[4] = d.rattlers as f64;
-            st[5] = steps as f64;
-            st[6] = if no_contacts { 1.0 } else { 0.0 };
-            // Work done by this point's RVE so far (throughput figures of benchmarks and runs).
-            st[7] += (steps as usize * sim.spheres.len()) as f64;
+            let report = self.run_on_cpu(index, sim, &order)?;
+            *last_stress = Some(report.stress);
+            self.record(
+                &report,
+                sim.spheres.len(),
+                &mut batch.stress[k],
+                &mut batch.state[k * STATE.len()..][..STATE.len()],
+            );
         }
         Ok(())
+    }
+}
+
+impl DemRve {
+    /// The order of one RVE for a strain increment `de` (eqs. 4.1-4.6): the velocity gradient
+    /// that applies it over T^DEM, and the DEM steps, from the stress `before` (P of eq. 4.3) and
+    /// the cell `h` (P^min of eq. 4.2).
+    fn order(&self, index: usize, de: &Voigt, before: &Voigt, h: &Matrix3<f64>, dt: f64) -> Result<RveOrder> {
+        let e = granite_core::math::strain_matrix(de);
+        let max_strain = SymmetricEigen::new(e).eigenvalues.amax();
+        let p = ((before[0] + before[1] + before[2]).abs() / 3.0).max(self.p_min_of_cell(h));
+        let plan = self.plan(max_strain, p, dt);
+        let steps = plan.full_steps + u64::from(plan.last_step > 0.0);
+        if steps > self.max_steps {
+            return Err(GraniteError::Other(format!(
+                "RVE of point {index} would need {steps} DEM steps for this increment (T = {:.3e} s, P = {p:.3e} Pa); \
+                 raise max_dem_steps or lower the MPM time step",
+                plan.duration
+            )));
+        }
+        Ok(RveOrder {
+            velocity_gradient: if max_strain > 0.0 { e / plan.duration } else { Matrix3::zeros() },
+            full_steps: plan.full_steps,
+            last_step: plan.last_step,
+        })
+    }
+
+    /// Carries out an order on this thread (the CPU backend).
+    fn run_on_cpu(&self, index: usize, sim: &mut DemSim, order: &RveOrder) -> Result<RveReport> {
+        if let Some(cell) = sim.cell.as_mut() {
+            cell.velocity_gradient = order.velocity_gradient;
+        }
+        let of_point = |e: GraniteError| GraniteError::Other(format!("RVE of material point {index}: {e}"));
+        let dt = sim.dt;
+        for _ in 0..order.full_steps {
+            sim.step().map_err(of_point)?;
+        }
+        if order.last_step > 0.0 {
+            sim.dt = order.last_step;
+            let r = sim.step();
+            sim.dt = dt;
+            r.map_err(of_point)?;
+        }
+        if let Some(cell) = sim.cell.as_mut() {
+            cell.velocity_gradient = Matrix3::zeros();
+        }
+        if !sim.events.is_empty() {
+            let first = std::mem::take(&mut sim.events).swap_remove(0);
+            self.tell_once(index, first);
+        }
+        let volume = sim.cell_volume().unwrap_or(1.0);
+        let d = sim.coordination();
+        let counts = sim.contact_counts();
+        Ok(RveReport {
+            stress: sim.love_weber_stress(volume),
+            cell: sim.cell.as_ref().map(|c| c.h).unwrap_or_else(Matrix3::identity),
+            contacts: d.contacts,
+            contact_ends: counts.iter().map(|&c| c as usize).sum(),
+            rattlers: d.rattlers,
+            floaters: d.floaters,
+            steps: order.full_steps + u64::from(order.last_step > 0.0),
+            failure: None,
+        })
+    }
+
+    /// Passes an RVE event on once for all RVEs (the lowest point's of a step).
+    fn tell_once(&self, index: usize, event: String) {
+        if !self.event_said.load(std::sync::atomic::Ordering::Relaxed) {
+            let mut said = self.event.lock().unwrap_or_else(|e| e.into_inner());
+            if said.as_ref().is_none_or(|(point, _)| index < *point) {
+                *said = Some((index, event));
+            }
+        }
+    }
+
+    /// A point's stress and state variables from its RVE's report.
+    fn record(&self, report: &RveReport, spheres: usize, stress: &mut Voigt, st: &mut [f64]) {
+        let no_contacts = report.contacts == 0;
+        *stress = if no_contacts { [0.0; 6] } else { report.stress };
+        let (mean, q) = granite_core::math::p_q(stress);
+        st[0] = mean;
+        st[1] = q;
+        st[2] = (report.cell.determinant().abs() - self.solid_volume) / self.solid_volume;
+        st[3] = report.coordination_no_rattlers(spheres);
+        st[4] = report.rattlers as f64;
+        st[5] = report.steps as f64;
+        st[6] = if no_contacts { 1.0 } else { 0.0 };
+        // Work done by this point's RVE so far (throughput figures of benchmarks and runs).
+        st[7] += (report.steps as usize * spheres) as f64;
+    }
+
+    /// Every point's RVE stepped on the device in one call.
+    fn update_on_device(&self, device: &OnDevice, batch: LawBatch<'_>) -> Result<()> {
+        let mut rves = device.rves.lock().map_err(|_| GraniteError::Other("device RVEs poisoned".into()))?;
+        let OnDeviceRves { batch: Some(on), last } = &mut *rves else {
+            return Err(GraniteError::Other("no RVE on the device yet".into()));
+        };
+        if batch.first != 0 || batch.len() != on.len() {
+            return Err(GraniteError::Other(format!(
+                "the device steps all {} RVEs of the material at once, not points {}..{}",
+                on.len(),
+                batch.first,
+                batch.first + batch.len()
+            )));
+        }
+        let orders = (0..batch.len())
+            .map(|k| self.order(k, &batch.dstrain[k], &last[k].0, &last[k].1, self.template.dt))
+            .collect::<Result<Vec<_>>>()?;
+        let reports = on.step(&orders)?;
+        let spheres = self.template.spheres.len();
+        let stride = STATE.len();
+        for (k, report) in reports.iter().enumerate() {
+            if let Some(failure) = &report.failure {
+                return Err(GraniteError::Other(format!(
+                    "RVE of material point {k}: stopped at its DEM step {} of this increment on the device: {failure}",
+                    report.steps
+                )));
+            }
+            last[k] = (report.stress, report.cell);
+            self.record(report, spheres, &mut batch.stress[k], &mut batch.state[k * stride..(k + 1) * stride]);
+        }
+        Ok(())
+    }
+
+    /// Runs `f` on the device's RVEs (None without a device).
+    fn on_device<R>(&self, f: impl FnOnce(&mut OnDeviceRves) -> Result<R>) -> Option<Result<R>> {
+        let device = self.device.as_ref()?;
+        Some(match device.rves.lock() {
+            Ok(mut rves) => f(&mut rves),
+            Err(_) => Err(GraniteError::Other("device RVEs poisoned".into())),
+        })
     }
 }
 
 /// Read access to the RVEs (for output of chosen points and tests).
 impl DemRve {
     pub fn with_rve<R>(&self, index: usize, f: impl FnOnce(&DemSim) -> R) -> Option<R> {
+        if let Some(found) = self.on_device(|d| d.batch.as_mut().map(|b| b.get(index)).transpose()) {
+            return found.ok().flatten().map(|sim| f(&sim));
+        }
         let rves = self.rves.read().ok()?;
         let guard = rves.get(index)?.lock().ok()?;
         guard.as_ref().map(|rve| f(&rve.sim))
+    }
+}
+
+/// The cell matrix of an RVE (identity without a cell).
+fn cell_of(sim: &DemSim) -> Matrix3<f64> {
+    sim.cell.as_ref().map(|c| c.h).unwrap_or_else(Matrix3::identity)
+}
+
+impl DemRve {
+    /// Appends RVEs to the material's batch on its device (opened with the first ones).
+    fn take_onto_device(&self, sims: Vec<DemSim>) -> Result<()> {
+        let Some(device) = &self.device else { return Err(GraniteError::Other("no device".into())) };
+        self.on_device(|d| {
+            d.last
+                .extend(sims.iter().map(|sim| (sim.love_weber_stress(sim.cell_volume().unwrap_or(1.0)), cell_of(sim))));
+            match d.batch.as_mut() {
+                Some(batch) => batch.push(sims),
+                None => {
+                    d.batch = Some(device.device.open(sims)?);
+                    Ok(())
+                }
+            }
+        })
+        .unwrap_or(Ok(()))
+    }
+
+    /// The name of the device the RVEs run on ("cpu": the engine's threads).
+    pub fn device_name(&self) -> String {
+        self.on_device(|d| Ok(d.batch.as_ref().map(|b| b.device_name()).unwrap_or_else(|| "gpu".into())))
+            .and_then(|r| r.ok())
+            .unwrap_or_else(|| "cpu".into())
     }
 }

@@ -1,0 +1,385 @@
+//! The device buffers' layout (`rve.wgsl`), filled from the host's RVEs and read back into them.
+
+use granite_core::dem::contacts::PairList;
+use granite_core::dem::sim::VerletState;
+use granite_core::dem::DemSim;
+use granite_core::ext::RveReport;
+use granite_core::{GraniteError, Result};
+use nalgebra::Matrix3;
+
+pub const RVE_STRIDE: usize = 64;
+const SPH_STRIDE: usize = 16;
+const PF_STRIDE: usize = 17;
+const PF_TOUCH: usize = 7;
+const PF_FORCE: usize = 8;
+const PH_STRIDE: usize = 8;
+/// Values of `consts` (see the C_ constants of the kernel).
+const CONSTS: usize = 17;
+/// Fewest slots per sphere in the device's pair rows.
+const MIN_SLOTS: usize = 16;
+
+/// Offsets into an RVE's record (the R_ constants of the kernel).
+#[derive(Clone, Copy)]
+pub enum Rec {
+    H = 0,
+    HBuild = 9,
+    L = 18,
+    Dt = 27,
+    Steps = 28,
+    LastDt = 29,
+    First = 30,
+    Count = 31,
+    Rebuild = 32,
+    RMax = 33,
+    RMin = 34,
+    Error = 35,
+    ErrorValue = 36,
+    Time = 37,
+    Step = 38,
+    Rebuilds = 39,
+    Flips = 40,
+    Stress = 41,
+    Contacts = 47,
+    Ends = 48,
+    Rattlers = 49,
+    Floaters = 50,
+    Taken = 51,
+}
+
+/// Why an RVE stopped on the device (the kernel's FAIL_ codes).
+#[derive(Debug, Clone, Copy)]
+pub enum Failure {
+    TooFast,
+    NotFinite,
+    TooManyPairs,
+    CellCollapsed,
+}
+
+impl Failure {
+    fn from_code(code: f64) -> Option<Failure> {
+        match code as u32 {
+            1 => Some(Failure::TooFast),
+            2 => Some(Failure::NotFinite),
+            3 => Some(Failure::TooManyPairs),
+            4 => Some(Failure::CellCollapsed),
+            _ => None,
+        }
+    }
+}
+
+/// The contact law the kernel runs, with its constants (one per batch).
+#[derive(Debug, Clone, PartialEq)]
+pub struct LawConstants {
+    /// 0: rolling_resistance, 1: linear.
+    kind: f64,
+    young: f64,
+    kn: f64,
+    kt_ratio: f64,
+    kt: f64,
+    alpha_r: f64,
+    alpha_t: f64,
+    mu: f64,
+    eta_r: f64,
+    skin: f64,
+    damping: f64,
+}
+
+impl LawConstants {
+    /// The constants of an RVE's law, or why the device cannot step this RVE.
+    pub fn of(sim: &DemSim) -> Result<LawConstants> {
+        let refuse = |what: &str| {
+            Err(GraniteError::Setup(format!("device \"gpu\": the RVE {what}; run it with device \"cpu\"")))
+        };
+        if sim.cell.is_none() {
+            return refuse("has no periodic cell");
+        }
+        if !sim.walls.is_empty() || !sim.clumps.is_empty() || !sim.potentials.is_empty() {
+            return refuse("holds walls, clumps or potential particles (the device steps spheres only)");
+        }
+        if sim.spheres.blocked.iter().any(|&b| b != 0) || !sim.external.is_empty() || sim.energy.is_some() {
+            return refuse("has blocked spheres, external loads or an energy tracker");
+        }
+        if sim.gravity != [0.0; 3] || sim.cell_control.is_some() {
+            return refuse("has gravity or a cell servo");
+        }
+        let [law] = &sim.laws[..] else { return refuse("has several contact laws (the device runs one)") };
+        let p = law.params();
+        if p.is_set("friction_max") {
+            return refuse("draws its friction per pair (friction_max)");
+        }
+        let mu = p.get("friction").to_radians().tan();
+        let common = |kind: f64| LawConstants {
+            kind,
+            young: 0.0,
+            kn: 0.0,
+            kt_ratio: 0.0,
+            kt: -1.0,
+            alpha_r: 0.0,
+            alpha_t: 0.0,
+            mu,
+            eta_r: 0.0,
+            skin: sim.skin,
+            damping: sim.damping,
+        };
+        match law.name() {
+            "rolling_resistance" => Ok(LawConstants {
+                young: p.get("young"),
+                kt_ratio: p.get("alpha_s"),
+                alpha_r: p.get("alpha_r"),
+                alpha_t: p.get("alpha_t"),
+                eta_r: p.get("eta_r"),
+                ..common(0.0)
+            }),
+            "linear" => Ok(LawConstants {
+                young: if p.is_set("young") { p.get("young") } else { 0.0 },
+                kn: if p.is_set("kn") { p.get("kn") } else { 0.0 },
+                kt_ratio: p.get("kt_ratio"),
+                kt: if p.is_set("kt") { p.get("kt") } else { -1.0 },
+                ..common(1.0)
+            }),
+            other => refuse(&format!("uses contact law \"{other}\" (the device runs rolling_resistance and linear)")),
+        }
+    }
+}
+
+/// Where each RVE's spheres and pair slots lie in the buffers.
+pub struct Layout {
+    /// First sphere of each RVE, and one past the last.
+    first: Vec<usize>,
+    /// Slots per sphere (the longest pair row or incoming list, with room to grow).
+    slots: usize,
+    /// Offsets into `ints`.
+    rows: usize,
+    rebuilt_rows: usize,
+    incoming: usize,
+    incoming_rebuilt: usize,
+    counts: usize,
+    ints_len: usize,
+}
+
+/// The buffers' initial contents.
+pub struct Uploaded {
+    pub consts: Vec<f64>,
+    pub rve: Vec<f64>,
+    pub sph: Vec<f64>,
+    pub pf: Vec<f64>,
+    pub ph_len: usize,
+    pub ints: Vec<i32>,
+}
+
+/// Pairs of a sphere list that the device stores in row `a` (the second sphere earlier, or the
+/// same sphere's image).
+fn check_pair(list: &PairList, k: usize) -> Result<(usize, usize)> {
+    let (a, b) = (list.a[k] as usize, list.b[k] as usize);
+    if b > a {
+        return Err(GraniteError::Other(format!("pair ({a}, {b}) stored with its later sphere second")));
+    }
+    Ok((a, b))
+}
+
+impl Layout {
+    pub fn new(rves: &[DemSim]) -> Result<Layout> {
+        let mut first = vec![0];
+        let mut longest = 0;
+        for sim in rves {
+            first.push(first.last().copied().unwrap_or(0) + sim.spheres.len());
+            // Candidates per sphere, both as first and as second sphere.
+            let mut per_sphere = vec![0usize; sim.spheres.len()];
+            for k in 0..sim.pairs.len() {
+                let (a, b) = check_pair(&sim.pairs, k)?;
+                per_sphere[a] += 1;
+                per_sphere[b] += 1;
+            }
+            longest = longest.max(per_sphere.into_iter().max().unwrap_or(0));
+        }
+        // A row holds the pairs of one sphere as first: at most all of its candidates.
+        let slots = (2 * longest + 8).max(MIN_SLOTS);
+        let spheres = *first.last().unwrap_or(&0);
+        let slot_count = spheres * slots;
+        let rows = 0;
+        let rebuilt_rows = rows + 4 * slot_count;
+        let incoming = rebuilt_rows + 4 * slot_count;
+        let incoming_rebuilt = incoming + slot_count;
+        let counts = incoming_rebuilt + 4 * slot_count;
+        let ints_len = counts + 8 * spheres;
+        if ints_len > i32::MAX as usize || slot_count * PF_STRIDE > u32::MAX as usize {
+            return Err(GraniteError::Setup(format!(
+                "device \"gpu\": {spheres} RVE spheres with {slots} pair slots each are more than one buffer addresses"
+            )));
+        }
+        Ok(Layout { first, slots, rows, rebuilt_rows, incoming, incoming_rebuilt, counts, ints_len })
+    }
+
+    fn slot(&self, r: usize, i: usize, k: usize) -> usize {
+        (self.first[r] + i) * self.slots + k
+    }
+
+    pub fn upload(&self, rves: &[DemSim], law: &LawConstants) -> Result<Uploaded> {
+        let spheres = *self.first.last().unwrap_or(&0);
+        let slot_count = spheres * self.slots;
+        let mut consts = vec![0.0; CONSTS];
+        for (i, v) in [self.slots, self.rows, self.rebuilt_rows, self.incoming, self.incoming_rebuilt, self.counts]
+            .into_iter()
+            .enumerate()
+        {
+            consts[i] = v as f64;
+        }
+        consts[6..].copy_from_slice(&[
+            law.skin,
+            law.damping,
+            law.kind,
+            law.young,
+            law.kn,
+            law.kt_ratio,
+            law.kt,
+            law.alpha_r,
+            law.alpha_t,
+            law.mu,
+            law.eta_r,
+        ]);
+        let mut rve = vec![0.0; rves.len() * RVE_STRIDE];
+        let mut sph = vec![0.0; spheres * SPH_STRIDE];
+        let mut pf = vec![0.0; slot_count * PF_STRIDE];
+        let mut ints = vec![0i32; self.ints_len];
+        for (r, sim) in rves.iter().enumerate() {
+            let rec = &mut rve[r * RVE_STRIDE..(r + 1) * RVE_STRIDE];
+            let cell = sim.cell.as_ref().ok_or_else(|| GraniteError::Other("an RVE without a cell".into()))?;
+            let state = sim.verlet_state();
+            let h_build = state.h_at_build.unwrap_or(cell.h);
+            for a in 0..3 {
+                for b in 0..3 {
+                    rec[Rec::H as usize + 3 * a + b] = cell.h[(a, b)];
+                    rec[Rec::HBuild as usize + 3 * a + b] = h_build[(a, b)];
+                }
+            }
+            let s = &sim.spheres;
+            rec[Rec::Dt as usize] = sim.dt;
+            rec[Rec::First as usize] = self.first[r] as f64;
+            rec[Rec::Count as usize] = s.len() as f64;
+            rec[Rec::Rebuild as usize] = if state.needs_rebuild { 1.0 } else { 0.0 };
+            rec[Rec::RMax as usize] = s.largest_radius();
+            rec[Rec::RMin as usize] = s.smallest_radius();
+            rec[Rec::Time as usize] = sim.time;
+            rec[Rec::Step as usize] = sim.step as f64;
+            rec[Rec::Rebuilds as usize] = state.rebuilds as f64;
+            rec[Rec::Flips as usize] = cell.flips as f64;
+            for i in 0..s.len() {
+                let o = &mut sph[(self.first[r] + i) * SPH_STRIDE..][..SPH_STRIDE];
+                o[0..3].copy_from_slice(&s.x[i]);
+                o[3..6].copy_from_slice(&s.v[i]);
+                o[6..9].copy_from_slice(&s.w[i]);
+                o[9..12].copy_from_slice(state.x_at_build.get(i).unwrap_or(&s.x[i]));
+                o[12] = s.radius[i];
+                o[13] = s.mass[i];
+                o[14] = s.inertia[i];
+            }
+            let list = &sim.pairs;
+            let hs = list.history_stride;
+            let mut own = vec![0usize; s.len()];
+            let mut incoming: Vec<Vec<usize>> = vec![Vec::new(); s.len()];
+            for k in 0..list.len() {
+                let (a, b) = check_pair(list, k)?;
+                let slot = self.slot(r, a, own[a]);
+                own[a] += 1;
+                incoming[b].push(slot);
+                let p = &mut ints[self.rows + 4 * slot..][..4];
+                p[0] = b as i32;
+                p[1..4].copy_from_slice(&list.shift[k]);
+                let f = &mut pf[slot * PF_STRIDE..][..PF_STRIDE];
+                let history = &list.history[k * hs..(k + 1) * hs];
+                f[..hs.min(7)].copy_from_slice(&history[..hs.min(7)]);
+                f[PF_TOUCH] = if list.touching[k] { 1.0 } else { 0.0 };
+                f[PF_FORCE..PF_FORCE + 3].copy_from_slice(&list.force[k]);
+            }
+            for i in 0..s.len() {
+                let c = self.counts + 8 * (self.first[r] + i);
+                ints[c] = own[i] as i32;
+                ints[c + 1] = incoming[i].len() as i32;
+                for (k, &slot) in incoming[i].iter().enumerate() {
+                    ints[self.incoming + self.slot(r, i, k)] = slot as i32;
+                }
+            }
+        }
+        Ok(Uploaded { consts, rve, sph, pf, ph_len: slot_count * PH_STRIDE, ints })
+    }
+
+    /// Writes the device's state into the host's RVEs.
+    pub fn download(&self, rves: &mut [DemSim], records: &[f64], sph: &[f64], pf: &[f64], ints: &[i32]) -> Result<()> {
+        for (r, sim) in rves.iter_mut().enumerate() {
+            let rec = &records[r * RVE_STRIDE..(r + 1) * RVE_STRIDE];
+            let matrix = |at: Rec| Matrix3::from_fn(|a, b| rec[at as usize + 3 * a + b]);
+            let n = sim.spheres.len();
+            let mut x_at_build = Vec::with_capacity(n);
+            for i in 0..n {
+                let o = &sph[(self.first[r] + i) * SPH_STRIDE..][..SPH_STRIDE];
+                sim.spheres.x[i] = [o[0], o[1], o[2]];
+                sim.spheres.v[i] = [o[3], o[4], o[5]];
+                sim.spheres.w[i] = [o[6], o[7], o[8]];
+                x_at_build.push([o[9], o[10], o[11]]);
+            }
+            if let Some(cell) = sim.cell.as_mut() {
+                cell.h = matrix(Rec::H);
+                cell.flips = rec[Rec::Flips as usize] as u64;
+            }
+            sim.time = rec[Rec::Time as usize];
+            sim.step = rec[Rec::Step as usize] as u64;
+            sim.set_verlet_state(VerletState {
+                x_at_build,
+                h_at_build: Some(matrix(Rec::HBuild)),
+                needs_rebuild: rec[Rec::Rebuild as usize] != 0.0,
+                rebuilds: rec[Rec::Rebuilds as usize] as u64,
+            });
+            // The rows as one list sorted by (a, b, shift), parameters set by the law as the CPU's
+            // merge sets them.
+            let mut found = Vec::new();
+            for a in 0..n {
+                let rows = ints[self.counts + 8 * (self.first[r] + a)] as usize;
+                for k in 0..rows {
+                    let slot = self.slot(r, a, k);
+                    let p = &ints[self.rows + 4 * slot..][..4];
+                    found.push((a as u32, p[0] as u32, [p[1], p[2], p[3]], slot));
+                }
+            }
+            found.sort_by_key(|&(a, b, shift, _)| (a, b, shift));
+            let (ps, hs) = sim.pair_strides();
+            let law = sim.laws.first().cloned().ok_or_else(|| GraniteError::Other("an RVE without a law".into()))?;
+            let mut list = PairList { param_stride: ps, history_stride: hs, ..Default::default() };
+            for (a, b, shift, slot) in found {
+                let f = &pf[slot * PF_STRIDE..][..PF_STRIDE];
+                list.a.push(a);
+                list.b.push(b);
+                list.shift.push(shift);
+                list.law.push(0);
+                let mut params = vec![0.0; ps];
+                law.init_pair(&sim.info_for(a as usize, b as usize, false), &mut params);
+                list.params.extend(params);
+                let mut history = vec![0.0; hs];
+                let kept = hs.min(7);
+                history[..kept].copy_from_slice(&f[..kept]);
+                list.history.extend(history);
+                list.touching.push(f[PF_TOUCH] != 0.0);
+                list.force.push([f[PF_FORCE], f[PF_FORCE + 1], f[PF_FORCE + 2]]);
+            }
+            sim.pairs = list;
+        }
+        Ok(())
+    }
+
+    /// What RVE `r` reported.
+    pub fn report(&self, records: &[f64], r: usize) -> RveReport {
+        let rec = &records[r * RVE_STRIDE..(r + 1) * RVE_STRIDE];
+        let count = |at: Rec| rec[at as usize] as usize;
+        let stress = std::array::from_fn(|k| rec[Rec::Stress as usize + k]);
+        RveReport {
+            stress,
+            cell: Matrix3::from_fn(|a, b| rec[Rec::H as usize + 3 * a + b]),
+            contacts: count(Rec::Contacts),
+            contact_ends: count(Rec::Ends),
+            rattlers: count(Rec::Rattlers),
+            floaters: count(Rec::Floaters),
+            steps: rec[Rec::Taken as usize] as u64,
+            failure: Failure::from_code(rec[Rec::Error as usize])
+                .map(|f| f.describe(rec[Rec::ErrorValue as usize], self.slots)),
+        }
+    }
+}

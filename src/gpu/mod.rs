@@ -1,0 +1,318 @@
+//! The RVEs of `dem_rve` on a GPU (`device: "gpu"`): wgpu over Vulkan, f64 WGSL compute
+//! (`rve.wgsl`). All RVEs of a material live in one set of device buffers; each MPM step is one
+//! submission of one workgroup per RVE, which runs all of that RVE's DEM steps; only the orders
+//! (velocity gradient, step counts) go up and the reports (stress, cell, counts) come back.
+//! Everything else comes back only when asked for (checkpoints, outputs, a point's object).
+
+mod layout;
+
+use granite_core::dem::DemSim;
+use granite_core::ext::{RveBatch, RveDevice, RveOrder, RveReport};
+use granite_core::{GraniteError, Result};
+use layout::{Failure, Layout, Rec};
+use std::sync::{Arc, OnceLock};
+use wgpu::util::DeviceExt;
+
+/// The GPU as an RVE device; the adapter is opened on first use.
+#[derive(Default)]
+pub struct GpuDevice {
+    gpu: OnceLock<std::result::Result<Arc<Gpu>, String>>,
+}
+
+impl GpuDevice {
+    pub fn new() -> GpuDevice {
+        GpuDevice::default()
+    }
+
+    fn gpu(&self) -> Result<Arc<Gpu>> {
+        self.gpu.get_or_init(|| Gpu::start().map(Arc::new)).clone().map_err(GraniteError::Setup)
+    }
+}
+
+impl RveDevice for GpuDevice {
+    fn name(&self) -> &str {
+        "gpu"
+    }
+    fn open(&self, rves: Vec<DemSim>) -> Result<Box<dyn RveBatch>> {
+        let gpu = self.gpu()?;
+        let mut batch = GpuBatch { gpu, shadows: Vec::new(), law: None, device: None, dirty: true };
+        batch.push(rves)?;
+        Ok(Box::new(batch))
+    }
+}
+
+/// An opened adapter with the compiled kernel.
+pub struct Gpu {
+    device: wgpu::Device,
+    queue: wgpu::Queue,
+    pipeline: wgpu::ComputePipeline,
+    name: String,
+}
+
+/// The adapter a process uses: under `mpirun`, the local rank's (round robin over the GPUs).
+fn local_rank() -> usize {
+    ["OMPI_COMM_WORLD_LOCAL_RANK", "MPI_LOCALRANKID", "SLURM_LOCALID", "PMI_LOCAL_RANK"]
+        .iter()
+        .find_map(|v| std::env::var(v).ok()?.parse().ok())
+        .unwrap_or(0)
+}
+
+impl Gpu {
+    fn start() -> std::result::Result<Gpu, String> {
+        let instance = wgpu::Instance::new(wgpu::InstanceDescriptor {
+            backends: wgpu::Backends::VULKAN,
+            ..wgpu::InstanceDescriptor::new_without_display_handle_from_env()
+        });
+        let adapters = pollster::block_on(instance.enumerate_adapters(wgpu::Backends::VULKAN));
+        let seen: Vec<String> = adapters.iter().map(|a| a.get_info().name).collect();
+        let mut usable: Vec<wgpu::Adapter> =
+            adapters.into_iter().filter(|a| a.features().contains(wgpu::Features::SHADER_F64)).collect();
+        // Real GPUs before software ones (lavapipe), each kind in the driver's order.
+        usable.sort_by_key(|a| a.get_info().device_type == wgpu::DeviceType::Cpu);
+        let real = usable.iter().filter(|a| a.get_info().device_type != wgpu::DeviceType::Cpu).count();
+        let pool = if real > 0 { real } else { usable.len() };
+        if pool == 0 {
+            return Err(format!(
+                "device \"gpu\": no Vulkan adapter with 64-bit float shaders (found: {}); install a Vulkan driver \
+                 (a GPU's, or Mesa's software one: apt-get install mesa-vulkan-drivers)",
+                if seen.is_empty() { "none".to_string() } else { seen.join(", ") }
+            ));
+        }
+        let adapter = usable.swap_remove(local_rank() % pool);
+        let name = adapter.get_info().name;
+        let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
+            label: Some("granite RVEs"),
+            required_features: wgpu::Features::SHADER_F64,
+            required_limits: adapter.limits(),
+            ..Default::default()
+        }))
+        .map_err(|e| format!("device \"gpu\" ({name}): {e}"))?;
+        let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("rve.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(include_str!("rve.wgsl").into()),
+        });
+        let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some("run_rves"),
+            layout: None,
+            module: &module,
+            entry_point: Some("run_rves"),
+            compilation_options: Default::default(),
+            cache: None,
+        });
+        if let Some(e) = pollster::block_on(scope.pop()) {
+            return Err(format!("device \"gpu\" ({name}): the RVE kernel does not compile: {e}"));
+        }
+        Ok(Gpu { device, queue, pipeline, name })
+    }
+
+    /// Copies `buffer` back to the host.
+    fn read(&self, buffer: &wgpu::Buffer) -> Result<Vec<u8>> {
+        let size = buffer.size();
+        let staging = self.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("readback"),
+            size,
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let mut encoder = self.device.create_command_encoder(&Default::default());
+        encoder.copy_buffer_to_buffer(buffer, 0, &staging, 0, size);
+        self.queue.submit([encoder.finish()]);
+        let (tx, rx) = std::sync::mpsc::channel();
+        staging.slice(..).map_async(wgpu::MapMode::Read, move |r| {
+            tx.send(r).ok();
+        });
+        self.device.poll(wgpu::PollType::wait_indefinitely()).map_err(|e| gpu_error(&self.name, e))?;
+        rx.recv().map_err(|e| gpu_error(&self.name, e))?.map_err(|e| gpu_error(&self.name, e))?;
+        let bytes = staging.slice(..).get_mapped_range().map_err(|e| gpu_error(&self.name, e))?.to_vec();
+        staging.unmap();
+        Ok(bytes)
+    }
+}
+
+fn gpu_error(name: &str, e: impl std::fmt::Display) -> GraniteError {
+    GraniteError::Other(format!("device \"gpu\" ({name}): {e}"))
+}
+
+/// The device buffers of a batch (see `rve.wgsl` for their layout).
+struct DeviceRves {
+    layout: Layout,
+    rve: wgpu::Buffer,
+    sph: wgpu::Buffer,
+    pf: wgpu::Buffer,
+    ints: wgpu::Buffer,
+    bind_group: wgpu::BindGroup,
+    /// The RVE records as the last call left them.
+    records: Vec<f64>,
+    /// Whether the device holds a newer state than the host's copies.
+    ahead: bool,
+}
+
+struct GpuBatch {
+    gpu: Arc<Gpu>,
+    /// The RVEs as last brought to the host (the device may be ahead).
+    shadows: Vec<DemSim>,
+    law: Option<layout::LawConstants>,
+    device: Option<DeviceRves>,
+    /// Whether the host's copies changed since the last upload.
+    dirty: bool,
+}
+
+impl GpuBatch {
+    /// Brings the device's state back into the host's copies.
+    fn sync_to_host(&mut self) -> Result<()> {
+        let Some(d) = self.device.as_mut().filter(|d| d.ahead) else { return Ok(()) };
+        let sph = self.gpu.read(&d.sph)?;
+        let pf = self.gpu.read(&d.pf)?;
+        let ints = self.gpu.read(&d.ints)?;
+        d.layout.download(
+            &mut self.shadows,
+            &d.records,
+            bytemuck::cast_slice(&sph),
+            bytemuck::cast_slice(&pf),
+            bytemuck::cast_slice(&ints),
+        )?;
+        d.ahead = false;
+        Ok(())
+    }
+
+    /// Makes the device's state the host's copies'.
+    fn upload(&mut self) -> Result<()> {
+        let law = self.law.as_ref().ok_or_else(|| GraniteError::Other("no RVE on the device".into()))?;
+        let layout = Layout::new(&self.shadows)?;
+        let data = layout.upload(&self.shadows, law)?;
+        let device = &self.gpu.device;
+        let storage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST;
+        let make = |label: &str, bytes: &[u8]| {
+            device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some(label),
+                contents: bytes,
+                usage: storage,
+            })
+        };
+        let consts = make("consts", bytemuck::cast_slice(&data.consts));
+        let rve = make("rve", bytemuck::cast_slice(&data.rve));
+        let sph = make("sph", bytemuck::cast_slice(&data.sph));
+        let pf = make("pf", bytemuck::cast_slice(&data.pf));
+        let ph = make("ph", bytemuck::cast_slice(&vec![0.0f64; data.ph_len.max(1)]));
+        let ints = make("ints", bytemuck::cast_slice(&data.ints));
+        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("rves"),
+            layout: &self.gpu.pipeline.get_bind_group_layout(0),
+            entries: &[&consts, &rve, &sph, &pf, &ph, &ints]
+                .iter()
+                .enumerate()
+                .map(|(i, b)| wgpu::BindGroupEntry { binding: i as u32, resource: b.as_entire_binding() })
+                .collect::<Vec<_>>(),
+        });
+        self.device = Some(DeviceRves { layout, rve, sph, pf, ints, bind_group, records: data.rve, ahead: false });
+        self.dirty = false;
+        Ok(())
+    }
+}
+
+impl RveBatch for GpuBatch {
+    fn device_name(&self) -> String {
+        self.gpu.name.clone()
+    }
+    fn len(&self) -> usize {
+        self.shadows.len()
+    }
+    fn push(&mut self, rves: Vec<DemSim>) -> Result<()> {
+        for sim in &rves {
+            let law = layout::LawConstants::of(sim)?;
+            match &self.law {
+                None => self.law = Some(law),
+                Some(l) if *l != law => {
+                    return Err(GraniteError::Setup(
+                        "device \"gpu\": the RVEs of one material must share one contact law and its parameters".into(),
+                    ))
+                }
+                Some(_) => {}
+            }
+        }
+        self.sync_to_host()?;
+        self.shadows.extend(rves);
+        self.dirty = true;
+        Ok(())
+    }
+    fn retain(&mut self, keep: &[bool]) -> Result<()> {
+        self.sync_to_host()?;
+        let mut k = keep.iter();
+        self.shadows.retain(|_| *k.next().unwrap_or(&true));
+        self.dirty = true;
+        Ok(())
+    }
+    fn step(&mut self, orders: &[RveOrder]) -> Result<Vec<RveReport>> {
+        if orders.len() != self.shadows.len() {
+            return Err(GraniteError::Other(format!("{} orders for {} RVEs", orders.len(), self.shadows.len())));
+        }
+        if self.shadows.is_empty() {
+            return Ok(Vec::new());
+        }
+        if self.dirty || self.device.is_none() {
+            self.sync_to_host()?;
+            self.upload()?;
+        }
+        let gpu = self.gpu.clone();
+        let d = self.device.as_mut().ok_or_else(|| GraniteError::Other("no RVE on the device".into()))?;
+        for (r, order) in orders.iter().enumerate() {
+            let rec = &mut d.records[r * layout::RVE_STRIDE..(r + 1) * layout::RVE_STRIDE];
+            for a in 0..3 {
+                for b in 0..3 {
+                    rec[Rec::L as usize + 3 * a + b] = order.velocity_gradient[(a, b)];
+                }
+            }
+            rec[Rec::Steps as usize] = order.full_steps as f64;
+            rec[Rec::LastDt as usize] = order.last_step;
+            rec[Rec::Error as usize] = 0.0;
+        }
+        gpu.queue.write_buffer(&d.rve, 0, bytemuck::cast_slice(&d.records));
+        let mut encoder = gpu.device.create_command_encoder(&Default::default());
+        {
+            let mut pass = encoder.begin_compute_pass(&Default::default());
+            pass.set_pipeline(&gpu.pipeline);
+            pass.set_bind_group(0, &d.bind_group, &[]);
+            let n = orders.len() as u32;
+            // At most 65535 workgroups along one axis: more RVEs go on a second axis.
+            pass.dispatch_workgroups(n.min(65535), n.div_ceil(65535), 1);
+        }
+        gpu.queue.submit([encoder.finish()]);
+        d.ahead = true;
+        let bytes = gpu.read(&d.rve)?;
+        d.records = bytemuck::cast_slice(&bytes).to_vec();
+        Ok((0..orders.len()).map(|r| d.layout.report(&d.records, r)).collect())
+    }
+    fn get(&mut self, index: usize) -> Result<DemSim> {
+        self.sync_to_host()?;
+        self.shadows.get(index).cloned().ok_or_else(|| GraniteError::Other(format!("no RVE {index} on the device")))
+    }
+    fn set(&mut self, index: usize, rve: DemSim) -> Result<()> {
+        layout::LawConstants::of(&rve)?;
+        self.sync_to_host()?;
+        let slot =
+            self.shadows.get_mut(index).ok_or_else(|| GraniteError::Other(format!("no RVE {index} on the device")))?;
+        *slot = rve;
+        self.dirty = true;
+        Ok(())
+    }
+}
+
+impl Failure {
+    /// The failure in the CPU engine's words.
+    pub fn describe(self, value: f64, slots: usize) -> String {
+        match self {
+            Failure::TooFast => format!(
+                "a sphere moved {value:.4e} m since the candidate lists were built, more than half the skin plus the \
+                 smallest radius, so contacts would be missed: the forces are too large for this time step; lower dt"
+            ),
+            Failure::NotFinite => "non-finite position or velocity; the time step may be too large".into(),
+            Failure::TooManyPairs => format!(
+                "a sphere has more than {slots} candidate pairs, the most the device's lists hold (lower the skin)"
+            ),
+            Failure::CellCollapsed => format!(
+                "periodic cell collapsed: a width {value:.4e} m (between opposite faces) below 1/64 of the interaction reach"
+            ),
+        }
+    }
+}

@@ -1,0 +1,674 @@
+// The RVEs of one MPM step on the device: one workgroup per periodic DEM sample, persistent over
+// all of that sample's DEM steps (thesis eqs. 4.1-4.6). Each step is the CPU engine's step
+// (`DemSim::step`) for spheres in a periodic cell: the candidate pairs rebuilt when a sphere or
+// the cell has used up the skin, the contact law on every candidate pair, then each sphere's
+// loads gathered in a fixed order (no floating-point atomics: a run is byte-identical to itself)
+// and the spheres moved with the cell's affine field.
+//
+// Layout. A pair (a, b, shift) with b < a (or a == b and a positive shift: a sphere and its own
+// image in a thin cell) lives in row a: slot a * K + k. Each sphere also lists the slots where it
+// is the second sphere ("incoming"), so that its loads are one sequential sum.
+
+const WG: u32 = 64u;
+
+// Constants of the batch (`consts`).
+const C_K: u32 = 0u;          // slots per sphere
+const C_PI: u32 = 1u;         // offsets into `ints`: main rows (4 per slot)
+const C_PJ: u32 = 2u;         //   rebuilt rows (4 per slot)
+const C_INC: u32 = 3u;        //   incoming slots (1 per slot)
+const C_INCT: u32 = 4u;       //   incoming pairs while rebuilding (4 per slot)
+const C_CNT: u32 = 5u;        //   per sphere: rows, incoming, wrap offset (8 per sphere)
+const C_SKIN: u32 = 6u;
+const C_DAMPING: u32 = 7u;
+const C_LAW: u32 = 8u;        // 0: rolling_resistance, 1: linear
+const C_YOUNG: u32 = 9u;      // kn = 2 E r1 r2 / (r1 + r2) when > 0
+const C_KN: u32 = 10u;        // fixed kn otherwise
+const C_KT_RATIO: u32 = 11u;  // kt = ratio kn ...
+const C_KT: u32 = 12u;        // ... or this fixed kt when >= 0
+const C_ALPHA_R: u32 = 13u;
+const C_ALPHA_T: u32 = 14u;
+const C_MU: u32 = 15u;
+const C_ETA_R: u32 = 16u;
+
+// One RVE's record (`rve`, RVE_STRIDE values each).
+const RVE_STRIDE: u32 = 64u;
+const R_H: u32 = 0u;          // cell matrix, row-major
+const R_HB: u32 = 9u;         // cell matrix at the last rebuild
+const R_L: u32 = 18u;         // velocity gradient of this call
+const R_DT: u32 = 27u;
+const R_STEPS: u32 = 28u;     // full steps of this call
+const R_LAST_DT: u32 = 29u;   // a shorter last step, or 0
+const R_FIRST: u32 = 30u;     // first sphere
+const R_COUNT: u32 = 31u;     // spheres
+const R_REBUILD: u32 = 32u;   // the lists must be rebuilt before the next step
+const R_RMAX: u32 = 33u;
+const R_RMIN: u32 = 34u;
+const R_ERROR: u32 = 35u;     // 0 fine; see `Failure` on the host
+const R_ERROR_VALUE: u32 = 36u;
+const R_TIME: u32 = 37u;
+const R_STEP: u32 = 38u;
+const R_REBUILDS: u32 = 39u;
+const R_FLIPS: u32 = 40u;
+const R_STRESS: u32 = 41u;    // Love-Weber stress, Voigt, tension positive
+const R_CONTACTS: u32 = 47u;
+const R_ENDS: u32 = 48u;
+const R_RATTLERS: u32 = 49u;
+const R_FLOATERS: u32 = 50u;
+const R_TAKEN: u32 = 51u;     // steps taken by this call
+
+// Per sphere (`sph`, SPH_STRIDE values): x, v, w, x at the last rebuild, radius, mass, inertia.
+const SPH_STRIDE: u32 = 16u;
+// Per slot (`pf`, PF_STRIDE values): history (7), touching, force on a, torques on a and b.
+const PF_STRIDE: u32 = 17u;
+const PF_TOUCH: u32 = 7u;
+const PF_FORCE: u32 = 8u;
+const PF_TA: u32 = 11u;
+const PF_TB: u32 = 14u;
+// Per slot of a row being rebuilt (`ph`): history (7) and touching.
+const PH_STRIDE: u32 = 8u;
+
+const FAIL_TOO_FAST: f64 = 1.0;
+const FAIL_NOT_FINITE: f64 = 2.0;
+const FAIL_TOO_MANY_PAIRS: f64 = 3.0;
+const FAIL_CELL_COLLAPSED: f64 = 4.0;
+const FAIL_LOST_PAIR: f64 = 5.0;
+const MAX_IMAGES_ACROSS: f64 = 64.0;
+
+@group(0) @binding(0) var<storage, read> consts: array<f64>;
+@group(0) @binding(1) var<storage, read_write> rve: array<f64>;
+@group(0) @binding(2) var<storage, read_write> sph: array<f64>;
+@group(0) @binding(3) var<storage, read_write> pf: array<f64>;
+@group(0) @binding(4) var<storage, read_write> ph: array<f64>;
+@group(0) @binding(5) var<storage, read_write> ints: array<i32>;
+
+var<workgroup> w_h: array<f64, 9>;
+var<workgroup> w_hn: array<f64, 9>;
+var<workgroup> w_inv: array<f64, 9>;
+var<workgroup> w_f: array<f64, 9>;
+var<workgroup> w_l: array<f64, 9>;
+var<workgroup> w_minv: array<i32, 9>;
+var<workgroup> w_dt: f64;
+var<workgroup> w_moved: array<f64, WG>;
+var<workgroup> w_bad: array<u32, WG>;
+var<workgroup> w_sums: array<f64, 576>;   // WG x 9
+var<workgroup> w_counts: array<vec4<u32>, WG>;
+var<workgroup> w_steps: u32;
+var<workgroup> w_rebuild: u32;
+var<workgroup> w_flip: u32;
+var<workgroup> w_fail: u32;
+
+fn cu(i: u32) -> u32 { return u32(consts[i]); }
+
+fn load3(base: u32) -> vec3<f64> { return vec3<f64>(sph[base], sph[base + 1u], sph[base + 2u]); }
+fn store3(base: u32, v: vec3<f64>) { sph[base] = v.x; sph[base + 1u] = v.y; sph[base + 2u] = v.z; }
+fn pf3(base: u32) -> vec3<f64> { return vec3<f64>(pf[base], pf[base + 1u], pf[base + 2u]); }
+fn set_pf3(base: u32, v: vec3<f64>) { pf[base] = v.x; pf[base + 1u] = v.y; pf[base + 2u] = v.z; }
+
+// Row-major 3x3 products, summed in the order of `granite_core::math::mat_vec`.
+fn h_times(v: vec3<f64>) -> vec3<f64> {
+    return vec3<f64>(
+        w_h[0] * v.x + w_h[1] * v.y + w_h[2] * v.z,
+        w_h[3] * v.x + w_h[4] * v.y + w_h[5] * v.z,
+        w_h[6] * v.x + w_h[7] * v.y + w_h[8] * v.z);
+}
+fn inv_times(v: vec3<f64>) -> vec3<f64> {
+    return vec3<f64>(
+        w_inv[0] * v.x + w_inv[1] * v.y + w_inv[2] * v.z,
+        w_inv[3] * v.x + w_inv[4] * v.y + w_inv[5] * v.z,
+        w_inv[6] * v.x + w_inv[7] * v.y + w_inv[8] * v.z);
+}
+fn l_times(v: vec3<f64>) -> vec3<f64> {
+    return vec3<f64>(
+        w_l[0] * v.x + w_l[1] * v.y + w_l[2] * v.z,
+        w_l[3] * v.x + w_l[4] * v.y + w_l[5] * v.z,
+        w_l[6] * v.x + w_l[7] * v.y + w_l[8] * v.z);
+}
+fn f_times(v: vec3<f64>) -> vec3<f64> {
+    return vec3<f64>(
+        w_f[0] * v.x + w_f[1] * v.y + w_f[2] * v.z,
+        w_f[3] * v.x + w_f[4] * v.y + w_f[5] * v.z,
+        w_f[6] * v.x + w_f[7] * v.y + w_f[8] * v.z);
+}
+fn image(n: vec3<i32>) -> vec3<f64> {
+    if (all(n == vec3<i32>(0))) { return vec3<f64>(0.0lf); }
+    return h_times(vec3<f64>(f64(n.x), f64(n.y), f64(n.z)));
+}
+
+fn sdot(a: vec3<f64>, b: vec3<f64>) -> f64 { return a.x * b.x + a.y * b.y + a.z * b.z; }
+fn scross(a: vec3<f64>, b: vec3<f64>) -> vec3<f64> {
+    return vec3<f64>(a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x);
+}
+
+// Inverse of a row-major 3x3 (cofactors over the determinant).
+fn inverse3(m: array<f64, 9>) -> array<f64, 9> {
+    let c00 = m[4] * m[8] - m[5] * m[7];
+    let c01 = m[5] * m[6] - m[3] * m[8];
+    let c02 = m[3] * m[7] - m[4] * m[6];
+    let det = m[0] * c00 + m[1] * c01 + m[2] * c02;
+    let d = 1.0lf / det;
+    return array<f64, 9>(
+        c00 * d, (m[2] * m[7] - m[1] * m[8]) * d, (m[1] * m[5] - m[2] * m[4]) * d,
+        c01 * d, (m[0] * m[8] - m[2] * m[6]) * d, (m[2] * m[3] - m[0] * m[5]) * d,
+        c02 * d, (m[1] * m[6] - m[0] * m[7]) * d, (m[0] * m[4] - m[1] * m[3]) * d);
+}
+
+fn sph_base(first: u32, i: u32) -> u32 { return (first + i) * SPH_STRIDE; }
+fn slot_of(first: u32, i: u32, k: u32) -> u32 { return (first + i) * cu(C_K) + k; }
+fn cnt_base(first: u32, i: u32) -> u32 { return cu(C_CNT) + (first + i) * 8u; }
+fn row_partner(slot: u32) -> i32 { return ints[cu(C_PI) + slot * 4u]; }
+fn row_shift(slot: u32) -> vec3<i32> {
+    let b = cu(C_PI) + slot * 4u;
+    return vec3<i32>(ints[b + 1u], ints[b + 2u], ints[b + 3u]);
+}
+
+// Whether a pair of a sphere with its own image is stored under this shift (its first non-zero
+// component positive), as the CPU's broad phase keeps it.
+fn positive_shift(n: vec3<i32>) -> bool {
+    if (n.x != 0) { return n.x > 0; }
+    if (n.y != 0) { return n.y > 0; }
+    return n.z > 0;
+}
+
+// Branch vector of pair (a, b, shift), always from its first sphere: both spheres of a pair then
+// decide alike whether it is a candidate.
+fn branch(first: u32, a: u32, b: u32, n: vec3<i32>) -> vec3<f64> {
+    return (load3(sph_base(first, b)) - load3(sph_base(first, a))) + image(n);
+}
+
+// Spring-slider of `tangential.rs`: the spring turned into the contact plane, loaded by the
+// tangential relative displacement, capped by Coulomb.
+fn beyond_scale(v: vec3<f64>, limit: f64) -> f64 {
+    let norm2 = sdot(v, v);
+    if (norm2 > limit * limit) {
+        let norm = sqrt(norm2);
+        return select(0.0lf, limit / norm, norm > 0.0lf);
+    }
+    return -1.0lf;
+}
+
+fn rotate_into_plane(u: vec3<f64>, n: vec3<f64>) -> vec3<f64> {
+    let len2 = sdot(u, u);
+    if (len2 == 0.0lf) { return u; }
+    let t = u - sdot(u, n) * n;
+    let t2 = sdot(t, t);
+    if (t2 == 0.0lf) { return vec3<f64>(0.0lf); }
+    return t * sqrt(len2 / t2);
+}
+
+struct Law { force: vec3<f64>, moment: vec3<f64> }
+
+// The contact law on one touching pair (see `rolling.rs`, `linear.rs`); updates the history in
+// `pf` and returns the force and extra moment on the first sphere.
+fn contact_law(slot: u32, ra: f64, rb: f64, n: vec3<f64>, overlap: f64, rel_v: vec3<f64>, spin: vec3<f64>, dt: f64) -> Law {
+    var kn = consts[C_KN];
+    if (consts[C_YOUNG] > 0.0lf) { kn = 2.0lf * consts[C_YOUNG] * ra * rb / (ra + rb); }
+    var kt = consts[C_KT_RATIO] * kn;
+    if (consts[C_KT] >= 0.0lf) { kt = consts[C_KT]; }
+    let mu = consts[C_MU];
+    let h = slot * PF_STRIDE;
+    let fn_ = kn * overlap;
+    // Tangential spring-slider.
+    let r = rotate_into_plane(vec3<f64>(pf[h], pf[h + 1u], pf[h + 2u]), n);
+    let vt = rel_v - sdot(rel_v, n) * n;
+    var s = r + vt * dt;
+    var ft = kt * s;
+    let scale = beyond_scale(ft, mu * fn_);
+    if (scale >= 0.0lf) { ft = ft * scale; s = s * scale; }
+    pf[h] = s.x; pf[h + 1u] = s.y; pf[h + 2u] = s.z;
+    var out: Law;
+    out.force = ft - fn_ * n;
+    out.moment = vec3<f64>(0.0lf);
+    if (u32(consts[C_LAW]) != 0u) { return out; }
+    // Rolling and twisting springs, capped at eta_r |F_n| min(r1, r2).
+    let kr = consts[C_ALPHA_R] * kt * ra * rb;
+    let ktw = consts[C_ALPHA_T] * kt * ra * rb;
+    let limit = consts[C_ETA_R] * min(ra, rb) * fn_;
+    let s_n = sdot(spin, n);
+    let roll = spin - s_n * n;
+    var theta = rotate_into_plane(vec3<f64>(pf[h + 3u], pf[h + 4u], pf[h + 5u]), n) + roll * dt;
+    var m_roll = kr * theta;
+    let rs = beyond_scale(m_roll, limit);
+    if (rs >= 0.0lf) { m_roll = m_roll * rs; theta = theta * rs; }
+    var twist = pf[h + 6u] + s_n * dt;
+    var m_twist = ktw * twist;
+    let ts = beyond_scale(vec3<f64>(m_twist, 0.0lf, 0.0lf), limit);
+    if (ts >= 0.0lf) { m_twist = m_twist * ts; twist = twist * ts; }
+    pf[h + 3u] = theta.x; pf[h + 4u] = theta.y; pf[h + 5u] = theta.z; pf[h + 6u] = twist;
+    out.moment = m_roll + m_twist * n;
+    return out;
+}
+
+fn open_contact(slot: u32) {
+    let h = slot * PF_STRIDE;
+    if (pf[h + PF_TOUCH] == 0.0lf) { return; }
+    for (var q = 0u; q < PF_STRIDE; q++) { pf[h + q] = 0.0lf; }
+}
+
+// Contact stage of sphere a's row.
+fn contacts_of(first: u32, a: u32, dt: f64) {
+    let k_max = u32(ints[cnt_base(first, a)]);
+    let sa = sph_base(first, a);
+    let xa = load3(sa);
+    let va = load3(sa + 3u);
+    let wa = load3(sa + 6u);
+    let ra = sph[sa + 12u];
+    for (var k = 0u; k < k_max; k++) {
+        let slot = slot_of(first, a, k);
+        let b = u32(row_partner(slot));
+        let sb = sph_base(first, b);
+        let d = (load3(sb) - xa) + image(row_shift(slot));
+        let rb = sph[sb + 12u];
+        let reach = ra + rb;
+        let dist2 = sdot(d, d);
+        if (dist2 >= reach * reach) { open_contact(slot); continue; }
+        let inv2 = 1.0lf / dist2;
+        let dist = sqrt(dist2);
+        let n = d * (dist * inv2);
+        let overlap = reach - dist;
+        let la = ra - 0.5lf * overlap;
+        let lb = dist - la;
+        let wb = load3(sb + 6u);
+        let spins = la * wa + lb * wb;
+        let rel_v = ((load3(sb + 3u) - va) - scross(spins, n)) + l_times(d);
+        let law = contact_law(slot, ra, rb, n, overlap, rel_v, wb - wa, dt);
+        let nf = scross(n, law.force);
+        let p = slot * PF_STRIDE;
+        pf[p + PF_TOUCH] = 1.0lf;
+        set_pf3(p + PF_FORCE, law.force);
+        set_pf3(p + PF_TA, la * nf + law.moment);
+        set_pf3(p + PF_TB, lb * nf - law.moment);
+    }
+}
+
+// YADE's Cundall damping of an acceleration (`motion.rs`).
+fn cundall(acc: vec3<f64>, vel: vec3<f64>, damping: f64, dt: f64) -> vec3<f64> {
+    let power = acc * (vel + 0.5lf * dt * acc);
+    let sign = select(vec3<f64>(-1.0lf), vec3<f64>(1.0lf), power >= vec3<f64>(0.0lf));
+    return acc * (vec3<f64>(1.0lf) - damping * sign);
+}
+
+// Gathers sphere i's loads (own row, then incoming slots, in order) and moves it. Returns its
+// squared displacement since the last rebuild (-1 if its state is not finite).
+fn move_sphere(first: u32, i: u32, dt: f64) -> f64 {
+    let c = cnt_base(first, i);
+    var f = vec3<f64>(0.0lf);
+    var t = vec3<f64>(0.0lf);
+    let own = u32(ints[c]);
+    for (var k = 0u; k < own; k++) {
+        let p = slot_of(first, i, k) * PF_STRIDE;
+        if (pf[p + PF_TOUCH] != 0.0lf) { f += pf3(p + PF_FORCE); t += pf3(p + PF_TA); }
+    }
+    let incoming = u32(ints[c + 1u]);
+    let base = cu(C_INC) + (first + i) * cu(C_K);
+    for (var k = 0u; k < incoming; k++) {
+        let p = u32(ints[base + k]) * PF_STRIDE;
+        if (pf[p + PF_TOUCH] != 0.0lf) { f -= pf3(p + PF_FORCE); t += pf3(p + PF_TB); }
+    }
+    let s = sph_base(first, i);
+    var x = load3(s);
+    var v = load3(s + 3u);
+    var w = load3(s + 6u);
+    let damping = consts[C_DAMPING];
+    let inv_m = 1.0lf / sph[s + 13u];
+    let inv_i = 1.0lf / sph[s + 14u];
+    v = v + cundall(f * inv_m, v, damping, dt) * dt;
+    let moving = v + l_times(x);
+    x = x + moving * dt;
+    // Newton's law holds for the whole velocity v + L x (see `Motion::advance_free`).
+    v = v - l_times(moving) * dt;
+    w = w + cundall(t * inv_i, w, damping, dt) * dt;
+    store3(s, x);
+    store3(s + 3u, v);
+    store3(s + 6u, w);
+    let d = x - f_times(load3(s + 9u));
+    // Finite only if every term is (NaN fails every comparison).
+    let check = d.x + d.y + d.z + v.x + v.y + v.z + w.x + w.y + w.z;
+    if (!(abs(check) <= 1.7976931348623157e308lf)) { return -1.0lf; }
+    return sdot(d, d);
+}
+
+// Candidate search and merge for sphere i's row (the CPU's `rebuild_candidates`): every sphere j
+// and every image within reach; pairs already in the row keep their history.
+fn rebuild_row(first: u32, i: u32, count: u32) -> bool {
+    let kk = cu(C_K);
+    let skin = consts[C_SKIN];
+    let si = sph_base(first, i);
+    let xi = load3(si);
+    let ri = sph[si + 12u];
+    let c = cnt_base(first, i);
+    let old = u32(ints[c]);
+    // Reach in reduced coordinates along each axis: |row a of h^-1| per unit length.
+    let g = vec3<f64>(
+        sqrt(w_inv[0] * w_inv[0] + w_inv[1] * w_inv[1] + w_inv[2] * w_inv[2]),
+        sqrt(w_inv[3] * w_inv[3] + w_inv[4] * w_inv[4] + w_inv[5] * w_inv[5]),
+        sqrt(w_inv[6] * w_inv[6] + w_inv[7] * w_inv[7] + w_inv[8] * w_inv[8]));
+    var fresh = 0u;
+    var incoming = 0u;
+    for (var j = 0u; j < count; j++) {
+        let sj = sph_base(first, j);
+        let rj = sph[sj + 12u];
+        let reach = ri + rj + skin;
+        let s = inv_times(load3(sj) - xi);
+        let span = reach * g * 1.000001lf;
+        let lo = vec3<i32>(ceil(-s - span));
+        let hi = vec3<i32>(floor(-s + span));
+        for (var n0 = lo.x; n0 <= hi.x; n0++) {
+            for (var n1 = lo.y; n1 <= hi.y; n1++) {
+                for (var n2 = lo.z; n2 <= hi.z; n2++) {
+                    let n = vec3<i32>(n0, n1, n2);
+                    if (j == i && all(n == vec3<i32>(0))) { continue; }
+                    // The pair as stored: from its first sphere.
+                    let mine = j < i || (j == i && positive_shift(n));
+                    var d: vec3<f64>;
+                    if (mine) { d = branch(first, i, j, n); } else { d = branch(first, j, i, -n); }
+                    if (sdot(d, d) >= reach * reach) { continue; }
+                    if (mine) {
+                        if (fresh >= kk) { return false; }
+                        let q = slot_of(first, i, fresh);
+                        let pj = cu(C_PJ) + q * 4u;
+                        ints[pj] = i32(j); ints[pj + 1u] = n.x; ints[pj + 2u] = n.y; ints[pj + 3u] = n.z;
+                        for (var e = 0u; e < PH_STRIDE; e++) { ph[q * PH_STRIDE + e] = 0.0lf; }
+                        for (var k = 0u; k < old; k++) {
+                            let o = slot_of(first, i, k);
+                            if (row_partner(o) == i32(j) && all(row_shift(o) == n)) {
+                                for (var e = 0u; e < PH_STRIDE; e++) { ph[q * PH_STRIDE + e] = pf[o * PF_STRIDE + e]; }
+                                break;
+                            }
+                        }
+                        fresh++;
+                    } else {
+                        if (incoming >= kk) { return false; }
+                        let t = cu(C_INCT) + slot_of(first, i, incoming) * 4u;
+                        ints[t] = i32(j); ints[t + 1u] = -n.x; ints[t + 2u] = -n.y; ints[t + 3u] = -n.z;
+                        incoming++;
+                    }
+                }
+            }
+        }
+    }
+    for (var k = 0u; k < fresh; k++) {
+        let q = slot_of(first, i, k);
+        for (var e = 0u; e < 4u; e++) { ints[cu(C_PI) + q * 4u + e] = ints[cu(C_PJ) + q * 4u + e]; }
+        for (var e = 0u; e < PH_STRIDE; e++) { pf[q * PF_STRIDE + e] = ph[q * PH_STRIDE + e]; }
+        for (var e = PH_STRIDE; e < PF_STRIDE; e++) { pf[q * PF_STRIDE + e] = 0.0lf; }
+    }
+    ints[c] = i32(fresh);
+    ints[c + 1u] = i32(incoming);
+    store3(si + 9u, xi);
+    return true;
+}
+
+// The slot of pair (a, b = i, shift) in row a, for sphere i's incoming list.
+fn resolve_incoming(first: u32, i: u32) -> bool {
+    let c = cnt_base(first, i);
+    let incoming = u32(ints[c + 1u]);
+    for (var k = 0u; k < incoming; k++) {
+        let t = cu(C_INCT) + slot_of(first, i, k) * 4u;
+        let a = u32(ints[t]);
+        let n = vec3<i32>(ints[t + 1u], ints[t + 2u], ints[t + 3u]);
+        let rows = u32(ints[cnt_base(first, a)]);
+        var found = false;
+        for (var q = 0u; q < rows; q++) {
+            let o = slot_of(first, a, q);
+            if (row_partner(o) == i32(i) && all(row_shift(o) == n)) {
+                ints[cu(C_INC) + slot_of(first, i, k)] = i32(o);
+                found = true;
+                break;
+            }
+        }
+        if (!found) { return false; }
+    }
+    return true;
+}
+
+fn barrier_all() {
+    storageBarrier();
+    workgroupBarrier();
+}
+
+fn fail(r: u32, code: f64, value: f64) {
+    if (rve[r * RVE_STRIDE + R_ERROR] == 0.0lf) {
+        rve[r * RVE_STRIDE + R_ERROR] = code;
+        rve[r * RVE_STRIDE + R_ERROR_VALUE] = value;
+    }
+    w_fail = 1u;
+}
+
+// Rebuilds the candidate lists of RVE r: positions wrapped into the cell (pair shifts
+// corrected), every row searched anew, the incoming lists resolved.
+fn rebuild(r: u32, lid: u32, first: u32, count: u32) {
+    let base = r * RVE_STRIDE;
+    if (lid == 0u) {
+        w_inv = inverse3(w_h);
+        // Widths between opposite faces: 1 / |row a of h^-1|.
+        let reach = 2.0lf * rve[base + R_RMAX] + consts[C_SKIN];
+        for (var a = 0u; a < 3u; a++) {
+            let g = sqrt(w_inv[3u * a] * w_inv[3u * a] + w_inv[3u * a + 1u] * w_inv[3u * a + 1u] + w_inv[3u * a + 2u] * w_inv[3u * a + 2u]);
+            if (!(MAX_IMAGES_ACROSS >= reach * g)) { fail(r, FAIL_CELL_COLLAPSED, 1.0lf / g); }
+        }
+    }
+    if (workgroupUniformLoad(&w_fail) != 0u) { return; }
+    for (var i = lid; i < count; i += WG) {
+        let s = sph_base(first, i);
+        let x = load3(s);
+        let k = vec3<i32>(floor(inv_times(x)));
+        let c = cnt_base(first, i);
+        ints[c + 2u] = k.x; ints[c + 3u] = k.y; ints[c + 4u] = k.z;
+        if (any(k != vec3<i32>(0))) { store3(s, x - image(k)); }
+    }
+    barrier_all();
+    var ok = true;
+    for (var i = lid; i < count; i += WG) {
+        let c = cnt_base(first, i);
+        let ka = vec3<i32>(ints[c + 2u], ints[c + 3u], ints[c + 4u]);
+        for (var k = 0u; k < u32(ints[c]); k++) {
+            let p = cu(C_PI) + slot_of(first, i, k) * 4u;
+            let cb = cnt_base(first, u32(ints[p]));
+            ints[p + 1u] += ints[cb + 2u] - ka.x;
+            ints[p + 2u] += ints[cb + 3u] - ka.y;
+            ints[p + 3u] += ints[cb + 4u] - ka.z;
+        }
+    }
+    barrier_all();
+    for (var i = lid; i < count; i += WG) {
+        if (!rebuild_row(first, i, count)) { ok = false; }
+    }
+    barrier_all();
+    for (var i = lid; i < count; i += WG) {
+        if (!resolve_incoming(first, i)) { ok = false; }
+    }
+    if (!ok) { fail(r, FAIL_TOO_MANY_PAIRS, f64(cu(C_K))); }
+    if (lid == 0u) {
+        for (var q = 0u; q < 9u; q++) { rve[base + R_HB + q] = w_h[q]; }
+        rve[base + R_REBUILD] = 0.0lf;
+        rve[base + R_REBUILDS] += 1.0lf;
+    }
+    barrier_all();
+}
+
+fn round_away(x: f64) -> f64 {
+    return sign(x) * floor(abs(x) + 0.5lf);
+}
+
+// Kraynik-Reinelt flip of the cell (`PeriodicCell::flip_if_needed`) by thread 0: sets w_minv to
+// M^-1 (h_new = h_old M) and returns whether the cell flipped.
+fn flip_if_needed() -> bool {
+    var m = array<i32, 9>(1, 0, 0, 0, 1, 0, 0, 0, 1);
+    var changed = false;
+    for (var j = 0u; j < 3u; j++) {
+        for (var i = 0u; i < 3u; i++) {
+            if (i == j) { continue; }
+            let ai = vec3<f64>(w_h[i], w_h[3u + i], w_h[6u + i]);
+            let aj = vec3<f64>(w_h[j], w_h[3u + j], w_h[6u + j]);
+            let k = round_away(sdot(aj, ai) / sdot(ai, ai));
+            if (k != 0.0lf) {
+                let nj = aj - ai * k;
+                w_h[j] = nj.x; w_h[3u + j] = nj.y; w_h[6u + j] = nj.z;
+                for (var q = 0u; q < 3u; q++) { m[3u * q + j] -= i32(k) * m[3u * q + i]; }
+                changed = true;
+            }
+        }
+    }
+    if (changed) {
+        // M is unimodular: its inverse is its adjugate over a determinant of +-1.
+        let det = m[0] * (m[4] * m[8] - m[5] * m[7]) - m[1] * (m[3] * m[8] - m[5] * m[6]) + m[2] * (m[3] * m[7] - m[4] * m[6]);
+        w_minv = array<i32, 9>(
+            (m[4] * m[8] - m[5] * m[7]) * det, (m[2] * m[7] - m[1] * m[8]) * det, (m[1] * m[5] - m[2] * m[4]) * det,
+            (m[5] * m[6] - m[3] * m[8]) * det, (m[0] * m[8] - m[2] * m[6]) * det, (m[2] * m[3] - m[0] * m[5]) * det,
+            (m[3] * m[7] - m[4] * m[6]) * det, (m[1] * m[6] - m[0] * m[7]) * det, (m[0] * m[4] - m[1] * m[3]) * det);
+    }
+    return changed;
+}
+
+@compute @workgroup_size(WG)
+fn run_rves(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
+    let r = group.x;
+    let base = r * RVE_STRIDE;
+    let first = u32(rve[base + R_FIRST]);
+    let count = u32(rve[base + R_COUNT]);
+    let skin = consts[C_SKIN];
+    if (lid == 0u) {
+        for (var q = 0u; q < 9u; q++) { w_h[q] = rve[base + R_H + q]; w_l[q] = rve[base + R_L + q]; }
+        let last = rve[base + R_LAST_DT];
+        w_steps = u32(rve[base + R_STEPS]) + select(0u, 1u, last > 0.0lf);
+        w_fail = 0u;
+        rve[base + R_TAKEN] = 0.0lf;
+    }
+    let steps = workgroupUniformLoad(&w_steps);
+    for (var step = 0u; step < steps; step++) {
+        if (lid == 0u) {
+            w_rebuild = u32(rve[base + R_REBUILD]);
+            w_dt = rve[base + R_DT];
+            if (step == u32(rve[base + R_STEPS])) { w_dt = rve[base + R_LAST_DT]; }
+        }
+        if (workgroupUniformLoad(&w_rebuild) != 0u) {
+            rebuild(r, lid, first, count);
+            if (workgroupUniformLoad(&w_fail) != 0u) { break; }
+        }
+        if (lid == 0u) {
+            // The cell at the step's end, and F = h_end h_build^-1 for the spheres' reference.
+            let dt = w_dt;
+            for (var a = 0u; a < 3u; a++) {
+                for (var b = 0u; b < 3u; b++) {
+                    let lh = w_l[3u * a] * w_h[b] + w_l[3u * a + 1u] * w_h[3u + b] + w_l[3u * a + 2u] * w_h[6u + b];
+                    w_hn[3u * a + b] = w_h[3u * a + b] + lh * dt;
+                }
+            }
+            var hb: array<f64, 9>;
+            for (var q = 0u; q < 9u; q++) { hb[q] = rve[base + R_HB + q]; }
+            let hbi = inverse3(hb);
+            for (var a = 0u; a < 3u; a++) {
+                for (var b = 0u; b < 3u; b++) {
+                    w_f[3u * a + b] = w_hn[3u * a] * hbi[b] + w_hn[3u * a + 1u] * hbi[3u + b] + w_hn[3u * a + 2u] * hbi[6u + b];
+                }
+            }
+        }
+        workgroupBarrier();
+        let dt = workgroupUniformLoad(&w_dt);
+        for (var i = lid; i < count; i += WG) { contacts_of(first, i, dt); }
+        barrier_all();
+        var worst = 0.0lf;
+        var bad = 0u;
+        for (var i = lid; i < count; i += WG) {
+            let m2 = move_sphere(first, i, dt);
+            if (m2 < 0.0lf) { bad = 1u; } else if (m2 > worst) { worst = m2; }
+        }
+        w_moved[lid] = worst;
+        w_bad[lid] = bad;
+        barrier_all();
+        if (lid == 0u) {
+            var moved2 = 0.0lf;
+            var any_bad = 0u;
+            for (var q = 0u; q < WG; q++) { moved2 = max(moved2, w_moved[q]); any_bad |= w_bad[q]; }
+            let moved = sqrt(moved2);
+            w_h = w_hn;
+            rve[base + R_TIME] += dt;
+            rve[base + R_STEP] += 1.0lf;
+            rve[base + R_TAKEN] += 1.0lf;
+            let rmax = rve[base + R_RMAX];
+            if (any_bad != 0u) {
+                fail(r, FAIL_NOT_FINITE, 0.0lf);
+            } else if (moved > 0.5lf * skin + rve[base + R_RMIN]) {
+                fail(r, FAIL_TOO_FAST, moved);
+            }
+            w_flip = 0u;
+            if (flip_if_needed()) {
+                w_flip = 1u;
+                rve[base + R_FLIPS] += 1.0lf;
+                rve[base + R_REBUILD] = 1.0lf;
+            }
+            var growth2 = 0.0lf;
+            for (var a = 0u; a < 3u; a++) {
+                for (var b = 0u; b < 3u; b++) {
+                    let e = w_f[3u * a + b] - select(0.0lf, 1.0lf, a == b);
+                    growth2 += e * e;
+                }
+            }
+            if (2.0lf * moved + sqrt(growth2) * (2.0lf * rmax + skin) > skin) { rve[base + R_REBUILD] = 1.0lf; }
+        }
+        if (workgroupUniformLoad(&w_flip) != 0u) {
+            for (var i = lid; i < count; i += WG) {
+                for (var k = 0u; k < u32(ints[cnt_base(first, i)]); k++) {
+                    let p = cu(C_PI) + slot_of(first, i, k) * 4u;
+                    let n = vec3<i32>(ints[p + 1u], ints[p + 2u], ints[p + 3u]);
+                    ints[p + 1u] = w_minv[0] * n.x + w_minv[1] * n.y + w_minv[2] * n.z;
+                    ints[p + 2u] = w_minv[3] * n.x + w_minv[4] * n.y + w_minv[5] * n.z;
+                    ints[p + 3u] = w_minv[6] * n.x + w_minv[7] * n.y + w_minv[8] * n.z;
+                }
+            }
+            barrier_all();
+        }
+        if (workgroupUniformLoad(&w_fail) != 0u) { break; }
+    }
+    // The RVE's measures after the call: Love-Weber stress (eq. 4.7) and contact counts.
+    barrier_all();
+    var sums: array<f64, 9>;
+    var counts = vec4<u32>(0u);
+    for (var i = lid; i < count; i += WG) {
+        let c = cnt_base(first, i);
+        var mine = 0u;
+        for (var k = 0u; k < u32(ints[c]); k++) {
+            let slot = slot_of(first, i, k);
+            let p = slot * PF_STRIDE;
+            if (pf[p + PF_TOUCH] == 0.0lf) { continue; }
+            mine++;
+            let f = pf3(p + PF_FORCE);
+            let l = branch(first, i, u32(row_partner(slot)), row_shift(slot));
+            for (var a = 0u; a < 3u; a++) {
+                for (var b = 0u; b < 3u; b++) { sums[3u * a + b] += f[a] * l[b]; }
+            }
+        }
+        counts.x += mine;
+        let base_in = cu(C_INC) + (first + i) * cu(C_K);
+        for (var k = 0u; k < u32(ints[c + 1u]); k++) {
+            if (pf[u32(ints[base_in + k]) * PF_STRIDE + PF_TOUCH] != 0.0lf) { mine++; }
+        }
+        counts.y += mine;
+        if (mine == 1u) { counts.z += 1u; }
+        if (mine == 0u) { counts.w += 1u; }
+    }
+    for (var q = 0u; q < 9u; q++) { w_sums[lid * 9u + q] = sums[q]; }
+    w_counts[lid] = counts;
+    workgroupBarrier();
+    if (lid == 0u) {
+        var s: array<f64, 9>;
+        var total = vec4<u32>(0u);
+        for (var t = 0u; t < WG; t++) {
+            for (var q = 0u; q < 9u; q++) { s[q] += w_sums[t * 9u + q]; }
+            total += w_counts[t];
+        }
+        for (var q = 0u; q < 9u; q++) { rve[base + R_H + q] = w_h[q]; }
+        let volume = abs(w_h[0] * (w_h[4] * w_h[8] - w_h[5] * w_h[7]) - w_h[1] * (w_h[3] * w_h[8] - w_h[5] * w_h[6])
+            + w_h[2] * (w_h[3] * w_h[7] - w_h[4] * w_h[6]));
+        rve[base + R_STRESS] = s[0] / volume;
+        rve[base + R_STRESS + 1u] = s[4] / volume;
+        rve[base + R_STRESS + 2u] = s[8] / volume;
+        rve[base + R_STRESS + 3u] = 0.5lf * (s[1] + s[3]) / volume;
+        rve[base + R_STRESS + 4u] = 0.5lf * (s[5] + s[7]) / volume;
+        rve[base + R_STRESS + 5u] = 0.5lf * (s[2] + s[6]) / volume;
+        rve[base + R_CONTACTS] = f64(total.x);
+        rve[base + R_ENDS] = f64(total.y);
+        rve[base + R_RATTLERS] = f64(total.z);
+        rve[base + R_FLOATERS] = f64(total.w);
+    }
+}
