@@ -825,3 +825,119 @@ pub fn potential(count: usize, steps: usize, repeat: usize) -> Result<()> {
         Ok(())
     })
 }
+
+/// A scene of `granite bench mpmxdem --device`: copies of one RVE, each compressed along y in
+/// every call as the oedometric scene's RVEs are, a fixed number of DEM steps per call.
+struct DeviceScene {
+    name: &'static str,
+    rve: granite_core::dem::DemSim,
+    copies: usize,
+    calls: usize,
+    dem_steps: u64,
+}
+
+impl DeviceScene {
+    fn new(scene: &str) -> Result<DeviceScene> {
+        match scene {
+            "oedometric" => Ok(DeviceScene {
+                name: "oedometric",
+                rve: bench_rve()?,
+                copies: 16,
+                calls: 40,
+                dem_steps: DEM_STEPS as u64,
+            }),
+            // Thesis 5.4: 400 points (0.1 m cells), each a 2000-sphere RVE.
+            "column" => {
+                let mut rve = periodic_rve(2000, 1e5)?;
+                let r_min = rve.spheres.smallest_radius();
+                rve.set_skin(0.05 * r_min)?;
+                Ok(DeviceScene { name: "column", rve, copies: 400, calls: 5, dem_steps: DEM_STEPS as u64 })
+            }
+            other => Err(granite_core::GraniteError::Setup(format!(
+                "unknown scene `{other}` of granite bench mpmxdem --device: oedometric or column"
+            ))),
+        }
+    }
+
+    /// The velocity gradient of one call (the oedometric scene's strain rate).
+    fn gradient(&self) -> nalgebra::Matrix3<f64> {
+        let mut l = nalgebra::Matrix3::zeros();
+        l[(1, 1)] = -TOP_SPEED / (2.0 * CELL) * MPM_DT / (self.dem_steps as f64 * self.rve.dt);
+        l
+    }
+
+    fn sphere_steps(&self) -> f64 {
+        (self.copies * self.rve.spheres.len() * self.calls) as f64 * self.dem_steps as f64
+    }
+}
+
+/// `granite bench mpmxdem --device gpu [--scene column]`: the same RVEs stepped on the device and
+/// on all CPU threads of this machine, rounds interleaved; fastest and slowest of each printed,
+/// in sphere-steps per second, with the device's name.
+pub fn mpmxdem_on_device(device: &str, scene: &str, repeat: usize) -> Result<()> {
+    use granite_core::ext::RveOrder;
+    use rayon::prelude::*;
+    let scene = DeviceScene::new(scene)?;
+    let registry = crate::registry();
+    let on = registry.rve_device(device)?.clone();
+    let threads = rayon::current_num_threads();
+    let order = RveOrder { velocity_gradient: scene.gradient(), full_steps: scene.dem_steps, last_step: 0.0 };
+    let mut rve = scene.rve.clone();
+    rve.set_sequential(true);
+    rve.cell_control = None;
+    let mut device_name = String::new();
+    let (mut gpu_times, mut cpu_times) = (Vec::new(), Vec::new());
+    for _ in 0..repeat {
+        let mut batch = on.open(vec![rve.clone(); scene.copies])?;
+        device_name = batch.device_name();
+        let orders = vec![order; scene.copies];
+        // The first call uploads the RVEs: not timed.
+        batch.step(&orders)?;
+        let t = Instant::now();
+        for _ in 0..scene.calls {
+            if let Some(failure) = batch.step(&orders)?.into_iter().find_map(|r| r.failure) {
+                return Err(granite_core::GraniteError::Other(format!("an RVE failed on the device: {failure}")));
+            }
+        }
+        gpu_times.push(t.elapsed().as_secs_f64());
+        let mut sims: Vec<_> = (0..scene.copies).map(|_| rve.clone()).collect();
+        for sim in &mut sims {
+            if let Some(c) = sim.cell.as_mut() {
+                c.velocity_gradient = order.velocity_gradient;
+            }
+            for _ in 0..scene.dem_steps {
+                sim.step()?;
+            }
+        }
+        let t = Instant::now();
+        for _ in 0..scene.calls {
+            sims.par_iter_mut().try_for_each(|sim| (0..scene.dem_steps).try_for_each(|_| sim.step()))?;
+        }
+        cpu_times.push(t.elapsed().as_secs_f64());
+    }
+    let work = scene.sphere_steps();
+    granite_core::outln!(
+        "granite bench mpmxdem --device {device} --scene {}: {} RVEs x {} spheres, {} calls x {} DEM steps ({:.3e} sphere-steps a round)",
+        scene.name,
+        scene.copies,
+        rve.spheres.len(),
+        scene.calls,
+        scene.dem_steps,
+        work
+    );
+    let fastest = |t: &[f64]| t.iter().cloned().fold(f64::INFINITY, f64::min);
+    let slowest = |t: &[f64]| t.iter().cloned().fold(0.0, f64::max);
+    let (g, c) = (fastest(&gpu_times), fastest(&cpu_times));
+    granite_core::outln!(
+        "device  {device_name}: {g:.3} s ({:.3})  {:.4e} sphere-steps/s",
+        slowest(&gpu_times),
+        work / g
+    );
+    granite_core::outln!(
+        "cpu     {threads} threads: {c:.3} s ({:.3})  {:.4e} sphere-steps/s",
+        slowest(&cpu_times),
+        work / c
+    );
+    granite_core::outln!("device over all CPU threads: {:.2}x", c / g);
+    Ok(())
+}

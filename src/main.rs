@@ -82,6 +82,13 @@ enum Command {
         /// slow spells only ever slow a run down).
         #[arg(long, default_value_t = 3, value_parser = granite::parse_at_least::<1>)]
         repeat: usize,
+        /// mpmxdem: where the RVEs run, "cpu" or "gpu" (against all CPU threads on the same RVEs).
+        #[arg(long, default_value = "cpu")]
+        device: String,
+        /// mpmxdem --device gpu: "oedometric" (16 x 125-sphere RVEs) or "column" (the thesis
+        /// column's 400 x 2000-sphere RVEs).
+        #[arg(long, default_value = "oedometric")]
+        scene: String,
     },
     /// List the registered plugins (constitutive laws, contact laws, shapes, velocity updates)
     /// and their parameters, with the laws of native plugin libraries given with --plugin.
@@ -231,7 +238,7 @@ fn main() -> ExitCode {
             }
             code
         }
-        Command::Bench { which, points, steps, particles, dem_steps, threads, axial_strain, repeat } => {
+        Command::Bench { which, points, steps, particles, dem_steps, threads, axial_strain, repeat, device, scene } => {
             #[cfg(feature = "mpi")]
             if which == "mpmxdem" && granite::launched_by_mpirun() {
                 let timeout = std::time::Duration::from_secs_f64(granite::mpi_comm::DEFAULT_TIMEOUT_S);
@@ -255,6 +262,7 @@ fn main() -> ExitCode {
                 "dem" => {
                     granite::bench::dem(&particles.unwrap_or_else(|| vec![10_000, 50_000]), dem_steps, &threads, repeat)
                 }
+                "mpmxdem" if device != "cpu" => granite::bench::mpmxdem_on_device(&device, &scene, repeat),
                 "mpmxdem" => granite::bench::mpmxdem(&threads, repeat),
                 "triaxial" => granite::bench::triaxial(&threads, axial_strain),
                 "potential" => {

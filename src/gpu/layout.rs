@@ -14,7 +14,7 @@ const PF_TOUCH: usize = 7;
 const PF_FORCE: usize = 8;
 const PH_STRIDE: usize = 8;
 /// Values of `consts` (see the C_ constants of the kernel).
-const CONSTS: usize = 17;
+const CONSTS: usize = 18;
 /// Fewest slots per sphere in the device's pair rows.
 const MIN_SLOTS: usize = 16;
 
@@ -179,6 +179,13 @@ fn check_pair(list: &PairList, k: usize) -> Result<(usize, usize)> {
 
 impl Layout {
     pub fn new(rves: &[DemSim]) -> Result<Layout> {
+        // One workgroup per RVE, along one axis of a dispatch.
+        if rves.len() > 65535 {
+            return Err(GraniteError::Setup(format!(
+                "device \"gpu\": {} RVEs in one material, at most 65535",
+                rves.len()
+            )));
+        }
         let mut first = vec![0];
         let mut longest = 0;
         for sim in rves {
@@ -214,7 +221,8 @@ impl Layout {
         (self.first[r] + i) * self.slots + k
     }
 
-    pub fn upload(&self, rves: &[DemSim], law: &LawConstants) -> Result<Uploaded> {
+    /// The buffers' contents for these RVEs, a dispatch taking at most `chunk` steps.
+    pub fn upload(&self, rves: &[DemSim], law: &LawConstants, chunk: u32) -> Result<Uploaded> {
         let spheres = *self.first.last().unwrap_or(&0);
         let slot_count = spheres * self.slots;
         let mut consts = vec![0.0; CONSTS];
@@ -236,6 +244,7 @@ impl Layout {
             law.alpha_t,
             law.mu,
             law.eta_r,
+            chunk as f64,
         ]);
         let mut rve = vec![0.0; rves.len() * RVE_STRIDE];
         let mut sph = vec![0.0; spheres * SPH_STRIDE];
@@ -363,6 +372,13 @@ impl Layout {
             sim.pairs = list;
         }
         Ok(())
+    }
+
+    /// Whether RVE `r` took all the steps of its order, or failed.
+    pub fn finished(&self, records: &[f64], r: usize) -> bool {
+        let rec = &records[r * RVE_STRIDE..(r + 1) * RVE_STRIDE];
+        let total = rec[Rec::Steps as usize] + if rec[Rec::LastDt as usize] > 0.0 { 1.0 } else { 0.0 };
+        rec[Rec::Error as usize] != 0.0 || rec[Rec::Taken as usize] >= total
     }
 
     /// What RVE `r` reported.

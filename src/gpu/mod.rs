@@ -47,6 +47,10 @@ pub struct Gpu {
     queue: wgpu::Queue,
     pipeline: wgpu::ComputePipeline,
     name: String,
+    /// Most DEM steps of one dispatch. Mesa's software Vulkan (lavapipe) ends every loop of a
+    /// kernel invocation after 65535 iterations in all, so there a call's steps go in short
+    /// dispatches; a GPU takes a whole MPM step's in one.
+    chunk: u32,
 }
 
 /// The adapter a process uses: under `mpirun`, the local rank's (round robin over the GPUs).
@@ -80,6 +84,7 @@ impl Gpu {
         }
         let adapter = usable.swap_remove(local_rank() % pool);
         let name = adapter.get_info().name;
+        let chunk = if adapter.get_info().device_type == wgpu::DeviceType::Cpu { 16 } else { 4096 };
         let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
             label: Some("granite RVEs"),
             required_features: wgpu::Features::SHADER_F64,
@@ -103,7 +108,7 @@ impl Gpu {
         if let Some(e) = pollster::block_on(scope.pop()) {
             return Err(format!("device \"gpu\" ({name}): the RVE kernel does not compile: {e}"));
         }
-        Ok(Gpu { device, queue, pipeline, name })
+        Ok(Gpu { device, queue, pipeline, name, chunk })
     }
 
     /// Copies `buffer` back to the host.
@@ -180,7 +185,7 @@ impl GpuBatch {
     fn upload(&mut self) -> Result<()> {
         let law = self.law.as_ref().ok_or_else(|| GraniteError::Other("no RVE on the device".into()))?;
         let layout = Layout::new(&self.shadows)?;
-        let data = layout.upload(&self.shadows, law)?;
+        let data = layout.upload(&self.shadows, law, self.gpu.chunk)?;
         let device = &self.gpu.device;
         let storage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST;
         let make = |label: &str, bytes: &[u8]| {
@@ -266,21 +271,31 @@ impl RveBatch for GpuBatch {
             rec[Rec::Steps as usize] = order.full_steps as f64;
             rec[Rec::LastDt as usize] = order.last_step;
             rec[Rec::Error as usize] = 0.0;
+            rec[Rec::Taken as usize] = 0.0;
         }
+        let most = orders.iter().map(|o| o.full_steps + u64::from(o.last_step > 0.0)).max().unwrap_or(0);
+        let dispatches = most.div_ceil(u64::from(gpu.chunk)).max(1);
         gpu.queue.write_buffer(&d.rve, 0, bytemuck::cast_slice(&d.records));
         let mut encoder = gpu.device.create_command_encoder(&Default::default());
         {
             let mut pass = encoder.begin_compute_pass(&Default::default());
             pass.set_pipeline(&gpu.pipeline);
             pass.set_bind_group(0, &d.bind_group, &[]);
-            let n = orders.len() as u32;
-            // At most 65535 workgroups along one axis: more RVEs go on a second axis.
-            pass.dispatch_workgroups(n.min(65535), n.div_ceil(65535), 1);
+            for _ in 0..dispatches {
+                pass.dispatch_workgroups(orders.len() as u32, 1, 1);
+            }
         }
         gpu.queue.submit([encoder.finish()]);
         d.ahead = true;
         let bytes = gpu.read(&d.rve)?;
         d.records = bytemuck::cast_slice(&bytes).to_vec();
+        if let Some(r) = (0..orders.len()).find(|&r| !d.layout.finished(&d.records, r)) {
+            return Err(GraniteError::Other(format!(
+                "device \"gpu\" ({}): the kernel stopped RVE {r} before its last step (a driver's limit on a kernel's \
+                 loops or time?)",
+                gpu.name
+            )));
+        }
         Ok((0..orders.len()).map(|r| d.layout.report(&d.records, r)).collect())
     }
     fn get(&mut self, index: usize) -> Result<DemSim> {

@@ -29,6 +29,7 @@ const C_ALPHA_R: u32 = 13u;
 const C_ALPHA_T: u32 = 14u;
 const C_MU: u32 = 15u;
 const C_ETA_R: u32 = 16u;
+const C_CHUNK: u32 = 17u;     // most steps one dispatch takes (the host dispatches again)
 
 // One RVE's record (`rve`, RVE_STRIDE values each).
 const RVE_STRIDE: u32 = 64u;
@@ -54,7 +55,7 @@ const R_CONTACTS: u32 = 47u;
 const R_ENDS: u32 = 48u;
 const R_RATTLERS: u32 = 49u;
 const R_FLOATERS: u32 = 50u;
-const R_TAKEN: u32 = 51u;     // steps taken by this call
+const R_TAKEN: u32 = 51u;     // steps taken by this call (its dispatches so far)
 
 // Per sphere (`sph`, SPH_STRIDE values): x, v, w, x at the last rebuild, radius, mass, inertia.
 const SPH_STRIDE: u32 = 16u;
@@ -93,6 +94,7 @@ var<workgroup> w_bad: array<u32, WG>;
 var<workgroup> w_sums: array<f64, 576>;   // WG x 9
 var<workgroup> w_counts: array<vec4<u32>, WG>;
 var<workgroup> w_steps: u32;
+var<workgroup> w_done: u32;
 var<workgroup> w_rebuild: u32;
 var<workgroup> w_flip: u32;
 var<workgroup> w_fail: u32;
@@ -530,12 +532,16 @@ fn run_rves(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_i
     if (lid == 0u) {
         for (var q = 0u; q < 9u; q++) { w_h[q] = rve[base + R_H + q]; w_l[q] = rve[base + R_L + q]; }
         let last = rve[base + R_LAST_DT];
-        w_steps = u32(rve[base + R_STEPS]) + select(0u, 1u, last > 0.0lf);
+        let total = u32(rve[base + R_STEPS]) + select(0u, 1u, last > 0.0lf);
+        // A call's steps may take several dispatches: each goes on where the last one stopped.
+        w_done = u32(rve[base + R_TAKEN]);
+        w_steps = min(total, w_done + cu(C_CHUNK));
+        if (rve[base + R_ERROR] != 0.0lf) { w_steps = w_done; }
         w_fail = 0u;
-        rve[base + R_TAKEN] = 0.0lf;
     }
+    let done = workgroupUniformLoad(&w_done);
     let steps = workgroupUniformLoad(&w_steps);
-    for (var step = 0u; step < steps; step++) {
+    for (var step = done; step < steps; step++) {
         if (lid == 0u) {
             w_rebuild = u32(rve[base + R_REBUILD]);
             w_dt = rve[base + R_DT];

@@ -105,10 +105,20 @@ impl ConstitutiveLawFactory for DemRveFactory {
         let params = Params::resolve("law \"dem_rve\"", SPECS, given)?;
         let mut objects = ObjectMap::new();
         objects.insert("rve".into(), std::sync::Arc::new(template));
+        // RVEs saved from a device resume on it, or on the CPU threads where there is none.
+        let mut moved_off = None;
         if let Some(serde_json::Value::String(name)) = map.remove("device") {
-            objects.insert("device".into(), Arc::new(RveDeviceChoice(registry.rve_device(&name)?)));
+            match registry.rve_device(&name) {
+                Ok(device) => {
+                    objects.insert("device".into(), Arc::new(RveDeviceChoice(device)));
+                }
+                Err(e) => moved_off = Some(format!("the RVEs saved on device \"{name}\" run on the CPU threads ({e})")),
+            }
         }
         let law = DemRve::new(params, &objects)?;
+        if let Some(said) = moved_off {
+            law.tell_once(0, said);
+        }
         let serde_json::Value::Array(rves) = map.remove("rves").ok_or_else(bad)? else { return Err(bad()) };
         if law.device.is_some() {
             let sims = rves.into_iter().map(|v| DemSim::from_json(v, registry)).collect::<Result<Vec<_>>>()?;

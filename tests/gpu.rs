@@ -1,0 +1,196 @@
+//! The RVEs of MPMxDEM on a GPU (`device: "gpu"`), on whatever Vulkan adapter with 64-bit floats
+//! the machine has (Mesa's lavapipe in CI): the device's DEM against the CPU engine's, run twice
+//! for determinism, through cell flips, checkpoints and the MPM coupling.
+//! `cargo test --features gpu --test gpu`.
+#![cfg(feature = "gpu")]
+
+mod common;
+use common::*;
+use granite_core::dem::DemSim;
+use granite_core::ext::rve::RveDeviceChoice;
+use granite_core::ext::{RveDevice, RveOrder};
+use granite_core::mpm::boundary::{TimeFunction, VelocityConstraint};
+use granite_core::mpm::{Mesh, MpmSim, StressScheme};
+use granite_core::registry::ParamMap;
+use nalgebra::Matrix3;
+use std::sync::Arc;
+
+fn device() -> Arc<dyn RveDevice> {
+    granite::registry().rve_device("gpu").unwrap().clone()
+}
+
+/// Largest difference between two runs' series, per column, relative to that column's largest
+/// magnitude (columns that stay near zero, like an angular momentum, compared at their own scale).
+fn worst_column(a: &Path, b: &Path) -> (String, f64) {
+    let (h, ra) = read_csv(a);
+    let (_, rb) = read_csv(b);
+    assert_eq!(ra.len(), rb.len(), "both runs write the same rows");
+    let mut worst = (String::new(), 0.0);
+    for c in 0..h.len() {
+        let scale = rb.iter().map(|r| r[c].abs()).fold(0.0, f64::max);
+        if scale == 0.0 {
+            continue;
+        }
+        let diff = ra.iter().zip(&rb).map(|(x, y)| (x[c] - y[c]).abs()).fold(0.0, f64::max) / scale;
+        if diff > worst.1 {
+            worst = (h[c].clone(), diff);
+        }
+    }
+    worst
+}
+
+use std::path::Path;
+
+#[test]
+fn the_one_cell_triaxial_on_the_gpu_agrees_with_the_cpu_and_repeats_byte_for_byte() {
+    // Thesis 4.4: 8 points, each with a 125-sphere RVE, to an axial strain of 0.002.
+    let prep = run("mpmxdem/prepare_rve.rhai", "gpu_prepare", &[("count", "125")], 2).unwrap();
+    let rve = prep.out_dir.join("rve.json");
+    let triaxial = |device: &str, name: &str| {
+        run(
+            "mpmxdem/triaxial_one_cell.rhai",
+            name,
+            &[("rve", rve.to_str().unwrap()), ("axial_strain", "0.002"), ("dt", "1e-3"), ("device", device)],
+            2,
+        )
+        .unwrap()
+        .out_dir
+        .join("series.csv")
+    };
+    let cpu = triaxial("cpu", "gpu_triaxial_cpu");
+    let gpu = triaxial("gpu", "gpu_triaxial_gpu");
+    let again = triaxial("gpu", "gpu_triaxial_gpu_again");
+    let (column, diff) = worst_column(&gpu, &cpu);
+    assert!(diff < 1e-6, "GPU and CPU series differ by {diff:.3e} (relative) in column {column}");
+    assert_eq!(std::fs::read(&gpu).unwrap(), std::fs::read(&again).unwrap(), "two GPU runs differ");
+    // The triaxial did load the RVEs: q grew well above zero on both.
+    let (h, rows) = read_csv(&gpu);
+    let q = rows.last().unwrap()[common::column(&h, "q")];
+    assert!(q > 1e4, "q = {q}");
+}
+
+#[test]
+fn a_sheared_rve_flips_its_cell_on_the_gpu_as_on_the_cpu() {
+    // Simple shear of a 100-sphere RVE: sheared on the CPU to a tilt of 0.48, then 200 steps more
+    // on each engine, past the tilt of one half where the cell flips and the candidate lists are
+    // rebuilt across the new images. (Sheared this fast, the packing is chaotic: two engines whose
+    // sums differ in their last bits drift apart over thousands of steps, not over these 200.)
+    let mut rve = granite::bench::periodic_rve(100, 1e5).unwrap();
+    rve.set_sequential(true);
+    rve.damping = 0.0;
+    let rate = 0.6 / (3000.0 * rve.dt);
+    let mut l = Matrix3::zeros();
+    l[(0, 2)] = rate;
+    rve.cell.as_mut().unwrap().velocity_gradient = l;
+    for _ in 0..2400 {
+        rve.step().unwrap();
+    }
+    assert_eq!(rve.cell.as_ref().unwrap().flips, 0);
+    let steps = 200;
+    let mut cpu = rve.clone();
+    for _ in 0..steps {
+        cpu.step().unwrap();
+    }
+    rve.cell.as_mut().unwrap().velocity_gradient = Matrix3::zeros();
+    let mut batch = device().open(vec![rve]).unwrap();
+    let report = batch.step(&[RveOrder { velocity_gradient: l, full_steps: steps, last_step: 0.0 }]).unwrap().remove(0);
+    assert!(report.failure.is_none(), "{:?}", report.failure);
+    assert_eq!(report.steps, steps);
+    let gpu = batch.get(0).unwrap();
+    let (cell_cpu, cell_gpu) = (cpu.cell.as_ref().unwrap(), gpu.cell.as_ref().unwrap());
+    assert_eq!(cell_cpu.flips, 1, "a tilt of 0.52 flips the cell once");
+    assert_eq!(cell_gpu.flips, cell_cpu.flips);
+    assert!((cell_gpu.h - cell_cpu.h).norm() < 1e-12 * cell_cpu.h.norm(), "cells {} and {}", cell_gpu.h, cell_cpu.h);
+    let stress = cpu.love_weber_stress(cpu.cell_volume().unwrap());
+    let p = (stress[0] + stress[1] + stress[2]).abs() / 3.0;
+    for k in 0..6 {
+        assert!((report.stress[k] - stress[k]).abs() < 1e-6 * p, "stress {k}: GPU {:?}, CPU {stress:?}", report.stress);
+    }
+    assert_eq!(report.contacts, cpu.coordination().contacts);
+    // The RVE brought back to the host has the device's stress.
+    let back = gpu.love_weber_stress(gpu.cell_volume().unwrap());
+    for k in 0..6 {
+        assert!((back[k] - report.stress[k]).abs() < 1e-9 * p, "the RVE brought back has another stress");
+    }
+}
+
+/// A coupled run of 4 points under a homogeneous velocity gradient, their RVEs on `device`.
+fn coupled(rve: &DemSim, device: Option<Arc<dyn RveDevice>>) -> MpmSim {
+    let reg = granite::registry();
+    let mesh = Mesh::new(3, [0.0; 3], [1.0; 3], [1, 1, 1]).unwrap();
+    let mut sim = MpmSim::new(mesh.clone(), reg.build_velocity_update("PIC", &ParamMap::new()).unwrap());
+    let mut objects = granite_core::ext::constitutive::ObjectMap::new();
+    objects.insert("rve".into(), Arc::new(rve.clone()));
+    if let Some(d) = device {
+        objects.insert("device".into(), Arc::new(RveDeviceChoice(d)));
+    }
+    let law = reg.build_law_with("dem_rve", &ParamMap::new(), &objects).unwrap();
+    let m = sim.add_material("rve", 1600.0, law).unwrap();
+    let xs = [[0.3, 0.3, 0.3], [0.7, 0.3, 0.4], [0.4, 0.7, 0.6], [0.6, 0.6, 0.7]];
+    let stress = rve.love_weber_stress(rve.cell_volume().unwrap());
+    sim.add_points(m, &xs, &[0.25; 4], [0.0; 3], stress).unwrap();
+    sim.scheme = StressScheme::Usl;
+    for node in 0..mesh.node_count() {
+        let x = mesh.node_position(node);
+        let v = [5.0 * x[0], 5.0 * x[1], -10.0 * x[2]];
+        for a in 0..3 {
+            sim.boundary.velocity.push(VelocityConstraint {
+                nodes: vec![node as u32],
+                axis: a,
+                value: TimeFunction::Constant(v[a]),
+            });
+        }
+    }
+    sim.set_dt(5e-5).unwrap();
+    sim
+}
+
+#[test]
+fn a_gpu_checkpoint_resumes_bit_for_bit_on_the_gpu_and_within_tolerance_on_the_cpu() {
+    let rve = granite::bench::periodic_rve(100, 1e5).unwrap();
+    let mut sim = coupled(&rve, Some(device()));
+    for _ in 0..4 {
+        sim.step().unwrap();
+    }
+    let dir = out_dir("gpu_checkpoint");
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("checkpoint.json");
+    sim.save(&path).unwrap();
+    let mut resumed = MpmSim::load(&path, &granite::registry()).unwrap();
+    // Where no GPU is at hand (a registry without the device), the RVEs resume on the CPU threads.
+    let mut on_cpu = MpmSim::load(&path, &granite_plugins::default_registry()).unwrap();
+    for _ in 0..4 {
+        sim.step().unwrap();
+        resumed.step().unwrap();
+        on_cpu.step().unwrap();
+    }
+    assert_eq!(sim.points.stress, resumed.points.stress);
+    assert_eq!(sim.materials[0].state, resumed.materials[0].state);
+    assert_eq!(sim.time.to_bits(), resumed.time.to_bits());
+    for (g, c) in sim.points.stress.iter().zip(&on_cpu.points.stress) {
+        let p = (c[0] + c[1] + c[2]).abs() / 3.0;
+        for k in 0..6 {
+            assert!((g[k] - c[k]).abs() < 1e-6 * p, "GPU {g:?}, CPU {c:?}");
+        }
+    }
+}
+
+#[test]
+fn coupled_points_on_the_gpu_follow_the_cpu() {
+    let rve = granite::bench::periodic_rve(100, 1e5).unwrap();
+    let mut gpu = coupled(&rve, Some(device()));
+    let mut cpu = coupled(&rve, None);
+    for _ in 0..20 {
+        gpu.step().unwrap();
+        cpu.step().unwrap();
+    }
+    for (g, c) in gpu.points.stress.iter().zip(&cpu.points.stress) {
+        let p = (c[0] + c[1] + c[2]).abs() / 3.0;
+        for k in 0..6 {
+            assert!((g[k] - c[k]).abs() < 1e-6 * p, "GPU {g:?}, CPU {c:?}");
+        }
+    }
+    let steps = |s: &MpmSim| s.materials[0].state.chunks(8).map(|st| st[5]).collect::<Vec<_>>();
+    assert_eq!(steps(&gpu), steps(&cpu), "DEM steps per point");
+    assert!(steps(&cpu).iter().all(|&n| n >= 1.0));
+}
