@@ -323,3 +323,22 @@ fn a_series_column_with_the_name_of_one_of_granite_is_refused() {
     );
     assert!(e.contains("already has a column `volumetric_strain`") && e.contains("line 3"), "{e}");
 }
+
+/// `device: "gpu"` in a granite built without the `gpu` feature says how to build one; an unknown
+/// device names the known ones.
+#[test]
+fn an_rve_device_granite_lacks_is_refused_with_what_to_do() {
+    let script = |device: &str| {
+        format!(
+            "let sim = mpm(#{{ dim: 3, origin: [0.0, 0.0, 0.0], cell: 1.0, cells: [1, 1, 1] }});\n\
+             let rve = dem();\nrve.periodic([0.01, 0.01, 0.01]);\n\
+             sim.material(\"dem_rve\", #{{ density: 1600.0, rve: rve, device: \"{device}\" }});"
+        )
+    };
+    if cfg!(not(feature = "gpu")) {
+        let e = run_err("rve_device_gpu", &script("gpu"), &[]);
+        assert!(e.contains("--features gpu") && e.contains("line 4"), "{e}");
+    }
+    let e = run_err("rve_device_unknown", &script("tpu"), &[]);
+    assert!(e.contains("no RVE device \"tpu\"") && e.contains("\"cpu\"") && e.contains("line 4"), "{e}");
+}
