@@ -240,3 +240,33 @@ fn a_loose_rve_on_the_gpu_follows_the_cpu_sphere_by_sphere() {
         assert_eq!(report.contacts, cpu.coordination().contacts, "call {call}");
     }
 }
+
+/// Over MPI (built with `--features "gpu mpi"`): each process holds its points' RVEs on its
+/// device, the balance moves RVEs between processes, and two processes write the bytes one does.
+#[cfg(feature = "mpi")]
+#[test]
+fn a_gpu_run_over_two_processes_writes_the_bytes_of_one() {
+    let prep = run(
+        "mpmxdem/prepare_rve.rhai",
+        "gpu_mpi_rve",
+        &[("count", "100"), ("p_init", "1000"), ("vertical_axis", "1")],
+        2,
+    )
+    .unwrap();
+    let rve = prep.out_dir.join("rve.json");
+    let script = root().join("tests").join("mpi").join("spread_column.rhai");
+    let sets = [("rve", rve.to_str().unwrap()), ("steps", "60"), ("balance_every", "10"), ("device", "gpu")];
+    let one =
+        granite::run(&script, common::sets(&sets), Some(out_dir("gpu_mpi_alone")), true, Some(1)).unwrap().out_dir;
+    let two = out_dir("gpu_mpi_np2");
+    let (code, stderr) = mpirun_granite(2, &script, &two, &sets);
+    assert_eq!(code, 0, "{stderr}");
+    for file in ["series.csv", "half.json", "rve_point5.vtu"] {
+        assert!(std::fs::read(one.join(file)).unwrap() == std::fs::read(two.join(file)).unwrap(), "{file} differs");
+    }
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(two.join("summary.json")).unwrap()).unwrap();
+    let points: Vec<u64> = summary["rank_points"].as_array().unwrap().iter().map(|v| v.as_u64().unwrap()).collect();
+    assert!(points.len() == 2 && points.iter().all(|&p| p > 0), "both processes hold RVEs: {points:?}");
+    assert!(summary["objects_moved"].as_u64().unwrap() > 0, "the balance moved RVEs between the devices");
+}

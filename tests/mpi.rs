@@ -33,21 +33,8 @@ fn test_script(name: &str) -> PathBuf {
 /// `mpirun -np N granite run SCRIPT --set ...` into a fresh folder; (exit code, stderr, folder).
 fn mpirun(np: usize, script: &str, name: &str, sets: &[(&str, &str)]) -> (i32, String, PathBuf) {
     let out = out_dir(name);
-    let mut cmd = Command::new("mpirun");
-    let version = Command::new("mpirun").arg("--version").output().expect("mpirun on the PATH (Open MPI)");
-    if String::from_utf8_lossy(&version.stdout).contains("Open MPI") {
-        // Containers run as root; CI machines have fewer cores than some runs have processes.
-        cmd.args(["--allow-run-as-root", "--oversubscribe"]);
-        // Waiting processes give their core away instead of spinning (2-core machines).
-        cmd.env("OMPI_MCA_mpi_yield_when_idle", "1");
-    }
-    cmd.args(["-np", &np.to_string(), env!("CARGO_BIN_EXE_granite"), "run"]).arg(test_script(script));
-    cmd.args(["--quiet", "--threads", "1", "--out"]).arg(&out);
-    for (k, v) in sets {
-        cmd.args(["--set", &format!("{k}={v}")]);
-    }
-    let output = cmd.output().expect("running mpirun");
-    (output.status.code().unwrap_or(-1), String::from_utf8_lossy(&output.stderr).into_owned(), out)
+    let (code, stderr) = mpirun_granite(np, &test_script(script), &out, sets);
+    (code, stderr, out)
 }
 
 /// The same script without MPI, in this process.

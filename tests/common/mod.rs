@@ -108,3 +108,24 @@ pub fn spawn_running(script: &Path, out: &Path) -> std::process::Child {
     wait_until_running(out, std::time::Duration::from_secs(60));
     child
 }
+
+/// `mpirun -np N granite run SCRIPT --quiet --threads 1 --out OUT --set ...` (Open MPI's launcher
+/// on the PATH); (exit code, stderr).
+pub fn mpirun_granite(np: usize, script: &Path, out: &Path, sets: &[(&str, &str)]) -> (i32, String) {
+    use std::process::Command;
+    let mut cmd = Command::new("mpirun");
+    let version = Command::new("mpirun").arg("--version").output().expect("mpirun on the PATH (Open MPI)");
+    if String::from_utf8_lossy(&version.stdout).contains("Open MPI") {
+        // Containers run as root; CI machines have fewer cores than some runs have processes.
+        cmd.args(["--allow-run-as-root", "--oversubscribe"]);
+        // Waiting processes give their core away instead of spinning (2-core machines).
+        cmd.env("OMPI_MCA_mpi_yield_when_idle", "1");
+    }
+    cmd.args(["-np", &np.to_string(), env!("CARGO_BIN_EXE_granite"), "run"]).arg(script);
+    cmd.args(["--quiet", "--threads", "1", "--out"]).arg(out);
+    for (k, v) in sets {
+        cmd.args(["--set", &format!("{k}={v}")]);
+    }
+    let output = cmd.output().expect("running mpirun");
+    (output.status.code().unwrap_or(-1), String::from_utf8_lossy(&output.stderr).into_owned())
+}

@@ -65,6 +65,12 @@ pub trait ConstitutiveLaw: Send + Sync {
     fn whole_batch(&self) -> bool {
         false
     }
+    /// A whole-batch law's update of the points whose flag is true (the others' objects live in
+    /// other processes; their entries are left as they are), in one call over all the material's
+    /// points. Returns each point's share of the call's time (its cost, for balancing).
+    fn update_where(&self, _here: &[bool], _batch: LawBatch<'_>) -> Result<Vec<f64>> {
+        Err(crate::GraniteError::Other(format!("law {} updates its points one batch at a time", self.name())))
+    }
     /// Drops the objects of the points whose flag is false (they live in another process now).
     fn release_objects(&self, _keep: &[bool]) {}
     /// One point's object as JSON, to move it to another process or gather it into a checkpoint.

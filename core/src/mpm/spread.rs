@@ -193,20 +193,34 @@ impl Spread {
         // Laws without state variables still get one slot per point to split on; it is not passed.
         let mut no_state = vec![0.0; if stride == 0 { n } else { 0 }];
         let states: &mut [f64] = if stride == 0 { &mut no_state } else { state };
-        let outcomes: Vec<(usize, f64, Result<()>)> = stress
-            .par_chunks_mut(1)
-            .zip(dstrain.par_chunks(1))
-            .zip(states.par_chunks_mut(stride.max(1)))
-            .enumerate()
-            .with_min_len(1)
-            .filter(|(i, _)| owner[*i] == me)
-            .map(|(i, ((s, de), st))| {
-                let t = Instant::now();
-                let st = &mut st[..stride];
-                let r = law.update(LawBatch { first: i, stress: s, dstrain: de, state: st });
-                (i, t.elapsed().as_secs_f64(), r)
-            })
-            .collect();
+        let outcomes: Vec<(usize, f64, Result<()>)> = if law.whole_batch() {
+            // One call for all the points here (a device's submission), its time shared out.
+            let here: Vec<bool> = owner.iter().map(|&o| o == me).collect();
+            let first_here = here.iter().position(|&h| h);
+            let batch = LawBatch { first: 0, stress: &mut *stress, dstrain, state: &mut states[..n * stride] };
+            let t = Instant::now();
+            match law.update_where(&here, batch) {
+                Ok(costs) => {
+                    (0..n).filter(|&i| here[i]).map(|i| (i, costs.get(i).copied().unwrap_or(0.0), Ok(()))).collect()
+                }
+                Err(e) => first_here.map(|i| vec![(i, t.elapsed().as_secs_f64(), Err(e))]).unwrap_or_default(),
+            }
+        } else {
+            stress
+                .par_chunks_mut(1)
+                .zip(dstrain.par_chunks(1))
+                .zip(states.par_chunks_mut(stride.max(1)))
+                .enumerate()
+                .with_min_len(1)
+                .filter(|(i, _)| owner[*i] == me)
+                .map(|(i, ((s, de), st))| {
+                    let t = Instant::now();
+                    let st = &mut st[..stride];
+                    let r = law.update(LawBatch { first: i, stress: s, dstrain: de, state: st });
+                    (i, t.elapsed().as_secs_f64(), r)
+                })
+                .collect()
+        };
         let busy = started.elapsed().as_secs_f64();
         let mut w = Writer::default();
         let failures: Vec<&(usize, f64, Result<()>)> = outcomes.iter().filter(|o| o.2.is_err()).collect();

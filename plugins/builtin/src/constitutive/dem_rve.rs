@@ -3,15 +3,17 @@
 //! point's strain increment as a velocity gradient applied over `T_DEM` (eqs. 4.1-4.6), on top of
 //! the contact forces, and returns its Love-Weber stress (4.7), tension positive like the MPM.
 
+use super::dem_rve_device::DeviceRves;
 use granite_core::dem::DemSim;
 use granite_core::ext::constitutive::ObjectMap;
 use granite_core::ext::rve::RveDeviceChoice;
-use granite_core::ext::{ConstitutiveLaw, ConstitutiveLawFactory, LawBatch, RveBatch, RveDevice, RveOrder, RveReport};
+use granite_core::ext::{ConstitutiveLaw, ConstitutiveLawFactory, LawBatch, RveOrder, RveReport};
 use granite_core::math::Voigt;
 use granite_core::params::{ParamSpec, Params};
 use granite_core::{GraniteError, Result};
 use nalgebra::{Matrix3, SymmetricEigen};
 use std::sync::{Arc, Mutex, RwLock};
+use std::time::Instant;
 
 pub struct DemRveFactory;
 
@@ -61,20 +63,7 @@ pub struct DemRve {
     solid_volume: f64,
     /// The device the RVEs live on (`device: "gpu"`), or None: each point's RVE in `rves`,
     /// stepped by the thread that updates the point.
-    device: Option<OnDevice>,
-}
-
-/// The RVEs of a material on a device.
-struct OnDevice {
-    device: Arc<dyn RveDevice>,
-    rves: Mutex<OnDeviceRves>,
-}
-
-struct OnDeviceRves {
-    /// None until the material has points.
-    batch: Option<Box<dyn RveBatch>>,
-    /// Each point's stress after its last call (P of eq. 4.3) and cell (P^min of eq. 4.2).
-    last: Vec<(Voigt, Matrix3<f64>)>,
+    device: Option<DeviceRves>,
 }
 
 impl ConstitutiveLawFactory for DemRveFactory {
@@ -122,7 +111,9 @@ impl ConstitutiveLawFactory for DemRveFactory {
         let serde_json::Value::Array(rves) = map.remove("rves").ok_or_else(bad)? else { return Err(bad()) };
         if law.device.is_some() {
             let sims = rves.into_iter().map(|v| DemSim::from_json(v, registry)).collect::<Result<Vec<_>>>()?;
-            law.take_onto_device(sims)?;
+            if let Some(device) = &law.device {
+                device.add(sims.into_iter().map(Some).collect())?;
+            }
             return Ok(Box::new(law));
         }
         {
@@ -196,7 +187,7 @@ impl DemRve {
                 let d = d.downcast_ref::<RveDeviceChoice>().ok_or_else(|| {
                     GraniteError::Setup(format!("{}: `device` must be \"cpu\" or \"gpu\"", params.owner()))
                 })?;
-                Some(OnDevice { device: d.0.clone(), rves: Mutex::new(OnDeviceRves { batch: None, last: Vec::new() }) })
+                Some(DeviceRves::new(d.0.clone()))
             }
         };
         let mut template = template;
@@ -299,9 +290,8 @@ impl ConstitutiveLaw for DemRve {
         STATE
     }
     fn points_added(&self, here: &[bool]) -> Result<()> {
-        if self.device.is_some() {
-            // Not spreadable: every point's RVE lives in this process.
-            return self.take_onto_device(vec![self.template.clone(); here.len()]);
+        if let Some(device) = &self.device {
+            return device.add(here.iter().map(|&h| h.then(|| self.template.clone())).collect());
         }
         let mut rves = self.rves.write().map_err(|_| GraniteError::Other("RVE store poisoned".into()))?;
         for &here in here {
@@ -310,13 +300,24 @@ impl ConstitutiveLaw for DemRve {
         Ok(())
     }
     fn spreadable(&self) -> bool {
-        // The device steps the whole material in one submission (see `whole_batch`).
-        self.device.is_none()
+        true
     }
     fn whole_batch(&self) -> bool {
         self.device.is_some()
     }
+    fn update_where(&self, here: &[bool], batch: LawBatch<'_>) -> Result<Vec<f64>> {
+        match &self.device {
+            Some(device) => self.update_on_device(device, here, batch),
+            None => Err(GraniteError::Other("dem_rve on the CPU updates its points one by one".into())),
+        }
+    }
     fn release_objects(&self, keep: &[bool]) {
+        if let Some(device) = &self.device {
+            if let Err(e) = device.release(keep) {
+                self.tell_once(0, format!("the device kept RVEs that moved to other processes: {e}"));
+            }
+            return;
+        }
         if let Ok(rves) = self.rves.read() {
             for (slot, &keep) in rves.iter().zip(keep) {
                 if !keep {
@@ -332,14 +333,8 @@ impl ConstitutiveLaw for DemRve {
     fn adopt_point_object(&self, point: usize, object: serde_json::Value) -> Result<()> {
         let mut sim = DemSim::from_json_like(object, &self.template)?;
         sim.set_sequential(true);
-        if let Some(done) = self.on_device(|d| {
-            let entry = (sim.love_weber_stress(sim.cell_volume().unwrap_or(1.0)), cell_of(&sim));
-            let batch = d.batch.as_mut().ok_or_else(|| GraniteError::Other(format!("no material point {point}")))?;
-            batch.set(point, sim.clone())?;
-            d.last[point] = entry;
-            Ok(())
-        }) {
-            return done;
+        if let Some(device) = &self.device {
+            return device.put(point, sim);
         }
         let rves = self.rves.read().map_err(|_| GraniteError::Other("RVE store poisoned".into()))?;
         let slot = rves.get(point).ok_or_else(|| GraniteError::Other(format!("no material point {point}")))?;
@@ -349,7 +344,7 @@ impl ConstitutiveLaw for DemRve {
     fn save_objects_from(&self, points: Vec<serde_json::Value>) -> Result<Option<serde_json::Value>> {
         let mut saved = serde_json::json!({ "template": self.template.to_json()?, "rves": points });
         if let Some(device) = &self.device {
-            saved["device"] = device.device.name().into();
+            saved["device"] = device.name().into();
         }
         Ok(Some(saved))
     }
@@ -360,11 +355,7 @@ impl ConstitutiveLaw for DemRve {
         *self.event.lock().unwrap_or_else(|e| e.into_inner()) = event;
     }
     fn points_removed(&self, keep: &[bool]) {
-        if let Some(Err(e)) = self.on_device(|d| {
-            let mut k = keep.iter();
-            d.last.retain(|_| *k.next().unwrap_or(&true));
-            d.batch.as_mut().map(|b| b.retain(keep)).unwrap_or(Ok(()))
-        }) {
+        if let Some(Err(e)) = self.device.as_ref().map(|d| d.remove_points(keep)) {
             self.tell_once(0, format!("the device could not drop the removed points' RVEs: {e}"));
         }
         if let Ok(mut rves) = self.rves.write() {
@@ -413,8 +404,8 @@ impl ConstitutiveLaw for DemRve {
         })
     }
     fn save_objects(&self) -> Result<Option<serde_json::Value>> {
-        let count = match self.on_device(|d| Ok(d.last.len())) {
-            Some(count) => count?,
+        let count = match &self.device {
+            Some(device) => device.points(),
             None => self.rves.read().map_err(|_| GraniteError::Other("RVE store poisoned".into()))?.len(),
         };
         let list = (0..count).map(|k| self.point_object(k)).collect::<Result<Vec<_>>>()?;
@@ -422,7 +413,8 @@ impl ConstitutiveLaw for DemRve {
     }
     fn update(&self, batch: LawBatch<'_>) -> Result<()> {
         if let Some(device) = &self.device {
-            return self.update_on_device(device, batch);
+            let all = vec![true; batch.len()];
+            return self.update_on_device(device, &all, batch).map(|_| ());
         }
         let rves = self.rves.read().map_err(|_| GraniteError::Other("RVE store poisoned".into()))?;
         for k in 0..batch.len() {
@@ -543,54 +535,51 @@ impl DemRve {
         st[7] += (report.steps as usize * spheres) as f64;
     }
 
-    /// Every point's RVE stepped on the device in one call.
-    fn update_on_device(&self, device: &OnDevice, batch: LawBatch<'_>) -> Result<()> {
-        let mut rves = device.rves.lock().map_err(|_| GraniteError::Other("device RVEs poisoned".into()))?;
-        let OnDeviceRves { batch: Some(on), last } = &mut *rves else {
-            return Err(GraniteError::Other("no RVE on the device yet".into()));
-        };
-        if batch.first != 0 || batch.len() != on.len() {
+    /// The RVEs of the points `here` names stepped on the device in one submission; returns the
+    /// time each took, the call's time shared out by their DEM work (their cost for balancing).
+    fn update_on_device(&self, device: &DeviceRves, here: &[bool], batch: LawBatch<'_>) -> Result<Vec<f64>> {
+        if batch.first != 0 || batch.len() != device.points() || here.len() != batch.len() {
             return Err(GraniteError::Other(format!(
-                "the device steps all {} RVEs of the material at once, not points {}..{}",
-                on.len(),
+                "the device steps all {} points of the material at once, not points {}..{}",
+                device.points(),
                 batch.first,
                 batch.first + batch.len()
             )));
         }
-        let orders = (0..batch.len())
-            .map(|k| self.order(k, &batch.dstrain[k], &last[k].0, &last[k].1, self.template.dt))
-            .collect::<Result<Vec<_>>>()?;
-        let reports = on.step(&orders)?;
+        let started = Instant::now();
+        let dt = self.template.dt;
+        let reports = device.step(|p| here[p], |p, stress, cell| self.order(p, &batch.dstrain[p], stress, cell, dt))?;
         let spheres = self.template.spheres.len();
         let stride = STATE.len();
-        for (k, report) in reports.iter().enumerate() {
+        for (point, report) in &reports {
             if let Some(failure) = &report.failure {
                 return Err(GraniteError::Other(format!(
-                    "RVE of material point {k}: stopped at its DEM step {} of this increment on the device: {failure}",
+                    "RVE of material point {point}: stopped at its DEM step {} of this increment on the device: {failure}",
                     report.steps
                 )));
             }
-            last[k] = (report.stress, report.cell);
-            self.record(report, spheres, &mut batch.stress[k], &mut batch.state[k * stride..(k + 1) * stride]);
+            self.record(
+                report,
+                spheres,
+                &mut batch.stress[*point],
+                &mut batch.state[point * stride..(point + 1) * stride],
+            );
         }
-        Ok(())
-    }
-
-    /// Runs `f` on the device's RVEs (None without a device).
-    fn on_device<R>(&self, f: impl FnOnce(&mut OnDeviceRves) -> Result<R>) -> Option<Result<R>> {
-        let device = self.device.as_ref()?;
-        Some(match device.rves.lock() {
-            Ok(mut rves) => f(&mut rves),
-            Err(_) => Err(GraniteError::Other("device RVEs poisoned".into())),
-        })
+        let seconds = started.elapsed().as_secs_f64();
+        let work: u64 = reports.iter().map(|(_, r)| r.steps).sum();
+        let mut costs = vec![0.0; batch.len()];
+        for (point, report) in &reports {
+            costs[*point] = if work > 0 { seconds * report.steps as f64 / work as f64 } else { 0.0 };
+        }
+        Ok(costs)
     }
 }
 
 /// Read access to the RVEs (for output of chosen points and tests).
 impl DemRve {
     pub fn with_rve<R>(&self, index: usize, f: impl FnOnce(&DemSim) -> R) -> Option<R> {
-        if let Some(found) = self.on_device(|d| d.batch.as_mut().map(|b| b.get(index)).transpose()) {
-            return found.ok().flatten().map(|sim| f(&sim));
+        if let Some(device) = &self.device {
+            return device.get(index).ok().map(|sim| f(&sim));
         }
         let rves = self.rves.read().ok()?;
         let guard = rves.get(index)?.lock().ok()?;
@@ -598,33 +587,9 @@ impl DemRve {
     }
 }
 
-/// The cell matrix of an RVE (identity without a cell).
-fn cell_of(sim: &DemSim) -> Matrix3<f64> {
-    sim.cell.as_ref().map(|c| c.h).unwrap_or_else(Matrix3::identity)
-}
-
 impl DemRve {
-    /// Appends RVEs to the material's batch on its device (opened with the first ones).
-    fn take_onto_device(&self, sims: Vec<DemSim>) -> Result<()> {
-        let Some(device) = &self.device else { return Err(GraniteError::Other("no device".into())) };
-        self.on_device(|d| {
-            d.last
-                .extend(sims.iter().map(|sim| (sim.love_weber_stress(sim.cell_volume().unwrap_or(1.0)), cell_of(sim))));
-            match d.batch.as_mut() {
-                Some(batch) => batch.push(sims),
-                None => {
-                    d.batch = Some(device.device.open(sims)?);
-                    Ok(())
-                }
-            }
-        })
-        .unwrap_or(Ok(()))
-    }
-
     /// The name of the device the RVEs run on ("cpu": the engine's threads).
     pub fn device_name(&self) -> String {
-        self.on_device(|d| Ok(d.batch.as_ref().map(|b| b.device_name()).unwrap_or_else(|| "gpu".into())))
-            .and_then(|r| r.ok())
-            .unwrap_or_else(|| "cpu".into())
+        self.device.as_ref().map(|d| d.adapter()).unwrap_or_else(|| "cpu".into())
     }
 }

@@ -1,6 +1,7 @@
 //! Constitutive laws (CB-Geo's materials as pure functions of stress, strain increment and state).
 
 pub mod dem_rve;
+mod dem_rve_device;
 pub mod elasticity;
 pub mod linear_elastic;
 pub mod mohr_coulomb;
