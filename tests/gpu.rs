@@ -216,7 +216,9 @@ fn a_loose_rve_on_the_gpu_follows_the_cpu_sphere_by_sphere() {
     let mut cpu = rve.clone();
     cpu.cell.as_mut().unwrap().velocity_gradient = l;
     let width = cpu.cell.as_ref().unwrap().widths()[0];
-    let mut batch = device().open(vec![rve]).unwrap();
+    // Workgroups of 256 invocations (what 2000-sphere RVEs get on a GPU) step 100 spheres alike.
+    let device = granite::gpu::GpuDevice::with_workgroup(256).unwrap();
+    let mut batch = device.open(vec![rve]).unwrap();
     for call in 0..10 {
         let report =
             batch.step(&[RveOrder { velocity_gradient: l, full_steps: 100, last_step: 0.0 }]).unwrap().remove(0);

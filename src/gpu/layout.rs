@@ -44,6 +44,7 @@ pub enum Rec {
     Rattlers = 49,
     Floaters = 50,
     Taken = 51,
+    Queue = 52,
 }
 
 /// Why an RVE stopped on the device (the kernel's FAIL_ codes).

@@ -17,11 +17,21 @@ use wgpu::util::DeviceExt;
 #[derive(Default)]
 pub struct GpuDevice {
     gpu: OnceLock<std::result::Result<Arc<Gpu>, String>>,
+    /// Invocations per workgroup, when not chosen from the RVEs' size.
+    workgroup: Option<u32>,
 }
 
 impl GpuDevice {
     pub fn new() -> GpuDevice {
         GpuDevice::default()
+    }
+
+    /// The device with workgroups of `size` invocations (64, 128 or 256) whatever the RVEs' size.
+    pub fn with_workgroup(size: u32) -> Result<GpuDevice> {
+        if !WORKGROUP_SIZES.contains(&size) {
+            return Err(GraniteError::Setup(format!("workgroup size {size}: one of {WORKGROUP_SIZES:?}")));
+        }
+        Ok(GpuDevice { workgroup: Some(size), ..Default::default() })
     }
 
     fn gpu(&self) -> Result<Arc<Gpu>> {
@@ -35,7 +45,8 @@ impl RveDevice for GpuDevice {
     }
     fn open(&self, rves: Vec<DemSim>) -> Result<Box<dyn RveBatch>> {
         let gpu = self.gpu()?;
-        let mut batch = GpuBatch { gpu, shadows: Vec::new(), law: None, device: None, dirty: true };
+        let mut batch =
+            GpuBatch { gpu, workgroup: self.workgroup, shadows: Vec::new(), law: None, device: None, dirty: true };
         batch.push(rves)?;
         Ok(Box::new(batch))
     }
@@ -45,8 +56,11 @@ impl RveDevice for GpuDevice {
 pub struct Gpu {
     device: wgpu::Device,
     queue: wgpu::Queue,
-    pipeline: wgpu::ComputePipeline,
+    /// The kernel compiled for each workgroup size asked for so far.
+    pipelines: std::sync::Mutex<std::collections::HashMap<u32, Arc<wgpu::ComputePipeline>>>,
     name: String,
+    /// A software adapter (lavapipe): runs a workgroup's invocations on one CPU thread.
+    software: bool,
     /// Most DEM steps of one dispatch. Mesa's software Vulkan (lavapipe) ends every loop of a
     /// kernel invocation after 65535 iterations in all, so there a call's steps go in short
     /// dispatches; a GPU takes a whole MPM step's in one.
@@ -92,12 +106,35 @@ impl Gpu {
             ..Default::default()
         }))
         .map_err(|e| format!("device \"gpu\" ({name}): {e}"))?;
-        let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+        let software = adapter.get_info().device_type == wgpu::DeviceType::Cpu;
+        let gpu = Gpu { device, queue, pipelines: Default::default(), name, software, chunk };
+        // Compiled once now, so that a kernel the driver refuses is said before any run.
+        gpu.pipeline(WORKGROUP_SIZES[0]).map_err(|e| e.to_string())?;
+        Ok(gpu)
+    }
+
+    /// Invocations per workgroup for RVEs of `spheres` spheres: about one per 8 spheres on a GPU
+    /// (occupancy: 400 RVEs of 2000 spheres are 400 workgroups), 64 on a software adapter.
+    fn workgroup_size(&self, spheres: usize) -> u32 {
+        if self.software {
+            return WORKGROUP_SIZES[0];
+        }
+        WORKGROUP_SIZES.into_iter().rev().find(|&w| (w as usize) * 8 <= spheres).unwrap_or(WORKGROUP_SIZES[0])
+    }
+
+    /// The kernel for workgroups of `size` invocations.
+    fn pipeline(&self, size: u32) -> Result<Arc<wgpu::ComputePipeline>> {
+        let mut pipelines = self.pipelines.lock().map_err(|_| GraniteError::Other("GPU pipelines poisoned".into()))?;
+        if let Some(p) = pipelines.get(&size) {
+            return Ok(p.clone());
+        }
+        let source = include_str!("rve.wgsl").replace("const WG: u32 = 64u;", &format!("const WG: u32 = {size}u;"));
+        let scope = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let module = self.device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("rve.wgsl"),
-            source: wgpu::ShaderSource::Wgsl(include_str!("rve.wgsl").into()),
+            source: wgpu::ShaderSource::Wgsl(source.into()),
         });
-        let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+        let pipeline = self.device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
             label: Some("run_rves"),
             layout: None,
             module: &module,
@@ -106,9 +143,14 @@ impl Gpu {
             cache: None,
         });
         if let Some(e) = pollster::block_on(scope.pop()) {
-            return Err(format!("device \"gpu\" ({name}): the RVE kernel does not compile: {e}"));
+            return Err(GraniteError::Setup(format!(
+                "device \"gpu\" ({}): the RVE kernel does not compile: {e}",
+                self.name
+            )));
         }
-        Ok(Gpu { device, queue, pipeline, name, chunk })
+        let pipeline = Arc::new(pipeline);
+        pipelines.insert(size, pipeline.clone());
+        Ok(pipeline)
     }
 
     /// Copies `buffer` back to the host.
@@ -139,8 +181,12 @@ fn gpu_error(name: &str, e: impl std::fmt::Display) -> GraniteError {
     GraniteError::Other(format!("device \"gpu\" ({name}): {e}"))
 }
 
+/// Workgroup sizes the kernel is compiled for.
+const WORKGROUP_SIZES: [u32; 3] = [64, 128, 256];
+
 /// The device buffers of a batch (see `rve.wgsl` for their layout).
 struct DeviceRves {
+    pipeline: Arc<wgpu::ComputePipeline>,
     layout: Layout,
     rve: wgpu::Buffer,
     sph: wgpu::Buffer,
@@ -155,6 +201,7 @@ struct DeviceRves {
 
 struct GpuBatch {
     gpu: Arc<Gpu>,
+    workgroup: Option<u32>,
     /// The RVEs as last brought to the host (the device may be ahead).
     shadows: Vec<DemSim>,
     law: Option<layout::LawConstants>,
@@ -201,16 +248,19 @@ impl GpuBatch {
         let pf = make("pf", bytemuck::cast_slice(&data.pf));
         let ph = make("ph", bytemuck::cast_slice(&vec![0.0f64; data.ph_len.max(1)]));
         let ints = make("ints", bytemuck::cast_slice(&data.ints));
+        let spheres = self.shadows.iter().map(|s| s.spheres.len()).max().unwrap_or(0);
+        let pipeline = self.gpu.pipeline(self.workgroup.unwrap_or_else(|| self.gpu.workgroup_size(spheres)))?;
         let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("rves"),
-            layout: &self.gpu.pipeline.get_bind_group_layout(0),
+            layout: &pipeline.get_bind_group_layout(0),
             entries: &[&consts, &rve, &sph, &pf, &ph, &ints]
                 .iter()
                 .enumerate()
                 .map(|(i, b)| wgpu::BindGroupEntry { binding: i as u32, resource: b.as_entire_binding() })
                 .collect::<Vec<_>>(),
         });
-        self.device = Some(DeviceRves { layout, rve, sph, pf, ints, bind_group, records: data.rve, ahead: false });
+        self.device =
+            Some(DeviceRves { pipeline, layout, rve, sph, pf, ints, bind_group, records: data.rve, ahead: false });
         self.dirty = false;
         Ok(())
     }
@@ -273,13 +323,19 @@ impl RveBatch for GpuBatch {
             rec[Rec::Error as usize] = 0.0;
             rec[Rec::Taken as usize] = 0.0;
         }
-        let most = orders.iter().map(|o| o.full_steps + u64::from(o.last_step > 0.0)).max().unwrap_or(0);
+        let steps = |o: &RveOrder| o.full_steps + u64::from(o.last_step > 0.0);
+        let mut queue: Vec<usize> = (0..orders.len()).collect();
+        queue.sort_by_key(|&r| std::cmp::Reverse(steps(&orders[r])));
+        for (w, &r) in queue.iter().enumerate() {
+            d.records[w * layout::RVE_STRIDE + Rec::Queue as usize] = r as f64;
+        }
+        let most = orders.iter().map(steps).max().unwrap_or(0);
         let dispatches = most.div_ceil(u64::from(gpu.chunk)).max(1);
         gpu.queue.write_buffer(&d.rve, 0, bytemuck::cast_slice(&d.records));
         let mut encoder = gpu.device.create_command_encoder(&Default::default());
         {
             let mut pass = encoder.begin_compute_pass(&Default::default());
-            pass.set_pipeline(&gpu.pipeline);
+            pass.set_pipeline(&d.pipeline);
             pass.set_bind_group(0, &d.bind_group, &[]);
             for _ in 0..dispatches {
                 pass.dispatch_workgroups(orders.len() as u32, 1, 1);

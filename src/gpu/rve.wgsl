@@ -9,6 +9,7 @@
 // image in a thin cell) lives in row a: slot a * K + k. Each sphere also lists the slots where it
 // is the second sphere ("incoming"), so that its loads are one sequential sum.
 
+// Invocations per workgroup: the host sets this line for the batch's RVE size (a power of two).
 const WG: u32 = 64u;
 
 // Constants of the batch (`consts`).
@@ -56,6 +57,7 @@ const R_ENDS: u32 = 48u;
 const R_RATTLERS: u32 = 49u;
 const R_FLOATERS: u32 = 50u;
 const R_TAKEN: u32 = 51u;     // steps taken by this call (its dispatches so far)
+const R_QUEUE: u32 = 52u;     // in record w: the RVE workgroup w steps (the longest orders first)
 
 // Per sphere (`sph`, SPH_STRIDE values): x, v, w, x at the last rebuild, radius, mass, inertia.
 const SPH_STRIDE: u32 = 16u;
@@ -91,7 +93,7 @@ var<workgroup> w_minv: array<i32, 9>;
 var<workgroup> w_dt: f64;
 var<workgroup> w_moved: array<f64, WG>;
 var<workgroup> w_bad: array<u32, WG>;
-var<workgroup> w_sums: array<f64, 576>;   // WG x 9
+var<workgroup> w_sums: array<f64, WG * 9u>;
 var<workgroup> w_counts: array<vec4<u32>, WG>;
 var<workgroup> w_steps: u32;
 var<workgroup> w_done: u32;
@@ -524,7 +526,9 @@ fn flip_if_needed() -> bool {
 
 @compute @workgroup_size(WG)
 fn run_rves(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
-    let r = group.x;
+    // Workgroups start in index order as the GPU's cores free up: the RVEs with the most steps
+    // go first, and the short ones fill in behind them.
+    let r = u32(rve[group.x * RVE_STRIDE + R_QUEUE]);
     let base = r * RVE_STRIDE;
     let first = u32(rve[base + R_FIRST]);
     let count = u32(rve[base + R_COUNT]);
@@ -582,10 +586,17 @@ fn run_rves(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_i
         w_moved[lid] = worst;
         w_bad[lid] = bad;
         barrier_all();
+        // The largest displacement by halving (a maximum does not depend on its order).
+        for (var half = WG / 2u; half > 0u; half = half / 2u) {
+            if (lid < half) {
+                w_moved[lid] = max(w_moved[lid], w_moved[lid + half]);
+                w_bad[lid] = w_bad[lid] | w_bad[lid + half];
+            }
+            workgroupBarrier();
+        }
         if (lid == 0u) {
-            var moved2 = 0.0lf;
-            var any_bad = 0u;
-            for (var q = 0u; q < WG; q++) { moved2 = max(moved2, w_moved[q]); any_bad |= w_bad[q]; }
+            let moved2 = w_moved[0];
+            let any_bad = w_bad[0];
             let moved = sqrt(moved2);
             w_h = w_hn;
             rve[base + R_TIME] += dt;
