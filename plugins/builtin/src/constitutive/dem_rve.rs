@@ -74,7 +74,7 @@ impl ConstitutiveLawFactory for DemRveFactory {
         SPECS
     }
     fn description(&self) -> &str {
-        "MPMxDEM: a periodic DEM sample per material point (needs `rve`, a prepared periodic dem())"
+        "MPMxDEM: a periodic DEM sample per material point (needs `rve`, a prepared periodic dem(); `device: \"gpu\"` steps them on a GPU)"
     }
     fn build(&self, params: Params) -> Result<Box<dyn ConstitutiveLaw>> {
         self.build_with(params, &ObjectMap::new())
