@@ -11,7 +11,6 @@ use common::*;
 use granite_core::dem::DemSim;
 use granite_core::ext::rve::RveDeviceChoice;
 use granite_core::ext::{RveDevice, RveOrder};
-use granite_core::mpm::boundary::{TimeFunction, VelocityConstraint};
 use granite_core::mpm::{Mesh, MpmSim, StressScheme};
 use granite_core::registry::ParamMap;
 use nalgebra::Matrix3;
@@ -148,7 +147,7 @@ fn a_sheared_rve_flips_its_cell_on_the_gpu_as_on_the_cpu() {
 fn coupled(rve: &DemSim, device: Option<Arc<dyn RveDevice>>) -> MpmSim {
     let reg = granite::registry();
     let mesh = Mesh::new(3, [0.0; 3], [1.0; 3], [1, 1, 1]).unwrap();
-    let mut sim = MpmSim::new(mesh.clone(), reg.build_velocity_update("PIC", &ParamMap::new()).unwrap());
+    let mut sim = MpmSim::new(mesh, reg.build_velocity_update("PIC", &ParamMap::new()).unwrap());
     let mut objects = granite_core::ext::constitutive::ObjectMap::new();
     objects.insert("rve".into(), Arc::new(rve.clone()));
     if let Some(d) = device {
@@ -160,17 +159,7 @@ fn coupled(rve: &DemSim, device: Option<Arc<dyn RveDevice>>) -> MpmSim {
     let stress = rve.love_weber_stress(rve.cell_volume().unwrap());
     sim.add_points(m, &xs, &[0.25; 4], [0.0; 3], stress).unwrap();
     sim.scheme = StressScheme::Usl;
-    for node in 0..mesh.node_count() {
-        let x = mesh.node_position(node);
-        let v = [5.0 * x[0], 5.0 * x[1], -10.0 * x[2]];
-        for a in 0..3 {
-            sim.boundary.velocity.push(VelocityConstraint {
-                nodes: vec![node as u32],
-                axis: a,
-                value: TimeFunction::Constant(v[a]),
-            });
-        }
-    }
+    prescribe_node_velocities(&mut sim, |x| [5.0 * x[0], 5.0 * x[1], -10.0 * x[2]]);
     sim.set_dt(5e-5).unwrap();
     sim
 }

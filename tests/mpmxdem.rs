@@ -6,7 +6,8 @@ use granite_core::dem::cell::PeriodicCell;
 use granite_core::dem::DemSim;
 use granite_core::ext::constitutive::ObjectMap;
 use granite_core::ext::{ConstitutiveLaw, LawBatch};
-use granite_core::mpm::boundary::{TimeFunction, VelocityConstraint};
+mod common;
+use common::prescribe_node_velocities;
 use granite_core::mpm::{Mesh, MpmSim, StressScheme};
 use granite_core::params::Params;
 use granite_core::registry::ParamMap;
@@ -121,23 +122,14 @@ fn coupled_run(
 ) -> (Vec<(f64, f64)>, MpmSim, Increments) {
     let reg = granite::registry();
     let mesh = Mesh::new(3, [0.0; 3], [1.0; 3], [1, 1, 1]).unwrap();
-    let mut sim = MpmSim::new(mesh.clone(), reg.build_velocity_update("PIC", &ParamMap::new()).unwrap());
+    let mut sim = MpmSim::new(mesh, reg.build_velocity_update("PIC", &ParamMap::new()).unwrap());
     let given: ParamMap = [("inertial_number".to_string(), inertial)].into_iter().collect();
     let law = reg.build_law_with("dem_rve", &given, &objects(rve)).unwrap();
     let m = sim.add_material("rve", 1600.0, law).unwrap();
     let volume = rve.cell_volume().unwrap();
     sim.add_points(m, &[[0.5; 3]], &[1.0], [0.0; 3], rve.love_weber_stress(volume)).unwrap();
     sim.scheme = StressScheme::Usl;
-    for node in 0..mesh.node_count() {
-        let x = mesh.node_position(node);
-        for a in 0..3 {
-            sim.boundary.velocity.push(VelocityConstraint {
-                nodes: vec![node as u32],
-                axis: a,
-                value: TimeFunction::Constant(l[a] * x[a]),
-            });
-        }
-    }
+    prescribe_node_velocities(&mut sim, |x| [l[0] * x[0], l[1] * x[1], l[2] * x[2]]);
     sim.set_dt(dt).unwrap();
     let mut curve = Vec::new();
     let mut increments = Vec::new();
@@ -224,22 +216,12 @@ fn coupled_results_do_not_depend_on_thread_count() {
         pool.install(|| {
             let reg = granite::registry();
             let mesh = Mesh::new(3, [0.0; 3], [1.0; 3], [1, 1, 1]).unwrap();
-            let mut sim = MpmSim::new(mesh.clone(), reg.build_velocity_update("PIC", &ParamMap::new()).unwrap());
+            let mut sim = MpmSim::new(mesh, reg.build_velocity_update("PIC", &ParamMap::new()).unwrap());
             let law = reg.build_law_with("dem_rve", &ParamMap::new(), &objects(&rve)).unwrap();
             let m = sim.add_material("rve", 1600.0, law).unwrap();
             let xs = [[0.3, 0.3, 0.3], [0.7, 0.3, 0.4], [0.4, 0.7, 0.6], [0.6, 0.6, 0.7]];
             sim.add_points(m, &xs, &[0.25; 4], [0.0; 3], [0.0; 6]).unwrap();
-            for node in 0..mesh.node_count() {
-                let x = mesh.node_position(node);
-                let v = [10.0 * x[1], -5.0 * x[0], -20.0 * x[2]];
-                for a in 0..3 {
-                    sim.boundary.velocity.push(VelocityConstraint {
-                        nodes: vec![node as u32],
-                        axis: a,
-                        value: TimeFunction::Constant(v[a]),
-                    });
-                }
-            }
+            prescribe_node_velocities(&mut sim, |x| [10.0 * x[1], -5.0 * x[0], -20.0 * x[2]]);
             sim.set_dt(5e-5).unwrap();
             for _ in 0..10 {
                 sim.step().unwrap();

@@ -8,63 +8,172 @@ use granite_core::{GraniteError, Result};
 use nalgebra::Matrix3;
 
 pub const RVE_STRIDE: usize = 64;
+/// Per sphere: x, v, w, x at the last rebuild, radius, mass, inertia.
 const SPH_STRIDE: usize = 16;
+/// Per pair slot: history (7), touching, force on the first sphere, torques on both.
 const PF_STRIDE: usize = 17;
 const PF_TOUCH: usize = 7;
 const PF_FORCE: usize = 8;
+const PF_TA: usize = 11;
+const PF_TB: usize = 14;
+/// Per slot of a row being rebuilt: history (7) and touching.
 const PH_STRIDE: usize = 8;
-/// Values of `consts` (see the C_ constants of the kernel).
-const CONSTS: usize = 18;
 /// Fewest slots per sphere in the device's pair rows.
 const MIN_SLOTS: usize = 16;
 
-/// Offsets into an RVE's record (the R_ constants of the kernel).
+/// Indices into the batch's constants (`consts`).
+#[derive(Clone, Copy)]
+enum Const {
+    /// Slots per sphere.
+    Slots,
+    /// Offsets into `ints`: the pair rows (4 per slot: second sphere, shift), the rows being
+    /// rebuilt, the incoming slots (1 per slot), the incoming pairs while rebuilding (4 per
+    /// slot), per sphere its counts (rows, incoming, wrap offset: 8 per sphere).
+    Rows,
+    RebuiltRows,
+    Incoming,
+    IncomingRebuilt,
+    Counts,
+    Skin,
+    Damping,
+    /// 0: rolling_resistance, 1: linear.
+    Law,
+    /// kn = 2 E r1 r2 / (r1 + r2) when above 0, else the fixed `Kn`.
+    Young,
+    Kn,
+    /// kt = ratio kn, or the fixed `Kt` when at least 0.
+    KtRatio,
+    Kt,
+    AlphaR,
+    AlphaT,
+    Mu,
+    EtaR,
+    /// Most steps one dispatch takes (the host dispatches again).
+    Chunk,
+}
+const CONSTS: usize = Const::Chunk as usize + 1;
+
+/// Offsets into an RVE's record.
 #[derive(Clone, Copy)]
 pub enum Rec {
+    /// The cell matrix, row-major.
     H = 0,
+    /// The cell matrix at the last rebuild.
     HBuild = 9,
+    /// The velocity gradient of this call.
     L = 18,
     Dt = 27,
+    /// Full steps of this call.
     Steps = 28,
+    /// A shorter last step, or 0.
     LastDt = 29,
+    /// First sphere and spheres.
     First = 30,
     Count = 31,
+    /// The lists must be rebuilt before the next step.
     Rebuild = 32,
     RMax = 33,
     RMin = 34,
+    /// 0, or a `Failure` code.
     Error = 35,
     ErrorValue = 36,
     Time = 37,
     Step = 38,
     Rebuilds = 39,
     Flips = 40,
+    /// Love-Weber stress, Voigt, tension positive.
     Stress = 41,
     Contacts = 47,
     Ends = 48,
     Rattlers = 49,
     Floaters = 50,
+    /// Steps taken by this call (its dispatches so far).
     Taken = 51,
+    /// In record w: the RVE workgroup w steps (the longest orders first).
     Queue = 52,
+}
+
+/// The constants the kernel is written against, as WGSL (put before `rve.wgsl`).
+pub fn wgsl_constants() -> String {
+    use Const as C;
+    let u = [
+        ("C_K", C::Slots as usize),
+        ("C_PI", C::Rows as usize),
+        ("C_PJ", C::RebuiltRows as usize),
+        ("C_INC", C::Incoming as usize),
+        ("C_INCT", C::IncomingRebuilt as usize),
+        ("C_CNT", C::Counts as usize),
+        ("C_SKIN", C::Skin as usize),
+        ("C_DAMPING", C::Damping as usize),
+        ("C_LAW", C::Law as usize),
+        ("C_YOUNG", C::Young as usize),
+        ("C_KN", C::Kn as usize),
+        ("C_KT_RATIO", C::KtRatio as usize),
+        ("C_KT", C::Kt as usize),
+        ("C_ALPHA_R", C::AlphaR as usize),
+        ("C_ALPHA_T", C::AlphaT as usize),
+        ("C_MU", C::Mu as usize),
+        ("C_ETA_R", C::EtaR as usize),
+        ("C_CHUNK", C::Chunk as usize),
+        ("RVE_STRIDE", RVE_STRIDE),
+        ("R_H", Rec::H as usize),
+        ("R_HB", Rec::HBuild as usize),
+        ("R_L", Rec::L as usize),
+        ("R_DT", Rec::Dt as usize),
+        ("R_STEPS", Rec::Steps as usize),
+        ("R_LAST_DT", Rec::LastDt as usize),
+        ("R_FIRST", Rec::First as usize),
+        ("R_COUNT", Rec::Count as usize),
+        ("R_REBUILD", Rec::Rebuild as usize),
+        ("R_RMAX", Rec::RMax as usize),
+        ("R_RMIN", Rec::RMin as usize),
+        ("R_ERROR", Rec::Error as usize),
+        ("R_ERROR_VALUE", Rec::ErrorValue as usize),
+        ("R_TIME", Rec::Time as usize),
+        ("R_STEP", Rec::Step as usize),
+        ("R_REBUILDS", Rec::Rebuilds as usize),
+        ("R_FLIPS", Rec::Flips as usize),
+        ("R_STRESS", Rec::Stress as usize),
+        ("R_CONTACTS", Rec::Contacts as usize),
+        ("R_ENDS", Rec::Ends as usize),
+        ("R_RATTLERS", Rec::Rattlers as usize),
+        ("R_FLOATERS", Rec::Floaters as usize),
+        ("R_TAKEN", Rec::Taken as usize),
+        ("R_QUEUE", Rec::Queue as usize),
+        ("SPH_STRIDE", SPH_STRIDE),
+        ("PF_STRIDE", PF_STRIDE),
+        ("PF_TOUCH", PF_TOUCH),
+        ("PF_FORCE", PF_FORCE),
+        ("PF_TA", PF_TA),
+        ("PF_TB", PF_TB),
+        ("PH_STRIDE", PH_STRIDE),
+    ];
+    let mut out: String = u.iter().map(|(name, v)| format!("const {name}: u32 = {v}u;\n")).collect();
+    for (name, f) in [
+        ("FAIL_TOO_FAST", Failure::TooFast),
+        ("FAIL_NOT_FINITE", Failure::NotFinite),
+        ("FAIL_TOO_MANY_PAIRS", Failure::TooManyPairs),
+        ("FAIL_CELL_COLLAPSED", Failure::CellCollapsed),
+    ] {
+        out += &format!("const {name}: f64 = {}.0lf;\n", f as u32);
+    }
+    out
 }
 
 /// Why an RVE stopped on the device (the kernel's FAIL_ codes).
 #[derive(Debug, Clone, Copy)]
 pub enum Failure {
-    TooFast,
-    NotFinite,
-    TooManyPairs,
-    CellCollapsed,
+    TooFast = 1,
+    NotFinite = 2,
+    TooManyPairs = 3,
+    CellCollapsed = 4,
 }
 
 impl Failure {
     fn from_code(code: f64) -> Option<Failure> {
-        match code as u32 {
-            1 => Some(Failure::TooFast),
-            2 => Some(Failure::NotFinite),
-            3 => Some(Failure::TooManyPairs),
-            4 => Some(Failure::CellCollapsed),
-            _ => None,
-        }
+        [Failure::TooFast, Failure::NotFinite, Failure::TooManyPairs, Failure::CellCollapsed]
+            .into_iter()
+            .find(|&f| f as u32 as f64 == code)
     }
 }
 
@@ -227,26 +336,28 @@ impl Layout {
         let spheres = *self.first.last().unwrap_or(&0);
         let slot_count = spheres * self.slots;
         let mut consts = vec![0.0; CONSTS];
-        for (i, v) in [self.slots, self.rows, self.rebuilt_rows, self.incoming, self.incoming_rebuilt, self.counts]
-            .into_iter()
-            .enumerate()
-        {
-            consts[i] = v as f64;
+        for (at, v) in [
+            (Const::Slots, self.slots as f64),
+            (Const::Rows, self.rows as f64),
+            (Const::RebuiltRows, self.rebuilt_rows as f64),
+            (Const::Incoming, self.incoming as f64),
+            (Const::IncomingRebuilt, self.incoming_rebuilt as f64),
+            (Const::Counts, self.counts as f64),
+            (Const::Skin, law.skin),
+            (Const::Damping, law.damping),
+            (Const::Law, law.kind),
+            (Const::Young, law.young),
+            (Const::Kn, law.kn),
+            (Const::KtRatio, law.kt_ratio),
+            (Const::Kt, law.kt),
+            (Const::AlphaR, law.alpha_r),
+            (Const::AlphaT, law.alpha_t),
+            (Const::Mu, law.mu),
+            (Const::EtaR, law.eta_r),
+            (Const::Chunk, f64::from(chunk)),
+        ] {
+            consts[at as usize] = v;
         }
-        consts[6..].copy_from_slice(&[
-            law.skin,
-            law.damping,
-            law.kind,
-            law.young,
-            law.kn,
-            law.kt_ratio,
-            law.kt,
-            law.alpha_r,
-            law.alpha_t,
-            law.mu,
-            law.eta_r,
-            chunk as f64,
-        ]);
         let mut rve = vec![0.0; rves.len() * RVE_STRIDE];
         let mut sph = vec![0.0; spheres * SPH_STRIDE];
         let mut pf = vec![0.0; slot_count * PF_STRIDE];

@@ -128,7 +128,8 @@ impl Gpu {
         if let Some(p) = pipelines.get(&size) {
             return Ok(p.clone());
         }
-        let source = include_str!("rve.wgsl").replace("const WG: u32 = 64u;", &format!("const WG: u32 = {size}u;"));
+        let kernel = include_str!("rve.wgsl").replace("const WG: u32 = 64u;", &format!("const WG: u32 = {size}u;"));
+        let source = layout::wgsl_constants() + kernel.as_str();
         let scope = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
         let module = self.device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("rve.wgsl"),

@@ -12,69 +12,9 @@
 // Invocations per workgroup: the host sets this line for the batch's RVE size (a power of two).
 const WG: u32 = 64u;
 
-// Constants of the batch (`consts`).
-const C_K: u32 = 0u;          // slots per sphere
-const C_PI: u32 = 1u;         // offsets into `ints`: main rows (4 per slot)
-const C_PJ: u32 = 2u;         //   rebuilt rows (4 per slot)
-const C_INC: u32 = 3u;        //   incoming slots (1 per slot)
-const C_INCT: u32 = 4u;       //   incoming pairs while rebuilding (4 per slot)
-const C_CNT: u32 = 5u;        //   per sphere: rows, incoming, wrap offset (8 per sphere)
-const C_SKIN: u32 = 6u;
-const C_DAMPING: u32 = 7u;
-const C_LAW: u32 = 8u;        // 0: rolling_resistance, 1: linear
-const C_YOUNG: u32 = 9u;      // kn = 2 E r1 r2 / (r1 + r2) when > 0
-const C_KN: u32 = 10u;        // fixed kn otherwise
-const C_KT_RATIO: u32 = 11u;  // kt = ratio kn ...
-const C_KT: u32 = 12u;        // ... or this fixed kt when >= 0
-const C_ALPHA_R: u32 = 13u;
-const C_ALPHA_T: u32 = 14u;
-const C_MU: u32 = 15u;
-const C_ETA_R: u32 = 16u;
-const C_CHUNK: u32 = 17u;     // most steps one dispatch takes (the host dispatches again)
-
-// One RVE's record (`rve`, RVE_STRIDE values each).
-const RVE_STRIDE: u32 = 64u;
-const R_H: u32 = 0u;          // cell matrix, row-major
-const R_HB: u32 = 9u;         // cell matrix at the last rebuild
-const R_L: u32 = 18u;         // velocity gradient of this call
-const R_DT: u32 = 27u;
-const R_STEPS: u32 = 28u;     // full steps of this call
-const R_LAST_DT: u32 = 29u;   // a shorter last step, or 0
-const R_FIRST: u32 = 30u;     // first sphere
-const R_COUNT: u32 = 31u;     // spheres
-const R_REBUILD: u32 = 32u;   // the lists must be rebuilt before the next step
-const R_RMAX: u32 = 33u;
-const R_RMIN: u32 = 34u;
-const R_ERROR: u32 = 35u;     // 0 fine; see `Failure` on the host
-const R_ERROR_VALUE: u32 = 36u;
-const R_TIME: u32 = 37u;
-const R_STEP: u32 = 38u;
-const R_REBUILDS: u32 = 39u;
-const R_FLIPS: u32 = 40u;
-const R_STRESS: u32 = 41u;    // Love-Weber stress, Voigt, tension positive
-const R_CONTACTS: u32 = 47u;
-const R_ENDS: u32 = 48u;
-const R_RATTLERS: u32 = 49u;
-const R_FLOATERS: u32 = 50u;
-const R_TAKEN: u32 = 51u;     // steps taken by this call (its dispatches so far)
-const R_QUEUE: u32 = 52u;     // in record w: the RVE workgroup w steps (the longest orders first)
-
-// Per sphere (`sph`, SPH_STRIDE values): x, v, w, x at the last rebuild, radius, mass, inertia.
-const SPH_STRIDE: u32 = 16u;
-// Per slot (`pf`, PF_STRIDE values): history (7), touching, force on a, torques on a and b.
-const PF_STRIDE: u32 = 17u;
-const PF_TOUCH: u32 = 7u;
-const PF_FORCE: u32 = 8u;
-const PF_TA: u32 = 11u;
-const PF_TB: u32 = 14u;
-// Per slot of a row being rebuilt (`ph`): history (7) and touching.
-const PH_STRIDE: u32 = 8u;
-
-const FAIL_TOO_FAST: f64 = 1.0;
-const FAIL_NOT_FINITE: f64 = 2.0;
-const FAIL_TOO_MANY_PAIRS: f64 = 3.0;
-const FAIL_CELL_COLLAPSED: f64 = 4.0;
-const FAIL_LOST_PAIR: f64 = 5.0;
+// The host puts the layout's constants before this text (`layout::wgsl_constants`): indices into
+// `consts` (C_), into an RVE's record (R_, RVE_STRIDE values a record), the strides and fields of
+// the sphere and pair buffers (SPH_, PF_, PH_) and the failure codes (FAIL_).
 const MAX_IMAGES_ACROSS: f64 = 64.0;
 
 @group(0) @binding(0) var<storage, read> consts: array<f64>;
@@ -108,34 +48,16 @@ fn store3(base: u32, v: vec3<f64>) { sph[base] = v.x; sph[base + 1u] = v.y; sph[
 fn pf3(base: u32) -> vec3<f64> { return vec3<f64>(pf[base], pf[base + 1u], pf[base + 2u]); }
 fn set_pf3(base: u32, v: vec3<f64>) { pf[base] = v.x; pf[base + 1u] = v.y; pf[base + 2u] = v.z; }
 
-// Row-major 3x3 products, summed in the order of `granite_core::math::mat_vec`.
-fn h_times(v: vec3<f64>) -> vec3<f64> {
+// A row-major 3x3 times a vector, summed in the order of `granite_core::math::mat_vec`.
+fn mat_vec(m: array<f64, 9>, v: vec3<f64>) -> vec3<f64> {
     return vec3<f64>(
-        w_h[0] * v.x + w_h[1] * v.y + w_h[2] * v.z,
-        w_h[3] * v.x + w_h[4] * v.y + w_h[5] * v.z,
-        w_h[6] * v.x + w_h[7] * v.y + w_h[8] * v.z);
-}
-fn inv_times(v: vec3<f64>) -> vec3<f64> {
-    return vec3<f64>(
-        w_inv[0] * v.x + w_inv[1] * v.y + w_inv[2] * v.z,
-        w_inv[3] * v.x + w_inv[4] * v.y + w_inv[5] * v.z,
-        w_inv[6] * v.x + w_inv[7] * v.y + w_inv[8] * v.z);
-}
-fn l_times(v: vec3<f64>) -> vec3<f64> {
-    return vec3<f64>(
-        w_l[0] * v.x + w_l[1] * v.y + w_l[2] * v.z,
-        w_l[3] * v.x + w_l[4] * v.y + w_l[5] * v.z,
-        w_l[6] * v.x + w_l[7] * v.y + w_l[8] * v.z);
-}
-fn f_times(v: vec3<f64>) -> vec3<f64> {
-    return vec3<f64>(
-        w_f[0] * v.x + w_f[1] * v.y + w_f[2] * v.z,
-        w_f[3] * v.x + w_f[4] * v.y + w_f[5] * v.z,
-        w_f[6] * v.x + w_f[7] * v.y + w_f[8] * v.z);
+        m[0] * v.x + m[1] * v.y + m[2] * v.z,
+        m[3] * v.x + m[4] * v.y + m[5] * v.z,
+        m[6] * v.x + m[7] * v.y + m[8] * v.z);
 }
 fn image(n: vec3<i32>) -> vec3<f64> {
     if (all(n == vec3<i32>(0))) { return vec3<f64>(0.0lf); }
-    return h_times(vec3<f64>(f64(n.x), f64(n.y), f64(n.z)));
+    return mat_vec(w_h, vec3<f64>(f64(n.x), f64(n.y), f64(n.z)));
 }
 
 fn sdot(a: vec3<f64>, b: vec3<f64>) -> f64 { return a.x * b.x + a.y * b.y + a.z * b.z; }
@@ -273,7 +195,7 @@ fn contacts_of(first: u32, a: u32, dt: f64) {
         let lb = dist - la;
         let wb = load3(sb + 6u);
         let spins = la * wa + lb * wb;
-        let rel_v = ((load3(sb + 3u) - va) - scross(spins, n)) + l_times(d);
+        let rel_v = ((load3(sb + 3u) - va) - scross(spins, n)) + mat_vec(w_l, d);
         let law = contact_law(slot, ra, rb, n, overlap, rel_v, wb - wa, dt);
         let nf = scross(n, law.force);
         let p = slot * PF_STRIDE;
@@ -316,15 +238,15 @@ fn move_sphere(first: u32, i: u32, dt: f64) -> f64 {
     let inv_m = 1.0lf / sph[s + 13u];
     let inv_i = 1.0lf / sph[s + 14u];
     v = v + cundall(f * inv_m, v, damping, dt) * dt;
-    let moving = v + l_times(x);
+    let moving = v + mat_vec(w_l, x);
     x = x + moving * dt;
     // Newton's law holds for the whole velocity v + L x (see `Motion::advance_free`).
-    v = v - l_times(moving) * dt;
+    v = v - mat_vec(w_l, moving) * dt;
     w = w + cundall(t * inv_i, w, damping, dt) * dt;
     store3(s, x);
     store3(s + 3u, v);
     store3(s + 6u, w);
-    let d = x - f_times(load3(s + 9u));
+    let d = x - mat_vec(w_f, load3(s + 9u));
     // Finite only if every term is (NaN fails every comparison).
     let check = d.x + d.y + d.z + v.x + v.y + v.z + w.x + w.y + w.z;
     if (!(abs(check) <= 1.7976931348623157e308lf)) { return -1.0lf; }
@@ -352,7 +274,7 @@ fn rebuild_row(first: u32, i: u32, count: u32) -> bool {
         let sj = sph_base(first, j);
         let rj = sph[sj + 12u];
         let reach = ri + rj + skin;
-        let s = inv_times(load3(sj) - xi);
+        let s = mat_vec(w_inv, load3(sj) - xi);
         let span = reach * g * 1.000001lf;
         let lo = vec3<i32>(ceil(-s - span));
         let hi = vec3<i32>(floor(-s + span));
@@ -455,7 +377,7 @@ fn rebuild(r: u32, lid: u32, first: u32, count: u32) {
     for (var i = lid; i < count; i += WG) {
         let s = sph_base(first, i);
         let x = load3(s);
-        let k = vec3<i32>(floor(inv_times(x)));
+        let k = vec3<i32>(floor(mat_vec(w_inv, x)));
         let c = cnt_base(first, i);
         ints[c + 2u] = k.x; ints[c + 3u] = k.y; ints[c + 4u] = k.z;
         if (any(k != vec3<i32>(0))) { store3(s, x - image(k)); }

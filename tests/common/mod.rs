@@ -129,3 +129,19 @@ pub fn mpirun_granite(np: usize, script: &Path, out: &Path, sets: &[(&str, &str)
     let output = cmd.output().expect("running mpirun");
     (output.status.code().unwrap_or(-1), String::from_utf8_lossy(&output.stderr).into_owned())
 }
+
+/// Holds every node of `sim`'s mesh at the velocity `field` gives at its position (a homogeneous
+/// deformation of the whole mesh).
+pub fn prescribe_node_velocities(sim: &mut granite_core::mpm::MpmSim, field: impl Fn([f64; 3]) -> [f64; 3]) {
+    use granite_core::mpm::boundary::{TimeFunction, VelocityConstraint};
+    for node in 0..sim.mesh.node_count() {
+        let v = field(sim.mesh.node_position(node));
+        for (axis, value) in v.into_iter().enumerate() {
+            sim.boundary.velocity.push(VelocityConstraint {
+                nodes: vec![node as u32],
+                axis,
+                value: TimeFunction::Constant(value),
+            });
+        }
+    }
+}
