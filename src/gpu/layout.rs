@@ -50,8 +50,10 @@ enum Const {
     EtaR,
     /// Most steps one dispatch takes (the host dispatches again).
     Chunk,
+    /// Most candidate-list rebuilds one dispatch makes (0: no limit).
+    Rebuilds,
 }
-const CONSTS: usize = Const::Chunk as usize + 1;
+const CONSTS: usize = Const::Rebuilds as usize + 1;
 
 /// Offsets into an RVE's record.
 #[derive(Clone, Copy)]
@@ -115,6 +117,7 @@ pub fn wgsl_constants() -> String {
         ("C_MU", C::Mu as usize),
         ("C_ETA_R", C::EtaR as usize),
         ("C_CHUNK", C::Chunk as usize),
+        ("C_REBUILDS", C::Rebuilds as usize),
         ("RVE_STRIDE", RVE_STRIDE),
         ("R_H", Rec::H as usize),
         ("R_HB", Rec::HBuild as usize),
@@ -154,6 +157,7 @@ pub fn wgsl_constants() -> String {
         ("FAIL_NOT_FINITE", Failure::NotFinite),
         ("FAIL_TOO_MANY_PAIRS", Failure::TooManyPairs),
         ("FAIL_CELL_COLLAPSED", Failure::CellCollapsed),
+        ("FAIL_LOST_PAIR", Failure::LostPair),
     ] {
         out += &format!("const {name}: f64 = {}.0lf;\n", f as u32);
     }
@@ -167,11 +171,12 @@ pub enum Failure {
     NotFinite = 2,
     TooManyPairs = 3,
     CellCollapsed = 4,
+    LostPair = 5,
 }
 
 impl Failure {
     fn from_code(code: f64) -> Option<Failure> {
-        [Failure::TooFast, Failure::NotFinite, Failure::TooManyPairs, Failure::CellCollapsed]
+        [Failure::TooFast, Failure::NotFinite, Failure::TooManyPairs, Failure::CellCollapsed, Failure::LostPair]
             .into_iter()
             .find(|&f| f as u32 as f64 == code)
     }
@@ -288,7 +293,8 @@ fn check_pair(list: &PairList, k: usize) -> Result<(usize, usize)> {
 }
 
 impl Layout {
-    pub fn new(rves: &[DemSim]) -> Result<Layout> {
+    /// The layout of these RVEs, with at least `min_slots` slots per sphere.
+    pub fn new(rves: &[DemSim], min_slots: usize) -> Result<Layout> {
         // One workgroup per RVE, along one axis of a dispatch.
         if rves.len() > 65535 {
             return Err(GraniteError::Setup(format!(
@@ -310,7 +316,7 @@ impl Layout {
             longest = longest.max(per_sphere.into_iter().max().unwrap_or(0));
         }
         // A row holds the pairs of one sphere as first: at most all of its candidates.
-        let slots = (2 * longest + 8).max(MIN_SLOTS);
+        let slots = (2 * longest + 8).max(MIN_SLOTS).max(min_slots);
         let spheres = *first.last().unwrap_or(&0);
         let slot_count = spheres * slots;
         let rows = 0;
@@ -332,7 +338,7 @@ impl Layout {
     }
 
     /// The buffers' contents for these RVEs, a dispatch taking at most `chunk` steps.
-    pub fn upload(&self, rves: &[DemSim], law: &LawConstants, chunk: u32) -> Result<Uploaded> {
+    pub fn upload(&self, rves: &[DemSim], law: &LawConstants, (chunk, rebuilds): (u32, u32)) -> Result<Uploaded> {
         let spheres = *self.first.last().unwrap_or(&0);
         let slot_count = spheres * self.slots;
         let mut consts = vec![0.0; CONSTS];
@@ -355,6 +361,7 @@ impl Layout {
             (Const::Mu, law.mu),
             (Const::EtaR, law.eta_r),
             (Const::Chunk, f64::from(chunk)),
+            (Const::Rebuilds, f64::from(rebuilds)),
         ] {
             consts[at as usize] = v;
         }
@@ -484,6 +491,16 @@ impl Layout {
             sim.pairs = list;
         }
         Ok(())
+    }
+
+    pub fn slots(&self) -> usize {
+        self.slots
+    }
+
+    /// Whether RVE `r` failed for want of pair slots (it can go on with more).
+    pub fn out_of_slots(&self, records: &[f64], r: usize) -> bool {
+        let code = records[r * RVE_STRIDE + Rec::Error as usize];
+        Failure::from_code(code).is_some_and(|f| matches!(f, Failure::TooManyPairs))
     }
 
     /// Whether RVE `r` took all the steps of its order, or failed.

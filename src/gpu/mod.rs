@@ -45,8 +45,15 @@ impl RveDevice for GpuDevice {
     }
     fn open(&self, rves: Vec<DemSim>) -> Result<Box<dyn RveBatch>> {
         let gpu = self.gpu()?;
-        let mut batch =
-            GpuBatch { gpu, workgroup: self.workgroup, shadows: Vec::new(), law: None, device: None, dirty: true };
+        let mut batch = GpuBatch {
+            gpu,
+            workgroup: self.workgroup,
+            min_slots: 0,
+            shadows: Vec::new(),
+            law: None,
+            device: None,
+            dirty: true,
+        };
         batch.push(rves)?;
         Ok(Box::new(batch))
     }
@@ -61,10 +68,12 @@ pub struct Gpu {
     name: String,
     /// A software adapter (lavapipe): runs a workgroup's invocations on one CPU thread.
     software: bool,
-    /// Most DEM steps of one dispatch. Mesa's software Vulkan (lavapipe) ends every loop of a
-    /// kernel invocation after 65535 iterations in all, so there a call's steps go in short
-    /// dispatches; a GPU takes a whole MPM step's in one.
+    /// Most DEM steps, and most candidate-list rebuilds (0: any), of one dispatch. Mesa's
+    /// software Vulkan (lavapipe) ends every loop of a kernel invocation after 65535 iterations in
+    /// all, so there a call's steps go in short dispatches of one rebuild at most (a thin cell's
+    /// rebuild searches many images); a GPU takes a whole MPM step's in one.
     chunk: u32,
+    rebuilds: u32,
 }
 
 /// The adapter a process uses: under `mpirun`, the local rank's (round robin over the GPUs).
@@ -107,7 +116,8 @@ impl Gpu {
         }))
         .map_err(|e| format!("device \"gpu\" ({name}): {e}"))?;
         let software = adapter.get_info().device_type == wgpu::DeviceType::Cpu;
-        let gpu = Gpu { device, queue, pipelines: Default::default(), name, software, chunk };
+        let rebuilds = if software { 1 } else { 0 };
+        let gpu = Gpu { device, queue, pipelines: Default::default(), name, software, chunk, rebuilds };
         // Compiled once now, so that a kernel the driver refuses is said before any run.
         gpu.pipeline(WORKGROUP_SIZES[0]).map_err(|e| e.to_string())?;
         Ok(gpu)
@@ -182,6 +192,9 @@ fn gpu_error(name: &str, e: impl std::fmt::Display) -> GraniteError {
     GraniteError::Other(format!("device \"gpu\" ({name}): {e}"))
 }
 
+/// Times one call may double the pair slots of its RVEs.
+const MAX_SLOT_DOUBLINGS: usize = 4;
+
 /// Workgroup sizes the kernel is compiled for.
 const WORKGROUP_SIZES: [u32; 3] = [64, 128, 256];
 
@@ -203,6 +216,8 @@ struct DeviceRves {
 struct GpuBatch {
     gpu: Arc<Gpu>,
     workgroup: Option<u32>,
+    /// Fewest pair slots per sphere (doubled when rows outgrow them).
+    min_slots: usize,
     /// The RVEs as last brought to the host (the device may be ahead).
     shadows: Vec<DemSim>,
     law: Option<layout::LawConstants>,
@@ -229,11 +244,80 @@ impl GpuBatch {
         Ok(())
     }
 
+    /// One submission of `orders`: each RVE's report, and whether it stopped for want of pair slots.
+    fn submit(&mut self, orders: &[RveOrder]) -> Result<Vec<(RveReport, bool)>> {
+        if self.dirty || self.device.is_none() {
+            self.sync_to_host()?;
+            self.upload()?;
+        }
+        let gpu = self.gpu.clone();
+        let d = self.device.as_mut().ok_or_else(|| GraniteError::Other("no RVE on the device".into()))?;
+        for (r, order) in orders.iter().enumerate() {
+            let rec = &mut d.records[r * layout::RVE_STRIDE..(r + 1) * layout::RVE_STRIDE];
+            for a in 0..3 {
+                for b in 0..3 {
+                    rec[Rec::L as usize + 3 * a + b] = order.velocity_gradient[(a, b)];
+                }
+            }
+            rec[Rec::Steps as usize] = order.full_steps as f64;
+            rec[Rec::LastDt as usize] = order.last_step;
+            rec[Rec::Error as usize] = 0.0;
+            rec[Rec::Taken as usize] = 0.0;
+        }
+        let steps = |o: &RveOrder| o.full_steps + u64::from(o.last_step > 0.0);
+        let mut queue: Vec<usize> = (0..orders.len()).collect();
+        queue.sort_by_key(|&r| std::cmp::Reverse(steps(&orders[r])));
+        for (w, &r) in queue.iter().enumerate() {
+            d.records[w * layout::RVE_STRIDE + Rec::Queue as usize] = r as f64;
+        }
+        gpu.queue.write_buffer(&d.rve, 0, bytemuck::cast_slice(&d.records));
+        // Submissions of as many dispatches as the longest order needs, until every RVE has taken
+        // its steps (a dispatch may end early: see `Gpu::rebuilds`).
+        let mut taken: Vec<f64> = vec![0.0; orders.len()];
+        loop {
+            let left = (0..orders.len())
+                .map(|r| {
+                    steps(&orders[r]).saturating_sub(d.records[r * layout::RVE_STRIDE + Rec::Taken as usize] as u64)
+                })
+                .max()
+                .unwrap_or(0);
+            let dispatches = left.div_ceil(u64::from(gpu.chunk)).max(1);
+            let mut encoder = gpu.device.create_command_encoder(&Default::default());
+            {
+                let mut pass = encoder.begin_compute_pass(&Default::default());
+                pass.set_pipeline(&d.pipeline);
+                pass.set_bind_group(0, &d.bind_group, &[]);
+                for _ in 0..dispatches {
+                    pass.dispatch_workgroups(orders.len() as u32, 1, 1);
+                }
+            }
+            gpu.queue.submit([encoder.finish()]);
+            d.ahead = true;
+            let bytes = gpu.read(&d.rve)?;
+            d.records = bytemuck::cast_slice(&bytes).to_vec();
+            let unfinished: Vec<usize> = (0..orders.len()).filter(|&r| !d.layout.finished(&d.records, r)).collect();
+            if unfinished.is_empty() {
+                break;
+            }
+            let now: Vec<f64> =
+                (0..orders.len()).map(|r| d.records[r * layout::RVE_STRIDE + Rec::Taken as usize]).collect();
+            if unfinished.iter().all(|&r| now[r] <= taken[r]) {
+                return Err(GraniteError::Other(format!(
+                    "device \"gpu\" ({}): the kernel stopped RVE {} before its last step (a driver's limit on a \
+                     kernel's loops or time?)",
+                    gpu.name, unfinished[0]
+                )));
+            }
+            taken = now;
+        }
+        Ok((0..orders.len()).map(|r| (d.layout.report(&d.records, r), d.layout.out_of_slots(&d.records, r))).collect())
+    }
+
     /// Makes the device's state the host's copies'.
     fn upload(&mut self) -> Result<()> {
         let law = self.law.as_ref().ok_or_else(|| GraniteError::Other("no RVE on the device".into()))?;
-        let layout = Layout::new(&self.shadows)?;
-        let data = layout.upload(&self.shadows, law, self.gpu.chunk)?;
+        let layout = Layout::new(&self.shadows, self.min_slots)?;
+        let data = layout.upload(&self.shadows, law, (self.gpu.chunk, self.gpu.rebuilds))?;
         let device = &self.gpu.device;
         let storage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST;
         let make = |label: &str, bytes: &[u8]| {
@@ -306,54 +390,38 @@ impl RveBatch for GpuBatch {
         if self.shadows.is_empty() {
             return Ok(Vec::new());
         }
-        if self.dirty || self.device.is_none() {
+        let mut reports = self.submit(orders)?;
+        // RVEs whose rows outgrew their slots (a cell flattened to a few reaches: more images in
+        // reach) go on from where they stopped with twice the slots.
+        for _ in 0..MAX_SLOT_DOUBLINGS {
+            let short: Vec<usize> = (0..orders.len()).filter(|&r| reports[r].1).collect();
+            if short.is_empty() {
+                break;
+            }
+            self.min_slots = 2 * self.device.as_ref().map(|d| d.layout.slots()).unwrap_or(self.min_slots);
             self.sync_to_host()?;
-            self.upload()?;
-        }
-        let gpu = self.gpu.clone();
-        let d = self.device.as_mut().ok_or_else(|| GraniteError::Other("no RVE on the device".into()))?;
-        for (r, order) in orders.iter().enumerate() {
-            let rec = &mut d.records[r * layout::RVE_STRIDE..(r + 1) * layout::RVE_STRIDE];
-            for a in 0..3 {
-                for b in 0..3 {
-                    rec[Rec::L as usize + 3 * a + b] = order.velocity_gradient[(a, b)];
-                }
-            }
-            rec[Rec::Steps as usize] = order.full_steps as f64;
-            rec[Rec::LastDt as usize] = order.last_step;
-            rec[Rec::Error as usize] = 0.0;
-            rec[Rec::Taken as usize] = 0.0;
-        }
-        let steps = |o: &RveOrder| o.full_steps + u64::from(o.last_step > 0.0);
-        let mut queue: Vec<usize> = (0..orders.len()).collect();
-        queue.sort_by_key(|&r| std::cmp::Reverse(steps(&orders[r])));
-        for (w, &r) in queue.iter().enumerate() {
-            d.records[w * layout::RVE_STRIDE + Rec::Queue as usize] = r as f64;
-        }
-        let most = orders.iter().map(steps).max().unwrap_or(0);
-        let dispatches = most.div_ceil(u64::from(gpu.chunk)).max(1);
-        gpu.queue.write_buffer(&d.rve, 0, bytemuck::cast_slice(&d.records));
-        let mut encoder = gpu.device.create_command_encoder(&Default::default());
-        {
-            let mut pass = encoder.begin_compute_pass(&Default::default());
-            pass.set_pipeline(&d.pipeline);
-            pass.set_bind_group(0, &d.bind_group, &[]);
-            for _ in 0..dispatches {
-                pass.dispatch_workgroups(orders.len() as u32, 1, 1);
+            self.dirty = true;
+            let rest: Vec<RveOrder> = (0..orders.len())
+                .map(|r| {
+                    let o = &orders[r];
+                    let taken = reports[r].0.steps;
+                    if !reports[r].1 {
+                        RveOrder { full_steps: 0, last_step: 0.0, ..*o }
+                    } else if taken < o.full_steps {
+                        RveOrder { full_steps: o.full_steps - taken, ..*o }
+                    } else {
+                        RveOrder { full_steps: 0, ..*o }
+                    }
+                })
+                .collect();
+            let again = self.submit(&rest)?;
+            for r in short {
+                let taken = reports[r].0.steps;
+                reports[r] = again[r].clone();
+                reports[r].0.steps += taken;
             }
         }
-        gpu.queue.submit([encoder.finish()]);
-        d.ahead = true;
-        let bytes = gpu.read(&d.rve)?;
-        d.records = bytemuck::cast_slice(&bytes).to_vec();
-        if let Some(r) = (0..orders.len()).find(|&r| !d.layout.finished(&d.records, r)) {
-            return Err(GraniteError::Other(format!(
-                "device \"gpu\" ({}): the kernel stopped RVE {r} before its last step (a driver's limit on a kernel's \
-                 loops or time?)",
-                gpu.name
-            )));
-        }
-        Ok((0..orders.len()).map(|r| d.layout.report(&d.records, r)).collect())
+        Ok(reports.into_iter().map(|(report, _)| report).collect())
     }
     fn get(&mut self, index: usize) -> Result<DemSim> {
         self.sync_to_host()?;
@@ -382,6 +450,11 @@ impl Failure {
             Failure::TooManyPairs => format!(
                 "a sphere has more than {slots} candidate pairs, the most the device's lists hold (lower the skin)"
             ),
+            Failure::LostPair => {
+                "a candidate pair found from one of its spheres was not found from the other (a fault of the device's \
+                 kernel: please report it with the RVE)"
+                    .into()
+            }
             Failure::CellCollapsed => format!(
                 "periodic cell collapsed: a width {value:.4e} m (between opposite faces) below 1/64 of the interaction reach"
             ),

@@ -16,6 +16,8 @@ const WG: u32 = 64u;
 // `consts` (C_), into an RVE's record (R_, RVE_STRIDE values a record), the strides and fields of
 // the sphere and pair buffers (SPH_, PF_, PH_) and the failure codes (FAIL_).
 const MAX_IMAGES_ACROSS: f64 = 64.0;
+// Pairs summed together in the Love-Weber stress (as `measures.rs` sums them).
+const PAIRS_PER_BLOCK: u32 = 1024u;
 
 @group(0) @binding(0) var<storage, read> consts: array<f64>;
 @group(0) @binding(1) var<storage, read_write> rve: array<f64>;
@@ -29,11 +31,12 @@ var<workgroup> w_hn: array<f64, 9>;
 var<workgroup> w_inv: array<f64, 9>;
 var<workgroup> w_f: array<f64, 9>;
 var<workgroup> w_l: array<f64, 9>;
+var<workgroup> w_ldt: array<f64, 9>;
 var<workgroup> w_minv: array<i32, 9>;
 var<workgroup> w_dt: f64;
 var<workgroup> w_moved: array<f64, WG>;
 var<workgroup> w_bad: array<u32, WG>;
-var<workgroup> w_sums: array<f64, WG * 9u>;
+var<workgroup> w_pairs: u32;
 var<workgroup> w_counts: array<vec4<u32>, WG>;
 var<workgroup> w_steps: u32;
 var<workgroup> w_done: u32;
@@ -213,21 +216,34 @@ fn cundall(acc: vec3<f64>, vel: vec3<f64>, damping: f64, dt: f64) -> vec3<f64> {
     return acc * (vec3<f64>(1.0lf) - damping * sign);
 }
 
-// Gathers sphere i's loads (own row, then incoming slots, in order) and moves it. Returns its
-// squared displacement since the last rebuild (-1 if its state is not finite).
+// Gathers sphere i's loads and moves it. Returns its squared displacement since the last rebuild
+// (-1 if its state is not finite). The sums run in the CPU engine's order (`write_back`): its own
+// row's pairs, a pair with its own image taking off its force as it comes, then the pairs where
+// it is second, in pair order.
 fn move_sphere(first: u32, i: u32, dt: f64) -> f64 {
     let c = cnt_base(first, i);
+    var run_f = vec3<f64>(0.0lf);
+    var run_t = vec3<f64>(0.0lf);
     var f = vec3<f64>(0.0lf);
     var t = vec3<f64>(0.0lf);
     let own = u32(ints[c]);
     for (var k = 0u; k < own; k++) {
-        let p = slot_of(first, i, k) * PF_STRIDE;
-        if (pf[p + PF_TOUCH] != 0.0lf) { f += pf3(p + PF_FORCE); t += pf3(p + PF_TA); }
+        let slot = slot_of(first, i, k);
+        let p = slot * PF_STRIDE;
+        if (pf[p + PF_TOUCH] == 0.0lf) { continue; }
+        run_f += pf3(p + PF_FORCE);
+        run_t += pf3(p + PF_TA);
+        if (u32(row_partner(slot)) == i) { f -= pf3(p + PF_FORCE); t += pf3(p + PF_TB); }
     }
+    f += run_f;
+    t += run_t;
     let incoming = u32(ints[c + 1u]);
     let base = cu(C_INC) + (first + i) * cu(C_K);
     for (var k = 0u; k < incoming; k++) {
-        let p = u32(ints[base + k]) * PF_STRIDE;
+        let slot = u32(ints[base + k]);
+        // Pairs of the sphere with its own image are summed with its row.
+        if (slot / cu(C_K) == first + i) { continue; }
+        let p = slot * PF_STRIDE;
         if (pf[p + PF_TOUCH] != 0.0lf) { f -= pf3(p + PF_FORCE); t += pf3(p + PF_TB); }
     }
     let s = sph_base(first, i);
@@ -240,8 +256,9 @@ fn move_sphere(first: u32, i: u32, dt: f64) -> f64 {
     v = v + cundall(f * inv_m, v, damping, dt) * dt;
     let moving = v + mat_vec(w_l, x);
     x = x + moving * dt;
-    // Newton's law holds for the whole velocity v + L x (see `Motion::advance_free`).
-    v = v - mat_vec(w_l, moving) * dt;
+    // Newton's law holds for the whole velocity v + L x (see `Motion::advance_free`, whose
+    // matrix L dt this is).
+    v = v - mat_vec(w_ldt, moving);
     w = w + cundall(t * inv_i, w, damping, dt) * dt;
     store3(s, x);
     store3(s + 3u, v);
@@ -278,6 +295,7 @@ fn rebuild_row(first: u32, i: u32, count: u32) -> bool {
         let span = reach * g * 1.000001lf;
         let lo = vec3<i32>(ceil(-s - span));
         let hi = vec3<i32>(floor(-s + span));
+        let from_here = incoming;
         for (var n0 = lo.x; n0 <= hi.x; n0++) {
             for (var n1 = lo.y; n1 <= hi.y; n1++) {
                 for (var n2 = lo.z; n2 <= hi.z; n2++) {
@@ -310,6 +328,21 @@ fn rebuild_row(first: u32, i: u32, count: u32) -> bool {
                     }
                 }
             }
+        }
+        // This sphere's pairs as second with sphere j were met by increasing image n, which is
+        // decreasing shift -n of the pair: turned round into the pairs' order (by shift).
+        var lo_k = from_here;
+        var hi_k = incoming;
+        while (lo_k + 1u < hi_k) {
+            hi_k--;
+            let a = cu(C_INCT) + slot_of(first, i, lo_k) * 4u;
+            let b = cu(C_INCT) + slot_of(first, i, hi_k) * 4u;
+            for (var e = 0u; e < 4u; e++) {
+                let keep = ints[a + e];
+                ints[a + e] = ints[b + e];
+                ints[b + e] = keep;
+            }
+            lo_k++;
         }
     }
     for (var k = 0u; k < fresh; k++) {
@@ -384,6 +417,7 @@ fn rebuild(r: u32, lid: u32, first: u32, count: u32) {
     }
     barrier_all();
     var ok = true;
+    var lost = false;
     for (var i = lid; i < count; i += WG) {
         let c = cnt_base(first, i);
         let ka = vec3<i32>(ints[c + 2u], ints[c + 3u], ints[c + 4u]);
@@ -401,10 +435,14 @@ fn rebuild(r: u32, lid: u32, first: u32, count: u32) {
     }
     barrier_all();
     for (var i = lid; i < count; i += WG) {
-        if (!resolve_incoming(first, i)) { ok = false; }
+        if (!resolve_incoming(first, i)) { lost = true; }
     }
     if (!ok) { fail(r, FAIL_TOO_MANY_PAIRS, f64(cu(C_K))); }
-    if (lid == 0u) {
+    if (lost) { fail(r, FAIL_LOST_PAIR, 0.0lf); }
+    // A row that did not fit kept its old pairs (all valid, history and all) and the lists stay
+    // due for a rebuild: the host gives the rows more slots and the RVE goes on from here.
+    barrier_all();
+    if (lid == 0u && w_fail == 0u) {
         for (var q = 0u; q < 9u; q++) { rve[base + R_HB + q] = w_h[q]; }
         rve[base + R_REBUILD] = 0.0lf;
         rve[base + R_REBUILDS] += 1.0lf;
@@ -467,6 +505,7 @@ fn run_rves(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_i
     }
     let done = workgroupUniformLoad(&w_done);
     let steps = workgroupUniformLoad(&w_steps);
+    var rebuilds_here = 0u;
     for (var step = done; step < steps; step++) {
         if (lid == 0u) {
             w_rebuild = u32(rve[base + R_REBUILD]);
@@ -474,12 +513,17 @@ fn run_rves(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_i
             if (step == u32(rve[base + R_STEPS])) { w_dt = rve[base + R_LAST_DT]; }
         }
         if (workgroupUniformLoad(&w_rebuild) != 0u) {
+            // A software adapter's loop budget (see `Gpu::chunk`) holds few rebuilds: the rest
+            // of the call's steps wait for the next dispatch.
+            if (cu(C_REBUILDS) > 0u && rebuilds_here >= cu(C_REBUILDS)) { break; }
+            rebuilds_here++;
             rebuild(r, lid, first, count);
             if (workgroupUniformLoad(&w_fail) != 0u) { break; }
         }
         if (lid == 0u) {
             // The cell at the step's end, and F = h_end h_build^-1 for the spheres' reference.
             let dt = w_dt;
+            for (var q = 0u; q < 9u; q++) { w_ldt[q] = w_l[q] * dt; }
             for (var a = 0u; a < 3u; a++) {
                 for (var b = 0u; b < 3u; b++) {
                     let lh = w_l[3u * a] * w_h[b] + w_l[3u * a + 1u] * w_h[3u + b] + w_l[3u * a + 2u] * w_h[6u + b];
@@ -559,23 +603,16 @@ fn run_rves(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_i
         }
         if (workgroupUniformLoad(&w_fail) != 0u) { break; }
     }
-    // The RVE's measures after the call: Love-Weber stress (eq. 4.7) and contact counts.
+    // The RVE's measures after the call: contact counts, and the Love-Weber stress (eq. 4.7)
+    // summed in the CPU engine's order (`DemSim::stress_and_axis_stiffness`): blocks of
+    // PAIRS_PER_BLOCK pairs in pair order, each from zero, then the blocks in order.
     barrier_all();
-    var sums: array<f64, 9>;
     var counts = vec4<u32>(0u);
     for (var i = lid; i < count; i += WG) {
         let c = cnt_base(first, i);
         var mine = 0u;
         for (var k = 0u; k < u32(ints[c]); k++) {
-            let slot = slot_of(first, i, k);
-            let p = slot * PF_STRIDE;
-            if (pf[p + PF_TOUCH] == 0.0lf) { continue; }
-            mine++;
-            let f = pf3(p + PF_FORCE);
-            let l = branch(first, i, u32(row_partner(slot)), row_shift(slot));
-            for (var a = 0u; a < 3u; a++) {
-                for (var b = 0u; b < 3u; b++) { sums[3u * a + b] += f[a] * l[b]; }
-            }
+            if (pf[slot_of(first, i, k) * PF_STRIDE + PF_TOUCH] != 0.0lf) { mine++; }
         }
         counts.x += mine;
         let base_in = cu(C_INC) + (first + i) * cu(C_K);
@@ -586,16 +623,60 @@ fn run_rves(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_i
         if (mine == 1u) { counts.z += 1u; }
         if (mine == 0u) { counts.w += 1u; }
     }
-    for (var q = 0u; q < 9u; q++) { w_sums[lid * 9u + q] = sums[q]; }
     w_counts[lid] = counts;
-    workgroupBarrier();
+    if (lid == 0u) {
+        // Where each sphere's row starts in the pair order.
+        var total = 0u;
+        for (var i = 0u; i < count; i++) {
+            let c = cnt_base(first, i);
+            ints[c + 5u] = i32(total);
+            total += u32(ints[c]);
+        }
+        w_pairs = total;
+    }
+    let pairs = workgroupUniformLoad(&w_pairs);
+    storageBarrier();
+    let blocks = (pairs + PAIRS_PER_BLOCK - 1u) / PAIRS_PER_BLOCK;
+    // Each block's sums go to this RVE's rebuild scratch, unused until the next rebuild.
+    let scratch = first * cu(C_K) * PH_STRIDE;
+    for (var b = lid; b < blocks; b += WG) {
+        var s: array<f64, 9>;
+        let start = b * PAIRS_PER_BLOCK;
+        let end = min(start + PAIRS_PER_BLOCK, pairs);
+        // The last sphere whose row starts at or before the block.
+        var lo = 0u;
+        var hi = count;
+        while (hi - lo > 1u) {
+            let mid = (lo + hi) / 2u;
+            if (u32(ints[cnt_base(first, mid) + 5u]) <= start) { lo = mid; } else { hi = mid; }
+        }
+        var a = lo;
+        var at = start;
+        while (at < end) {
+            let c = cnt_base(first, a);
+            let row_start = u32(ints[c + 5u]);
+            if (at >= row_start + u32(ints[c])) { a++; continue; }
+            let slot = slot_of(first, a, at - row_start);
+            let p = slot * PF_STRIDE;
+            if (pf[p + PF_TOUCH] != 0.0lf) {
+                let f = pf3(p + PF_FORCE);
+                let l = (load3(sph_base(first, u32(row_partner(slot)))) + image(row_shift(slot))) - load3(sph_base(first, a));
+                for (var i = 0u; i < 3u; i++) {
+                    for (var j = 0u; j < 3u; j++) { s[3u * i + j] += f[i] * l[j]; }
+                }
+            }
+            at++;
+        }
+        for (var q = 0u; q < 9u; q++) { ph[scratch + 9u * b + q] = s[q]; }
+    }
+    barrier_all();
     if (lid == 0u) {
         var s: array<f64, 9>;
-        var total = vec4<u32>(0u);
-        for (var t = 0u; t < WG; t++) {
-            for (var q = 0u; q < 9u; q++) { s[q] += w_sums[t * 9u + q]; }
-            total += w_counts[t];
+        for (var b = 0u; b < blocks; b++) {
+            for (var q = 0u; q < 9u; q++) { s[q] += ph[scratch + 9u * b + q]; }
         }
+        var total = vec4<u32>(0u);
+        for (var t = 0u; t < WG; t++) { total += w_counts[t]; }
         for (var q = 0u; q < 9u; q++) { rve[base + R_H + q] = w_h[q]; }
         let volume = abs(w_h[0] * (w_h[4] * w_h[8] - w_h[5] * w_h[7]) - w_h[1] * (w_h[3] * w_h[8] - w_h[5] * w_h[6])
             + w_h[2] * (w_h[3] * w_h[7] - w_h[4] * w_h[6]));
