@@ -586,10 +586,3 @@ impl DemRve {
         guard.as_ref().map(|rve| f(&rve.sim))
     }
 }
-
-impl DemRve {
-    /// The name of the device the RVEs run on ("cpu": the engine's threads).
-    pub fn device_name(&self) -> String {
-        self.device.as_ref().map(|d| d.adapter()).unwrap_or_else(|| "cpu".into())
-    }
-}

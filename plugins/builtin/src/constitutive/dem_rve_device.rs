@@ -100,11 +100,6 @@ impl DeviceRves {
         self.device.name()
     }
 
-    /// The adapter's own name, once RVEs are on it.
-    pub(super) fn adapter(&self) -> String {
-        self.held().ok().and_then(|h| h.batch.as_ref().map(|b| b.device_name())).unwrap_or_else(|| self.name().into())
-    }
-
     /// Material points appended: one entry each, with its RVE where it lives in this process.
     pub(super) fn add(&self, rves: Vec<Option<DemSim>>) -> Result<()> {
         let mut held = self.held()?;
