@@ -214,6 +214,22 @@ fn coupled(rve: &DemSim, device: Option<Arc<dyn RveDevice>>) -> MpmSim {
 }
 
 #[test]
+fn an_rve_time_step_above_its_contacts_bound_is_said_once_on_the_gpu_too() {
+    // As on the CPU (tests/mpmxdem.rs): a time step a little above the RVE's stable_dt is worth a
+    // warning, passed on once by the MPM for all its RVEs.
+    let mut rve = granite::bench::periodic_rve(100, 1e5).unwrap();
+    let limit = rve.stable_dt().expect("a compacted RVE has contacts").dt;
+    rve.set_dt(1.05 * limit).unwrap();
+    let mut sim = coupled(&rve, Some(device()));
+    for _ in 0..3 {
+        sim.step().unwrap();
+    }
+    let said: Vec<&String> = sim.events.iter().filter(|e| e.contains("above the stability bound")).collect();
+    assert_eq!(said.len(), 1, "said once: {:?}", sim.events);
+    assert!(said[0].contains("RVE of material point 0"), "{}", said[0]);
+}
+
+#[test]
 fn a_gpu_checkpoint_resumes_bit_for_bit_on_the_gpu_and_within_tolerance_on_the_cpu() {
     let rve = granite::bench::periodic_rve(100, 1e5).unwrap();
     let mut sim = coupled(&rve, Some(device()));

@@ -294,7 +294,7 @@ impl DemSim {
     /// are clumps, whose rotational inertia is only bounded here). The proof is for the undamped
     /// system; Cundall damping lowers the real limit (measured on an RVE), so the stop errs on the
     /// side of running.
-    pub(crate) fn check_time_step(&mut self) -> crate::Result<()> {
+    pub fn check_time_step(&mut self) -> crate::Result<()> {
         self.last_check = Some(self.step);
         let lin = self.linearise();
         let Some((bound, b, contacts)) = lin.gershgorin() else { return Ok(()) };

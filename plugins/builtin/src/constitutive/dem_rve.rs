@@ -64,6 +64,9 @@ pub struct DemRve {
     /// The device the RVEs live on (`device: "gpu"`), or None: each point's RVE in `rves`,
     /// stepped by the thread that updates the point.
     device: Option<DeviceRves>,
+    /// Whether the RVE's time step was checked against its contacts (a device's RVEs: once,
+    /// on the prepared sample, before their first steps).
+    time_step_checked: std::sync::atomic::AtomicBool,
 }
 
 impl ConstitutiveLawFactory for DemRveFactory {
@@ -210,6 +213,7 @@ impl DemRve {
             event_said: std::sync::atomic::AtomicBool::new(false),
             solid_volume: volume,
             device,
+            time_step_checked: std::sync::atomic::AtomicBool::new(false),
         })
     }
 }
@@ -545,6 +549,17 @@ impl DemRve {
                 batch.first,
                 batch.first + batch.len()
             )));
+        }
+        if !self.time_step_checked.swap(true, std::sync::atomic::Ordering::Relaxed) {
+            // The CPU engine checks each RVE's time step against its contacts as it steps; the
+            // device does not, so the prepared sample is checked here once (its warning, or the
+            // stop of a time step its contacts cannot follow).
+            let mut sample = self.template.clone();
+            let first = here.iter().position(|&h| h).unwrap_or(0);
+            sample.check_time_step().map_err(|e| GraniteError::Other(format!("RVE of material point {first}: {e}")))?;
+            for event in sample.events {
+                self.tell_once(first, event);
+            }
         }
         let started = Instant::now();
         let dt = self.template.dt;
