@@ -14,6 +14,7 @@ use granite_core::ext::{RveDevice, RveOrder};
 use granite_core::mpm::{Mesh, MpmSim, StressScheme};
 use granite_core::registry::ParamMap;
 use nalgebra::Matrix3;
+use std::path::Path;
 use std::sync::Arc;
 
 fn device() -> Arc<dyn RveDevice> {
@@ -46,8 +47,6 @@ fn worst_column(a: &Path, b: &Path) -> (String, f64) {
     }
     worst
 }
-
-use std::path::Path;
 
 #[test]
 fn the_one_cell_triaxial_on_the_gpu_agrees_with_the_cpu_and_repeats_byte_for_byte() {
