@@ -112,11 +112,10 @@ impl ConstitutiveLawFactory for DemRveFactory {
             law.tell_once(0, said);
         }
         let serde_json::Value::Array(rves) = map.remove("rves").ok_or_else(bad)? else { return Err(bad()) };
-        if law.device.is_some() {
-            let sims = rves.into_iter().map(|v| DemSim::from_json(v, registry)).collect::<Result<Vec<_>>>()?;
-            if let Some(device) = &law.device {
-                device.add(sims.into_iter().map(Some).collect())?;
-            }
+        if let Some(device) = &law.device {
+            let sims =
+                rves.into_iter().map(|v| DemSim::from_json(v, registry).map(Some)).collect::<Result<Vec<_>>>()?;
+            device.add(sims)?;
             return Ok(Box::new(law));
         }
         {
