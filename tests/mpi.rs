@@ -46,12 +46,22 @@ fn bytes(path: &Path) -> Vec<u8> {
     std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
 }
 
-/// summary.json without what differs from run to run (times) and what only a run over several
-/// processes reports (their share of the work).
+/// summary.json without what differs from run to run (times) and what depends on how the
+/// points are spread over processes (their share of the work, what exact sharing of RVEs
+/// within a process spared).
 fn results(dir: &Path) -> serde_json::Map<String, serde_json::Value> {
     let text = std::fs::read_to_string(dir.join("summary.json")).unwrap();
     let serde_json::Value::Object(mut map) = serde_json::from_str(&text).unwrap() else { panic!("summary.json") };
-    for key in ["wall_time_s", "processes", "rank_busy_fraction", "rank_imbalance", "rank_points", "objects_moved"] {
+    for key in [
+        "wall_time_s",
+        "processes",
+        "rank_busy_fraction",
+        "rank_imbalance",
+        "rank_points",
+        "objects_moved",
+        "rve_sphere_steps_shared",
+        "rve_sphere_steps_computed",
+    ] {
         map.remove(key);
     }
     map
@@ -82,6 +92,24 @@ fn one_two_and_three_processes_write_the_same_bytes_as_a_run_without_mpi() {
             let busy = summary["rank_busy_fraction"].as_array().unwrap();
             assert!(busy.iter().all(|b| b.as_f64().is_some_and(|b| (0.0..=1.0).contains(&b))), "{busy:?}");
         }
+    }
+}
+
+#[test]
+fn adaptive_rves_decide_the_same_on_one_two_and_three_processes() {
+    let rve = rve().to_str().unwrap();
+    let sets = [("rve", rve), ("steps", "60"), ("balance_every", "10"), ("adaptive", "true")];
+    let reference = alone("spread_column.rhai", "mpi_adaptive_alone", &sets).unwrap();
+    let summary = results(&reference);
+    let followed = summary["rve_point_steps_followed"].as_f64().unwrap();
+    assert!(followed > 0.0, "no point followed another: the test would not test the activation");
+    for np in [2, 3] {
+        let (code, stderr, out) = mpirun(np, "spread_column.rhai", &format!("mpi_adaptive_np{np}"), &sets);
+        assert_eq!(code, 0, "{np} processes: {stderr}");
+        for file in ["series.csv", "half.json", "rve_point5.vtu"] {
+            assert!(bytes(&reference.join(file)) == bytes(&out.join(file)), "{np} processes: {file} differs");
+        }
+        assert_eq!(summary, results(&out), "{np} processes: summary.json differs");
     }
 }
 

@@ -71,6 +71,35 @@ pub trait ConstitutiveLaw: Send + Sync {
     fn update_where(&self, _here: &[bool], _batch: LawBatch<'_>) -> Result<Vec<f64>> {
         Err(crate::GraniteError::Other(format!("law {} updates its points one batch at a time", self.name())))
     }
+    /// After the update of all the material's points (and, in a spread run, after every process
+    /// has every point's result): what a law that couples its points does last, the same in
+    /// every process (adaptive RVEs: followers take their leader's stress increment). Returns
+    /// the point objects to copy, (from, to), before the next update (`copy_object`, or across
+    /// processes `point_object` and `adopt_point_object`).
+    fn complete_update(&self, _stress: &mut [Voigt], _state: &mut [f64]) -> Result<Vec<(usize, usize)>> {
+        Ok(Vec::new())
+    }
+    /// Makes the object of point `to` a copy of point `from`'s, both in this process.
+    fn copy_object(&self, from: usize, to: usize) -> Result<()> {
+        Err(crate::GraniteError::Other(format!(
+            "law {} keeps no object to copy from point {from} to {to}",
+            self.name()
+        )))
+    }
+    /// Values for each row of series.csv, from the material's state variables (summed over the
+    /// materials that give the same name).
+    fn series(&self, _state: &[f64]) -> Vec<(&'static str, f64)> {
+        Vec::new()
+    }
+    /// Entries for summary.json at the end of a run (`spared`: what this law's process-local
+    /// savings came to, summed over the run's processes; see `process_savings`).
+    fn run_summary(&self, _state: &[f64], _spared: f64) -> Vec<(String, serde_json::Value)> {
+        Vec::new()
+    }
+    /// Work this process alone spared (a spread run sums it over processes for `run_summary`).
+    fn process_savings(&self) -> f64 {
+        0.0
+    }
     /// Drops the objects of the points whose flag is false (they live in another process now).
     fn release_objects(&self, _keep: &[bool]) {}
     /// One point's object as JSON, to move it to another process or gather it into a checkpoint.

@@ -432,6 +432,21 @@ impl MpmSim {
         Ok(())
     }
 
+    /// The laws' columns for series.csv (`ConstitutiveLaw::series`), summed over the
+    /// materials that give the same name, in the order they first appear.
+    pub fn law_series(&self) -> Vec<(&'static str, f64)> {
+        let mut out: Vec<(&'static str, f64)> = Vec::new();
+        for m in &self.materials {
+            for (name, value) in m.law.series(&m.state) {
+                match out.iter_mut().find(|(n, _)| *n == name) {
+                    Some((_, v)) => *v += value,
+                    None => out.push((name, value)),
+                }
+            }
+        }
+        out
+    }
+
     pub fn snapshot(&self) -> Snapshot {
         Snapshot {
             step: self.step,

@@ -361,6 +361,53 @@ impl Spread {
         Ok(report)
     }
 
+    /// Copies point objects (from, to), the same list in every process: in place where one
+    /// process owns both, else from the owner of `from` to the owner of `to` (collective).
+    pub fn copy_objects(&mut self, law: &dyn ConstitutiveLaw, copies: &[(usize, usize)]) -> Result<()> {
+        let me = self.rank() as u32;
+        let mut outgoing = vec![Writer::default(); self.size()];
+        let mut across = false;
+        for &(from, to) in copies {
+            let (a, b) = (self.owner[from], self.owner[to]);
+            if a == b {
+                if a == me {
+                    law.copy_object(from, to)?;
+                }
+                continue;
+            }
+            across = true;
+            if a == me {
+                let object = serde_json::to_vec(&law.point_object(from)?)
+                    .map_err(|e| GraniteError::Other(format!("object of material point {from}: {e}")))?;
+                outgoing[b as usize].u64(to as u64).bytes(&object);
+            }
+        }
+        if !across {
+            return Ok(());
+        }
+        for bytes in self.comm.exchange(outgoing.into_iter().map(|w| w.0).collect()) {
+            let mut r = Reader::new(&bytes);
+            while !r.done() {
+                let point = r.u64()? as usize;
+                let object = serde_json::from_slice(r.bytes()?)
+                    .map_err(|e| GraniteError::Other(format!("object of material point {point}: {e}")))?;
+                law.adopt_point_object(point, object)?;
+            }
+        }
+        Ok(())
+    }
+
+    /// The sum over the processes of one number each gives (collective).
+    pub fn sum(&self, x: f64) -> Result<f64> {
+        let mut w = Writer::default();
+        w.f64(x);
+        let mut total = 0.0;
+        for bytes in self.comm.all_gather(&w.0) {
+            total += Reader::new(&bytes).f64()?;
+        }
+        Ok(total)
+    }
+
     /// Every point's object in point order on rank 0 (for a checkpoint); None elsewhere.
     pub fn gather_objects(&self, law: &dyn ConstitutiveLaw) -> Result<Option<Vec<serde_json::Value>>> {
         let me = self.rank() as u32;

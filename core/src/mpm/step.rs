@@ -607,6 +607,8 @@ fn stress_update(pts: &mut Points, materials: &mut [Material]) -> Result<()> {
             let (stress, dstrain) = (&mut pts.stress[range.clone()], &pts.dstrain[range]);
             spread
                 .update(law, stress, dstrain, &mut m.state, stride)
+                .and_then(|()| law.complete_update(stress, &mut m.state))
+                .and_then(|copies| spread.copy_objects(law, &copies))
                 .map_err(|e| GraniteError::Other(format!("material \"{}\" ({}): {e}", m.name, law.name())))?;
             continue;
         }
@@ -619,7 +621,7 @@ fn stress_update(pts: &mut Points, materials: &mut [Material]) -> Result<()> {
             (CHUNK, MIN_CHUNKS_PER_TASK)
         };
         let stress = pts.stress[range.clone()].par_chunks_mut(chunk);
-        let dstrain = pts.dstrain[range].par_chunks(chunk);
+        let dstrain = pts.dstrain[range.clone()].par_chunks(chunk);
         let results: Vec<Result<()>> = if stride == 0 {
             stress
                 .zip(dstrain)
@@ -639,6 +641,9 @@ fn stress_update(pts: &mut Points, materials: &mut [Material]) -> Result<()> {
         if let Some(Err(e)) = results.into_iter().find(|r| r.is_err()) {
             return Err(GraniteError::Other(format!("material \"{}\" ({}): {e}", m.name, law.name())));
         }
+        law.complete_update(&mut pts.stress[range], &mut m.state)
+            .and_then(|copies| copies.into_iter().try_for_each(|(from, to)| law.copy_object(from, to)))
+            .map_err(|e| GraniteError::Other(format!("material \"{}\" ({}): {e}", m.name, law.name())))?;
     }
     Ok(())
 }

@@ -133,6 +133,10 @@ impl ScriptSim for MpmScene {
             d.angular_momentum[1],
             d.angular_momentum[2],
         ];
+        for (name, value) in sim.law_series() {
+            cols.push(name);
+            vals.push(value);
+        }
         if let Some(r) = &self.runout {
             let (lx, dr, l_norm, t_norm, front) = r.measure(sim);
             cols.extend(["lx", "runout", "runout_normalised", "time_normalised", "front_runout_normalised"]);
@@ -273,6 +277,15 @@ impl ScriptSim for MpmScene {
     }
     fn run_ended(&mut self, ctx: &ScriptContext) -> Result<()> {
         for m in &self.mpm.materials {
+            let spared = match &m.spread {
+                Some(spread) => spread.sum(m.law.process_savings())?,
+                None => m.law.process_savings(),
+            };
+            if ctx.writes_files() {
+                for (key, value) in m.law.run_summary(&m.state, spared) {
+                    ctx.set_summary(&key, value);
+                }
+            }
             let Some(spread) = &m.spread else { continue };
             let report = spread.report()?;
             if ctx.writes_files() {
@@ -387,14 +400,26 @@ pub(super) fn law_inputs(
         }
         skip.push("device");
     }
+    // Switches are numbers to a law (true: 1), and an option given as a map (`adaptive: #{
+    // coarsen: 0.01 }`) switches on the option and sets its parameters `adaptive_coarsen`, ...
+    let mut numbers = Map::new();
     for (k, v) in opts {
         if let Some(h) = v.clone().try_cast::<super::dem_api::DemHandle>() {
             let dem = h.lock().sim.prepared();
             objects.insert(k.to_string(), Arc::new(dem));
             skip.push(k.as_str());
+        } else if let Ok(on) = v.as_bool() {
+            numbers.insert(k.clone(), Dynamic::from(if on { 1.0 } else { 0.0 }));
+        } else if let Some(sub) = v.clone().try_cast::<Map>() {
+            numbers.insert(k.clone(), Dynamic::from(1.0));
+            for (s, value) in sub {
+                numbers.insert(format!("{k}_{s}").into(), value);
+            }
+        } else {
+            numbers.insert(k.clone(), v.clone());
         }
     }
-    Ok((param_map(opts, &skip, law)?, objects))
+    Ok((param_map(&numbers, &skip, law)?, objects))
 }
 
 enum Region {

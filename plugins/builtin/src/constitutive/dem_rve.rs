@@ -3,7 +3,9 @@
 //! point's strain increment as a velocity gradient applied over `T_DEM` (eqs. 4.1-4.6), on top of
 //! the contact forces, and returns its Love-Weber stress (4.7), tension positive like the MPM.
 
+use super::dem_rve_adaptive::{Activation, Restart, Role, Tolerances};
 use super::dem_rve_device::DeviceRves;
+use super::dem_rve_share::Twins;
 use granite_core::dem::DemSim;
 use granite_core::ext::constitutive::ObjectMap;
 use granite_core::ext::rve::RveDeviceChoice;
@@ -12,6 +14,7 @@ use granite_core::math::Voigt;
 use granite_core::params::{ParamSpec, Params};
 use granite_core::{GraniteError, Result};
 use nalgebra::{Matrix3, SymmetricEigen};
+use rayon::prelude::*;
 use std::sync::{Arc, Mutex, RwLock};
 use std::time::Instant;
 
@@ -29,6 +32,24 @@ pub const SPECS: &[ParamSpec] = &[
     ParamSpec::unset("grain_size", "characteristic grain size l of eq. 4.1 (default: mean diameter of the RVE)"),
     ParamSpec::optional("max_dem_steps", 1e7, "most DEM steps one call may take (a safeguard)"),
     ParamSpec::unset("dem_steps", "fixed DEM steps per call instead of eqs. 4.1-4.5 (benchmarks, comparisons)"),
+    ParamSpec::optional(
+        "share",
+        1.0,
+        "1: points whose RVEs and strain increments are bitwise the same step one RVE (exact); 0: each steps its own",
+    ),
+    ParamSpec::optional(
+        "adaptive",
+        0.0,
+        "1: points close to an active point follow it instead of stepping their RVE (docs/mpmxdem.md)",
+    ),
+    ParamSpec::optional("adaptive_coarsen", 0.02, "adaptive: distance (relative stress error) under which a point follows"),
+    ParamSpec::optional("adaptive_refine", 0.05, "adaptive: distance over which a follower steps its own RVE again"),
+    ParamSpec::optional("adaptive_every", 10.0, "adaptive: MPM steps between two coarsening passes (the history's memory)"),
+    ParamSpec::optional(
+        "adaptive_restart",
+        0.0,
+        "adaptive: a follower steps again from 0: a copy of its leader's RVE; 1: its own, caught up with the strain it missed",
+    ),
 ];
 
 /// What one point's RVE carries between calls.
@@ -67,6 +88,13 @@ pub struct DemRve {
     /// Whether the RVE's time step was checked against its contacts (a device's RVEs: once,
     /// on the prepared sample, before their first steps).
     time_step_checked: std::sync::atomic::AtomicBool,
+    /// Exact sharing of bitwise-equal RVEs among this process's points (`share`).
+    share: bool,
+    twins: Mutex<Twins>,
+    /// Sphere-steps exact sharing spared this process.
+    shared_sphere_steps: Mutex<f64>,
+    /// Similarity-based activation (`adaptive`), the same in every process.
+    activation: Option<Mutex<Activation>>,
 }
 
 impl ConstitutiveLawFactory for DemRveFactory {
@@ -111,7 +139,15 @@ impl ConstitutiveLawFactory for DemRveFactory {
         if let Some(said) = moved_off {
             law.tell_once(0, said);
         }
+        if let (Some(a), Some(saved)) = (&law.activation, map.remove("adaptive")) {
+            a.lock()
+                .unwrap_or_else(|e| e.into_inner())
+                .load_json(saved)
+                .map_err(|e| GraniteError::Other(format!("dem_rve checkpoint: adaptive RVEs: {e}")))?;
+        }
         let serde_json::Value::Array(rves) = map.remove("rves").ok_or_else(bad)? else { return Err(bad()) };
+        // Every point starts with an RVE object of its own (sharing resumes as increments agree).
+        law.twins.lock().unwrap_or_else(|e| e.into_inner()).add(&vec![false; rves.len()], false);
         if let Some(device) = &law.device {
             let sims =
                 rves.into_iter().map(|v| DemSim::from_json(v, registry).map(Some)).collect::<Result<Vec<_>>>()?;
@@ -192,11 +228,38 @@ impl DemRve {
                 Some(DeviceRves::new(d.0.clone()))
             }
         };
+        let share = params.get("share") != 0.0;
+        let tolerances = if params.get("adaptive") != 0.0 {
+            let coarsen = params.non_negative("adaptive_coarsen")?;
+            let refine = params.positive("adaptive_refine")?;
+            if refine <= coarsen {
+                return Err(GraniteError::param_in(
+                    format!("`adaptive_refine` of {}", params.owner()),
+                    refine,
+                    &format!("must exceed adaptive_coarsen = {coarsen} (a follower would step again at once)"),
+                ));
+            }
+            let every = params.count("adaptive_every")?.max(1);
+            let restart = match params.get("adaptive_restart") {
+                0.0 => Restart::CopyLeader,
+                1.0 => Restart::OwnCaughtUp,
+                other => {
+                    return Err(GraniteError::param_in(
+                        format!("`adaptive_restart` of {}", params.owner()),
+                        other,
+                        "must be 0 (from a copy of the leader's RVE) or 1 (its own RVE, caught up)",
+                    ))
+                }
+            };
+            Some(Tolerances { coarsen, refine, every, restart })
+        } else {
+            None
+        };
         let mut template = template;
         template.set_sequential(true);
         template.cell_control = None;
         template.gravity = [0.0; 3];
-        Ok(DemRve {
+        let mut law = DemRve {
             weight: mass * g,
             density: mass / volume,
             grain_size,
@@ -213,7 +276,16 @@ impl DemRve {
             solid_volume: volume,
             device,
             time_step_checked: std::sync::atomic::AtomicBool::new(false),
-        })
+            share,
+            twins: Mutex::new(Twins::default()),
+            shared_sphere_steps: Mutex::new(0.0),
+            activation: None,
+        };
+        if let Some(tolerances) = tolerances {
+            // Relative distances are floored at the RVE's own weight over its base (eq. 4.2).
+            law.activation = Some(Mutex::new(Activation::new(tolerances, law.p_min(&law.template))));
+        }
+        Ok(law)
     }
 }
 
@@ -293,6 +365,10 @@ impl ConstitutiveLaw for DemRve {
         STATE
     }
     fn points_added(&self, here: &[bool]) -> Result<()> {
+        self.twins.lock().unwrap_or_else(|e| e.into_inner()).add(here, self.share);
+        if let Some(a) = &self.activation {
+            a.lock().unwrap_or_else(|e| e.into_inner()).add(here.len());
+        }
         if let Some(device) = &self.device {
             return device.add(here.iter().map(|&h| h.then(|| self.template.clone())).collect());
         }
@@ -306,15 +382,59 @@ impl ConstitutiveLaw for DemRve {
         true
     }
     fn whole_batch(&self) -> bool {
-        self.device.is_some()
+        self.device.is_some() || self.share || self.activation.is_some()
     }
     fn update_where(&self, here: &[bool], batch: LawBatch<'_>) -> Result<Vec<f64>> {
-        match &self.device {
-            Some(device) => self.update_on_device(device, here, batch),
-            None => Err(GraniteError::Other("dem_rve on the CPU updates its points one by one".into())),
+        self.update_batch(here, batch)
+    }
+    fn complete_update(&self, stress: &mut [Voigt], state: &mut [f64]) -> Result<Vec<(usize, usize)>> {
+        Ok(match &self.activation {
+            Some(a) => a.lock().unwrap_or_else(|e| e.into_inner()).complete(stress, state, STATE.len()),
+            None => Vec::new(),
+        })
+    }
+    fn copy_object(&self, from: usize, to: usize) -> Result<()> {
+        let mut twins = self.twins.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some((a, b)) = twins.detach(to) {
+            self.copy_rve(a, b)?;
         }
+        self.copy_rve(twins.object_of(from), to)
+    }
+    fn series(&self, state: &[f64]) -> Vec<(&'static str, f64)> {
+        let active = match &self.activation {
+            Some(a) => a.lock().unwrap_or_else(|e| e.into_inner()).active(),
+            None => state.len() / STATE.len(),
+        };
+        let steps: f64 = state.chunks(STATE.len()).map(|st| st[5]).sum();
+        vec![("rve_active", active as f64), ("rve_sphere_steps", steps * self.template.spheres.len() as f64)]
+    }
+    fn process_savings(&self) -> f64 {
+        *self.shared_sphere_steps.lock().unwrap_or_else(|e| e.into_inner())
+    }
+    fn run_summary(&self, state: &[f64], spared: f64) -> Vec<(String, serde_json::Value)> {
+        let done: f64 = state.chunks(STATE.len()).map(|st| st[7]).sum();
+        // `done` counts the increments' work as if each point had stepped its own RVE.
+        let mut out = vec![
+            ("rve_sphere_steps".to_string(), done.into()),
+            ("rve_sphere_steps_shared".to_string(), spared.into()),
+            ("rve_sphere_steps_computed".to_string(), (done - spared).into()),
+        ];
+        if let Some(a) = &self.activation {
+            let followed = a.lock().unwrap_or_else(|e| e.into_inner()).followed();
+            let skipped = followed.leader_dem_steps * self.template.spheres.len() as f64;
+            out.push(("rve_point_steps_followed".to_string(), followed.point_steps.into()));
+            out.push(("rve_sphere_steps_followed".to_string(), skipped.into()));
+        }
+        out
     }
     fn release_objects(&self, keep: &[bool]) {
+        // Riders of a point that leaves get its RVE first.
+        for (point, _) in keep.iter().enumerate().filter(|(_, &k)| !k) {
+            let copy = self.twins.lock().unwrap_or_else(|e| e.into_inner()).detach(point);
+            if let Some(Err(e)) = copy.map(|(from, to)| self.copy_rve(from, to)) {
+                self.tell_once(point, format!("could not hand its RVE to the points sharing it: {e}"));
+            }
+        }
         if let Some(device) = &self.device {
             if let Err(e) = device.release(keep) {
                 self.tell_once(0, format!("the device kept RVEs that moved to other processes: {e}"));
@@ -336,6 +456,9 @@ impl ConstitutiveLaw for DemRve {
     fn adopt_point_object(&self, point: usize, object: serde_json::Value) -> Result<()> {
         let mut sim = DemSim::from_json_like(object, &self.template)?;
         sim.set_sequential(true);
+        if let Some((from, to)) = self.twins.lock().unwrap_or_else(|e| e.into_inner()).detach(point) {
+            self.copy_rve(from, to)?;
+        }
         if let Some(device) = &self.device {
             return device.put(point, sim);
         }
@@ -349,6 +472,9 @@ impl ConstitutiveLaw for DemRve {
         if let Some(device) = &self.device {
             saved["device"] = device.name().into();
         }
+        if let Some(a) = &self.activation {
+            saved["adaptive"] = a.lock().unwrap_or_else(|e| e.into_inner()).to_json();
+        }
         Ok(Some(saved))
     }
     fn pending_event(&self) -> Option<(usize, String)> {
@@ -358,6 +484,18 @@ impl ConstitutiveLaw for DemRve {
         *self.event.lock().unwrap_or_else(|e| e.into_inner()) = event;
     }
     fn points_removed(&self, keep: &[bool]) {
+        {
+            let mut twins = self.twins.lock().unwrap_or_else(|e| e.into_inner());
+            for (point, _) in keep.iter().enumerate().filter(|(_, &k)| !k) {
+                if let Some(Err(e)) = twins.detach(point).map(|(from, to)| self.copy_rve(from, to)) {
+                    self.tell_once(point, format!("could not hand its RVE to the points sharing it: {e}"));
+                }
+            }
+            twins.retain(keep);
+        }
+        if let Some(a) = &self.activation {
+            a.lock().unwrap_or_else(|e| e.into_inner()).retain(keep);
+        }
         if let Some(Err(e)) = self.device.as_ref().map(|d| d.remove_points(keep)) {
             self.tell_once(0, format!("the device could not drop the removed points' RVEs: {e}"));
         }
@@ -415,39 +553,55 @@ impl ConstitutiveLaw for DemRve {
         self.save_objects_from(list)
     }
     fn update(&self, batch: LawBatch<'_>) -> Result<()> {
-        if let Some(device) = &self.device {
+        if self.whole_batch() && batch.first == 0 && batch.len() == self.points() {
+            // `complete_update` follows, called by the MPM step.
             let all = vec![true; batch.len()];
-            return self.update_on_device(device, &all, batch).map(|_| ());
+            return self.update_batch(&all, batch).map(|_| ());
+        }
+        if self.device.is_some() || self.activation.is_some() {
+            return Err(GraniteError::Other(format!(
+                "dem_rve with a device or adaptive RVEs updates all {} points at once, not points {}..{}",
+                self.points(),
+                batch.first,
+                batch.first + batch.len()
+            )));
         }
         let rves = self.rves.read().map_err(|_| GraniteError::Other("RVE store poisoned".into()))?;
         for k in 0..batch.len() {
             let index = batch.first + k;
+            if let Some((from, to)) = self.twins.lock().unwrap_or_else(|e| e.into_inner()).own(index) {
+                copy_within(&rves, from, to)?;
+            }
             let mut rve = rves
                 .get(index)
                 .ok_or_else(|| GraniteError::Other(format!("no RVE for material point {index}")))?
                 .lock()
                 .map_err(|_| GraniteError::Other(format!("RVE {index} poisoned")))?;
-            let Some(Rve { sim, stress: last_stress }) = &mut *rve else {
+            let Some(rve) = &mut *rve else {
                 return Err(GraniteError::Other(format!("the RVE of material point {index} is in another process")));
             };
-            let before = match *last_stress {
-                Some(stress) => stress,
-                None => sim.love_weber_stress(sim.cell_volume().unwrap_or(1.0)),
-            };
-            let cell = sim.cell.as_ref().map(|c| c.h).unwrap_or_else(Matrix3::identity);
-            let order = self.order(index, &batch.dstrain[k], &before, &cell, sim.dt)?;
-            *last_stress = None;
-            let report = self.run_on_cpu(index, sim, &order)?;
-            *last_stress = Some(report.stress);
+            let report = self.step_own(index, &batch.dstrain[k], rve)?;
             self.record(
                 &report,
-                sim.spheres.len(),
+                rve.sim.spheres.len(),
                 &mut batch.stress[k],
                 &mut batch.state[k * STATE.len()..][..STATE.len()],
             );
         }
         Ok(())
     }
+}
+
+/// Makes the RVE in slot `to` a copy of the one in slot `from`.
+fn copy_within(rves: &[Mutex<Option<Rve>>], from: usize, to: usize) -> Result<()> {
+    let copy = {
+        let source = rves.get(from).and_then(|r| r.lock().ok());
+        source.as_ref().and_then(|r| r.as_ref()).map(|r| Rve { sim: r.sim.clone(), stress: r.stress })
+    };
+    let copy = copy.ok_or_else(|| GraniteError::Other(format!("no RVE of material point {from} to share")))?;
+    let slot = rves.get(to).ok_or_else(|| GraniteError::Other(format!("no material point {to}")))?;
+    *slot.lock().unwrap_or_else(|e| e.into_inner()) = Some(copy);
+    Ok(())
 }
 
 impl DemRve {
@@ -538,33 +692,156 @@ impl DemRve {
         st[7] += (report.steps as usize * spheres) as f64;
     }
 
-    /// The RVEs of the points `here` names stepped on the device in one submission; returns the
-    /// time each took, the call's time shared out by their DEM work (their cost for balancing).
-    fn update_on_device(&self, device: &DeviceRves, here: &[bool], batch: LawBatch<'_>) -> Result<Vec<f64>> {
-        if batch.first != 0 || batch.len() != device.points() || here.len() != batch.len() {
+    /// One point's RVE stepped on this thread by the strain `de` (the CPU backend).
+    fn step_own(&self, index: usize, de: &Voigt, rve: &mut Rve) -> Result<RveReport> {
+        let sim = &mut rve.sim;
+        let before = match rve.stress {
+            Some(stress) => stress,
+            None => sim.love_weber_stress(sim.cell_volume().unwrap_or(1.0)),
+        };
+        let cell = sim.cell.as_ref().map(|c| c.h).unwrap_or_else(Matrix3::identity);
+        let order = self.order(index, de, &before, &cell, sim.dt)?;
+        rve.stress = None;
+        let report = self.run_on_cpu(index, sim, &order)?;
+        rve.stress = Some(report.stress);
+        Ok(report)
+    }
+
+    /// Material points known (their RVEs here or not).
+    fn points(&self) -> usize {
+        match &self.device {
+            Some(device) => device.points(),
+            None => self.rves.read().map(|r| r.len()).unwrap_or(0),
+        }
+    }
+
+    /// Makes the RVE of point `to` a copy of point `from`'s.
+    fn copy_rve(&self, from: usize, to: usize) -> Result<()> {
+        match &self.device {
+            Some(device) => device.copy(from, to),
+            None => {
+                copy_within(&self.rves.read().map_err(|_| GraniteError::Other("RVE store poisoned".into()))?, from, to)
+            }
+        }
+    }
+
+    /// The update of all the material's points in one call, of which this process steps those
+    /// `here` names: the activation decides which points step (all, without `adaptive`), exact
+    /// sharing which RVEs, then they step on the device in one submission or on the CPU
+    /// threads. Followers are left to `complete_update`. Returns each point's cost in seconds.
+    fn update_batch(&self, here: &[bool], batch: LawBatch<'_>) -> Result<Vec<f64>> {
+        let n = self.points();
+        if batch.first != 0 || batch.len() != n || here.len() != n {
             return Err(GraniteError::Other(format!(
-                "the device steps all {} points of the material at once, not points {}..{}",
-                device.points(),
+                "dem_rve updates all {n} points of the material at once, not points {}..{}",
                 batch.first,
                 batch.first + batch.len()
             )));
         }
+        let stride = STATE.len();
+        let roles: Vec<Role> = match &self.activation {
+            Some(a) => {
+                a.lock().unwrap_or_else(|e| e.into_inner()).plan(batch.dstrain, batch.stress, batch.state, stride)
+            }
+            None => batch.dstrain.iter().map(|de| Role::Steps(*de)).collect(),
+        };
+        let strain: Vec<Option<Voigt>> = roles
+            .iter()
+            .zip(here)
+            .map(|(role, &here)| match role {
+                Role::Steps(de) if here => Some(*de),
+                _ => None,
+            })
+            .collect();
+        let shared = self.twins.lock().unwrap_or_else(|e| e.into_inner()).split(&strain);
+        for &(from, to) in &shared.copies {
+            self.copy_rve(from, to)?;
+        }
+        let mut stepping = vec![false; n];
+        for &p in &shared.steppers {
+            stepping[p] = true;
+        }
+        let started = Instant::now();
+        let reports: Vec<(usize, RveReport, f64)> = match &self.device {
+            Some(device) => self.step_on_device(device, &stepping, &strain)?,
+            None => self.step_on_cpu(&shared.steppers, &strain)?,
+        };
+        let spheres = self.template.spheres.len();
+        let mut costs = vec![0.0; n];
+        let mut report_of = vec![None; n];
+        for (point, report, seconds) in &reports {
+            self.record(report, spheres, &mut batch.stress[*point], &mut batch.state[point * stride..][..stride]);
+            costs[*point] = *seconds;
+            report_of[*point] = Some(report);
+        }
+        let mut spared = 0.0;
+        for &(point, keeper) in &shared.riders {
+            let report = report_of[keeper].ok_or_else(|| {
+                GraniteError::Other(format!("RVE of material point {point}: its keeper {keeper} did not step"))
+            })?;
+            self.record(report, spheres, &mut batch.stress[point], &mut batch.state[point * stride..][..stride]);
+            spared += (report.steps as usize * spheres) as f64;
+        }
+        *self.shared_sphere_steps.lock().unwrap_or_else(|e| e.into_inner()) += spared;
+        if self.device.is_some() {
+            // The device's call is one: its time is shared out by the RVEs' DEM steps.
+            let seconds = started.elapsed().as_secs_f64();
+            let work: u64 = reports.iter().map(|(_, r, _)| r.steps).sum();
+            for (point, report, _) in &reports {
+                costs[*point] = if work > 0 { seconds * report.steps as f64 / work as f64 } else { 0.0 };
+            }
+        }
+        Ok(costs)
+    }
+
+    /// The RVEs of the points `stepping` names, each by its `strain`, on this process's threads.
+    fn step_on_cpu(&self, steppers: &[usize], strain: &[Option<Voigt>]) -> Result<Vec<(usize, RveReport, f64)>> {
+        let rves = self.rves.read().map_err(|_| GraniteError::Other("RVE store poisoned".into()))?;
+        let outcomes: Vec<Result<(usize, RveReport, f64)>> = steppers
+            .par_iter()
+            .with_min_len(1)
+            .map(|&index| {
+                let t = Instant::now();
+                let de = strain[index].ok_or_else(|| GraniteError::Other(format!("no strain for point {index}")))?;
+                let mut rve = rves
+                    .get(index)
+                    .ok_or_else(|| GraniteError::Other(format!("no RVE for material point {index}")))?
+                    .lock()
+                    .map_err(|_| GraniteError::Other(format!("RVE {index} poisoned")))?;
+                let Some(rve) = &mut *rve else {
+                    return Err(GraniteError::Other(format!(
+                        "the RVE of material point {index} is in another process"
+                    )));
+                };
+                let report = self.step_own(index, &de, rve)?;
+                Ok((index, report, t.elapsed().as_secs_f64()))
+            })
+            .collect();
+        // The lowest failing point's error, whatever thread ran what.
+        outcomes.into_iter().collect()
+    }
+
+    /// The RVEs of the points `stepping` names stepped on the device in one submission.
+    fn step_on_device(
+        &self,
+        device: &DeviceRves,
+        stepping: &[bool],
+        strain: &[Option<Voigt>],
+    ) -> Result<Vec<(usize, RveReport, f64)>> {
         if !self.time_step_checked.swap(true, std::sync::atomic::Ordering::Relaxed) {
             // The CPU engine checks each RVE's time step against its contacts as it steps; the
             // device does not, so the prepared sample is checked here once (its warning, or the
             // stop of a time step its contacts cannot follow).
             let mut sample = self.template.clone();
-            let first = here.iter().position(|&h| h).unwrap_or(0);
+            let first = stepping.iter().position(|&h| h).unwrap_or(0);
             sample.check_time_step().map_err(|e| GraniteError::Other(format!("RVE of material point {first}: {e}")))?;
             for event in sample.events {
                 self.tell_once(first, event);
             }
         }
-        let started = Instant::now();
         let dt = self.template.dt;
-        let reports = device.step(|p| here[p], |p, stress, cell| self.order(p, &batch.dstrain[p], stress, cell, dt))?;
-        let spheres = self.template.spheres.len();
-        let stride = STATE.len();
+        let reports = device
+            .step(|p| stepping[p], |p, stress, cell| self.order(p, &strain[p].unwrap_or([0.0; 6]), stress, cell, dt))?;
         for (point, report) in &reports {
             if let Some(failure) = &report.failure {
                 return Err(GraniteError::Other(format!(
@@ -572,26 +849,18 @@ impl DemRve {
                     report.steps
                 )));
             }
-            self.record(
-                report,
-                spheres,
-                &mut batch.stress[*point],
-                &mut batch.state[point * stride..(point + 1) * stride],
-            );
         }
-        let seconds = started.elapsed().as_secs_f64();
-        let work: u64 = reports.iter().map(|(_, r)| r.steps).sum();
-        let mut costs = vec![0.0; batch.len()];
-        for (point, report) in &reports {
-            costs[*point] = if work > 0 { seconds * report.steps as f64 / work as f64 } else { 0.0 };
-        }
-        Ok(costs)
+        Ok(reports.into_iter().map(|(p, r)| (p, r, 0.0)).collect())
     }
 }
 
 /// Read access to the RVEs (for output of chosen points and tests).
 impl DemRve {
     pub fn with_rve<R>(&self, index: usize, f: impl FnOnce(&DemSim) -> R) -> Option<R> {
+        if index >= self.points() {
+            return None;
+        }
+        let index = self.twins.lock().unwrap_or_else(|e| e.into_inner()).object_of(index);
         if let Some(device) = &self.device {
             return device.get(index).ok().map(|sim| f(&sim));
         }

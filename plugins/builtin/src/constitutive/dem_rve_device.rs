@@ -156,6 +156,15 @@ impl DeviceRves {
         }
     }
 
+    /// Makes the RVE of `to` a copy of the RVE of `from`.
+    pub(super) fn copy(&self, from: usize, to: usize) -> Result<()> {
+        let sim = self.get(from)?;
+        self.put(to, sim)?;
+        let mut held = self.held()?;
+        held.last[to] = held.last[from];
+        Ok(())
+    }
+
     /// A copy of the RVE of `point` as it is now.
     pub(super) fn get(&self, point: usize) -> Result<DemSim> {
         let mut held = self.held()?;
@@ -169,7 +178,8 @@ impl DeviceRves {
     }
 
     /// Steps the RVEs of the points `here` names, each by the order `order_of(point, stress,
-    /// cell)` gives, in one submission; returns each such point's report, in point order.
+    /// cell)` gives, in one submission (the others take no step); returns each such point's
+    /// report, in point order.
     pub(super) fn step(
         &self,
         here: impl Fn(usize) -> bool,
@@ -177,22 +187,17 @@ impl DeviceRves {
     ) -> Result<Vec<(usize, RveReport)>> {
         let mut held = self.held()?;
         let Some(count) = held.batch.as_ref().map(|b| b.len()) else { return Ok(Vec::new()) };
-        let mut orders = vec![None; count];
+        // RVEs that do not step this call (sharing another's, following another point) take
+        // no step.
+        let rest = RveOrder { velocity_gradient: Matrix3::zeros(), full_steps: 0, last_step: 0.0 };
+        let mut orders = vec![rest; count];
         let mut points = Vec::new();
         for point in (0..held.slot.len()).filter(|&p| here(p)) {
             let s = held.slot(point)?;
             let (stress, cell) = &held.last[point];
-            orders[s] = Some(order_of(point, stress, cell)?);
+            orders[s] = order_of(point, stress, cell)?;
             points.push((point, s));
         }
-        // Every RVE on the device belongs to a point updated here.
-        let orders = orders
-            .into_iter()
-            .enumerate()
-            .map(|(s, o)| {
-                o.ok_or_else(|| GraniteError::Other(format!("the RVE in device slot {s} has no point to update")))
-            })
-            .collect::<Result<Vec<_>>>()?;
         let reports = held.batch.as_mut().map(|b| b.step(&orders)).unwrap_or_else(|| Ok(Vec::new()))?;
         let mut out = Vec::with_capacity(points.len());
         for (point, s) in points {

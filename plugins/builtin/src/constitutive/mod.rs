@@ -1,7 +1,9 @@
 //! Constitutive laws (CB-Geo's materials as pure functions of stress, strain increment and state).
 
 pub mod dem_rve;
+pub mod dem_rve_adaptive;
 mod dem_rve_device;
+mod dem_rve_share;
 pub mod elasticity;
 pub mod linear_elastic;
 pub mod mohr_coulomb;
