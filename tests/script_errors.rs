@@ -342,3 +342,20 @@ fn an_rve_device_granite_lacks_is_refused_with_what_to_do() {
     let e = run_err("rve_device_unknown", &script("tpu"), &[]);
     assert!(e.contains("no RVE device \"tpu\"") && e.contains("\"cpu\"") && e.contains("line 4"), "{e}");
 }
+
+/// `adaptive: #{ ... }` of `dem_rve`: a misspelt tolerance is named with the parameters there
+/// are, and a `refine` not above `coarsen` is refused with why.
+#[test]
+fn adaptive_rve_tolerances_are_checked_by_name() {
+    let script = |adaptive: &str| {
+        format!(
+            "let sim = mpm(#{{ dim: 3, origin: [0.0, 0.0, 0.0], cell: 1.0, cells: [1, 1, 1] }});\n\
+             let rve = dem();\nrve.periodic([0.01, 0.01, 0.01]);\n\
+             sim.material(\"dem_rve\", #{{ density: 1600.0, rve: rve, adaptive: {adaptive} }});"
+        )
+    };
+    let e = run_err("rve_adaptive_misspelt", &script("#{ corsen: 0.01 }"), &[]);
+    assert!(e.contains("adaptive_corsen") && e.contains("adaptive_coarsen") && e.contains("line 4"), "{e}");
+    let e = run_err("rve_adaptive_refine", &script("#{ coarsen: 0.01, refine: 0.005 }"), &[]);
+    assert!(e.contains("adaptive_refine") && e.contains("must exceed adaptive_coarsen") && e.contains("line 4"), "{e}");
+}

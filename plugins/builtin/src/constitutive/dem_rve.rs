@@ -42,8 +42,8 @@ pub const SPECS: &[ParamSpec] = &[
         0.0,
         "1: points close to an active point follow it instead of stepping their RVE (docs/mpmxdem.md)",
     ),
-    ParamSpec::optional("adaptive_coarsen", 0.02, "adaptive: distance (relative stress error) under which a point follows"),
-    ParamSpec::optional("adaptive_refine", 0.05, "adaptive: distance over which a follower steps its own RVE again"),
+    ParamSpec::optional("adaptive_coarsen", 0.001, "adaptive: distance (relative stress error) under which a point follows"),
+    ParamSpec::optional("adaptive_refine", 0.002, "adaptive: distance over which a follower steps its own RVE again"),
     ParamSpec::optional("adaptive_every", 10.0, "adaptive: MPM steps between two coarsening passes (the history's memory)"),
     ParamSpec::optional(
         "adaptive_restart",
@@ -169,6 +169,33 @@ impl ConstitutiveLawFactory for DemRveFactory {
 impl DemRve {
     /// The law for resolved parameters and the prepared sample in `objects["rve"]`.
     pub fn new(params: Params, objects: &ObjectMap) -> Result<DemRve> {
+        let share = params.get("share") != 0.0;
+        let tolerances = if params.get("adaptive") != 0.0 {
+            let coarsen = params.non_negative("adaptive_coarsen")?;
+            let refine = params.positive("adaptive_refine")?;
+            if refine <= coarsen {
+                return Err(GraniteError::param_in(
+                    format!("`adaptive_refine` of {}", params.owner()),
+                    refine,
+                    &format!("must exceed adaptive_coarsen = {coarsen} (a follower would step again at once)"),
+                ));
+            }
+            let every = params.count("adaptive_every")?.max(1);
+            let restart = match params.get("adaptive_restart") {
+                0.0 => Restart::CopyLeader,
+                1.0 => Restart::OwnCaughtUp,
+                other => {
+                    return Err(GraniteError::param_in(
+                        format!("`adaptive_restart` of {}", params.owner()),
+                        other,
+                        "must be 0 (from a copy of the leader's RVE) or 1 (its own RVE, caught up)",
+                    ))
+                }
+            };
+            Some(Tolerances { coarsen, refine, every, restart })
+        } else {
+            None
+        };
         let template = objects
             .get("rve")
             .and_then(|o| o.downcast_ref::<DemSim>())
@@ -227,33 +254,6 @@ impl DemRve {
                 })?;
                 Some(DeviceRves::new(d.0.clone()))
             }
-        };
-        let share = params.get("share") != 0.0;
-        let tolerances = if params.get("adaptive") != 0.0 {
-            let coarsen = params.non_negative("adaptive_coarsen")?;
-            let refine = params.positive("adaptive_refine")?;
-            if refine <= coarsen {
-                return Err(GraniteError::param_in(
-                    format!("`adaptive_refine` of {}", params.owner()),
-                    refine,
-                    &format!("must exceed adaptive_coarsen = {coarsen} (a follower would step again at once)"),
-                ));
-            }
-            let every = params.count("adaptive_every")?.max(1);
-            let restart = match params.get("adaptive_restart") {
-                0.0 => Restart::CopyLeader,
-                1.0 => Restart::OwnCaughtUp,
-                other => {
-                    return Err(GraniteError::param_in(
-                        format!("`adaptive_restart` of {}", params.owner()),
-                        other,
-                        "must be 0 (from a copy of the leader's RVE) or 1 (its own RVE, caught up)",
-                    ))
-                }
-            };
-            Some(Tolerances { coarsen, refine, every, restart })
-        } else {
-            None
         };
         let mut template = template;
         template.set_sequential(true);
@@ -609,7 +609,9 @@ impl DemRve {
     /// that applies it over T^DEM, and the DEM steps, from the stress `before` (P of eq. 4.3) and
     /// the cell `h` (P^min of eq. 4.2).
     fn order(&self, index: usize, de: &Voigt, before: &Voigt, h: &Matrix3<f64>, dt: f64) -> Result<RveOrder> {
-        let e = granite_core::math::strain_matrix(de);
+        // -0.0 and 0.0 give one order (exact sharing groups increments by their bits).
+        let de = de.map(|x| x + 0.0);
+        let e = granite_core::math::strain_matrix(&de);
         let max_strain = SymmetricEigen::new(e).eigenvalues.amax();
         let p = ((before[0] + before[1] + before[2]).abs() / 3.0).max(self.p_min_of_cell(h));
         let plan = self.plan(max_strain, p, dt);

@@ -55,7 +55,9 @@ impl Twins {
     /// get RVEs of their own.
     pub fn split(&mut self, strain: &[Option<Voigt>]) -> Shared {
         let mut out = Shared::default();
-        let bits = |e: &Voigt| e.map(f64::to_bits);
+        // Increments that differ only in the sign of a zero make the same RVE order (`order`
+        // adds 0.0 to every component), so they share.
+        let bits = |e: &Voigt| e.map(|x| (x + 0.0).to_bits());
         // Per (keeper, strain bits) group: its new keeper (the keeper itself when it steps with
         // the same strain, else the group's lowest point).
         let mut groups: BTreeMap<(usize, [u64; 6]), usize> = BTreeMap::new();
