@@ -35,6 +35,22 @@ fn prepare_and_run_the_one_cell_triaxial() {
     }
     let dumps = std::fs::read_dir(tri.out_dir.join("rve_point0")).unwrap().count();
     assert!(dumps >= 1, "RVE particle dumps of point 0");
+    // The same test with adaptive RVEs: fewer points step their own RVE, for the same q to the
+    // 1 % the default tolerances keep along a triaxial path (docs/mpmxdem.md).
+    let adaptive = run(
+        "mpmxdem/triaxial_one_cell.rhai",
+        "mpmxdem_triaxial_adaptive",
+        &[("rve", rve.to_str().unwrap()), ("axial_strain", "0.002"), ("dt", "1e-3"), ("adaptive", "true")],
+        2,
+    )
+    .unwrap();
+    let (ha, rows_a) = read_csv(&adaptive.out_dir.join("series.csv"));
+    let last_a = rows_a.last().unwrap();
+    assert!(last_a[column(&ha, "rve_active")] < 8.0, "{} points step their own RVE", last_a[column(&ha, "rve_active")]);
+    assert_eq!(last[column(&h, "rve_active")], 8.0);
+    let qa = last_a[column(&ha, "q")];
+    assert!((qa - last[q]).abs() < 0.01 * last[q], "q = {qa} with adaptive RVEs, {} without", last[q]);
+    assert!(summary_f64(&adaptive, "rve_sphere_steps") < summary_f64(&tri, "rve_sphere_steps"));
 }
 
 /// The documented small column (thesis 5.4 with the 150-sphere RVE at 250 Pa, the script's
