@@ -120,6 +120,20 @@ impl SpreadReport {
     }
 }
 
+/// Takes in the point objects other processes sent: (point, JSON) records.
+fn adopt_objects(law: &dyn ConstitutiveLaw, incoming: Vec<Vec<u8>>) -> Result<()> {
+    for bytes in incoming {
+        let mut r = Reader::new(&bytes);
+        while !r.done() {
+            let point = r.u64()? as usize;
+            let object = serde_json::from_slice(r.bytes()?)
+                .map_err(|e| GraniteError::Other(format!("object of material point {point}: {e}")))?;
+            law.adopt_point_object(point, object)?;
+        }
+    }
+    Ok(())
+}
+
 impl Spread {
     pub fn new(comm: Comm) -> Spread {
         let size = comm.size();
@@ -322,15 +336,7 @@ impl Spread {
         let incoming = self.comm.exchange(outgoing.into_iter().map(|w| w.0).collect());
         self.owner = new_owner;
         law.release_objects(&self.here());
-        for bytes in incoming {
-            let mut r = Reader::new(&bytes);
-            while !r.done() {
-                let point = r.u64()? as usize;
-                let object = serde_json::from_slice(r.bytes()?)
-                    .map_err(|e| GraniteError::Other(format!("object of material point {point}: {e}")))?;
-                law.adopt_point_object(point, object)?;
-            }
-        }
+        adopt_objects(law, incoming)?;
         self.stats.moved += moved;
         Ok(())
     }
@@ -385,16 +391,7 @@ impl Spread {
         if !across {
             return Ok(());
         }
-        for bytes in self.comm.exchange(outgoing.into_iter().map(|w| w.0).collect()) {
-            let mut r = Reader::new(&bytes);
-            while !r.done() {
-                let point = r.u64()? as usize;
-                let object = serde_json::from_slice(r.bytes()?)
-                    .map_err(|e| GraniteError::Other(format!("object of material point {point}: {e}")))?;
-                law.adopt_point_object(point, object)?;
-            }
-        }
-        Ok(())
+        adopt_objects(law, self.comm.exchange(outgoing.into_iter().map(|w| w.0).collect()))
     }
 
     /// The sum over the processes of one number each gives (collective).
