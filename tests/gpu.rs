@@ -79,6 +79,42 @@ fn the_one_cell_triaxial_on_the_gpu_agrees_with_the_cpu_and_repeats_byte_for_byt
     assert!(q > 1e4, "q = {q}");
 }
 
+/// Adaptive RVEs on the device: the followers' decisions and the copies of leaders' RVEs on
+/// restarts give the CPU's series (its bytes on lavapipe).
+#[test]
+fn adaptive_rves_on_the_gpu_follow_the_cpu() {
+    let prep = run("mpmxdem/prepare_rve.rhai", "gpu_prepare_adaptive", &[("count", "125")], 2).unwrap();
+    let rve = prep.out_dir.join("rve.json");
+    let triaxial = |device: &str| {
+        run(
+            "mpmxdem/triaxial_one_cell.rhai",
+            &format!("gpu_adaptive_triaxial_{device}"),
+            &[
+                ("rve", rve.to_str().unwrap()),
+                ("axial_strain", "0.002"),
+                ("dt", "1e-3"),
+                ("device", device),
+                ("adaptive", "true"),
+                ("coarsen", "0.005"),
+                ("refine", "0.01"),
+            ],
+            2,
+        )
+        .unwrap()
+        .out_dir
+        .join("series.csv")
+    };
+    let (cpu, gpu) = (triaxial("cpu"), triaxial("gpu"));
+    let (column, diff) = worst_column(&gpu, &cpu);
+    assert!(diff < 1e-6, "GPU and CPU series differ by {diff:.3e} (relative) in column {column}");
+    if exact_adapter() {
+        assert_eq!(std::fs::read(&gpu).unwrap(), std::fs::read(&cpu).unwrap(), "lavapipe and the CPU differ");
+    }
+    let (h, rows) = read_csv(&gpu);
+    let active: Vec<f64> = rows.iter().map(|r| r[common::column(&h, "rve_active")]).collect();
+    assert!(active.iter().any(|&a| a < 8.0), "no point followed another: {active:?}");
+}
+
 /// The same triaxial to an axial strain of 0.01: q/p, the volumetric strain (the void ratio's
 /// change) and the coordination at the end within 2 % of the CPU's. About a minute on lavapipe:
 /// `cargo test --features gpu --test gpu -- --ignored`.
