@@ -3,7 +3,7 @@
 //! point's strain increment as a velocity gradient applied over `T_DEM` (eqs. 4.1-4.6), on top of
 //! the contact forces, and returns its Love-Weber stress (4.7), tension positive like the MPM.
 
-use super::dem_rve_adaptive::{Activation, Restart, Role, Tolerances};
+use super::dem_rve_adaptive::{state, Activation, Restart, Role, Tolerances};
 use super::dem_rve_device::DeviceRves;
 use super::dem_rve_share::Twins;
 use granite_core::dem::DemSim;
@@ -343,6 +343,7 @@ impl DemRve {
     }
 }
 
+/// In the order of `dem_rve_adaptive::state`'s indices.
 const STATE: &[&str] = &[
     "rve_mean_stress",
     "rve_deviatoric_stress",
@@ -405,14 +406,14 @@ impl ConstitutiveLaw for DemRve {
             Some(a) => a.lock().unwrap_or_else(|e| e.into_inner()).active(),
             None => state.len() / STATE.len(),
         };
-        let steps: f64 = state.chunks(STATE.len()).map(|st| st[5]).sum();
+        let steps: f64 = state.chunks(STATE.len()).map(|st| st[state::DEM_STEPS]).sum();
         vec![("rve_active", active as f64), ("rve_sphere_steps", steps * self.template.spheres.len() as f64)]
     }
     fn process_savings(&self) -> f64 {
         *self.shared_sphere_steps.lock().unwrap_or_else(|e| e.into_inner())
     }
     fn run_summary(&self, state: &[f64], spared: f64) -> Vec<(String, serde_json::Value)> {
-        let done: f64 = state.chunks(STATE.len()).map(|st| st[7]).sum();
+        let done: f64 = state.chunks(STATE.len()).map(|st| st[state::DEM_SPHERE_STEPS]).sum();
         // `done` counts the increments' work as if each point had stepped its own RVE.
         let mut out = vec![
             ("rve_sphere_steps".to_string(), done.into()),
@@ -869,5 +870,23 @@ impl DemRve {
         let rves = self.rves.read().ok()?;
         let guard = rves.get(index)?.lock().ok()?;
         guard.as_ref().map(|rve| f(&rve.sim))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_adaptive_controller_reads_the_state_variables_it_names() {
+        let at = |k: usize| STATE[k];
+        assert_eq!(at(state::MEAN_STRESS), "rve_mean_stress");
+        assert_eq!(at(state::DEVIATORIC_STRESS), "rve_deviatoric_stress");
+        assert_eq!(at(state::VOID_RATIO), "void_ratio");
+        assert_eq!(at(state::COORDINATION), "coordination");
+        assert_eq!(at(state::RATTLERS), "rattlers");
+        assert_eq!(at(state::DEM_STEPS), "dem_steps");
+        assert_eq!(at(state::NO_CONTACTS), "no_contacts");
+        assert_eq!(at(state::DEM_SPHERE_STEPS), "dem_sphere_steps");
     }
 }

@@ -139,6 +139,7 @@ pub mod state {
     pub const RATTLERS: usize = 4;
     pub const DEM_STEPS: usize = 5;
     pub const NO_CONTACTS: usize = 6;
+    pub const DEM_SPHERE_STEPS: usize = 7;
 }
 
 impl Activation {
@@ -154,10 +155,6 @@ impl Activation {
             before: Vec::new(),
             increment: Vec::new(),
         }
-    }
-
-    pub fn tolerances(&self) -> Tolerances {
-        self.tolerances
     }
 
     /// Points appended: they start active.
@@ -192,7 +189,8 @@ impl Activation {
     }
 
     /// The point each follows (None: active).
-    pub fn leaders(&self) -> Vec<Option<usize>> {
+    #[cfg(test)]
+    fn leaders(&self) -> Vec<Option<usize>> {
         self.points.iter().map(|h| h.follows.map(|l| l as usize)).collect()
     }
 
