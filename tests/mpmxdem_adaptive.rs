@@ -94,6 +94,26 @@ fn exact_sharing_gives_the_bits_of_stepping_every_rve_and_spares_the_copies_at_r
     assert!(pressure(&stress_on[4]) > p0 * 1.01, "compressed {} vs resting {p0}", pressure(&stress_on[4]));
 }
 
+#[test]
+fn equal_rves_of_a_checkpoint_share_again_on_resuming() {
+    let sim = two_cells(&[]);
+    let dir = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("target/test-out/mpmxdem_share_checkpoint");
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("checkpoint.json");
+    sim.save(&path).unwrap();
+    let mut resumed = MpmSim::load(&path, &granite::registry()).unwrap();
+    let mut sim = sim;
+    drive(&mut sim, right_cell_compressed, 6);
+    drive(&mut resumed, right_cell_compressed, 6);
+    assert_eq!(sim.points.stress, resumed.points.stress);
+    assert_eq!(sim.materials[0].state, resumed.materials[0].state);
+    // The eight saved copies of the prepared sample share again: the resting cell's spare as much
+    // as in the run that was never saved.
+    let (spared, spared_resumed) = (sim.materials[0].law.process_savings(), resumed.materials[0].law.process_savings());
+    assert!(spared > 0.0);
+    assert_eq!(spared_resumed, spared);
+}
+
 /// Both cells compressed alike for 20 steps, then only the right one for 20.
 fn two_phases(given: &[(&str, f64)]) -> (MpmSim, f64, f64) {
     let mut sim = two_cells(given);

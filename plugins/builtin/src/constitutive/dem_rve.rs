@@ -146,8 +146,10 @@ impl ConstitutiveLawFactory for DemRveFactory {
                 .map_err(|e| GraniteError::Other(format!("dem_rve checkpoint: adaptive RVEs: {e}")))?;
         }
         let serde_json::Value::Array(rves) = map.remove("rves").ok_or_else(bad)? else { return Err(bad()) };
-        // Every point starts with an RVE object of its own (sharing resumes as increments agree).
-        law.twins.lock().unwrap_or_else(|e| e.into_inner()).add(&vec![false; rves.len()], false);
+        // Points whose saved RVEs are equal share one again (a checkpoint written before their
+        // increments parted).
+        let keepers = if law.share { equal_to_earlier(&rves) } else { vec![None; rves.len()] };
+        law.twins.lock().unwrap_or_else(|e| e.into_inner()).restore(&keepers);
         if let Some(device) = &law.device {
             let sims =
                 rves.into_iter().map(|v| DemSim::from_json(v, registry).map(Some)).collect::<Result<Vec<_>>>()?;
@@ -591,6 +593,22 @@ impl ConstitutiveLaw for DemRve {
         }
         Ok(())
     }
+}
+
+/// For each value, the first earlier one equal to it (None: the first of its kind).
+fn equal_to_earlier(values: &[serde_json::Value]) -> Vec<Option<usize>> {
+    let mut firsts: Vec<usize> = Vec::new();
+    values
+        .iter()
+        .enumerate()
+        .map(|(i, v)| {
+            let first = firsts.iter().copied().find(|&k| values[k] == *v);
+            if first.is_none() {
+                firsts.push(i);
+            }
+            first
+        })
+        .collect()
 }
 
 /// Makes the RVE in slot `to` a copy of the one in slot `from`.

@@ -45,6 +45,12 @@ impl Twins {
         }
     }
 
+    /// The sharing a checkpoint's equal RVEs give: `keeper[i]` the first point whose RVE equals
+    /// point i's (None: the first of its kind). Replaces what was there.
+    pub fn restore(&mut self, keeper: &[Option<usize>]) {
+        self.keeper = keeper.iter().map(|k| k.map(|k| k as u32)).collect();
+    }
+
     /// The point whose RVE object holds this point's RVE.
     pub fn object_of(&self, point: usize) -> usize {
         self.keeper.get(point).copied().flatten().map(|k| k as usize).unwrap_or(point)
