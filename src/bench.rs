@@ -486,7 +486,7 @@ fn oedometric_rves(rve: &granite_core::dem::DemSim, comm: Option<granite_core::c
     objects.insert("rve".into(), Arc::new(rve.clone()));
     // Every RVE steps (no exact sharing of points whose increments agree): the peer's work.
     let law = reg.build_law_with("dem_rve", &params(&[("dem_steps", DEM_STEPS as f64), ("share", 0.0)]), &objects)?;
-    let bytes = law.bytes_per_point();
+    let bytes = law.point_objects().map(|o| o.bytes_per_point()).unwrap_or(0);
     let m = sim.add_material("sand", 1700.0, law)?;
     let (xs, vols) = cell_points(&mesh, Layout::Gauss, 2, |_| Ok(true))?;
     let volume = rve.cell_volume().unwrap_or(1.0);

@@ -5,7 +5,7 @@
 use granite_core::dem::cell::PeriodicCell;
 use granite_core::dem::DemSim;
 use granite_core::ext::constitutive::ObjectMap;
-use granite_core::ext::{ConstitutiveLaw, LawBatch};
+use granite_core::ext::{ConstitutiveLaw, LawBatch, PointObjects};
 mod common;
 use common::prescribe_node_velocities;
 use granite_core::mpm::{Mesh, MpmSim, StressScheme};

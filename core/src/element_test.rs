@@ -96,7 +96,7 @@ fn least_change(j: &[Vec<f64>], r: &[f64]) -> Option<Vec<f64>> {
 /// Drives `law` (a fresh law, its per-point objects made for one point) along `path`.
 pub fn run(law: &dyn ConstitutiveLaw, path: &Path) -> Result<Record> {
     let held: Vec<usize> = (0..6).filter(|&c| path.hold[c].is_some()).collect();
-    if !held.is_empty() && law.save_objects()?.is_some() {
+    if !held.is_empty() && law.point_objects().is_some() {
         return Err(GraniteError::Setup(format!(
             "law \"{}\" keeps an object per point (a DEM sample): its element test follows a strain path \
              only (no `hold`), since the trial increments of a mixed path cannot be undone on it",

@@ -49,6 +49,16 @@ pub trait ConstitutiveLaw: Send + Sync {
     }
     /// Updates stress and state of a batch of points from their strain increments.
     fn update(&self, batch: LawBatch<'_>) -> Result<()>;
+    /// The law's per-point objects (an RVE per point), or None for a plain law.
+    fn point_objects(&self) -> Option<&dyn PointObjects> {
+        None
+    }
+}
+
+/// What a law that keeps an object per material point (`dem_rve`: an RVE) does with those
+/// objects beyond `ConstitutiveLaw::update`: make and drop them with the points, spread them over
+/// the processes of a run, save them in checkpoints, picture them, report their work.
+pub trait PointObjects: Send + Sync {
     /// `here.len()` points were appended to the material. Laws with per-point objects make one for
     /// each point whose flag is true; the others' objects live in other processes of the run.
     fn points_added(&self, _here: &[bool]) -> Result<()> {
@@ -69,7 +79,7 @@ pub trait ConstitutiveLaw: Send + Sync {
     /// other processes; their entries are left as they are), in one call over all the material's
     /// points. Returns each point's share of the call's time (its cost, for balancing).
     fn update_where(&self, _here: &[bool], _batch: LawBatch<'_>) -> Result<Vec<f64>> {
-        Err(crate::GraniteError::Other(format!("law {} updates its points one batch at a time", self.name())))
+        Err(crate::GraniteError::Other("this law updates its points one batch at a time".into()))
     }
     /// After the update of all the material's points (and, in a spread run, after every process
     /// has every point's result): what a law that couples its points does last, the same in
@@ -81,10 +91,7 @@ pub trait ConstitutiveLaw: Send + Sync {
     }
     /// Makes the object of point `to` a copy of point `from`'s, both in this process.
     fn copy_object(&self, from: usize, to: usize) -> Result<()> {
-        Err(crate::GraniteError::Other(format!(
-            "law {} keeps no object to copy from point {from} to {to}",
-            self.name()
-        )))
+        Err(crate::GraniteError::Other(format!("this law cannot copy the object of point {from} to point {to}")))
     }
     /// Values for each row of series.csv, from the material's state variables (summed over the
     /// materials that give the same name).
@@ -103,13 +110,9 @@ pub trait ConstitutiveLaw: Send + Sync {
     /// Drops the objects of the points whose flag is false (they live in another process now).
     fn release_objects(&self, _keep: &[bool]) {}
     /// One point's object as JSON, to move it to another process or gather it into a checkpoint.
-    fn point_object(&self, point: usize) -> Result<serde_json::Value> {
-        Err(crate::GraniteError::Other(format!("law {} keeps no object for point {point}", self.name())))
-    }
+    fn point_object(&self, point: usize) -> Result<serde_json::Value>;
     /// Takes in the object `point_object` wrote for `point` in another process.
-    fn adopt_point_object(&self, point: usize, _object: serde_json::Value) -> Result<()> {
-        Err(crate::GraniteError::Other(format!("law {} keeps no object for point {point}", self.name())))
-    }
+    fn adopt_point_object(&self, point: usize, object: serde_json::Value) -> Result<()>;
     /// What `save_objects` writes, from every point's `point_object` in point order (gathered
     /// from the processes that hold them).
     fn save_objects_from(&self, _points: Vec<serde_json::Value>) -> Result<Option<serde_json::Value>> {
@@ -127,10 +130,6 @@ pub trait ConstitutiveLaw: Send + Sync {
     /// The law's own per-point objects as JSON for a checkpoint (None: it has none).
     fn save_objects(&self) -> Result<Option<serde_json::Value>> {
         Ok(None)
-    }
-    /// Restores objects written by `save_objects` (their contact laws built by `contact_laws`).
-    fn load_objects(&self, _objects: serde_json::Value, _contact_laws: &dyn ContactLawSource) -> Result<()> {
-        Err(crate::GraniteError::Other(format!("law {} keeps no objects to restore", self.name())))
     }
     /// A picture of one point's object (e.g. its RVE's particles) for ParaView: positions and
     /// per-particle fields, or None when the law has no such object.

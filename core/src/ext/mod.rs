@@ -9,7 +9,7 @@ pub mod rve;
 pub mod shape;
 pub mod velocity_update;
 
-pub use constitutive::{ConstitutiveLaw, ConstitutiveLawFactory, LawBatch};
+pub use constitutive::{ConstitutiveLaw, ConstitutiveLawFactory, LawBatch, PointObjects};
 pub use contact::{ContactBatch, ContactLaw, ContactLawFactory, PairInfo};
 pub use rve::{RveBatch, RveDevice, RveOrder, RveReport};
 pub use shape::{ShapeModel, ShapeModelFactory};

@@ -72,12 +72,13 @@ impl MpmSim {
     fn write_checkpoint(&self, path: &Path, written_by: &str) -> Result<()> {
         let mut materials = Vec::new();
         for m in &self.materials {
-            let objects = match &m.spread {
-                Some(spread) => match spread.gather_objects(m.law.as_ref())? {
-                    Some(points) => m.law.save_objects_from(points)?,
+            let objects = match (m.law.point_objects(), &m.spread) {
+                (None, _) => None,
+                (Some(objects), Some(spread)) => match spread.gather_objects(objects)? {
+                    Some(points) => objects.save_objects_from(points)?,
                     None => None,
                 },
-                None => m.law.save_objects()?,
+                (Some(objects), None) => objects.save_objects()?,
             };
             materials.push(MaterialRecord {
                 name: m.name.clone(),

@@ -267,7 +267,9 @@ impl MpmSim {
             if let Some(mut spread) = self.new_spread(self.materials[k].law.as_ref()) {
                 let m = &mut self.materials[k];
                 let here = spread.add(m.count);
-                m.law.release_objects(&here);
+                if let Some(objects) = m.law.point_objects() {
+                    objects.release_objects(&here);
+                }
                 m.spread = Some(spread);
             }
         }
@@ -283,7 +285,8 @@ impl MpmSim {
     }
 
     fn new_spread(&self, law: &dyn ConstitutiveLaw) -> Option<crate::mpm::spread::Spread> {
-        let comm = self.comm.as_ref().filter(|c| c.size() > 1 && law.spreadable())?;
+        let spreadable = law.point_objects().is_some_and(|o| o.spreadable());
+        let comm = self.comm.as_ref().filter(|c| c.size() > 1 && spreadable)?;
         let mut spread = crate::mpm::spread::Spread::new(comm.clone());
         spread.balance_every = self.balance_every;
         Some(spread)
@@ -365,7 +368,9 @@ impl MpmSim {
             Some(spread) => spread.add(new.len()),
             None => vec![true; new.len()],
         };
-        self.materials[m].law.points_added(&here)?;
+        if let Some(objects) = self.materials[m].law.point_objects() {
+            objects.points_added(&here)?;
+        }
         let material = &mut self.materials[m];
         let stride = material.state_stride();
         let mut fresh = vec![0.0; stride];
@@ -437,7 +442,8 @@ impl MpmSim {
     pub fn law_series(&self) -> Vec<(&'static str, f64)> {
         let mut out: Vec<(&'static str, f64)> = Vec::new();
         for m in &self.materials {
-            for (name, value) in m.law.series(&m.state) {
+            let Some(objects) = m.law.point_objects() else { continue };
+            for (name, value) in objects.series(&m.state) {
                 match out.iter_mut().find(|(n, _)| *n == name) {
                     Some((_, v)) => *v += value,
                     None => out.push((name, value)),
@@ -473,7 +479,9 @@ impl MpmSim {
         for m in &mut self.materials {
             let mask = &keep[start..start + m.count];
             retain_strided(&mut m.state, m.law.state_names().len(), mask);
-            m.law.points_removed(mask);
+            if let Some(objects) = m.law.point_objects() {
+                objects.points_removed(mask);
+            }
             if let Some(spread) = m.spread.as_mut() {
                 spread.retain(mask);
             }

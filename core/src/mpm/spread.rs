@@ -14,7 +14,7 @@
 
 use crate::comm::{Comm, Reader, Writer};
 use crate::error::{GraniteError, Result};
-use crate::ext::{ConstitutiveLaw, LawBatch};
+use crate::ext::{ConstitutiveLaw, LawBatch, PointObjects};
 use crate::math::Voigt;
 use rayon::prelude::*;
 use std::time::Instant;
@@ -121,7 +121,7 @@ impl SpreadReport {
 }
 
 /// Takes in the point objects other processes sent: (point, JSON) records.
-fn adopt_objects(law: &dyn ConstitutiveLaw, incoming: Vec<Vec<u8>>) -> Result<()> {
+fn adopt_objects(law: &dyn PointObjects, incoming: Vec<Vec<u8>>) -> Result<()> {
     for bytes in incoming {
         let mut r = Reader::new(&bytes);
         while !r.done() {
@@ -200,6 +200,9 @@ impl Spread {
         state: &mut [f64],
         stride: usize,
     ) -> Result<()> {
+        let objects = law
+            .point_objects()
+            .ok_or_else(|| GraniteError::Other(format!("law {} keeps no objects to spread", law.name())))?;
         let started = Instant::now();
         let n = stress.len();
         let me = self.rank() as u32;
@@ -207,13 +210,13 @@ impl Spread {
         // Laws without state variables still get one slot per point to split on; it is not passed.
         let mut no_state = vec![0.0; if stride == 0 { n } else { 0 }];
         let states: &mut [f64] = if stride == 0 { &mut no_state } else { state };
-        let outcomes: Vec<(usize, f64, Result<()>)> = if law.whole_batch() {
+        let outcomes: Vec<(usize, f64, Result<()>)> = if objects.whole_batch() {
             // One call for all the points here (a device's submission), its time shared out.
             let here: Vec<bool> = owner.iter().map(|&o| o == me).collect();
             let first_here = here.iter().position(|&h| h);
             let batch = LawBatch { first: 0, stress: &mut *stress, dstrain, state: &mut states[..n * stride] };
             let t = Instant::now();
-            match law.update_where(&here, batch) {
+            match objects.update_where(&here, batch) {
                 Ok(costs) => {
                     (0..n).filter(|&i| here[i]).map(|i| (i, costs.get(i).copied().unwrap_or(0.0), Ok(()))).collect()
                 }
@@ -242,7 +245,7 @@ impl Spread {
         for (i, _, r) in failures {
             w.u64(*i as u64).str(&r.as_ref().err().map(|e| e.to_string()).unwrap_or_default());
         }
-        match law.pending_event() {
+        match objects.pending_event() {
             Some((point, text)) => w.u64(1).u64(point as u64).str(&text),
             None => w.u64(0),
         };
@@ -297,7 +300,7 @@ impl Spread {
         if let Some(rank) = readers.iter().position(|(r, left)| *left != 0 || !r.done()) {
             return Err(disagree(rank));
         }
-        law.set_pending_event(event);
+        objects.set_pending_event(event);
         self.stats.stages += 1;
         self.stats.stage_s += started.elapsed().as_secs_f64();
         if let Some((_, rank, text)) = failed {
@@ -305,14 +308,14 @@ impl Spread {
         }
         self.steps_since_balance += 1;
         if self.balance_every > 0 && self.steps_since_balance >= self.balance_every && self.size() > 1 {
-            self.balance(law)?;
+            self.balance(objects)?;
         }
         Ok(())
     }
 
     /// New owners from the measured costs, the same in every process; moves the objects that
     /// change hands.
-    fn balance(&mut self, law: &dyn ConstitutiveLaw) -> Result<()> {
+    fn balance(&mut self, law: &dyn PointObjects) -> Result<()> {
         let new_owner = balanced_owners(&self.owner, &self.cost, self.size());
         self.steps_since_balance = 0;
         self.cost.iter_mut().for_each(|c| *c = 0.0);
@@ -369,7 +372,7 @@ impl Spread {
 
     /// Copies point objects (from, to), the same list in every process: in place where one
     /// process owns both, else from the owner of `from` to the owner of `to` (collective).
-    pub fn copy_objects(&mut self, law: &dyn ConstitutiveLaw, copies: &[(usize, usize)]) -> Result<()> {
+    pub fn copy_objects(&mut self, law: &dyn PointObjects, copies: &[(usize, usize)]) -> Result<()> {
         let me = self.rank() as u32;
         let mut outgoing = vec![Writer::default(); self.size()];
         let mut across = false;
@@ -406,7 +409,7 @@ impl Spread {
     }
 
     /// Every point's object in point order on rank 0 (for a checkpoint); None elsewhere.
-    pub fn gather_objects(&self, law: &dyn ConstitutiveLaw) -> Result<Option<Vec<serde_json::Value>>> {
+    pub fn gather_objects(&self, law: &dyn PointObjects) -> Result<Option<Vec<serde_json::Value>>> {
         let me = self.rank() as u32;
         let mut w = Writer::default();
         let mut failure = String::new();

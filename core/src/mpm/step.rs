@@ -99,7 +99,7 @@ impl MpmSim {
         self.time = t_next;
         self.step += 1;
         for m in &self.materials {
-            for e in m.law.take_events() {
+            for e in m.law.point_objects().map(|o| o.take_events()).unwrap_or_default() {
                 self.events.push(format!("step {} (t = {:.6e} s), material \"{}\": {e}", self.step, self.time, m.name));
             }
         }
@@ -603,19 +603,20 @@ fn stress_update(pts: &mut Points, materials: &mut [Material]) -> Result<()> {
         }
         let stride = m.law.state_names().len();
         let law = m.law.as_ref();
-        if let Some(spread) = m.spread.as_mut() {
+        let objects = law.point_objects();
+        if let (Some(spread), Some(objects)) = (m.spread.as_mut(), objects) {
             let (stress, dstrain) = (&mut pts.stress[range.clone()], &pts.dstrain[range]);
             spread
                 .update(law, stress, dstrain, &mut m.state, stride)
-                .and_then(|()| law.complete_update(stress, &mut m.state))
-                .and_then(|copies| spread.copy_objects(law, &copies))
+                .and_then(|()| objects.complete_update(stress, &mut m.state))
+                .and_then(|copies| spread.copy_objects(objects, &copies))
                 .map_err(|e| GraniteError::Other(format!("material \"{}\" ({}): {e}", m.name, law.name())))?;
             continue;
         }
         // Laws with per-point objects (an RVE per point) are expensive per point: one task each.
-        let (chunk, min_chunks) = if law.whole_batch() {
+        let (chunk, min_chunks) = if objects.is_some_and(|o| o.whole_batch()) {
             (range.len(), 1)
-        } else if law.bytes_per_point() > 0 {
+        } else if objects.is_some() {
             (1, 1)
         } else {
             (CHUNK, MIN_CHUNKS_PER_TASK)
@@ -641,9 +642,12 @@ fn stress_update(pts: &mut Points, materials: &mut [Material]) -> Result<()> {
         if let Some(Err(e)) = results.into_iter().find(|r| r.is_err()) {
             return Err(GraniteError::Other(format!("material \"{}\" ({}): {e}", m.name, law.name())));
         }
-        law.complete_update(&mut pts.stress[range], &mut m.state)
-            .and_then(|copies| copies.into_iter().try_for_each(|(from, to)| law.copy_object(from, to)))
-            .map_err(|e| GraniteError::Other(format!("material \"{}\" ({}): {e}", m.name, law.name())))?;
+        if let Some(objects) = objects {
+            objects
+                .complete_update(&mut pts.stress[range], &mut m.state)
+                .and_then(|copies| copies.into_iter().try_for_each(|(from, to)| objects.copy_object(from, to)))
+                .map_err(|e| GraniteError::Other(format!("material \"{}\" ({}): {e}", m.name, law.name())))?;
+        }
     }
     Ok(())
 }

@@ -50,7 +50,9 @@ fn element_test(ctx: &ScriptContext, law: &str, params: Map, path: Map) -> RhaiR
     let registry = ctx.registry();
     let (given, objects) = super::mpm_api::law_inputs(&params, law, &registry)?;
     let law_obj = registry.build_law_with(law, &given, &objects).or_rhai()?;
-    law_obj.points_added(&[true]).or_rhai()?;
+    if let Some(objects) = law_obj.point_objects() {
+        objects.points_added(&[true]).or_rhai()?;
+    }
     let record = run(law_obj.as_ref(), &path).or_rhai()?;
     let mut out = Map::new();
     out.insert("stress".into(), Dynamic::from(rows(&record.stress)));

@@ -277,13 +277,15 @@ impl ScriptSim for MpmScene {
     }
     fn run_ended(&mut self, ctx: &ScriptContext) -> Result<()> {
         for m in &self.mpm.materials {
-            let spared = match &m.spread {
-                Some(spread) => spread.sum(m.law.process_savings())?,
-                None => m.law.process_savings(),
-            };
-            if ctx.writes_files() {
-                for (key, value) in m.law.run_summary(&m.state, spared) {
-                    ctx.set_summary(&key, value);
+            if let Some(objects) = m.law.point_objects() {
+                let spared = match &m.spread {
+                    Some(spread) => spread.sum(objects.process_savings())?,
+                    None => objects.process_savings(),
+                };
+                if ctx.writes_files() {
+                    for (key, value) in objects.run_summary(&m.state, spared) {
+                        ctx.set_summary(&key, value);
+                    }
                 }
             }
             let Some(spread) = &m.spread else { continue };
@@ -495,7 +497,7 @@ impl Handle<MpmScene> {
             return err(format!("material \"{}\" does not belong to this simulation", m.name));
         };
         let law = material.law.name().to_string();
-        if material.law.bytes_per_point() > 0 {
+        if material.law.point_objects().is_some() {
             return err(format!(
                 "set_material(\"{}\"): law \"{law}\" keeps an object per point; its parameters are fixed",
                 m.name
@@ -728,7 +730,7 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
         let index = m.index_in(s)?;
         let st = s.lock();
         match st.sim.mpm.materials.get(index) {
-            Some(material) => Ok(material.law.bytes_per_point() as i64),
+            Some(material) => Ok(material.law.point_objects().map(|o| o.bytes_per_point()).unwrap_or(0) as i64),
             None => err(format!("material \"{}\" does not belong to this simulation", m.name)),
         }
     });
@@ -959,7 +961,8 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
             Some(spread) => (spread.owner[local] as usize, spread.owner[local] as usize == spread.rank()),
             None => (0, sim.writes_files()),
         };
-        let frame = if here { sim.materials[m].law.object_frame(local) } else { None };
+        let objects = sim.materials[m].law.point_objects();
+        let frame = if here { objects.and_then(|o| o.object_frame(local)) } else { None };
         let law = sim.materials[m].law.name().to_string();
         let path = st.points_path(file);
         let written = match frame {

@@ -9,7 +9,7 @@ use super::dem_rve_share::Twins;
 use granite_core::dem::DemSim;
 use granite_core::ext::constitutive::ObjectMap;
 use granite_core::ext::rve::RveDeviceChoice;
-use granite_core::ext::{ConstitutiveLaw, ConstitutiveLawFactory, LawBatch, RveOrder, RveReport};
+use granite_core::ext::{ConstitutiveLaw, ConstitutiveLawFactory, LawBatch, PointObjects, RveOrder, RveReport};
 use granite_core::math::Voigt;
 use granite_core::params::{ParamSpec, Params};
 use granite_core::{GraniteError, Result};
@@ -367,6 +367,50 @@ impl ConstitutiveLaw for DemRve {
     fn state_names(&self) -> &[&'static str] {
         STATE
     }
+    fn update(&self, batch: LawBatch<'_>) -> Result<()> {
+        if self.whole_batch() && batch.first == 0 && batch.len() == self.points() {
+            // `complete_update` follows, called by the MPM step.
+            let all = vec![true; batch.len()];
+            return self.update_batch(&all, batch).map(|_| ());
+        }
+        if self.device.is_some() || self.activation.is_some() {
+            return Err(GraniteError::Other(format!(
+                "dem_rve with a device or adaptive RVEs updates all {} points at once, not points {}..{}",
+                self.points(),
+                batch.first,
+                batch.first + batch.len()
+            )));
+        }
+        let rves = self.rves.read().map_err(|_| GraniteError::Other("RVE store poisoned".into()))?;
+        for k in 0..batch.len() {
+            let index = batch.first + k;
+            if let Some((from, to)) = self.twins.lock().unwrap_or_else(|e| e.into_inner()).own(index) {
+                copy_within(&rves, from, to)?;
+            }
+            let mut rve = rves
+                .get(index)
+                .ok_or_else(|| GraniteError::Other(format!("no RVE for material point {index}")))?
+                .lock()
+                .map_err(|_| GraniteError::Other(format!("RVE {index} poisoned")))?;
+            let Some(rve) = &mut *rve else {
+                return Err(GraniteError::Other(format!("the RVE of material point {index} is in another process")));
+            };
+            let report = self.step_own(index, &batch.dstrain[k], rve)?;
+            self.record(
+                &report,
+                rve.sim.spheres.len(),
+                &mut batch.stress[k],
+                &mut batch.state[k * STATE.len()..][..STATE.len()],
+            );
+        }
+        Ok(())
+    }
+    fn point_objects(&self) -> Option<&dyn PointObjects> {
+        Some(self)
+    }
+}
+
+impl PointObjects for DemRve {
     fn points_added(&self, here: &[bool]) -> Result<()> {
         self.twins.lock().unwrap_or_else(|e| e.into_inner()).add(here, self.share);
         if let Some(a) = &self.activation {
@@ -554,44 +598,6 @@ impl ConstitutiveLaw for DemRve {
         };
         let list = (0..count).map(|k| self.point_object(k)).collect::<Result<Vec<_>>>()?;
         self.save_objects_from(list)
-    }
-    fn update(&self, batch: LawBatch<'_>) -> Result<()> {
-        if self.whole_batch() && batch.first == 0 && batch.len() == self.points() {
-            // `complete_update` follows, called by the MPM step.
-            let all = vec![true; batch.len()];
-            return self.update_batch(&all, batch).map(|_| ());
-        }
-        if self.device.is_some() || self.activation.is_some() {
-            return Err(GraniteError::Other(format!(
-                "dem_rve with a device or adaptive RVEs updates all {} points at once, not points {}..{}",
-                self.points(),
-                batch.first,
-                batch.first + batch.len()
-            )));
-        }
-        let rves = self.rves.read().map_err(|_| GraniteError::Other("RVE store poisoned".into()))?;
-        for k in 0..batch.len() {
-            let index = batch.first + k;
-            if let Some((from, to)) = self.twins.lock().unwrap_or_else(|e| e.into_inner()).own(index) {
-                copy_within(&rves, from, to)?;
-            }
-            let mut rve = rves
-                .get(index)
-                .ok_or_else(|| GraniteError::Other(format!("no RVE for material point {index}")))?
-                .lock()
-                .map_err(|_| GraniteError::Other(format!("RVE {index} poisoned")))?;
-            let Some(rve) = &mut *rve else {
-                return Err(GraniteError::Other(format!("the RVE of material point {index} is in another process")));
-            };
-            let report = self.step_own(index, &batch.dstrain[k], rve)?;
-            self.record(
-                &report,
-                rve.sim.spheres.len(),
-                &mut batch.stress[k],
-                &mut batch.state[k * STATE.len()..][..STATE.len()],
-            );
-        }
-        Ok(())
     }
 }
 
