@@ -138,14 +138,14 @@ pub fn check_sets(script: &Path, sets: &[Vec<(String, String)>]) -> Result<()> {
             let params: Vec<String> = set.iter().map(|(k, v)| format!("{k}={v}")).collect();
             GraniteError::Setup(format!("run {k} [{}] would fail before it starts: {e}", params.join(" ")))
         };
-        let options = granite_core::script::RunOptions { overrides: set.clone(), quiet: true, ..Default::default() };
-        let declared = granite_core::script::list_params(script, crate::registry(), options)
-            .map_err(|e| refused(e.to_string()))?;
+        let options = granite_script::RunOptions { overrides: set.clone(), quiet: true, ..Default::default() };
+        let declared =
+            granite_script::list_params(script, crate::registry(), options).map_err(|e| refused(e.to_string()))?;
         // Parameters are declared before a script's first simulation: a name not among them is
         // a misspelling the run would refuse there.
         if let Some((name, _)) = set.iter().find(|(name, _)| !declared.iter().any(|d| &d.name == name)) {
             let names: Vec<&str> = declared.iter().map(|d| d.name.as_str()).collect();
-            let near = granite_core::script::api_doc::closest(name, names.iter().copied());
+            let near = granite_script::api_doc::closest(name, names.iter().copied());
             let hint = near.first().map(|n| format!(" (did you mean `{n}`?)")).unwrap_or_default();
             return Err(refused(format!(
                 "{} declares no parameter `{name}`{hint}; declared: {}",

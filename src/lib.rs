@@ -9,8 +9,8 @@ pub mod mpi_comm;
 pub mod repl;
 pub mod signals;
 
-use granite_core::script::{run_script, RunOptions, RunReport};
 use granite_core::{Registry, Result};
+use granite_script::{run_script, RunOptions, RunReport};
 use std::path::{Path, PathBuf};
 
 /// The registry every run starts from: all built-in plugins (and, built with `--features gpu`,
@@ -125,8 +125,8 @@ pub fn threads_per_process() -> Option<usize> {
 /// checks them.
 pub fn describe_params(script: &Path, overrides: Vec<(String, String)>, plugins: Vec<PathBuf>) -> Result<String> {
     let options = RunOptions { overrides: overrides.clone(), plugins, quiet: true, ..Default::default() };
-    let declared = granite_core::script::list_params(script, registry(), options)?;
-    let shown = |d: &granite_core::script::Declared| {
+    let declared = granite_script::list_params(script, registry(), options)?;
+    let shown = |d: &granite_script::Declared| {
         let (value, default) = (d.value.to_string(), d.default.to_string());
         if value == default {
             value
@@ -206,7 +206,7 @@ pub fn plugin_listing(libraries: &[PathBuf]) -> Result<String> {
     use std::fmt::Write;
     let mut reg = registry();
     for lib in libraries {
-        granite_core::plugin::load_plugin(lib, &mut reg, false)?;
+        granite_loader::load_plugin(lib, &mut reg, false)?;
     }
     let mut out = String::from("constitutive laws (sim.material(NAME, #{ density: ..., PARAMS })):\n");
     for name in reg.law_names() {

@@ -322,7 +322,7 @@ fn main() -> ExitCode {
                         out.join("batch_summary.csv").display()
                     );
                     if let Some(signal) = granite::signals::received() {
-                        granite_core::errln!("granite batch: stopped by {}", granite_core::script::signal_name(signal));
+                        granite_core::errln!("granite batch: stopped by {}", granite_script::signal_name(signal));
                         ExitCode::from((128 + signal).clamp(0, 255) as u8)
                     } else if ok < outcomes.len() {
                         ExitCode::FAILURE
@@ -336,7 +336,7 @@ fn main() -> ExitCode {
                 }
             }
         }
-        Command::Plot { csv, x, y, out } => match granite_core::io::plot::plot(&csv, &x, &y, out) {
+        Command::Plot { csv, x, y, out } => match granite_script::plot::plot(&csv, &x, &y, out) {
             Ok(path) => {
                 granite_core::outln!("granite: wrote {}", path.display());
                 ExitCode::SUCCESS
@@ -349,14 +349,8 @@ fn main() -> ExitCode {
         Command::Repl { script, out, set, plugins, quiet } => {
             let program = format!("granite {} ({})", env!("CARGO_PKG_VERSION"), env!("GRANITE_GIT_COMMIT"));
             let out_dir = out.unwrap_or_else(|| PathBuf::from("out").join("repl"));
-            let options = granite_core::script::RunOptions {
-                program,
-                out_dir,
-                overrides: set,
-                quiet,
-                plugins,
-                ..Default::default()
-            };
+            let options =
+                granite_script::RunOptions { program, out_dir, overrides: set, quiet, plugins, ..Default::default() };
             match granite::repl::run(script.as_deref(), options) {
                 Ok(0) => ExitCode::SUCCESS,
                 Ok(failed) => {
@@ -370,21 +364,21 @@ fn main() -> ExitCode {
             }
         }
         Command::Api { name: None } => {
-            granite_core::out!("{}", granite_core::script::api_doc::markdown());
+            granite_core::out!("{}", granite_script::api_doc::markdown());
             ExitCode::SUCCESS
         }
         Command::Api { name: Some(name) } => {
-            let found = granite_core::script::api_doc::lookup(&name);
+            let found = granite_script::api_doc::lookup(&name);
             if found.is_empty() {
                 let word = name.rsplit('.').next().unwrap_or(&name);
                 granite_core::errln!(
                     "granite: no function or property `{name}` in the API{}",
-                    granite_core::script::api_doc::did_you_mean(word)
+                    granite_script::api_doc::did_you_mean(word)
                 );
                 return ExitCode::FAILURE;
             }
             for d in found {
-                granite_core::out!("{}", granite_core::script::api_doc::help_text(d));
+                granite_core::out!("{}", granite_script::api_doc::help_text(d));
             }
             ExitCode::SUCCESS
         }

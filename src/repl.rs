@@ -2,8 +2,8 @@
 //! and evaluates them in one session. Ctrl-C pauses a running simulation instead of quitting.
 
 use granite_core::error::Result;
-use granite_core::script::repl::{Outcome, ReplSession};
-use granite_core::script::RunOptions;
+use granite_script::repl::{Outcome, ReplSession};
+use granite_script::RunOptions;
 use std::io::{BufRead, IsTerminal};
 use std::path::{Path, PathBuf};
 
@@ -145,7 +145,7 @@ struct Completion {
 impl rustyline::completion::Completer for Completion {
     type Candidate = String;
     fn complete(&self, line: &str, pos: usize, _: &rustyline::Context<'_>) -> rustyline::Result<(usize, Vec<String>)> {
-        Ok(granite_core::script::api_doc::complete(line, pos, &self.variables))
+        Ok(granite_script::api_doc::complete(line, pos, &self.variables))
     }
 }
 

@@ -3,7 +3,7 @@
 //! before (kept in tests/checkpoints/) still load and run.
 
 mod common;
-use granite_core::script::{run_source, RunOptions};
+use granite_script::{run_source, RunOptions};
 use std::path::{Path, PathBuf};
 
 /// Runs script text; Err carries the script error.

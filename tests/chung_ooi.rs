@@ -12,7 +12,7 @@
 //! the benchmark's reference runs; the contact then lasts about 300 steps, so the duration counted
 //! in steps is within 1 % and the sampled extremes closer still: hence 1 % on all three.
 
-use granite_core::script::{run_source, RunOptions, RunReport};
+use granite_script::{run_source, RunOptions, RunReport};
 
 mod common;
 

@@ -2,7 +2,7 @@
 //! console a YADE user expects (`O.bodies`, `O.interactions`, `O.forces`), each call checked
 //! against mechanics or against an uninterrupted run.
 
-use granite_core::script::{run_source, RunOptions, RunReport};
+use granite_script::{run_source, RunOptions, RunReport};
 
 mod common;
 

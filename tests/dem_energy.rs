@@ -2,13 +2,13 @@
 //! losses to friction, to the dashpots and to Cundall damping, and the work of moving walls add up
 //! to a constant.
 
-use granite_core::script::{run_source, RunOptions};
+use granite_script::{run_source, RunOptions};
 
 mod common;
 
 /// 120 spheres dropped into a box under `law` and Cundall `damping`, then squeezed by a side wall
 /// moving in at 5 cm/s, the energy tracked throughout; `series` rows every that many steps.
-fn squeezed_deposition(name: &str, law: &str, damping: f64, series: u64) -> granite_core::script::RunReport {
+fn squeezed_deposition(name: &str, law: &str, damping: f64, series: u64) -> granite_script::RunReport {
     let source = format!(
         r#"
 let r = 0.01; let rho = 2600.0;

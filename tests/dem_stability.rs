@@ -216,14 +216,14 @@ fn run_script(
     name: &str,
     source: &str,
     (param, value): (&str, &str),
-) -> granite_core::Result<granite_core::script::RunReport> {
-    let options = granite_core::script::RunOptions {
+) -> granite_core::Result<granite_script::RunReport> {
+    let options = granite_script::RunOptions {
         out_dir: common::out_dir(&format!("{name}_{value}")),
         overrides: common::sets(&[(param, value)]),
         quiet: true,
         ..Default::default()
     };
-    granite_core::script::run_source(&format!("{name}.rhai"), source, granite::registry(), options)
+    granite_script::run_source(&format!("{name}.rhai"), source, granite::registry(), options)
 }
 
 #[test]

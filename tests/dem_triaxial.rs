@@ -7,12 +7,12 @@ use common::*;
 
 /// Shears 1000 spheres to 5 % axial strain at the script's quasi-static inertial number (2e-4)
 /// and returns its summary.
-fn triaxial(name: &str, confining: &str, young: &str) -> granite_core::script::RunReport {
+fn triaxial(name: &str, confining: &str, young: &str) -> granite_script::RunReport {
     let pairs = [("confining", confining), ("young", young), ("axial_strain", "0.05")];
     run("dem/triaxial_periodic.rhai", name, &pairs, 2).unwrap_or_else(|e| panic!("{name}: {e}"))
 }
 
-fn assert_lateral_stress_held(name: &str, report: &granite_core::script::RunReport) {
+fn assert_lateral_stress_held(name: &str, report: &granite_script::RunReport) {
     let mean = summary_f64(report, "mean_lateral_stress_error");
     let smoothed = summary_f64(report, "max_lateral_stress_error_2500_steps");
     let single = summary_f64(report, "max_lateral_stress_error");

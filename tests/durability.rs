@@ -38,14 +38,14 @@ fn block(cells: usize, extra: &str) -> String {
 
 /// Runs `source` in this process into `out` (the same folder every time: runs that resume one
 /// another) with `--set` values `pairs`.
-fn run_in(out: &Path, source: &str, pairs: &[(&str, &str)]) -> granite_core::script::RunReport {
-    let options = granite_core::script::RunOptions {
+fn run_in(out: &Path, source: &str, pairs: &[(&str, &str)]) -> granite_script::RunReport {
+    let options = granite_script::RunOptions {
         out_dir: out.to_path_buf(),
         overrides: common::sets(pairs),
         quiet: true,
         ..Default::default()
     };
-    granite_core::script::run_source("block.rhai", source, granite::registry(), options).unwrap()
+    granite_script::run_source("block.rhai", source, granite::registry(), options).unwrap()
 }
 
 fn write_script(dir: &Path, source: &str) -> PathBuf {

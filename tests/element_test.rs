@@ -1,7 +1,7 @@
 //! Element tests from scripts (`element_test`): one material point along a strain or mixed path,
 //! no mesh, against closed-form answers.
 
-use granite_core::script::{run_source, RunOptions, RunReport};
+use granite_script::{run_source, RunOptions, RunReport};
 
 mod common;
 

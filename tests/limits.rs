@@ -3,7 +3,7 @@
 //! arrays, strings and maps stop with an error before they take the memory the process has.
 
 mod common;
-use granite_core::script::{run_source, RunOptions};
+use granite_script::{run_source, RunOptions};
 
 fn fails(name: &str, source: &str) -> String {
     let options = RunOptions { out_dir: common::out_dir(name), quiet: true, ..Default::default() };

@@ -99,9 +99,8 @@ fn bad_plugins_are_refused_with_the_library_named() {
     let good = build_plugin(&[], "plugin-test");
     let wrong = build_plugin(&["wrong_abi"], "plugin-test-wrong-abi");
     let run = |src: String, name: &str| -> String {
-        let options =
-            granite_core::script::RunOptions { out_dir: common::out_dir(name), quiet: true, ..Default::default() };
-        match granite_core::script::run_source("plugin.rhai", &src, granite::registry(), options) {
+        let options = granite_script::RunOptions { out_dir: common::out_dir(name), quiet: true, ..Default::default() };
+        match granite_script::run_source("plugin.rhai", &src, granite::registry(), options) {
             Ok(_) => panic!("{name}: should fail"),
             Err(e) => e.to_string(),
         }
@@ -243,13 +242,13 @@ fn a_plugin_table_declaring_more_parameters_than_it_names_is_refused() {
     {
         let lying: &'static LawTable = Box::leak(Box::new(table(count)));
         let mut registry = granite::registry();
-        let e = unsafe { granite_core::plugin::register_table(lying, "liar.so".into(), &mut registry, false) };
+        let e = unsafe { granite_loader::register_table(lying, "liar.so".into(), &mut registry, false) };
         let e = e.expect_err("refused").to_string();
         assert!(e.contains("liar.so") && e.contains(says), "{e}");
         assert!(registry.law_factory("lying").is_err());
     }
     let honest: &'static LawTable = Box::leak(Box::new(table(2)));
     let mut registry = granite::registry();
-    unsafe { granite_core::plugin::register_table(honest, "honest.so".into(), &mut registry, false) }.unwrap();
+    unsafe { granite_loader::register_table(honest, "honest.so".into(), &mut registry, false) }.unwrap();
     assert_eq!(registry.law_factory("lying").unwrap().param_specs().len(), 2);
 }

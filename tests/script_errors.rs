@@ -2,7 +2,7 @@
 //! unstable stops, keeps and writes its last good state.
 
 mod common;
-use granite_core::script::{run_source, RunOptions};
+use granite_script::{run_source, RunOptions};
 
 fn run_err(name: &str, source: &str, overrides: &[(&str, &str)]) -> String {
     let options = RunOptions {

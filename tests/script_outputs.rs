@@ -1,10 +1,10 @@
 //! Where a script's files go and come from, and values checked where they are given.
 
-use granite_core::script::{run_source, RunOptions};
+use granite_script::{run_source, RunOptions};
 
 mod common;
 
-fn run(name: &str, out: &std::path::Path, source: &str) -> granite_core::Result<granite_core::script::RunReport> {
+fn run(name: &str, out: &std::path::Path, source: &str) -> granite_core::Result<granite_script::RunReport> {
     let options = RunOptions { out_dir: out.to_path_buf(), quiet: true, ..Default::default() };
     run_source(&format!("{name}.rhai"), source, granite::registry(), options)
 }
@@ -22,12 +22,12 @@ sim.dt(1e-3);
 #[test]
 fn repl_simulations_have_their_own_folders() {
     let out = common::out_dir("outputs_repl");
-    let mut session = granite_core::script::repl::ReplSession::new(
+    let mut session = granite_script::repl::ReplSession::new(
         granite::registry(),
         RunOptions { out_dir: out.clone(), quiet: true, ..Default::default() },
     )
     .unwrap();
-    use granite_core::script::repl::Outcome;
+    use granite_script::repl::Outcome;
     let ok = |o: Outcome| assert!(matches!(o, Outcome::Value(_)), "{o:?}");
     ok(session.eval(&format!("{ONE_SPHERE} sim.run_steps(10); sim.save(\"state.json\");"), false));
     ok(session.eval("let again = dem_load(\"state.json\"); again.run_steps(5);", false));

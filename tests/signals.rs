@@ -71,8 +71,8 @@ fn sigint_and_sigterm_stop_the_run_cleanly_and_it_resumes_from_its_checkpoint() 
             checkpoint.to_str().unwrap()
         );
         let resumed = common::out_dir(&format!("signal_{name}_resumed"));
-        let options = granite_core::script::RunOptions { out_dir: resumed.clone(), quiet: true, ..Default::default() };
-        granite_core::script::run_source("resume.rhai", &resume, granite::registry(), options).unwrap();
+        let options = granite_script::RunOptions { out_dir: resumed.clone(), quiet: true, ..Default::default() };
+        granite_script::run_source("resume.rhai", &resume, granite::registry(), options).unwrap();
         assert_eq!(json(&resumed.join("summary.json"))["step"], step);
     }
 }

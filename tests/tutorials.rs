@@ -2,7 +2,7 @@
 
 mod common;
 
-fn run(script: &str, name: &str, sets: &[(&str, &str)]) -> granite_core::script::RunReport {
+fn run(script: &str, name: &str, sets: &[(&str, &str)]) -> granite_script::RunReport {
     let path = common::root().join("examples").join(script);
     granite::run(&path, common::sets(sets), Some(common::out_dir(name)), true, Some(1)).unwrap()
 }

@@ -49,9 +49,7 @@ pub mod memory;
 pub mod mpm;
 pub mod par;
 pub mod params;
-pub mod plugin;
 pub mod registry;
-pub mod script;
 pub mod simd;
 
 pub use error::{GraniteError, Result};

@@ -29,11 +29,11 @@ pub fn run(
     name: &str,
     pairs: &[(&str, &str)],
     threads: usize,
-) -> granite_core::Result<granite_core::script::RunReport> {
+) -> granite_core::Result<granite_script::RunReport> {
     granite::run(&script(script_rel), sets(pairs), Some(out_dir(name)), true, Some(threads))
 }
 
-pub fn summary_f64(report: &granite_core::script::RunReport, key: &str) -> f64 {
+pub fn summary_f64(report: &granite_script::RunReport, key: &str) -> f64 {
     report.summary.get(key).and_then(|v| v.as_f64()).unwrap_or_else(|| panic!("summary has no number `{key}`"))
 }
 
@@ -54,8 +54,8 @@ pub fn column(header: &[String], name: &str) -> usize {
 pub fn run_text(name: &str, source: &str) -> PathBuf {
     let out = out_dir(name);
     let options =
-        granite_core::script::RunOptions { out_dir: out.clone(), overrides: vec![], quiet: true, ..Default::default() };
-    granite_core::script::run_source(&format!("{name}.rhai"), source, granite::registry(), options)
+        granite_script::RunOptions { out_dir: out.clone(), overrides: vec![], quiet: true, ..Default::default() };
+    granite_script::run_source(&format!("{name}.rhai"), source, granite::registry(), options)
         .unwrap_or_else(|e| panic!("{name}: {e}"));
     out
 }
@@ -64,9 +64,8 @@ pub fn run_text(name: &str, source: &str) -> PathBuf {
 #[allow(dead_code)]
 pub fn run_text_err(name: &str, source: &str) -> String {
     let out = out_dir(name);
-    let options =
-        granite_core::script::RunOptions { out_dir: out, overrides: vec![], quiet: true, ..Default::default() };
-    match granite_core::script::run_source(&format!("{name}.rhai"), source, granite::registry(), options) {
+    let options = granite_script::RunOptions { out_dir: out, overrides: vec![], quiet: true, ..Default::default() };
+    match granite_script::run_source(&format!("{name}.rhai"), source, granite::registry(), options) {
         Ok(_) => panic!("{name}: the script ran without an error"),
         Err(e) => e.to_string(),
     }

@@ -140,6 +140,19 @@ impl DemSim {
         }
     }
 
+    /// [`DemSim::deep_overlaps`] of the set-up as the first step would see it: candidate lists in
+    /// force are used as they are, missing ones are built now (the step still builds its own, with
+    /// its checks). Empty when the lists cannot be built (the step reports why).
+    pub fn deep_overlaps_before_run(&mut self, fraction: f64, most: usize) -> Vec<(String, f64)> {
+        if self.needs_rebuild {
+            if self.rebuild_candidates().is_err() {
+                return Vec::new();
+            }
+            self.needs_rebuild = true;
+        }
+        self.deep_overlaps(fraction, most)
+    }
+
     /// Sphere pairs and sphere-wall pairs whose overlap exceeds `fraction` of the smaller radius
     /// (of the sphere's, for a wall), from the candidate lists as they are (after a rebuild):
     /// `(description, overlap / radius)`, deepest first, at most `most`. A packing made by hand

@@ -2,7 +2,6 @@
 
 pub mod checkpoint_file;
 pub mod durable;
-pub mod plot;
 pub mod series;
 pub mod vtk;
 

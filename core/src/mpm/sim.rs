@@ -224,7 +224,7 @@ pub struct MpmSim {
     pub(crate) comm: Option<crate::comm::Comm>,
     balance_every: u64,
     /// The mesh was replaced (its boundary conditions with it) since the last run began.
-    pub(crate) mesh_replaced: bool,
+    pub mesh_replaced: bool,
 }
 
 impl MpmSim {

@@ -7,9 +7,9 @@ use super::convert::{api_options, get, number, string, OrRhai, RhaiResult};
 use super::driver::Handle;
 use super::mpm_api::MpmScene;
 use super::ScriptContext;
-use crate::error::{GraniteError, Result};
-use crate::ext::{ConstitutiveLaw, LawBatch};
-use crate::params::Params;
+use granite_core::error::{GraniteError, Result};
+use granite_core::ext::{ConstitutiveLaw, LawBatch};
+use granite_core::params::Params;
 use rhai::{Array, Dynamic, Engine, FnPtr, Map};
 use std::sync::Arc;
 

@@ -1,7 +1,7 @@
 //! `granite plot`: line plots of series.csv columns as SVG or PNG, so energies, runout and stress
 //! paths can be looked at without other tools.
 
-use crate::error::{GraniteError, Result};
+use granite_core::error::{GraniteError, Result};
 use plotters::prelude::*;
 use std::path::{Path, PathBuf};
 

@@ -3,6 +3,10 @@
 //!
 //! Rhai is called at set-up and from callbacks every N steps, never per material point.
 
+// As in granite-core: index loops over fixed-size arrays read better than iterator chains, and
+// negated comparisons are deliberate (they also reject NaN).
+#![allow(clippy::needless_range_loop, clippy::neg_cmp_op_on_partial_ord)]
+
 pub mod api_doc;
 pub mod convert;
 mod data_memory;
@@ -13,15 +17,16 @@ mod element;
 mod limits;
 mod mpm_api;
 mod output;
+pub mod plot;
 mod potential_api;
 pub mod repl;
 mod script_law;
 
 pub use mpm_api::SimHandle;
 
-use crate::error::{GraniteError, Result};
-use crate::registry::Registry;
 use convert::{err, RhaiResult};
+use granite_core::error::{GraniteError, Result};
+use granite_core::registry::Registry;
 use indexmap::IndexMap;
 use limits::Limits;
 use rhai::{Dynamic, Engine, EvalAltResult, NativeCallContext};
@@ -56,7 +61,7 @@ pub struct RunOptions {
     pub folder_per_simulation: bool,
     /// The processes running this script together (`mpirun`); None: this process alone. Every
     /// process runs the whole script; the first one writes the files.
-    pub comm: Option<crate::comm::Comm>,
+    pub comm: Option<granite_core::comm::Comm>,
     /// Set by a signal handler to the number of a signal asking the run to stop (SIGINT, SIGTERM):
     /// a run stops cleanly at its next step and the script ends `interrupted`.
     pub stop_signal: Option<&'static std::sync::atomic::AtomicI32>,
@@ -83,7 +88,7 @@ impl ScriptContext {
     }
 
     /// The other processes of the run, if any.
-    pub fn comm(&self) -> Option<&crate::comm::Comm> {
+    pub fn comm(&self) -> Option<&granite_core::comm::Comm> {
         self.options.comm.as_ref().filter(|c| c.size() > 1)
     }
 
@@ -92,7 +97,7 @@ impl ScriptContext {
     /// `sim.save` wrote it).
     pub(crate) fn input_path(&self, file: &str) -> std::result::Result<PathBuf, String> {
         // A checkpoint whose newest file was lost still has the one before (`io::durable`).
-        let exists = |p: &Path| p.is_file() || crate::io::durable::previous_path(p).is_file();
+        let exists = |p: &Path| p.is_file() || granite_core::io::durable::previous_path(p).is_file();
         let given = Path::new(file);
         if exists(given) || given.is_absolute() {
             return Ok(given.to_path_buf());
@@ -241,7 +246,7 @@ impl ScriptContext {
     /// Loads a native law plugin into this script's registry.
     pub fn load_plugin(&self, path: &Path, replace: bool) -> Result<(String, String)> {
         let mut reg = self.registry.write().unwrap_or_else(|p| p.into_inner());
-        let (name, version) = crate::plugin::load_plugin(path, &mut reg, replace)?;
+        let (name, version) = granite_loader::load_plugin(path, &mut reg, replace)?;
         self.plugins.lock().unwrap().push((path.display().to_string(), name.clone(), version.clone()));
         Ok((name, version))
     }
@@ -318,7 +323,7 @@ impl ScriptContext {
     /// `warnings` (the first [`MAX_WARNINGS_KEPT`], then a count of the rest).
     pub fn warn(&self, text: &str) {
         if self.writes_files() {
-            crate::errln!("granite: {text}");
+            granite_core::errln!("granite: {text}");
         }
         let mut warnings = self.warnings.lock().unwrap();
         warnings.1 += 1;
@@ -451,12 +456,12 @@ fn build_engine(ctx: &Arc<ScriptContext>) -> Engine {
     let c = ctx.clone();
     engine.register_fn("out_dir", move || c.options.out_dir.display().to_string());
     if ctx.writes_files() {
-        engine.register_fn("print_line", |s: &str| crate::outln!("{s}"));
+        engine.register_fn("print_line", |s: &str| granite_core::outln!("{s}"));
         // Rhai's own print and debug panic on a closed standard output.
-        engine.on_print(|s| crate::outln!("{s}"));
+        engine.on_print(|s| granite_core::outln!("{s}"));
         engine.on_debug(|s, source, pos| match source {
-            Some(source) => crate::errln!("{source} @ {pos:?} | {s}"),
-            None => crate::errln!("{pos:?} | {s}"),
+            Some(source) => granite_core::errln!("{source} @ {pos:?} | {s}"),
+            None => granite_core::errln!("{pos:?} | {s}"),
         });
     } else {
         // The other processes of an MPI run run the same script: one of them speaks.
@@ -470,11 +475,11 @@ fn build_engine(ctx: &Arc<ScriptContext>) -> Engine {
         let dir = &c.options.out_dir;
         let ys: Vec<String> = ys.iter().map(|y| y.to_string()).collect();
         let drawn = if c.writes_files() {
-            crate::io::plot::plot(&dir.join(csv), x, &ys, Some(dir.join(out))).map(|_| ())
+            crate::plot::plot(&dir.join(csv), x, &ys, Some(dir.join(out))).map(|_| ())
         } else {
             Ok(())
         };
-        crate::comm::agree(c.comm(), 0, drawn).map_err(convert::to_rhai)?;
+        granite_core::comm::agree(c.comm(), 0, drawn).map_err(convert::to_rhai)?;
         Ok(dir.join(out).display().to_string())
     });
     mpm_api::register(&mut engine, ctx);
@@ -591,7 +596,7 @@ pub fn run_source(name: &str, source: &str, registry: Registry, options: RunOpti
     }
     summary.insert("wall_time_s".into(), Value::from(started.elapsed().as_secs_f64()));
     if ctx.writes_files() {
-        let records = crate::io::write_summary(&out_dir.join("summary.json"), &summary)
+        let records = granite_core::io::write_summary(&out_dir.join("summary.json"), &summary)
             .and_then(|()| write_provenance(&out_dir, name, source, &ctx, started_at, summary.get("status")));
         if let Err(e) = records {
             // The run's own error comes first: it is what failed first (a full disk fails the
@@ -694,7 +699,7 @@ fn write_provenance(
     p.insert("started".to_string(), Value::from(iso8601(started)));
     p.insert("ended".to_string(), Value::from(iso8601(std::time::SystemTime::now())));
     p.insert("status".to_string(), status.cloned().unwrap_or(Value::Null));
-    crate::io::write_summary(&out_dir.join("provenance.json"), &p)
+    granite_core::io::write_summary(&out_dir.join("provenance.json"), &p)
 }
 
 /// A script error in one line: the message first, then where it happened. A call that matches

@@ -1,9 +1,9 @@
 //! `element_test(law, #{ parameters }, #{ path })`: a law on one material point, without a mesh
-//! (see `crate::element_test`).
+//! (see `granite_core::element_test`).
 
 use super::convert::{api_options, err, finite, get, integer, numbers, OrRhai, RhaiResult};
 use super::ScriptContext;
-use crate::element_test::{run, Path};
+use granite_core::element_test::{run, Path};
 use rhai::{Array, Dynamic, Engine, Map};
 use std::sync::Arc;
 
@@ -31,7 +31,7 @@ fn element_test(ctx: &ScriptContext, law: &str, params: Map, path: Map) -> RhaiR
     let mut hold = [None; 6];
     if let Some(h) = get(&path, "hold") {
         let h = h.clone().try_cast::<Map>().ok_or_else(|| {
-            super::convert::to_rhai(crate::GraniteError::Setup(
+            super::convert::to_rhai(granite_core::GraniteError::Setup(
                 "`hold` of element_test is a map of components and stresses, e.g. #{ xx: -1e5, yy: -1e5 }".into(),
             ))
         })?;
@@ -61,7 +61,7 @@ fn element_test(ctx: &ScriptContext, law: &str, params: Map, path: Map) -> RhaiR
         .stress
         .iter()
         .map(|s| {
-            let (p, q) = crate::math::p_q(s);
+            let (p, q) = granite_core::math::p_q(s);
             (Dynamic::from(-p), Dynamic::from(q))
         })
         .unzip();

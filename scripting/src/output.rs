@@ -1,9 +1,9 @@
 //! The files one simulation writes: series rows and VTK frames, whatever the engine.
 
-use crate::error::Result;
-use crate::io::vtk::{Encoding, Field, PolyData};
-use crate::io::{SeriesWriter, VtkWriter};
-use crate::math::Vec3;
+use granite_core::error::Result;
+use granite_core::io::vtk::{Encoding, Field, PolyData};
+use granite_core::io::{SeriesWriter, VtkWriter};
+use granite_core::math::Vec3;
 use std::path::PathBuf;
 
 pub struct Output {

@@ -5,13 +5,13 @@ use super::convert::{
 };
 use super::driver::{register_common, Handle, ScriptSim};
 use super::ScriptContext;
-use crate::dem::generate::{cloud, lattice, Psd};
-use crate::dem::particles::dof;
-use crate::dem::walls::{Wall, WallShape};
-use crate::dem::DemSim;
-use crate::error::{GraniteError, Result};
-use crate::io::vtk::Field;
-use crate::math::Vec3;
+use granite_core::dem::generate::{cloud, lattice, Psd};
+use granite_core::dem::particles::dof;
+use granite_core::dem::walls::{Wall, WallShape};
+use granite_core::dem::DemSim;
+use granite_core::error::{GraniteError, Result};
+use granite_core::io::vtk::Field;
+use granite_core::math::Vec3;
 use rhai::{Array, Dynamic, Engine, FnPtr, Map};
 use std::io::Write;
 use std::path::Path;
@@ -59,8 +59,8 @@ impl DemMaterialHandle {
 
 /// Everything a whole-state snapshot needs.
 pub struct DemSnapshot {
-    spheres: crate::dem::Spheres,
-    potentials: crate::dem::potential::Potentials,
+    spheres: granite_core::dem::Spheres,
+    potentials: granite_core::dem::potential::Potentials,
     walls: Vec<Wall>,
     time: f64,
     step: u64,
@@ -87,15 +87,7 @@ impl ScriptSim for DemScene {
             return Vec::new();
         }
         self.overlaps_checked_for = Some(bodies);
-        // The candidate lists as the first step would build them; it still builds them itself
-        // (the step's own checks follow a rebuild). Lists in force are used as they are.
-        if self.dem.needs_rebuild {
-            if self.dem.rebuild_candidates().is_err() {
-                return Vec::new();
-            }
-            self.dem.needs_rebuild = true;
-        }
-        let deep = self.dem.deep_overlaps(DEEP_OVERLAP, 5);
+        let deep = self.dem.deep_overlaps_before_run(DEEP_OVERLAP, 5);
         if deep.is_empty() {
             return Vec::new();
         }
@@ -186,7 +178,7 @@ impl ScriptSim for DemScene {
             (self.dem.cell_volume(), self.dem.void_ratio(), self.dem.cell_strain())
         {
             let s = self.dem.love_weber_stress(volume);
-            let (p, q) = crate::math::p_q(&s);
+            let (p, q) = granite_core::math::p_q(&s);
             cols.extend([
                 "void_ratio",
                 "p",
@@ -221,7 +213,7 @@ impl ScriptSim for DemScene {
         ];
         (s.x.clone(), fields)
     }
-    fn vtk_poly(&self) -> Vec<(&'static str, crate::io::vtk::PolyData)> {
+    fn vtk_poly(&self) -> Vec<(&'static str, granite_core::io::vtk::PolyData)> {
         let mut out = vec![("contacts", self.dem.contacts_picture())];
         if !self.dem.walls.is_empty() {
             out.push(("walls", self.dem.walls_picture()));
@@ -276,7 +268,7 @@ impl ScriptSim for DemScene {
     fn save_state(&self, path: &std::path::Path, ctx: &ScriptContext) -> Result<()> {
         // Every process of an MPI run holds the same DEM simulation: the first one writes it.
         let written = if ctx.writes_files() { self.prepared().save_as(path, &ctx.options.program) } else { Ok(()) };
-        crate::comm::agree(ctx.comm(), 0, written)
+        granite_core::comm::agree(ctx.comm(), 0, written)
     }
     fn drain_events(&mut self) -> Vec<String> {
         self.dem.events.drain(..).collect()
@@ -517,7 +509,7 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
                     0
                 }
             } else {
-                crate::dem::bodies::parse_dofs(&string(f, "fixed")?).or_rhai()?
+                granite_core::dem::bodies::parse_dofs(&string(f, "fixed")?).or_rhai()?
             };
         }
         Ok(st.sim.dem.spheres.id[i] as i64)
@@ -562,9 +554,12 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
         "tetra_clump",
         |s: &mut DemHandle, m: DemMaterialHandle, centre: Dynamic, r_sphere: Dynamic, r_clump: Dynamic| {
             let c = vector(&centre, 3, "centre")?;
-            let members =
-                crate::dem::clump::tetrahedral_members(c, finite(&r_sphere, "r_sphere")?, finite(&r_clump, "r_clump")?)
-                    .or_rhai()?;
+            let members = granite_core::dem::clump::tetrahedral_members(
+                c,
+                finite(&r_sphere, "r_sphere")?,
+                finite(&r_clump, "r_clump")?,
+            )
+            .or_rhai()?;
             let index = m.index_in(s)?;
             s.lock().sim.dem.add_clump(index, &members, [0.0; 3], CLUMP_VOXELS).map(|c| c as i64).or_rhai()
         },
@@ -606,11 +601,11 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
             }
             let index = m.index_in(s)?;
             let density = s.lock().sim.dem.materials[index as usize].density;
-            let props = crate::dem::clump::mass_properties(&template, density, CLUMP_VOXELS).or_rhai()?;
+            let props = granite_core::dem::clump::mass_properties(&template, density, CLUMP_VOXELS).or_rhai()?;
             let mut st = s.lock();
             for (k, (c, _)) in centres.iter().enumerate() {
-                let u = [0, 1, 2].map(|j| crate::ext::contact::uniform(seed ^ 0xC1u64, (3 * k + j) as u64));
-                let (members, q) = crate::dem::clump::place_template(&template, *c, u);
+                let u = [0, 1, 2].map(|j| granite_core::ext::contact::uniform(seed ^ 0xC1u64, (3 * k + j) as u64));
+                let (members, q) = granite_core::dem::clump::place_template(&template, *c, u);
                 if members.len() == 1 {
                     st.sim.dem.add_sphere(index, members[0].0, members[0].1, [0.0; 3]).or_rhai()?;
                 } else {
@@ -813,13 +808,13 @@ fn cell_axis(name: &str) -> Option<usize> {
     }
 }
 
-fn voigt_array(v: &crate::math::Voigt) -> Array {
+fn voigt_array(v: &granite_core::math::Voigt) -> Array {
     v.iter().map(|&c| Dynamic::from(c)).collect()
 }
 
 /// Periodic cell methods (thesis 1.1.4; YADE's Cell and PeriTriaxController).
 fn register_cell(engine: &mut Engine) {
-    use crate::dem::cell::{AxisGoal, CellControl, PeriodicCell};
+    use granite_core::dem::cell::{AxisGoal, CellControl, PeriodicCell};
     engine.register_fn("periodic", |s: &mut DemHandle, size: Dynamic| {
         let size = vector(&size, 3, "cell size")?;
         if size.iter().any(|&l| !(l > 0.0)) {
@@ -828,7 +823,7 @@ fn register_cell(engine: &mut Engine) {
         s.lock().sim.dem.set_cell(Some(PeriodicCell::new_box(size)));
         Ok(())
     });
-    fn cell_of(s: &DemHandle) -> RhaiResult<crate::dem::cell::PeriodicCell> {
+    fn cell_of(s: &DemHandle) -> RhaiResult<granite_core::dem::cell::PeriodicCell> {
         s.lock().sim.dem.cell.clone().ok_or_else(|| {
             super::convert::to_rhai(GraniteError::Setup(
                 "this simulation has no periodic cell: call periodic([lx, ly, lz]) first".into(),
@@ -947,8 +942,10 @@ fn range2(d: Option<&Dynamic>, name: &str) -> RhaiResult<[f64; 2]> {
 
 /// Heap and packing measures (thesis 2.3.2-2.3.3, appendix A).
 fn register_measures(engine: &mut Engine) {
-    use crate::dem::repose::{measure, Heap};
-    use crate::dem::voids::{grains, void_ratio_bounding_box, void_ratio_sub_volume, void_ratio_tetrahedra, SubVolume};
+    use granite_core::dem::repose::{measure, Heap};
+    use granite_core::dem::voids::{
+        grains, void_ratio_bounding_box, void_ratio_sub_volume, void_ratio_tetrahedra, SubVolume,
+    };
     engine.register_fn("angle_of_repose", |s: &mut DemHandle, opts: Map| {
         api_options(&opts, "DemSim", "angle_of_repose")?;
         let kind = string(get(&opts, "heap").unwrap_or(&Dynamic::from("plane_strain")), "heap")?;

@@ -5,9 +5,9 @@
 use super::convert::{err, finite, number, OrRhai, RhaiResult};
 use super::output::Output;
 use super::ScriptContext;
-use crate::error::{GraniteError, Result};
-use crate::io::vtk::Field;
-use crate::math::Vec3;
+use granite_core::error::{GraniteError, Result};
+use granite_core::io::vtk::Field;
+use granite_core::math::Vec3;
 use rhai::{Dynamic, Engine, FnPtr, Map, NativeCallContext};
 use std::io::IsTerminal;
 use std::path::Path;
@@ -34,7 +34,7 @@ pub trait ScriptSim: Send + 'static {
     /// Positions and per-point fields of one VTK frame.
     fn vtk_frame(&self) -> (Vec<Vec3>, Vec<Field>);
     /// Poly data written beside each frame, by series name (DEM walls and contact network).
-    fn vtk_poly(&self) -> Vec<(&'static str, crate::io::vtk::PolyData)> {
+    fn vtk_poly(&self) -> Vec<(&'static str, granite_core::io::vtk::PolyData)> {
         Vec::new()
     }
     /// A CSV table of every point or particle.
@@ -431,7 +431,7 @@ impl<S: ScriptSim> Handle<S> {
                 let stopped = plan.stop.as_ref().is_some_and(|s| s.load(Ordering::SeqCst));
                 let interrupted = st.ctx.pause_requests() != plan.pauses_at_start;
                 if interrupted && !stopped {
-                    crate::errln!("granite: paused at step {} (t = {:.6e} s)", st.sim.steps(), st.sim.time());
+                    granite_core::errln!("granite: paused at step {} (t = {:.6e} s)", st.sim.steps(), st.sim.time());
                 }
                 (st.sim.time(), st.driven.clone(), stopped || interrupted, st.ctx.stop_requested())
             };
@@ -553,7 +553,7 @@ impl<S: ScriptSim> Handle<S> {
                 Err(e) => Some(super::describe(e, &engine)),
             };
             if let Some(e) = &report {
-                crate::errln!("granite: the background run stopped: {e}");
+                granite_core::errln!("granite: the background run stopped: {e}");
             }
             let (slot, cv) = &*done;
             *slot.lock().unwrap_or_else(|p| p.into_inner()) = Ending { ended: true, result: Some(result) };
@@ -666,7 +666,7 @@ impl Progress {
             last.set(Instant::now());
             let rate = done as f64 / self.start.elapsed().as_secs_f64().max(1e-9);
             let eta = (self.total - done) as f64 / rate.max(1e-9);
-            crate::errln!(
+            granite_core::errln!(
                 "step {done}/{} ({:.0}%)  t = {time:.4e} s  {rate:.0} steps/s  ETA {eta:.0} s",
                 self.total,
                 100.0 * done as f64 / self.total as f64
@@ -734,7 +734,7 @@ pub fn register_common<S: ScriptSim>(engine: &mut Engine) {
         let mut st = s.lock();
         let path = st.script_file_path("write_points", file)?;
         let written = if st.output.writes { st.sim.write_points(&path) } else { Ok(()) };
-        crate::comm::agree(st.ctx.comm(), 0, written).map(|_| path.display().to_string()).or_rhai()
+        granite_core::comm::agree(st.ctx.comm(), 0, written).map(|_| path.display().to_string()).or_rhai()
     });
     engine.register_fn("write_series", |ctx: NativeCallContext, s: &mut Handle<S>| s.write_series(&ctx));
     engine.register_fn("series_column", |s: &mut Handle<S>, name: &str, f: FnPtr| {
@@ -762,7 +762,7 @@ pub fn register_common<S: ScriptSim>(engine: &mut Engine) {
         Ok(())
     });
     engine.register_fn("vtk_format", |s: &mut Handle<S>, format: &str| {
-        let encoding = crate::io::vtk::Encoding::parse(format).or_rhai()?;
+        let encoding = granite_core::io::vtk::Encoding::parse(format).or_rhai()?;
         s.lock().output.vtk_encoding = encoding;
         Ok::<_, Box<rhai::EvalAltResult>>(())
     });

@@ -2,10 +2,10 @@
 //! checked (symbol, ABI version, table size) and then kept loaded for the life of the process:
 //! granite never unloads a library, so no law can outlive its code.
 
-use crate::error::{GraniteError, Result};
-use crate::ext::{ConstitutiveLaw, ConstitutiveLawFactory, LawBatch};
-use crate::params::{ParamSpec, Params};
-use crate::registry::Registry;
+use granite_core::error::{GraniteError, Result};
+use granite_core::ext::{ConstitutiveLaw, ConstitutiveLawFactory, LawBatch};
+use granite_core::params::{ParamSpec, Params};
+use granite_core::registry::Registry;
 use granite_plugin_abi::{ErrorBuffer, LawTable, LawTableV1, ABI_VERSION};
 use std::ffi::{c_void, CStr};
 use std::path::Path;

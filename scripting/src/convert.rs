@@ -1,16 +1,16 @@
 //! Conversions from Rhai values to engine values, with errors that name the parameter.
 
-use crate::error::{GraniteError, Result};
-use crate::ext::contact::Elastic;
-use crate::math::Vec3;
-use crate::registry::ParamMap;
+use granite_core::error::{GraniteError, Result};
+use granite_core::ext::contact::Elastic;
+use granite_core::math::Vec3;
+use granite_core::registry::ParamMap;
 use rhai::{Dynamic, EvalAltResult, Map, Position};
 
 pub type RhaiResult<T> = std::result::Result<T, Box<EvalAltResult>>;
 
 /// A granite error as a Rhai runtime error; Rhai adds the script position of the failing call.
 pub fn to_rhai(e: GraniteError) -> Box<EvalAltResult> {
-    let text = crate::error::compact_numbers(&e.to_string());
+    let text = granite_core::error::compact_numbers(&e.to_string());
     Box::new(EvalAltResult::ErrorRuntime(Dynamic::from(text), Position::NONE))
 }
 

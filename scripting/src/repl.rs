@@ -2,8 +2,8 @@
 //! kept between inputs, so that a user can run, pause, inspect, change a parameter and resume.
 
 use super::{describe, prepare, RunOptions, ScriptContext};
-use crate::error::Result;
-use crate::registry::Registry;
+use granite_core::error::Result;
+use granite_core::registry::Registry;
 use rhai::{Dynamic, Engine, Scope, AST};
 use std::sync::Arc;
 
@@ -167,9 +167,9 @@ fn readable(signature: &str) -> String {
         ("rhai::types::dynamic::Dynamic", "value"),
         ("types::dynamic::Dynamic", "value"),
         ("alloc::string::String", "string"),
-        ("granite_core::script::driver::Handle<granite_core::script::dem_api::DemScene>", "DemSim"),
-        ("granite_core::script::driver::Handle<granite_core::script::mpm_api::MpmScene>", "MpmSim"),
-        ("granite_core::script::", ""),
+        ("granite_script::driver::Handle<granite_script::dem_api::DemScene>", "DemSim"),
+        ("granite_script::driver::Handle<granite_script::mpm_api::MpmScene>", "MpmSim"),
+        ("granite_script::", ""),
     ];
     let mut s = signature.replace("_: ", "");
     for (from, to) in TERMS {

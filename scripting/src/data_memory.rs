@@ -6,9 +6,9 @@
 //! Rhai's own size limits would do this per value, but they measure a whole array after every
 //! change to it: a loop of `a.push(x)` then costs the square of its length (1e5 pushes took
 //! 5.8 s, 1e6 about ten minutes). Counting the process's allocations (the `granite` binary's
-//! [`CountingAllocator`](crate::memory::CountingAllocator)) costs one comparison an operation.
+//! [`CountingAllocator`](granite_core::memory::CountingAllocator)) costs one comparison an operation.
 
-use crate::memory::{allocated_bytes, available_bytes};
+use granite_core::memory::{allocated_bytes, available_bytes};
 use rhai::{Array, Blob, Dynamic, Engine, EvalAltResult, ImmutableString};
 use std::sync::atomic::{AtomicU64, Ordering::Relaxed};
 use std::sync::Arc;

@@ -4,8 +4,8 @@
 
 use super::convert::{err, finite, get, numbers, param_map, string, vector, OrRhai, RhaiResult};
 use super::dem_api::{DemHandle, DemMaterialHandle};
-use crate::dem::potential::shape::{PotentialShape, MASS_RESOLUTION};
-use crate::math::Vec3;
+use granite_core::dem::potential::shape::{PotentialShape, MASS_RESOLUTION};
+use granite_core::math::Vec3;
 use nalgebra::{UnitQuaternion, Vector3};
 use rhai::{Dynamic, Engine, Map};
 use std::sync::Arc;
@@ -133,8 +133,8 @@ pub(super) fn add_cloud(
 ) -> RhaiResult<i64> {
     let mut st = s.lock();
     for (k, c) in centres.iter().enumerate() {
-        let u = [0, 1, 2].map(|j| crate::ext::contact::uniform(seed ^ 0xC1u64, (3 * k + j) as u64));
-        let (_, q) = crate::dem::clump::place_template(&[], *c, u);
+        let u = [0, 1, 2].map(|j| granite_core::ext::contact::uniform(seed ^ 0xC1u64, (3 * k + j) as u64));
+        let (_, q) = granite_core::dem::clump::place_template(&[], *c, u);
         st.sim.dem.add_potential(m.index_in(s)?, shape, *c, q, [0.0; 3], false).or_rhai()?;
     }
     Ok(centres.len() as i64)

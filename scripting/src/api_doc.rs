@@ -264,7 +264,7 @@ pub fn did_you_mean(name: &str) -> String {
 pub fn markdown() -> String {
     let mut out = String::from(
         "# Script API reference\n\nGenerated from the table the REPL's `:help` reads \
-         (`core/src/script/api_doc.rs`); regenerate with `granite api > docs/api.md`.\n\
+         (`scripting/src/api_doc.rs`); regenerate with `granite api > docs/api.md`.\n\
          `sim` is an `MpmSim` or a `DemSim`; `#{ ... }` is an options map whose keys are listed.\n",
     );
     let sections = [

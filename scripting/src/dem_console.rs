@@ -5,13 +5,13 @@
 use super::convert::elastic_from;
 use super::convert::{api_options, err, finite, get, integer, number, string, vector, OrRhai, RhaiResult};
 use super::dem_api::{DemHandle, DemMaterialHandle};
-use crate::dem::bodies::{dofs_name, parse_dofs, SphereEdit};
-use crate::dem::inspect::{ContactView, Other};
-use crate::dem::particles::FREE;
-use crate::dem::DemSim;
-use crate::error::GraniteError;
-use crate::math::Vec3;
-use crate::registry::ParamMap;
+use granite_core::dem::bodies::{dofs_name, parse_dofs, SphereEdit};
+use granite_core::dem::inspect::{ContactView, Other};
+use granite_core::dem::particles::FREE;
+use granite_core::dem::DemSim;
+use granite_core::error::GraniteError;
+use granite_core::math::Vec3;
+use granite_core::registry::ParamMap;
 use rhai::{Array, Dynamic, Engine, Map};
 
 fn vec3(v: Vec3) -> Dynamic {
@@ -90,7 +90,9 @@ fn sphere_edit(opts: &Map, material: Option<u16>) -> RhaiResult<SphereEdit> {
     let v3 = |k: &str| get(opts, k).map(|d| vector(d, 3, k)).transpose();
     let fixed = match get(opts, "fixed") {
         None => None,
-        Some(d) if d.is_bool() => Some(if d.as_bool().unwrap_or(false) { crate::dem::particles::dof::ALL } else { 0 }),
+        Some(d) if d.is_bool() => {
+            Some(if d.as_bool().unwrap_or(false) { granite_core::dem::particles::dof::ALL } else { 0 })
+        }
         Some(d) => Some(parse_dofs(&string(d, "fixed")?).or_rhai()?),
     };
     let radius = get(opts, "radius").map(|d| finite(d, "radius")).transpose()?;

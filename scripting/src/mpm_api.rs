@@ -6,14 +6,14 @@ use super::convert::{
 };
 use super::driver::{register_common, Handle, ScriptSim};
 use super::ScriptContext;
-use crate::error::{GraniteError, Result};
-use crate::io::vtk::Field;
-use crate::math::{deviatoric_strain_norm, p_q, Vec3, Voigt};
-use crate::mpm::boundary::{Face, FrictionConstraint, NodalForce, TimeFunction, VelocityConstraint};
-use crate::mpm::fill::{cell_points, Layout};
-use crate::mpm::sim::Snapshot;
-use crate::mpm::{Boundary, Mesh, MpmSim, OutOfMeshPolicy, ShapeFunctions, StressRate, StressScheme};
-use crate::registry::ParamMap;
+use granite_core::error::{GraniteError, Result};
+use granite_core::io::vtk::Field;
+use granite_core::math::{deviatoric_strain_norm, p_q, Vec3, Voigt};
+use granite_core::mpm::boundary::{Face, FrictionConstraint, NodalForce, TimeFunction, VelocityConstraint};
+use granite_core::mpm::fill::{cell_points, Layout};
+use granite_core::mpm::sim::Snapshot;
+use granite_core::mpm::{Boundary, Mesh, MpmSim, OutOfMeshPolicy, ShapeFunctions, StressRate, StressScheme};
+use granite_core::registry::ParamMap;
 use rhai::{Array, Dynamic, Engine, FnPtr, Map, NativeCallContext};
 use std::io::Write;
 use std::path::Path;
@@ -34,7 +34,7 @@ impl Runout {
     pub fn measure(&self, sim: &MpmSim) -> (f64, f64, f64, f64, f64) {
         let lx = sim.voxel_width();
         let dr = lx - self.width0;
-        let g = crate::math::norm3(sim.gravity).max(f64::MIN_POSITIVE);
+        let g = granite_core::math::norm3(sim.gravity).max(f64::MIN_POSITIVE);
         let front = (sim.mass_front(0.99) - self.width0) / self.width0;
         (lx, dr, dr / self.width0, (sim.time - self.t0) / (self.height0 / g).sqrt(), front)
     }
@@ -292,7 +292,7 @@ impl ScriptSim for MpmScene {
             let report = spread.report()?;
             if ctx.writes_files() {
                 if !ctx.options.quiet {
-                    crate::errln!("granite: material \"{}\": {}", m.name, report.line());
+                    granite_core::errln!("granite: material \"{}\": {}", m.name, report.line());
                 }
                 for (key, value) in report.summary() {
                     ctx.set_summary(&key, value);
@@ -390,15 +390,15 @@ pub(super) fn time_function(value: &Dynamic, name: &str) -> RhaiResult<(TimeFunc
 pub(super) fn law_inputs(
     opts: &Map,
     law: &str,
-    registry: &crate::registry::Registry,
-) -> RhaiResult<(crate::registry::ParamMap, crate::ext::constitutive::ObjectMap)> {
-    let mut objects = crate::ext::constitutive::ObjectMap::new();
+    registry: &granite_core::registry::Registry,
+) -> RhaiResult<(granite_core::registry::ParamMap, granite_core::ext::constitutive::ObjectMap)> {
+    let mut objects = granite_core::ext::constitutive::ObjectMap::new();
     let mut skip = vec!["density", "name"];
     if let Some(device) = get(opts, "device") {
         let name = string(device, "device")?;
         if name != "cpu" {
             let device = registry.rve_device(&name).or_rhai()?.clone();
-            objects.insert("device".into(), Arc::new(crate::ext::rve::RveDeviceChoice(device)));
+            objects.insert("device".into(), Arc::new(granite_core::ext::rve::RveDeviceChoice(device)));
         }
         skip.push("device");
     }
@@ -503,7 +503,7 @@ impl Handle<MpmScene> {
                 m.name
             ));
         }
-        let mut params: crate::registry::ParamMap =
+        let mut params: granite_core::registry::ParamMap =
             material.law.params().iter().filter(|(_, v)| !v.is_nan()).map(|(k, v)| (k.to_string(), v)).collect();
         params.extend(param_map(&opts, &[], &law)?);
         let rebuilt = st.ctx.registry().build_law(&law, &params).or_rhai()?;
@@ -694,7 +694,7 @@ impl Handle<MpmScene> {
         }
         let mut st = self.lock();
         let sim = &mut st.sim.mpm;
-        let g = crate::math::norm3(sim.gravity);
+        let g = granite_core::math::norm3(sim.gravity);
         if g == 0.0 {
             return err("geostatic_stress needs gravity: call gravity([...]) first");
         }
@@ -966,11 +966,11 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
         let law = sim.materials[m].law.name().to_string();
         let path = st.points_path(file);
         let written = match frame {
-            Some((x, fields)) => crate::io::vtk::write_vtu(&path, &x, &fields),
+            Some((x, fields)) => granite_core::io::vtk::write_vtu(&path, &x, &fields),
             None if here => Err(GraniteError::Other(format!("law \"{law}\" keeps no per-point object to write"))),
             None => Ok(()),
         };
-        crate::comm::agree(st.ctx.comm(), holder, written).or_rhai()?;
+        granite_core::comm::agree(st.ctx.comm(), holder, written).or_rhai()?;
         Ok(path.display().to_string())
     });
     engine.register_fn("point_position", |s: &mut SimHandle, i: i64| -> RhaiResult<Array> {
