@@ -3,37 +3,17 @@
 use super::convert::{
     api_options, err, finite, get, integer, number, numbers, only_keys, param_map, string, vector, OrRhai, RhaiResult,
 };
-use super::driver::{register_common, Handle, ScriptSim};
+use super::driver::{register_common, Handle};
 use super::ScriptContext;
 use granite_core::dem::generate::{cloud, lattice, Psd};
 use granite_core::dem::particles::dof;
 use granite_core::dem::walls::{Wall, WallShape};
 use granite_core::dem::DemSim;
-use granite_core::error::{GraniteError, Result};
-use granite_core::io::vtk::Field;
+use granite_core::error::GraniteError;
 use granite_core::math::Vec3;
+use granite_run::{DemScene, Simulation};
 use rhai::{Array, Dynamic, Engine, FnPtr, Map};
-use std::io::Write;
-use std::path::Path;
 use std::sync::Arc;
-
-/// A DEM simulation as scripts see it.
-pub struct DemScene {
-    pub dem: DemSim,
-    /// Wall velocity components driven by script functions: (wall, axis).
-    driven: Vec<(usize, usize)>,
-    /// The skin was left to its default (half the smallest radius, as YADE).
-    auto_skin: bool,
-    /// Deep overlaps are looked for before a run while this holds (`sim.allow_overlaps(true)`
-    /// turns it off), once per set of bodies: the sphere and wall counts last checked.
-    check_overlaps: bool,
-    overlaps_checked_for: Option<(usize, usize)>,
-}
-
-/// Overlap, as a fraction of the smaller radius, above which a body at the start of a run is
-/// reported: a sound stiffness keeps a packing at rest well under 1 %; 10 % is a set-up mistake
-/// (spheres placed inside one another, a sphere centred on a wall).
-pub const DEEP_OVERLAP: f64 = 0.1;
 
 pub type DemHandle = Handle<DemScene>;
 
@@ -54,231 +34,6 @@ impl DemMaterialHandle {
     }
     pub(super) fn name(&self) -> &str {
         &self.name
-    }
-}
-
-/// Everything a whole-state snapshot needs.
-pub struct DemSnapshot {
-    spheres: granite_core::dem::Spheres,
-    potentials: granite_core::dem::potential::Potentials,
-    walls: Vec<Wall>,
-    time: f64,
-    step: u64,
-}
-
-impl DemScene {
-    /// A copy ready to be stepped elsewhere (e.g. as an RVE): the default skin is settled.
-    pub fn prepared(&self) -> DemSim {
-        let mut dem = self.dem.clone();
-        if self.auto_skin {
-            let r_min = dem.spheres.smallest_radius();
-            if r_min.is_finite() {
-                dem.skin = 0.5 * r_min;
-            }
-        }
-        dem
-    }
-}
-
-impl ScriptSim for DemScene {
-    fn setup_warnings(&mut self) -> Vec<String> {
-        let bodies = (self.dem.spheres.len(), self.dem.walls.len());
-        if !self.check_overlaps || self.overlaps_checked_for == Some(bodies) {
-            return Vec::new();
-        }
-        self.overlaps_checked_for = Some(bodies);
-        let deep = self.dem.deep_overlaps_before_run(DEEP_OVERLAP, 5);
-        if deep.is_empty() {
-            return Vec::new();
-        }
-        let list: Vec<String> = deep.iter().map(|(what, d)| format!("{what} by {:.0} %", 100.0 * d)).collect();
-        vec![format!(
-            "bodies overlap by more than {:.0} % of a radius at the start of the run (deepest: {}): they start \
-             with forces a packing at rest never has and may fly apart; move them, or sim.allow_overlaps(true) \
-             if this is meant",
-            100.0 * DEEP_OVERLAP,
-            list.join(", ")
-        )]
-    }
-    type Snapshot = DemSnapshot;
-
-    fn validate(&self) -> Result<()> {
-        self.dem.validate()
-    }
-    fn advance(&mut self) -> Result<()> {
-        if self.auto_skin {
-            let r_min = self.dem.spheres.smallest_radius();
-            if r_min.is_finite() {
-                self.dem.skin = 0.5 * r_min;
-            }
-            self.auto_skin = false;
-        }
-        self.dem.step()
-    }
-    fn time(&self) -> f64 {
-        self.dem.time
-    }
-    fn steps(&self) -> u64 {
-        self.dem.step
-    }
-    fn dt(&self) -> f64 {
-        self.dem.dt
-    }
-    fn series_row(&self) -> (Vec<&'static str>, Vec<f64>) {
-        let d = self.dem.diagnostics();
-        let mut cols = vec![
-            "step",
-            "time",
-            "kinetic_energy",
-            "elastic_energy",
-            "gravitational_energy",
-            "total_energy",
-            "unbalanced_force",
-            "contacts",
-            "wall_contacts",
-            "coordination",
-            "coordination_no_rattlers",
-            "rattlers",
-            "particles",
-            "max_height",
-        ];
-        let mut vals = vec![
-            self.dem.step as f64,
-            self.dem.time,
-            d.kinetic_energy,
-            d.elastic_energy,
-            d.gravitational_energy,
-            d.kinetic_energy + d.elastic_energy + d.gravitational_energy,
-            d.unbalanced_force,
-            d.contacts as f64,
-            d.wall_contacts as f64,
-            d.coordination,
-            d.coordination_no_rattlers,
-            d.rattlers as f64,
-            d.particles as f64,
-            d.max_height,
-        ];
-        if let Some(energy) = &self.dem.energy {
-            const COLUMNS: [&str; 8] = [
-                "energy_kinetic",
-                "energy_gravitational",
-                "energy_elastic",
-                "energy_friction",
-                "energy_viscous",
-                "energy_damping",
-                "energy_boundary_work",
-                "energy_total",
-            ];
-            cols.extend(COLUMNS);
-            // Nothing is measured before the first tracked step.
-            let measured = energy.initial_total.is_some();
-            vals.extend(energy.entries()[..8].iter().map(|(_, v)| if measured { *v } else { f64::NAN }));
-        }
-        if let (Some(volume), Some(e), Some((strain, vol_strain))) =
-            (self.dem.cell_volume(), self.dem.void_ratio(), self.dem.cell_strain())
-        {
-            let s = self.dem.love_weber_stress(volume);
-            let (p, q) = granite_core::math::p_q(&s);
-            cols.extend([
-                "void_ratio",
-                "p",
-                "q",
-                "sxx",
-                "syy",
-                "szz",
-                "sxy",
-                "syz",
-                "sxz",
-                "strain_x",
-                "strain_y",
-                "strain_z",
-                "volumetric_strain",
-            ]);
-            // p and q as soil mechanics plots them: compression positive.
-            vals.extend([e, -p, q, s[0], s[1], s[2], s[3], s[4], s[5], strain[0], strain[1], strain[2], vol_strain]);
-        }
-        (cols, vals)
-    }
-    fn vtk_frame(&self) -> (Vec<Vec3>, Vec<Field>) {
-        let s = &self.dem.spheres;
-        let counts = self.dem.contact_counts();
-        let fields = vec![
-            Field::int("id", s.id.iter().map(|&i| i as i64)),
-            Field::float("radius", 1, s.radius.clone()),
-            Field::int("material", s.material.iter().map(|&m| m as i64)),
-            Field::float("velocity", 3, s.v.iter().flatten().copied().collect()),
-            Field::float("angular_velocity", 3, s.w.iter().flatten().copied().collect()),
-            Field::float("force", 3, s.force.iter().flatten().copied().collect()),
-            Field::int("contacts", counts.iter().map(|&c| c as i64)),
-        ];
-        (s.x.clone(), fields)
-    }
-    fn vtk_poly(&self) -> Vec<(&'static str, granite_core::io::vtk::PolyData)> {
-        let mut out = vec![("contacts", self.dem.contacts_picture())];
-        if !self.dem.walls.is_empty() {
-            out.push(("walls", self.dem.walls_picture()));
-        }
-        if !self.dem.potentials.is_empty() {
-            out.push(("potentials", self.dem.potentials_picture()));
-        }
-        out
-    }
-    fn write_points(&self, path: &Path) -> Result<()> {
-        let f = std::fs::File::create(path).map_err(|e| GraniteError::io(path, e))?;
-        let mut w = std::io::BufWriter::new(f);
-        let io = |e| GraniteError::io(path, e);
-        writeln!(w, "id,material,x,y,z,radius,vx,vy,vz,wx,wy,wz,contacts").map_err(io)?;
-        let s = &self.dem.spheres;
-        let counts = self.dem.contact_counts();
-        for i in 0..s.len() {
-            let mut row = vec![s.id[i] as f64, s.material[i] as f64];
-            row.extend(s.x[i]);
-            row.push(s.radius[i]);
-            row.extend(s.v[i]);
-            row.extend(s.w[i]);
-            row.push(counts[i] as f64);
-            let line = row.iter().map(|v| v.to_string()).collect::<Vec<_>>().join(",");
-            writeln!(w, "{line}").map_err(|e| GraniteError::io(path, e))?;
-        }
-        w.flush().map_err(|e| GraniteError::io(path, e))
-    }
-    fn diagnostics(&self) -> Vec<(&'static str, f64)> {
-        let (cols, vals) = self.series_row();
-        cols.into_iter().zip(vals).collect()
-    }
-    fn snapshot(&self) -> DemSnapshot {
-        DemSnapshot {
-            spheres: self.dem.spheres.clone(),
-            potentials: self.dem.potentials.clone(),
-            walls: self.dem.walls.clone(),
-            time: self.dem.time,
-            step: self.dem.step,
-        }
-    }
-    fn restore(&mut self, s: DemSnapshot) {
-        self.dem.spheres = s.spheres;
-        self.dem.potentials = s.potentials;
-        self.dem.walls = s.walls;
-        self.dem.time = s.time;
-        self.dem.step = s.step;
-        self.dem.pairs = Default::default();
-        self.dem.wall_pairs = Default::default();
-        let _ = self.dem.rebuild_candidates();
-    }
-    fn save_state(&self, path: &std::path::Path, ctx: &ScriptContext) -> Result<()> {
-        // Every process of an MPI run holds the same DEM simulation: the first one writes it.
-        let written = if ctx.writes_files() { self.prepared().save_as(path, &ctx.options.program) } else { Ok(()) };
-        granite_core::comm::agree(ctx.comm(), 0, written)
-    }
-    fn drain_events(&mut self) -> Vec<String> {
-        self.dem.events.drain(..).collect()
-    }
-    fn set_driven(&mut self, target: usize, value: f64) {
-        if let Some(&(w, axis)) = self.driven.get(target) {
-            if let Some(wall) = self.dem.walls.get_mut(w) {
-                wall.velocity[axis] = value;
-            }
-        }
     }
 }
 
@@ -362,10 +117,7 @@ impl Handle<DemScene> {
             }
             None => true,
         };
-        Ok(Handle::new(
-            DemScene { dem, driven: Vec::new(), auto_skin, check_overlaps: true, overlaps_checked_for: None },
-            ctx,
-        ))
+        Ok(Handle::new(DemScene::new(dem, auto_skin), ctx))
     }
 
     fn material(&mut self, opts: Map) -> RhaiResult<DemMaterialHandle> {
@@ -464,7 +216,7 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
         let mut st = s.lock();
         let path = st.script_file_path("save", file)?;
         let ctx = st.ctx.clone();
-        st.sim.save_state(&path, &ctx).map(|_| path.display().to_string()).or_rhai()
+        st.sim.save_state(&path, &ctx.run_context()).map(|_| path.display().to_string()).or_rhai()
     });
     let c = ctx.clone();
     engine.register_fn("dem_load", move |file: &str| {
@@ -477,10 +229,7 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
         })?;
         let (dem, read, fallback) = DemSim::load_newest(&path, &*c.registry()).or_rhai()?;
         c.record_load(&read, dem.step, fallback);
-        Ok::<_, Box<rhai::EvalAltResult>>(Handle::new(
-            DemScene { dem, driven: Vec::new(), auto_skin: false, check_overlaps: true, overlaps_checked_for: None },
-            c.clone(),
-        ))
+        Ok::<_, Box<rhai::EvalAltResult>>(Handle::new(DemScene::new(dem, false), c.clone()))
     });
     engine.register_fn("contact_law", |s: &mut DemHandle, law: &str, opts: Map| s.contact_law(law, None, opts));
     engine.register_fn(

@@ -3,137 +3,48 @@
 //! good state), and the script methods built on it.
 
 use super::convert::{err, finite, number, OrRhai, RhaiResult};
-use super::output::Output;
 use super::ScriptContext;
 use granite_core::error::{GraniteError, Result};
-use granite_core::io::vtk::Field;
-use granite_core::math::Vec3;
+use granite_run::{Cadence, Progress, Runner, Simulation};
 use rhai::{Dynamic, Engine, FnPtr, Map, NativeCallContext};
-use std::io::IsTerminal;
-use std::path::Path;
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::{Arc, Condvar, Mutex, MutexGuard};
-use std::time::{Duration, Instant};
 
-/// An engine as scripts drive it.
-pub trait ScriptSim: Send + 'static {
-    type Snapshot: Send;
-    /// Checks the set-up before a run.
-    fn validate(&self) -> Result<()>;
-    /// One time step.
-    fn advance(&mut self) -> Result<()>;
-    fn time(&self) -> f64;
-    fn steps(&self) -> u64;
-    fn dt(&self) -> f64;
-    /// Column names and values of one `series.csv` row.
-    fn series_row(&self) -> (Vec<&'static str>, Vec<f64>);
-    /// Names the file that continues the series when its columns change.
-    fn series_tag(&self) -> &'static str {
-        "more"
-    }
-    /// Positions and per-point fields of one VTK frame.
-    fn vtk_frame(&self) -> (Vec<Vec3>, Vec<Field>);
-    /// Poly data written beside each frame, by series name (DEM walls and contact network).
-    fn vtk_poly(&self) -> Vec<(&'static str, granite_core::io::vtk::PolyData)> {
-        Vec::new()
-    }
-    /// A CSV table of every point or particle.
-    fn write_points(&self, path: &Path) -> Result<()>;
-    /// Global measures by name, for `sim.diagnostics()`.
-    fn diagnostics(&self) -> Vec<(&'static str, f64)>;
-    fn snapshot(&self) -> Self::Snapshot;
-    fn restore(&mut self, snapshot: Self::Snapshot);
-    /// Messages for the user since the last call (deletions, mesh changes...).
-    fn drain_events(&mut self) -> Vec<String>;
-    /// Sets the value of boundary condition `target` from a script function (see `Handle::drive`).
-    fn set_driven(&mut self, target: usize, value: f64);
-    /// What the set-up should tell the user before its first run (bodies overlapping deeply);
-    /// called before every run, it says each thing once.
-    fn setup_warnings(&mut self) -> Vec<String> {
-        Vec::new()
-    }
-    /// Writes a checkpoint of the whole state (every process of an MPI run calls it; the first
-    /// writes) that `mpm_load` / `dem_load` resume from.
-    fn save_state(&self, path: &Path, ctx: &ScriptContext) -> Result<()>;
-    /// A run call ended: what the engine reports of it (the processes' share of the work in a run
-    /// over MPI). Every process calls it at the same point.
-    fn run_ended(&mut self, _ctx: &ScriptContext) -> Result<()> {
-        Ok(())
-    }
-}
-
-pub struct State<S: ScriptSim> {
-    pub sim: S,
+pub struct State<S: Simulation> {
+    /// The simulation with its outputs, last good state and checkpoint.
+    pub run: Runner<S>,
     pub ctx: Arc<ScriptContext>,
-    pub output: Output,
     callbacks: Vec<(u64, FnPtr)>,
     driven: Vec<(usize, FnPtr)>,
     /// Extra series columns computed by script functions.
     columns: Vec<(String, FnPtr)>,
-    output_claimed: bool,
-    last_good: Option<S::Snapshot>,
-    /// `sim.checkpoint_every(n, file)`: a checkpoint every n steps, and when a signal stops the run.
-    checkpoint: Option<(u64, String)>,
     background: Option<Background>,
 }
 
-impl<S: ScriptSim> State<S> {
-    /// Claims this simulation's output folder on its first write: the first simulation of a
-    /// script that writes gets the run's folder itself (series.csv, vtk/...), the N-th one
-    /// `simN/` in it; in a REPL session every simulation gets its own `simN/`.
-    fn claim_output(&mut self) {
-        if !self.output_claimed {
-            let index = self.ctx.next_sim_index();
-            if index > 1 || self.ctx.options.folder_per_simulation {
-                self.output.dir = self.output.dir.join(format!("sim{index}"));
-            }
-            // A simulation first writes before its first step: one that has steps behind it was
-            // loaded from a checkpoint, and continues the outputs of the run that wrote it.
-            if self.sim.steps() > 0 {
-                self.output.resumes_at = Some((self.sim.steps(), self.sim.time()));
-            }
-            self.output_claimed = true;
-        }
+impl<S: Simulation> std::ops::Deref for State<S> {
+    type Target = Runner<S>;
+    fn deref(&self) -> &Runner<S> {
+        &self.run
     }
+}
 
+impl<S: Simulation> std::ops::DerefMut for State<S> {
+    fn deref_mut(&mut self) -> &mut Runner<S> {
+        &mut self.run
+    }
+}
+
+impl<S: Simulation> State<S> {
     /// Writes a series row with the engine's columns and already computed extra values.
     fn write_series_row(&mut self, extra: &[f64]) -> Result<()> {
-        self.claim_output();
-        let (mut all, mut vals) = self.sim.series_row();
-        all.extend(self.columns.iter().map(|(n, _)| n.as_str()));
-        vals.extend_from_slice(extra);
-        let tag = self.sim.series_tag();
-        let written = self.output.write_series(self.sim.steps(), &all, &vals, tag);
-        written.map_err(|e| self.output_failed(e))
-    }
-
-    fn write_vtk(&mut self) -> Result<()> {
-        self.claim_output();
-        let (x, fields) = self.sim.vtk_frame();
-        let poly = self.sim.vtk_poly();
-        let written = self.output.write_vtk(self.sim.steps(), self.sim.time(), &x, &fields, &poly);
-        written.map_err(|e| self.output_failed(e))
-    }
-
-    /// An output that could not be written (a full disk, a lost folder): the run stops with the
-    /// step it was at, the file and the cause; what was written before stays as it was.
-    fn output_failed(&self, e: GraniteError) -> GraniteError {
-        GraniteError::Other(format!(
-            "at step {} (t = {:.6e} s) an output could not be written: {e}; the outputs written before are kept",
-            self.sim.steps(),
-            self.sim.time()
-        ))
+        let names: Vec<&str> = self.columns.iter().map(|(n, _)| n.as_str()).collect();
+        self.run.write_series_row(&names, extra)
     }
 
     /// Where a file the script names is written: relative paths in this simulation's output
     /// folder (made if missing).
     pub fn points_path(&mut self, file: &str) -> std::path::PathBuf {
-        self.claim_output();
-        let path = self.output.dir.join(file);
-        if let Some(dir) = path.parent() {
-            let _ = std::fs::create_dir_all(dir);
-        }
-        path
+        self.run.output_path(file)
     }
 
     /// [`State::points_path`] of a file the script names for something it writes, checked by
@@ -143,59 +54,20 @@ impl<S: ScriptSim> State<S> {
         Ok(self.points_path(file))
     }
 
-    /// Writes the checkpoint the script asked for, if it asked; its path.
-    fn write_checkpoint(&mut self) -> Result<Option<std::path::PathBuf>> {
-        let Some((_, file)) = self.checkpoint.clone() else { return Ok(None) };
-        let path = self.points_path(&file);
-        self.sim.save_state(&path, &self.ctx).map_err(|e| self.output_failed(e))?;
-        Ok(Some(path))
-    }
-
     /// A signal asked the run to stop: the state as it is after the last whole step is written
     /// (series row, VTK frame, the script's checkpoint), and the script ends with where it stopped
     /// and how to resume.
     fn stop_on_signal(&mut self, signal: i32) -> Box<rhai::EvalAltResult> {
-        let (step, time) = (self.sim.steps(), self.sim.time());
-        let mut msg = format!(
-            "stopped by {} at step {step} (t = {time:.6e} s); the outputs hold the state up to there",
-            super::signal_name(signal)
-        );
-        self.output.last_vtk_step = None;
-        if let Err(e) = self.write_vtk() {
-            msg.push_str(&format!(" (the last VTK frame could not be written: {e})"));
-        }
-        msg.push_str(&match self.write_checkpoint() {
-            Ok(Some(path)) => format!("; checkpoint {}: resume from it with mpm_load / dem_load", path.display()),
-            Ok(None) => {
-                "; no checkpoint was asked for (sim.checkpoint_every(n, file) writes one, also on a signal)".into()
-            }
-            Err(e) => format!("; the checkpoint could not be written: {e}"),
-        });
+        let msg = self.run.stop_on_signal(&super::signal_name(signal));
         super::convert::to_rhai(GraniteError::Other(msg))
     }
 
-    /// Restores the last good state, writes it out, and turns the failure into a script error.
-    fn fail(&mut self, e: GraniteError) -> Box<rhai::EvalAltResult> {
-        let failed_step = self.sim.steps();
-        let mut msg = e.to_string();
-        if let Some(snap) = self.last_good.take() {
-            self.sim.restore(snap);
-            self.output.last_vtk_step = None;
-            let path = self.points_path("last_good_points.csv");
-            let writes = self.output.writes;
-            let written = self.write_vtk().and_then(|_| if writes { self.sim.write_points(&path) } else { Ok(()) });
-            msg = match written {
-                Ok(()) => format!(
-                    "{msg}\nthe last good state (step {}, t = {:.6e} s) is kept and written to {} and vtk/",
-                    self.sim.steps(),
-                    self.sim.time(),
-                    path.display()
-                ),
-                Err(w) => format!("{msg}\n(could not write the last good state: {w})"),
-            };
+    /// A failed step (the last good state restored and written by the runner) as a script error.
+    fn failed(&mut self, e: GraniteError) -> Box<rhai::EvalAltResult> {
+        if let Some(step) = self.run.failed_at_step.take() {
+            self.ctx.set_summary("failed_at_step", serde_json::Value::from(step));
         }
-        self.ctx.set_summary("failed_at_step", serde_json::Value::from(failed_step));
-        super::convert::to_rhai(GraniteError::Other(msg))
+        super::convert::to_rhai(e)
     }
 
     /// Clears script functions driving boundary values (their targets are gone).
@@ -206,9 +78,9 @@ impl<S: ScriptSim> State<S> {
 
 /// A script's handle on one simulation (shared: closures, callbacks and a background run may
 /// hold it too).
-pub struct Handle<S: ScriptSim>(Arc<Shared<S>>);
+pub struct Handle<S: Simulation>(Arc<Shared<S>>);
 
-pub struct Shared<S: ScriptSim> {
+pub struct Shared<S: Simulation> {
     /// Which simulation of the session this is (1, 2, ...): the handles of its materials carry it.
     serial: u64,
     state: Mutex<State<S>>,
@@ -217,7 +89,7 @@ pub struct Shared<S: ScriptSim> {
     waiting: AtomicUsize,
 }
 
-impl<S: ScriptSim> Clone for Handle<S> {
+impl<S: Simulation> Clone for Handle<S> {
     fn clone(&self) -> Self {
         Handle(self.0.clone())
     }
@@ -246,8 +118,7 @@ impl Caller<'_, '_> {
 struct Plan {
     /// None: until paused.
     steps: Option<u64>,
-    series_every: u64,
-    vtk_every: u64,
+    cadence: Cadence,
     progress: bool,
     /// Set by `sim.pause()` for a background run.
     stop: Option<Arc<AtomicBool>>,
@@ -285,24 +156,24 @@ impl Background {
     }
 }
 
-impl<S: ScriptSim> Handle<S> {
+impl<S: Simulation> Handle<S> {
     pub fn new(sim: S, ctx: Arc<ScriptContext>) -> Handle<S> {
+        let mut run = Runner::new(sim, ctx.options.out_dir.clone(), ctx.run_context());
         // The output folder is chosen when the simulation first writes: a simulation that only
-        // serves as a template (e.g. a loaded RVE) does not take the run's folder.
-        let mut output = Output::new(ctx.options.out_dir.clone());
-        output.writes = ctx.writes_files();
-        let state = State {
-            sim,
-            ctx,
-            output,
-            callbacks: Vec::new(),
-            driven: Vec::new(),
-            columns: Vec::new(),
-            output_claimed: false,
-            last_good: None,
-            checkpoint: None,
-            background: None,
-        };
+        // serves as a template (e.g. a loaded RVE) does not take the run's folder. The first
+        // simulation of a script that writes gets the run's folder itself (series.csv, vtk/...),
+        // the N-th one `simN/` in it; in a REPL session every simulation gets its own `simN/`.
+        let chooser = ctx.clone();
+        run.choose_folder_on_first_write(Box::new(move |dir: &std::path::Path| {
+            let index = chooser.next_sim_index();
+            if index > 1 || chooser.options.folder_per_simulation {
+                dir.join(format!("sim{index}"))
+            } else {
+                dir.to_path_buf()
+            }
+        }));
+        let state =
+            State { run, ctx, callbacks: Vec::new(), driven: Vec::new(), columns: Vec::new(), background: None };
         let serial = state.ctx.next_simulation_serial();
         Handle(Arc::new(Shared { serial, state: Mutex::new(state), waiting: AtomicUsize::new(0) }))
     }
@@ -367,34 +238,18 @@ impl<S: ScriptSim> Handle<S> {
             ));
         }
         st.ctx.check_overrides()?;
-        st.sim.validate().or_rhai()?;
-        for w in st.sim.setup_warnings() {
+        for w in st.run.prepare().or_rhai()? {
             st.ctx.warn(&w);
         }
-        // Unless the script set them, output intervals follow the run's length up to this call's
-        // end: a short first call (common in the REPL) must not fix every-step output for later
-        // long ones, and a script looping over short calls (`loop { sim.run_steps(500); ... }`)
-        // must not write 20 frames and 500 rows per call; it gets about 20 frames and 500 rows
-        // each time its step count doubles.
-        let (series_every, vtk_every) = match steps {
-            Some(n) => {
-                let end = st.sim.steps().saturating_add(n);
-                ((end / 500).max(1), (end / 20).max(1))
-            }
-            None => (OPEN_RUN_SERIES_EVERY, OPEN_RUN_VTK_EVERY),
-        };
+        let cadence = st.run.cadence(steps);
         let plan = Plan {
             steps,
-            series_every: st.output.series_every.unwrap_or(series_every),
-            vtk_every: st.output.vtk_every.unwrap_or(vtk_every),
+            cadence,
             progress: !st.ctx.options.quiet && stop.is_none(),
             stop,
             pauses_at_start: st.ctx.pause_requests(),
         };
-        if st.output.last_vtk_step.is_none() {
-            st.write_vtk().or_rhai()?;
-        }
-        st.last_good = Some(st.sim.snapshot());
+        st.run.open().or_rhai()?;
         Ok(plan)
     }
 
@@ -409,7 +264,7 @@ impl<S: ScriptSim> Handle<S> {
         let mut plan = self.begin(Some(1), None)?;
         let st = self.lock();
         // A single step writes a frame only on the run's own frame interval.
-        plan.vtk_every = st.output.vtk_every.unwrap_or(u64::MAX);
+        plan.cadence.vtk_every = st.output.vtk_every.unwrap_or(u64::MAX);
         drop(st);
         self.run_plan(&Caller::Within(ctx), plan)
     }
@@ -459,30 +314,19 @@ impl<S: ScriptSim> Handle<S> {
                 // A script law runs inside the step: a Ctrl-C at the prompt pauses the run after
                 // the step (and stops the input then), never halfway through it.
                 let interruptible = super::INTERRUPTIBLE_SINCE.take();
-                let advanced = st.sim.advance();
+                k += 1;
+                let stepped = st.run.step(plan.cadence, k, plan.steps == Some(k));
                 super::INTERRUPTIBLE_SINCE.set(interruptible);
-                if let Err(e) = advanced {
-                    return Err(st.fail(e));
-                }
-                for ev in st.sim.drain_events() {
+                let done = match stepped {
+                    Ok(done) => done,
+                    Err(e) => return Err(st.failed(e)),
+                };
+                for ev in done.events {
                     st.ctx.warn(&ev);
                 }
-                k += 1;
                 let step = st.sim.steps();
-                let last = plan.steps == Some(k);
-                let series_due = step.is_multiple_of(plan.series_every) || last;
-                if series_due {
-                    st.last_good = Some(st.sim.snapshot());
-                }
-                // A call's last state is written when the call spans a frame interval (short calls
-                // in a script loop would otherwise flood vtk/).
-                if step.is_multiple_of(plan.vtk_every) || (last && k >= plan.vtk_every) {
-                    st.write_vtk().or_rhai()?;
-                }
-                if st.checkpoint.as_ref().is_some_and(|(every, _)| step.is_multiple_of(*every)) {
-                    st.write_checkpoint().or_rhai()?;
-                }
                 progress.tick(k, st.sim.time());
+                let series_due = done.series_due;
                 let due =
                     st.callbacks.iter().filter(|(n, _)| step.is_multiple_of(*n)).map(|(_, f)| f.clone()).collect();
                 (due, series_due)
@@ -496,8 +340,13 @@ impl<S: ScriptSim> Handle<S> {
         }
         progress.finish();
         let mut st = self.lock();
-        let ctx = st.ctx.clone();
-        st.sim.run_ended(&ctx).or_rhai()
+        let end = st.run.end().or_rhai()?;
+        let summary = std::mem::take(&mut st.run.summary);
+        for (key, value) in summary {
+            st.ctx.set_summary(&key, value);
+        }
+        drop(end);
+        Ok(())
     }
 
     pub fn run_until(&self, ctx: &NativeCallContext, t_end: Dynamic) -> RhaiResult<()> {
@@ -615,74 +464,8 @@ thread_local! {
     static IN_BACKGROUND_RUN: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
 }
 
-/// Output intervals of an open-ended run (`sim.run()`) unless the script set them.
-const OPEN_RUN_SERIES_EVERY: u64 = 100;
-const OPEN_RUN_VTK_EVERY: u64 = 2000;
-
-/// Progress of a run on stderr: a bar on a terminal, a plain status line every 10 s otherwise.
-struct Progress {
-    bar: Option<indicatif::ProgressBar>,
-    /// Not on a terminal: when the last status line went out.
-    plain: Option<std::cell::Cell<Instant>>,
-    total: u64,
-    start: Instant,
-}
-
-impl Progress {
-    fn new(quiet: bool, total: Option<u64>) -> Progress {
-        let now = Instant::now();
-        let mut progress = Progress { bar: None, plain: None, total: total.unwrap_or(0), start: now };
-        let Some(total) = total.filter(|_| !quiet) else {
-            return progress;
-        };
-        if std::io::stderr().is_terminal() {
-            let bar = indicatif::ProgressBar::new(total);
-            let style =
-                indicatif::ProgressStyle::with_template("{bar:30.cyan/blue} {pos}/{len} steps  {msg}  ETA {eta}")
-                    .map(|s| s.progress_chars("=> "));
-            if let Ok(style) = style {
-                bar.set_style(style);
-            }
-            // Small runs finish before the first redraw and leave nothing behind.
-            bar.set_draw_target(indicatif::ProgressDrawTarget::stderr_with_hz(4));
-            progress.bar = Some(bar);
-        } else {
-            progress.plain = Some(std::cell::Cell::new(now));
-        }
-        progress
-    }
-
-    fn tick(&self, done: u64, time: f64) {
-        if let Some(bar) = &self.bar {
-            bar.set_position(done);
-            if done.is_multiple_of(64) {
-                let rate = done as f64 / self.start.elapsed().as_secs_f64().max(1e-9);
-                bar.set_message(format!("t = {time:.4e} s  {rate:.0} steps/s"));
-            }
-        } else if let Some(last) = &self.plain {
-            if last.get().elapsed() < Duration::from_secs(10) {
-                return;
-            }
-            last.set(Instant::now());
-            let rate = done as f64 / self.start.elapsed().as_secs_f64().max(1e-9);
-            let eta = (self.total - done) as f64 / rate.max(1e-9);
-            granite_core::errln!(
-                "step {done}/{} ({:.0}%)  t = {time:.4e} s  {rate:.0} steps/s  ETA {eta:.0} s",
-                self.total,
-                100.0 * done as f64 / self.total as f64
-            );
-        }
-    }
-
-    fn finish(&self) {
-        if let Some(bar) = &self.bar {
-            bar.finish_and_clear();
-        }
-    }
-}
-
 /// Script methods every simulation type has.
-pub fn register_common<S: ScriptSim>(engine: &mut Engine) {
+pub fn register_common<S: Simulation>(engine: &mut Engine) {
     engine.register_fn("run_until", |ctx: NativeCallContext, s: &mut Handle<S>, t: Dynamic| s.run_until(&ctx, t));
     engine.register_fn("run_steps", |ctx: NativeCallContext, s: &mut Handle<S>, n: i64| {
         if n < 0 {

@@ -69,6 +69,15 @@ pub struct RunOptions {
 
 impl ScriptContext {
     /// Whether this process writes the run's files (the first of several processes, or the only one).
+    /// Who runs the script's simulations, as the run driver needs it.
+    pub fn run_context(&self) -> granite_run::RunContext {
+        granite_run::RunContext {
+            program: self.options.program.clone(),
+            comm: self.options.comm.clone(),
+            quiet: self.options.quiet,
+        }
+    }
+
     pub fn writes_files(&self) -> bool {
         self.options.comm.as_ref().is_none_or(|c| c.rank() == 0)
     }

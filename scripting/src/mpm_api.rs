@@ -4,55 +4,17 @@ use super::convert::{
     api_options, axis_index, counts, err, finite, get, integer, number, numbers, param_map, string, vector, OrRhai,
     RhaiResult,
 };
-use super::driver::{register_common, Handle, ScriptSim};
+use super::driver::{register_common, Handle};
 use super::ScriptContext;
-use granite_core::error::{GraniteError, Result};
-use granite_core::io::vtk::Field;
-use granite_core::math::{deviatoric_strain_norm, p_q, Vec3, Voigt};
+use granite_core::error::GraniteError;
+use granite_core::math::{Vec3, Voigt};
 use granite_core::mpm::boundary::{Face, FrictionConstraint, NodalForce, TimeFunction, VelocityConstraint};
 use granite_core::mpm::fill::{cell_points, Layout};
-use granite_core::mpm::sim::Snapshot;
 use granite_core::mpm::{Boundary, Mesh, MpmSim, OutOfMeshPolicy, ShapeFunctions, StressRate, StressScheme};
 use granite_core::registry::ParamMap;
+use granite_run::{Driven, MpmScene, Runout, Simulation};
 use rhai::{Array, Dynamic, Engine, FnPtr, Map, NativeCallContext};
-use std::io::Write;
-use std::path::Path;
 use std::sync::Arc;
-
-/// Reference geometry of a collapsing column, for the runout columns (thesis 5.6-5.9).
-#[derive(Debug, Clone, Copy)]
-pub struct Runout {
-    pub width0: f64,
-    pub height0: f64,
-    /// Time the collapse started (t~ counts from here).
-    pub t0: f64,
-}
-
-impl Runout {
-    /// `(L_x, d_r, L~, t~)` of eqs. 5.6-5.9, and the body front's `L~` (the x holding 99 % of
-    /// the mass in place of L_x).
-    pub fn measure(&self, sim: &MpmSim) -> (f64, f64, f64, f64, f64) {
-        let lx = sim.voxel_width();
-        let dr = lx - self.width0;
-        let g = granite_core::math::norm3(sim.gravity).max(f64::MIN_POSITIVE);
-        let front = (sim.mass_front(0.99) - self.width0) / self.width0;
-        (lx, dr, dr / self.width0, (sim.time - self.t0) / (self.height0 / g).sqrt(), front)
-    }
-}
-
-/// An MPM simulation as scripts see it.
-pub struct MpmScene {
-    pub mpm: MpmSim,
-    runout: Option<Runout>,
-    /// Boundary values a script function drives, by driver target index.
-    driven: Vec<Driven>,
-}
-
-#[derive(Clone, Copy)]
-enum Driven {
-    Velocity(usize),
-    Force(usize),
-}
 
 pub type SimHandle = Handle<MpmScene>;
 
@@ -77,236 +39,6 @@ impl MaterialHandle {
 
     pub(super) fn new(index: usize, name: String, sim: u64) -> MaterialHandle {
         MaterialHandle { index, name, sim }
-    }
-}
-
-impl ScriptSim for MpmScene {
-    type Snapshot = Snapshot;
-
-    fn validate(&self) -> Result<()> {
-        self.mpm.validate()
-    }
-    fn advance(&mut self) -> Result<()> {
-        self.mpm.step()
-    }
-    fn time(&self) -> f64 {
-        self.mpm.time
-    }
-    fn steps(&self) -> u64 {
-        self.mpm.step
-    }
-    fn dt(&self) -> f64 {
-        self.mpm.dt
-    }
-    fn series_row(&self) -> (Vec<&'static str>, Vec<f64>) {
-        let sim = &self.mpm;
-        let d = sim.diagnostics();
-        let mut cols = vec![
-            "step",
-            "time",
-            "kinetic_energy",
-            "elastic_energy",
-            "gravitational_energy",
-            "total_energy",
-            "max_height",
-            "max_x",
-            "max_deviatoric_strain",
-            "points",
-            "deleted_points",
-            "angular_momentum_x",
-            "angular_momentum_y",
-            "angular_momentum_z",
-        ];
-        let mut vals = vec![
-            sim.step as f64,
-            sim.time,
-            d.kinetic_energy,
-            d.elastic_energy,
-            d.gravitational_energy,
-            d.total_energy(),
-            d.max_height,
-            d.max_x,
-            d.max_deviatoric_strain,
-            d.points as f64,
-            sim.deleted_points as f64,
-            d.angular_momentum[0],
-            d.angular_momentum[1],
-            d.angular_momentum[2],
-        ];
-        for (name, value) in sim.law_series() {
-            cols.push(name);
-            vals.push(value);
-        }
-        if let Some(r) = &self.runout {
-            let (lx, dr, l_norm, t_norm, front) = r.measure(sim);
-            cols.extend(["lx", "runout", "runout_normalised", "time_normalised", "front_runout_normalised"]);
-            vals.extend([lx, dr, l_norm, t_norm, front]);
-        }
-        (cols, vals)
-    }
-    fn series_tag(&self) -> &'static str {
-        "runout"
-    }
-    fn vtk_frame(&self) -> (Vec<Vec3>, Vec<Field>) {
-        let sim = &self.mpm;
-        let p = &sim.points;
-        let n = p.len();
-        let field = Field::float;
-        let mut fields = vec![
-            Field::int("id", p.id.iter().map(|&i| i as i64)),
-            Field::int("material", p.material.iter().map(|&m| m as i64)),
-            field("velocity", 3, p.v.iter().flatten().copied().collect()),
-            field("stress", 6, p.stress.iter().flatten().copied().collect()),
-            field("strain", 6, p.strain.iter().flatten().copied().collect()),
-            field("mean_stress", 1, p.stress.iter().map(|s| p_q(s).0).collect()),
-            field("deviatoric_stress", 1, p.stress.iter().map(|s| p_q(s).1).collect()),
-            field("deviatoric_strain", 1, p.strain.iter().map(deviatoric_strain_norm).collect()),
-            field("volume", 1, p.volume.clone()),
-        ];
-        // Law state variables by name (zero for points whose law lacks that variable).
-        let mut start = 0;
-        for m in &sim.materials {
-            let names = m.law.state_names();
-            for (k, name) in names.iter().enumerate() {
-                let idx = match fields.iter().position(|f| f.name == *name) {
-                    Some(i) => i,
-                    None => {
-                        fields.push(field(name, 1, vec![0.0; n]));
-                        fields.len() - 1
-                    }
-                };
-                for j in 0..m.count {
-                    fields[idx].values[start + j] = m.state[j * names.len() + k];
-                }
-            }
-            start += m.count;
-        }
-        (p.x.clone(), fields)
-    }
-    fn write_points(&self, path: &Path) -> Result<()> {
-        let f = std::fs::File::create(path).map_err(|e| GraniteError::io(path, e))?;
-        let mut w = std::io::BufWriter::new(f);
-        let io = |e| GraniteError::io(path, e);
-        writeln!(
-            w,
-            "id,material,x,y,z,vx,vy,vz,sxx,syy,szz,sxy,syz,sxz,exx,eyy,ezz,gxy,gyz,gxz,p,q,deviatoric_strain,volume,mass"
-        )
-        .map_err(io)?;
-        let p = &self.mpm.points;
-        for i in 0..p.len() {
-            let (mean, q) = p_q(&p.stress[i]);
-            let mut row = vec![p.id[i] as f64, p.material[i] as f64];
-            row.extend(p.x[i]);
-            row.extend(p.v[i]);
-            row.extend(p.stress[i]);
-            row.extend(p.strain[i]);
-            row.extend([mean, q, deviatoric_strain_norm(&p.strain[i]), p.volume[i], p.mass[i]]);
-            let line = row.iter().map(|v| v.to_string()).collect::<Vec<_>>().join(",");
-            writeln!(w, "{line}").map_err(|e| GraniteError::io(path, e))?;
-        }
-        w.flush().map_err(|e| GraniteError::io(path, e))
-    }
-    fn diagnostics(&self) -> Vec<(&'static str, f64)> {
-        let sim = &self.mpm;
-        let d = sim.diagnostics();
-        let mut out = vec![
-            ("time", sim.time),
-            ("step", sim.step as f64),
-            ("points", d.points as f64),
-            ("mass", d.mass),
-            ("momentum_x", d.momentum[0]),
-            ("momentum_y", d.momentum[1]),
-            ("momentum_z", d.momentum[2]),
-            ("angular_momentum_x", d.angular_momentum[0]),
-            ("angular_momentum_y", d.angular_momentum[1]),
-            ("angular_momentum_z", d.angular_momentum[2]),
-            ("kinetic_energy", d.kinetic_energy),
-            ("elastic_energy", d.elastic_energy),
-            ("gravitational_energy", d.gravitational_energy),
-            ("total_energy", d.total_energy()),
-            ("max_height", d.max_height),
-            ("max_x", d.max_x),
-            ("max_deviatoric_strain", d.max_deviatoric_strain),
-            ("deleted_points", sim.deleted_points as f64),
-        ];
-        if let Some(r) = &self.runout {
-            let (lx, dr, ln, tn, front) = r.measure(sim);
-            out.extend([
-                ("lx", lx),
-                ("runout", dr),
-                ("runout_normalised", ln),
-                ("time_normalised", tn),
-                ("front_runout_normalised", front),
-            ]);
-        }
-        out
-    }
-    fn snapshot(&self) -> Snapshot {
-        self.mpm.snapshot()
-    }
-    fn restore(&mut self, snapshot: Snapshot) {
-        self.mpm.restore(snapshot)
-    }
-    fn save_state(&self, path: &std::path::Path, ctx: &ScriptContext) -> Result<()> {
-        // Collective: every process calls it, the first writes.
-        self.mpm.save_as(path, &ctx.options.program)
-    }
-    fn drain_events(&mut self) -> Vec<String> {
-        self.mpm.events.drain(..).collect()
-    }
-    fn setup_warnings(&mut self) -> Vec<String> {
-        // Said only when it matters: a script usually sets the new mesh's boundaries right after.
-        let bare = std::mem::take(&mut self.mpm.mesh_replaced) && self.mpm.boundary.is_empty();
-        let mut warnings = Vec::new();
-        if bare {
-            warnings.push(
-                "the mesh was replaced, which cleared its boundary conditions, and none was set since: the \
-                 points run with no boundary"
-                    .into(),
-            );
-        }
-        if self.mpm.velocity_update.affine() && self.mpm.shape == ShapeFunctions::Linear && self.mpm.step == 0 {
-            warnings.push(format!(
-                "{} (an affine transfer) with linear shape functions can gain energy as points cross cells, \
-                 whatever the time step (APIC on an elastic bar of 50 cells blows up at 0.1 x critical_dt and \
-                 gains 16 % at 0.02 x); sim.shape_functions(\"bspline2\") or \"gimp\" keeps it stable",
-                self.mpm.velocity_update.name()
-            ));
-        }
-        warnings
-    }
-    fn run_ended(&mut self, ctx: &ScriptContext) -> Result<()> {
-        for m in &self.mpm.materials {
-            if let Some(objects) = m.law.point_objects() {
-                let spared = match &m.spread {
-                    Some(spread) => spread.sum(objects.process_savings())?,
-                    None => objects.process_savings(),
-                };
-                if ctx.writes_files() {
-                    for (key, value) in objects.run_summary(&m.state, spared) {
-                        ctx.set_summary(&key, value);
-                    }
-                }
-            }
-            let Some(spread) = &m.spread else { continue };
-            let report = spread.report()?;
-            if ctx.writes_files() {
-                if !ctx.options.quiet {
-                    granite_core::errln!("granite: material \"{}\": {}", m.name, report.line());
-                }
-                for (key, value) in report.summary() {
-                    ctx.set_summary(&key, value);
-                }
-            }
-        }
-        Ok(())
-    }
-    fn set_driven(&mut self, target: usize, value: f64) {
-        match self.driven.get(target) {
-            Some(Driven::Velocity(i)) => self.mpm.boundary.velocity[*i].value = TimeFunction::Driven(value),
-            Some(Driven::Force(i)) => self.mpm.boundary.forces[*i].factor = TimeFunction::Driven(value),
-            None => {}
-        }
     }
 }
 
@@ -450,7 +182,7 @@ impl Handle<MpmScene> {
         if let Some(comm) = &ctx.options.comm {
             mpm.set_communicator(comm.clone());
         }
-        let scene = MpmScene { mpm, runout: None, driven: Vec::new() };
+        let scene = MpmScene::new(mpm);
         Ok(Handle::new(scene, ctx))
     }
 
@@ -745,7 +477,7 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
         let mut st = s.lock();
         let path = st.script_file_path("save", file)?;
         let ctx = st.ctx.clone();
-        st.sim.save_state(&path, &ctx).map(|_| path.display().to_string()).or_rhai()
+        st.sim.save_state(&path, &ctx.run_context()).map(|_| path.display().to_string()).or_rhai()
     });
     let c = ctx.clone();
     engine.register_fn("mpm_load", move |file: &str| {
@@ -758,7 +490,7 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
         if let Some(comm) = &c.options.comm {
             mpm.set_communicator(comm.clone());
         }
-        Ok::<_, Box<rhai::EvalAltResult>>(Handle::new(MpmScene { mpm, runout: None, driven: Vec::new() }, c.clone()))
+        Ok::<_, Box<rhai::EvalAltResult>>(Handle::new(MpmScene::new(mpm), c.clone()))
     });
     engine.register_fn("fill_box", |s: &mut SimHandle, m: MaterialHandle, lo: Dynamic, hi: Dynamic, opts: Map| {
         let region = s.box_region(&lo, &hi)?;

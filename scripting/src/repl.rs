@@ -167,8 +167,8 @@ fn readable(signature: &str) -> String {
         ("rhai::types::dynamic::Dynamic", "value"),
         ("types::dynamic::Dynamic", "value"),
         ("alloc::string::String", "string"),
-        ("granite_script::driver::Handle<granite_script::dem_api::DemScene>", "DemSim"),
-        ("granite_script::driver::Handle<granite_script::mpm_api::MpmScene>", "MpmSim"),
+        ("granite_script::driver::Handle<granite_run::dem_scene::DemScene>", "DemSim"),
+        ("granite_script::driver::Handle<granite_run::mpm_scene::MpmScene>", "MpmSim"),
         ("granite_script::", ""),
     ];
     let mut s = signature.replace("_: ", "");

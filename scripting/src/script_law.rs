@@ -5,11 +5,11 @@
 
 use super::convert::{api_options, get, number, string, OrRhai, RhaiResult};
 use super::driver::Handle;
-use super::mpm_api::MpmScene;
 use super::ScriptContext;
 use granite_core::error::{GraniteError, Result};
 use granite_core::ext::{ConstitutiveLaw, LawBatch};
 use granite_core::params::Params;
+use granite_run::MpmScene;
 use rhai::{Array, Dynamic, Engine, FnPtr, Map};
 use std::sync::Arc;
 

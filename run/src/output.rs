@@ -1,0 +1,156 @@
+//! The files one simulation writes into its output folder: `series.csv` rows and VTK frames,
+//! whatever the engine.
+
+use granite_core::error::Result;
+use granite_core::io::vtk::{Encoding, Field, PolyData};
+use granite_core::io::{SeriesWriter, VtkWriter};
+use granite_core::math::Vec3;
+use std::path::PathBuf;
+
+pub struct Output {
+    pub dir: PathBuf,
+    /// False in the processes of an MPI run other than the first: they run the same simulation
+    /// and write nothing.
+    pub writes: bool,
+    series: Option<SeriesWriter>,
+    vtk: Option<VtkWriter>,
+    /// Poly-data series beside the points (DEM walls, contact network), by name.
+    poly: Vec<(String, VtkWriter)>,
+    /// How VTK arrays are written (binary unless the script asks for ASCII).
+    pub vtk_encoding: Encoding,
+    /// Steps between series rows / VTK frames; None = chosen per run call.
+    pub series_every: Option<u64>,
+    pub vtk_every: Option<u64>,
+    pub last_series_step: Option<u64>,
+    pub last_vtk_step: Option<u64>,
+    /// The step and time a simulation loaded from a checkpoint starts at: its series continue
+    /// the files of the run it resumes, and the VTK series keeps that run's earlier frames.
+    pub resumes_at: Option<(u64, f64)>,
+}
+
+impl Output {
+    pub fn new(dir: PathBuf) -> Output {
+        Output {
+            dir,
+            writes: true,
+            series: None,
+            vtk: None,
+            poly: Vec::new(),
+            vtk_encoding: Encoding::default(),
+            series_every: None,
+            vtk_every: None,
+            last_series_step: None,
+            last_vtk_step: None,
+            resumes_at: None,
+        }
+    }
+
+    /// Appends a row; a change in the column set (e.g. runout tracking starting) continues in
+    /// `<prefix>series_<tag>.csv`.
+    pub fn write_series(&mut self, step: u64, cols: &[&str], vals: &[f64], tag: &str) -> Result<()> {
+        if self.last_series_step == Some(step) {
+            return Ok(());
+        }
+        if !self.writes {
+            self.last_series_step = Some(step);
+            return Ok(());
+        }
+        let needs_new = match &self.series {
+            None => true,
+            Some(w) => w.columns().len() != cols.len() || w.columns().iter().zip(cols).any(|(a, b)| a != b),
+        };
+        if needs_new {
+            let columns: Vec<String> = cols.iter().map(|s| s.to_string()).collect();
+            let first = self.series.is_none();
+            let resumed = if first { self.resumed_series(&columns)? } else { None };
+            self.series = match resumed {
+                Some(resumed) => Some(resumed),
+                None => {
+                    // A resumed run whose columns match no earlier file leaves series.csv alone.
+                    let taken = self.resumes_at.is_some() && self.dir.join("series.csv").exists();
+                    let name = if first && !taken { "series.csv".to_string() } else { format!("series_{tag}.csv") };
+                    Some(SeriesWriter::create(&self.dir.join(name), columns)?)
+                }
+            };
+        }
+        if let Some(w) = self.series.as_mut() {
+            w.write(vals)?;
+        }
+        self.last_series_step = Some(step);
+        Ok(())
+    }
+
+    /// For a resumed simulation, the earlier series file with these columns (`series.csv`, then
+    /// `series_*.csv`), continued from the step it resumes at.
+    fn resumed_series(&self, columns: &[String]) -> Result<Option<SeriesWriter>> {
+        let Some((step, _)) = self.resumes_at else { return Ok(None) };
+        let mut files = vec![self.dir.join("series.csv")];
+        if let Ok(entries) = std::fs::read_dir(&self.dir) {
+            let mut more: Vec<_> = entries
+                .flatten()
+                .map(|e| e.path())
+                .filter(|p| p.file_name().is_some_and(|n| n.to_string_lossy().starts_with("series_")))
+                .filter(|p| p.extension().is_some_and(|e| e == "csv"))
+                .collect();
+            more.sort();
+            files.extend(more);
+        }
+        for file in files {
+            if let Some(series) = SeriesWriter::resume(&file, columns, step)? {
+                return Ok(Some(series));
+            }
+        }
+        Ok(None)
+    }
+
+    /// A VTK series of this simulation: a new one, or for a resumed simulation the earlier run's,
+    /// continued after its frames before the resumed time.
+    fn vtk_series(&self, dir: &std::path::Path, stem: &str) -> Result<VtkWriter> {
+        match self.resumes_at {
+            Some((_, time)) => VtkWriter::resume(dir, stem, time),
+            None => VtkWriter::new(dir, stem),
+        }
+    }
+
+    /// One frame: the points, and each poly-data series (`vtk/<prefix><name>_N.vtp`, its own
+    /// `.pvd`) at the same time.
+    pub fn write_vtk(
+        &mut self,
+        step: u64,
+        time: f64,
+        positions: &[Vec3],
+        fields: &[Field],
+        poly: &[(&str, PolyData)],
+    ) -> Result<()> {
+        if self.last_vtk_step == Some(step) {
+            return Ok(());
+        }
+        if !self.writes {
+            self.last_vtk_step = Some(step);
+            return Ok(());
+        }
+        let dir = self.dir.join("vtk");
+        if self.vtk.is_none() {
+            self.vtk = Some(self.vtk_series(&dir, "points")?);
+        }
+        if let Some(w) = self.vtk.as_mut() {
+            w.encoding = self.vtk_encoding;
+            w.write_frame(time, positions, fields)?;
+        }
+        for (name, data) in poly {
+            let k = match self.poly.iter().position(|(n, _)| n == name) {
+                Some(k) => k,
+                None => {
+                    let series = self.vtk_series(&dir, name)?;
+                    self.poly.push((name.to_string(), series));
+                    self.poly.len() - 1
+                }
+            };
+            let writer = &mut self.poly[k].1;
+            writer.encoding = self.vtk_encoding;
+            writer.write_poly_frame(time, data)?;
+        }
+        self.last_vtk_step = Some(step);
+        Ok(())
+    }
+}
