@@ -883,9 +883,7 @@ pub fn mpmxdem_on_device(device: &str, scene: &str, repeat: usize) -> Result<()>
     let on = registry.rve_device(device)?.clone();
     let threads = rayon::current_num_threads();
     let order = RveOrder { velocity_gradient: scene.gradient(), full_steps: scene.dem_steps, last_step: 0.0 };
-    let mut rve = scene.rve.clone();
-    rve.set_sequential(true);
-    rve.cell_control = None;
+    let rve = granite_core::dem::Rve::prepare(scene.rve.clone(), "granite bench mpmxdem")?;
     let mut device_name = String::new();
     let (mut gpu_times, mut cpu_times, mut idle_times) = (Vec::new(), Vec::new(), Vec::new());
     let idle = RveOrder { full_steps: 0, ..order };
@@ -910,18 +908,14 @@ pub fn mpmxdem_on_device(device: &str, scene: &str, repeat: usize) -> Result<()>
             batch.step(&idle_orders)?;
         }
         idle_times.push(t.elapsed().as_secs_f64());
-        let mut sims: Vec<_> = (0..scene.copies).map(|_| rve.clone()).collect();
-        for sim in &mut sims {
-            if let Some(c) = sim.cell.as_mut() {
-                c.velocity_gradient = order.velocity_gradient;
-            }
-            for _ in 0..scene.dem_steps {
-                sim.step()?;
-            }
+        // The CPU threads carry out the same orders as dem_rve does (steps, then the response).
+        let mut rves: Vec<_> = (0..scene.copies).map(|_| rve.clone()).collect();
+        for rve in &mut rves {
+            rve.deform(&order)?;
         }
         let t = Instant::now();
         for _ in 0..scene.calls {
-            sims.par_iter_mut().try_for_each(|sim| (0..scene.dem_steps).try_for_each(|_| sim.step()))?;
+            rves.par_iter_mut().try_for_each(|rve| rve.deform(&order).map(|_| ()))?;
         }
         cpu_times.push(t.elapsed().as_secs_f64());
     }
@@ -930,7 +924,7 @@ pub fn mpmxdem_on_device(device: &str, scene: &str, repeat: usize) -> Result<()>
         "granite bench mpmxdem --device {device} --scene {}: {} RVEs x {} spheres, {} calls x {} DEM steps ({:.3e} sphere-steps a round)",
         scene.name,
         scene.copies,
-        rve.spheres.len(),
+        rve.sphere_count(),
         scene.calls,
         scene.dem_steps,
         work

@@ -8,7 +8,7 @@
 
 mod common;
 use common::*;
-use granite_core::dem::DemSim;
+use granite_core::dem::{DemSim, Rve};
 use granite_core::ext::rve::RveDeviceChoice;
 use granite_core::ext::{RveDevice, RveOrder};
 use granite_core::mpm::{Mesh, MpmSim, StressScheme};
@@ -25,7 +25,7 @@ fn device() -> Arc<dyn RveDevice> {
 /// computes what the CPU engine computes, bit for bit.
 fn exact_adapter() -> bool {
     let rve = granite::bench::periodic_rve(20, 1e5).unwrap();
-    device().open(vec![rve]).unwrap().device_name().contains("llvmpipe")
+    device().open(vec![Rve::as_is(rve)]).unwrap().device_name().contains("llvmpipe")
 }
 
 /// Largest difference between two runs' series, per column, relative to that column's largest
@@ -166,11 +166,11 @@ fn a_sheared_rve_flips_its_cell_on_the_gpu_as_on_the_cpu() {
         cpu.step().unwrap();
     }
     rve.cell.as_mut().unwrap().velocity_gradient = Matrix3::zeros();
-    let mut batch = device().open(vec![rve]).unwrap();
+    let mut batch = device().open(vec![Rve::as_is(rve)]).unwrap();
     let report = batch.step(&[RveOrder { velocity_gradient: l, full_steps: steps, last_step: 0.0 }]).unwrap().remove(0);
     assert!(report.failure.is_none(), "{:?}", report.failure);
     assert_eq!(report.steps, steps);
-    let gpu = batch.get(0).unwrap();
+    let gpu = batch.get(0).unwrap().into_dem();
     let (cell_cpu, cell_gpu) = (cpu.cell.as_ref().unwrap(), gpu.cell.as_ref().unwrap());
     assert_eq!(cell_cpu.flips, 1, "a tilt of 0.52 flips the cell once");
     assert_eq!(cell_gpu.flips, cell_cpu.flips);
@@ -211,7 +211,7 @@ fn an_rve_flattened_to_a_fraction_of_its_reach_goes_on_with_longer_rows() {
     }
     let thickness = cpu.cell.as_ref().unwrap().widths()[2];
     assert!(thickness < 0.1 * reach, "the cell is {thickness:.3e} m thick, reach {reach:.3e} m");
-    let mut batch = device().open(vec![rve]).unwrap();
+    let mut batch = device().open(vec![Rve::as_is(rve)]).unwrap();
     let report = batch.step(&[RveOrder { velocity_gradient: l, full_steps: steps, last_step: 0.0 }]).unwrap().remove(0);
     assert!(report.failure.is_none(), "{:?}", report.failure);
     assert_eq!(report.steps, steps);
@@ -222,7 +222,7 @@ fn an_rve_flattened_to_a_fraction_of_its_reach_goes_on_with_longer_rows() {
     }
     assert_eq!(report.contacts, cpu.coordination().contacts);
     if exact_adapter() {
-        let gpu = batch.get(0).unwrap();
+        let gpu = batch.get(0).unwrap().into_dem();
         assert!(gpu.spheres.x == cpu.spheres.x && report.stress == stress, "lavapipe and the CPU differ");
     }
 }
@@ -336,14 +336,14 @@ fn a_loose_rve_on_the_gpu_follows_the_cpu_sphere_by_sphere() {
     // Workgroups of 256 invocations (what 2000-sphere RVEs get on a GPU) step 100 spheres alike.
     let device = granite::gpu::GpuDevice::with_workgroup(256).unwrap();
     let exact_adapter = exact_adapter();
-    let mut batch = device.open(vec![rve]).unwrap();
+    let mut batch = device.open(vec![Rve::as_is(rve)]).unwrap();
     for call in 0..10 {
         let report =
             batch.step(&[RveOrder { velocity_gradient: l, full_steps: 100, last_step: 0.0 }]).unwrap().remove(0);
         for _ in 0..100 {
             cpu.step().unwrap();
         }
-        let gpu = batch.get(0).unwrap();
+        let gpu = batch.get(0).unwrap().into_dem();
         let apart =
             gpu.spheres.x.iter().zip(&cpu.spheres.x).flat_map(|(a, b)| (0..3).map(move |k| (a[k] - b[k]).abs()));
         let apart = apart.fold(0.0, f64::max);

@@ -3,7 +3,7 @@
 //! rest, a pure DEM run of the same strain path, and thread-count independence.
 
 use granite_core::dem::cell::PeriodicCell;
-use granite_core::dem::DemSim;
+use granite_core::dem::{DemSim, Rve};
 use granite_core::ext::constitutive::ObjectMap;
 use granite_core::ext::{ConstitutiveLaw, LawBatch, PointObjects};
 mod common;
@@ -57,7 +57,7 @@ fn p_min_and_deformation_time_follow_eqs_4_2_to_4_5() {
     let law = DemRve::new(params(&[("inertial_number", 1e-2)]), &objects(&rve)).unwrap();
     // Hand-checked: m = 2650 * 4/3 pi (1e-3)^3 = 1.1100294e-5 kg; W = 64 m 9.81 = 6.969210e-3 N;
     // the bottom face is (8 mm)^2 = 6.4e-5 m^2, so P_min = 108.894 Pa (eq. 4.2).
-    let p_min = law.p_min(&rve);
+    let p_min = law.p_min(&Rve::prepare(rve.clone(), "test").unwrap());
     assert!((p_min - 108.894).abs() < 1e-3, "P_min = {p_min}");
     // Eq. 4.1 with |de|max = 1e-4, I = 1e-2, rho_g = 2650, l = 2 mm, P = P_min:
     // T = 1e-2 sqrt(2650 * 4e-6 / 108.894) = 9.8662e-5 s.

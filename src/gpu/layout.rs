@@ -525,6 +525,7 @@ impl Layout {
             steps: rec[Rec::Taken as usize] as u64,
             failure: Failure::from_code(rec[Rec::Error as usize])
                 .map(|f| f.describe(rec[Rec::ErrorValue as usize], self.slots)),
+            events: Vec::new(),
         }
     }
 }

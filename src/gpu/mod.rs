@@ -6,7 +6,7 @@
 
 mod layout;
 
-use granite_core::dem::DemSim;
+use granite_core::dem::{DemSim, Rve};
 use granite_core::ext::{RveBatch, RveDevice, RveOrder, RveReport};
 use granite_core::{GraniteError, Result};
 use layout::{Failure, Layout, Rec};
@@ -43,7 +43,7 @@ impl RveDevice for GpuDevice {
     fn name(&self) -> &str {
         "gpu"
     }
-    fn open(&self, rves: Vec<DemSim>) -> Result<Box<dyn RveBatch>> {
+    fn open(&self, rves: Vec<Rve>) -> Result<Box<dyn RveBatch>> {
         let gpu = self.gpu()?;
         let mut batch = GpuBatch {
             gpu,
@@ -358,7 +358,8 @@ impl RveBatch for GpuBatch {
     fn len(&self) -> usize {
         self.shadows.len()
     }
-    fn push(&mut self, rves: Vec<DemSim>) -> Result<()> {
+    fn push(&mut self, rves: Vec<Rve>) -> Result<()> {
+        let rves: Vec<DemSim> = rves.into_iter().map(Rve::into_dem).collect();
         for sim in &rves {
             let law = layout::LawConstants::of(sim)?;
             match &self.law {
@@ -423,11 +424,16 @@ impl RveBatch for GpuBatch {
         }
         Ok(reports.into_iter().map(|(report, _)| report).collect())
     }
-    fn get(&mut self, index: usize) -> Result<DemSim> {
+    fn get(&mut self, index: usize) -> Result<Rve> {
         self.sync_to_host()?;
-        self.shadows.get(index).cloned().ok_or_else(|| GraniteError::Other(format!("no RVE {index} on the device")))
+        self.shadows
+            .get(index)
+            .cloned()
+            .map(Rve::as_is)
+            .ok_or_else(|| GraniteError::Other(format!("no RVE {index} on the device")))
     }
-    fn set(&mut self, index: usize, rve: DemSim) -> Result<()> {
+    fn set(&mut self, index: usize, rve: Rve) -> Result<()> {
+        let rve = rve.into_dem();
         layout::LawConstants::of(&rve)?;
         self.sync_to_host()?;
         let slot =

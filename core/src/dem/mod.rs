@@ -23,6 +23,7 @@ pub mod potential;
 mod rebuild;
 pub mod repose;
 mod rows;
+pub mod rve;
 pub mod sim;
 pub mod stability;
 pub mod state;
@@ -31,5 +32,6 @@ pub mod voids;
 pub mod walls;
 
 pub use particles::Spheres;
+pub use rve::Rve;
 pub use sim::{DemMaterial, DemSim};
 pub use walls::{Wall, WallShape};

@@ -3,7 +3,7 @@
 //! DEM steps (thesis eqs. 4.1-4.5), and gives back each RVE's Love-Weber stress (eq. 4.7) and
 //! contact counts; the RVEs stay on the device between calls.
 
-use crate::dem::DemSim;
+use crate::dem::Rve;
 use crate::error::Result;
 use crate::math::Voigt;
 use nalgebra::Matrix3;
@@ -36,6 +36,8 @@ pub struct RveReport {
     pub steps: u64,
     /// Why it stopped before its last step (the CPU engine's words), if it did.
     pub failure: Option<String>,
+    /// What its steps said for the user (a time step above its contacts' bound).
+    pub events: Vec<String>,
 }
 
 impl RveReport {
@@ -59,7 +61,7 @@ pub trait RveDevice: Send + Sync {
     fn name(&self) -> &str;
     /// Why these RVEs cannot run on this device (no adapter, a feature the kernels lack), or
     /// the batch holding them on it.
-    fn open(&self, rves: Vec<DemSim>) -> Result<Box<dyn RveBatch>>;
+    fn open(&self, rves: Vec<Rve>) -> Result<Box<dyn RveBatch>>;
 }
 
 /// The RVEs of one material on a device, indexed by material point.
@@ -71,13 +73,13 @@ pub trait RveBatch: Send {
         self.len() == 0
     }
     /// Appends RVEs.
-    fn push(&mut self, rves: Vec<DemSim>) -> Result<()>;
+    fn push(&mut self, rves: Vec<Rve>) -> Result<()>;
     /// Keeps the RVEs whose flag is true, in order.
     fn retain(&mut self, keep: &[bool]) -> Result<()>;
     /// Steps every RVE by its order (one per RVE, in order) in one submission.
     fn step(&mut self, orders: &[RveOrder]) -> Result<Vec<RveReport>>;
     /// A copy of one RVE as it is now (checkpoints, outputs).
-    fn get(&mut self, index: usize) -> Result<DemSim>;
+    fn get(&mut self, index: usize) -> Result<Rve>;
     /// Replaces one RVE.
-    fn set(&mut self, index: usize, rve: DemSim) -> Result<()>;
+    fn set(&mut self, index: usize, rve: Rve) -> Result<()>;
 }

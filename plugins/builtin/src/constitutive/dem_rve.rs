@@ -6,7 +6,7 @@
 use super::dem_rve_adaptive::{state, Activation, Restart, Role, Tolerances};
 use super::dem_rve_device::DeviceRves;
 use super::dem_rve_share::Twins;
-use granite_core::dem::DemSim;
+use granite_core::dem::{DemSim, Rve};
 use granite_core::ext::constitutive::ObjectMap;
 use granite_core::ext::rve::RveDeviceChoice;
 use granite_core::ext::{ConstitutiveLaw, ConstitutiveLawFactory, LawBatch, PointObjects, RveOrder, RveReport};
@@ -53,18 +53,18 @@ pub const SPECS: &[ParamSpec] = &[
 ];
 
 /// What one point's RVE carries between calls.
-struct Rve {
-    sim: DemSim,
-    /// Love-Weber stress of `sim` as the last call left it: the next call's P (eq. 4.3) without
+struct PointRve {
+    rve: Rve,
+    /// Love-Weber stress of `rve` as the last call left it: the next call's P (eq. 4.3) without
     /// a second pass over the contacts. None until computed (a new or reloaded RVE).
     stress: Option<Voigt>,
 }
 
 pub struct DemRve {
     params: Params,
-    template: DemSim,
+    template: Rve,
     /// One slot per material point; empty for points whose RVE lives in another process.
-    rves: RwLock<Vec<Mutex<Option<Rve>>>>,
+    rves: RwLock<Vec<Mutex<Option<PointRve>>>>,
     inertial_number: f64,
     keep_dt: bool,
     vertical_axis: usize,
@@ -121,7 +121,7 @@ impl ConstitutiveLawFactory for DemRveFactory {
     ) -> Result<Box<dyn ConstitutiveLaw>> {
         let bad = || GraniteError::Other("dem_rve checkpoint: expected {template, rves}".into());
         let serde_json::Value::Object(mut map) = objects else { return Err(bad()) };
-        let template = DemSim::from_json(map.remove("template").ok_or_else(bad)?, registry)?;
+        let template = Rve::from_json(map.remove("template").ok_or_else(bad)?, registry)?;
         let params = Params::resolve("law \"dem_rve\"", SPECS, given)?;
         let mut objects = ObjectMap::new();
         objects.insert("rve".into(), std::sync::Arc::new(template));
@@ -151,17 +151,14 @@ impl ConstitutiveLawFactory for DemRveFactory {
         let keepers = if law.share { equal_to_earlier(&rves) } else { vec![None; rves.len()] };
         law.twins.lock().unwrap_or_else(|e| e.into_inner()).restore(&keepers);
         if let Some(device) = &law.device {
-            let sims =
-                rves.into_iter().map(|v| DemSim::from_json(v, registry).map(Some)).collect::<Result<Vec<_>>>()?;
-            device.add(sims)?;
+            let rves = rves.into_iter().map(|v| Rve::from_json(v, registry).map(Some)).collect::<Result<Vec<_>>>()?;
+            device.add(rves)?;
             return Ok(Box::new(law));
         }
         {
             let mut store = law.rves.write().map_err(|_| GraniteError::Other("RVE store poisoned".into()))?;
             for v in rves {
-                let mut sim = DemSim::from_json(v, registry)?;
-                sim.set_sequential(true);
-                store.push(Mutex::new(Some(Rve { sim, stress: None })));
+                store.push(Mutex::new(Some(PointRve { rve: Rve::from_json(v, registry)?, stress: None })));
             }
         }
         Ok(Box::new(law))
@@ -198,24 +195,20 @@ impl DemRve {
         } else {
             None
         };
-        let template = objects
-            .get("rve")
-            .and_then(|o| o.downcast_ref::<DemSim>())
-            .ok_or_else(|| GraniteError::MissingParameter {
-                name: "rve".into(),
-                context: params.owner().into(),
-                expected: "a prepared periodic DEM sample: a dem() simulation with periodic(...)".into(),
-            })?
-            .clone();
-        if template.cell.is_none() {
-            return Err(GraniteError::Setup(format!("{}: the `rve` must have a periodic cell", params.owner())));
-        }
-        if template.spheres.is_empty() || template.dt <= 0.0 || template.laws.is_empty() {
-            return Err(GraniteError::Setup(format!(
-                "{}: the `rve` needs spheres, a contact law and a time step",
-                params.owner()
-            )));
-        }
+        // A script hands the DEM simulation it prepared; a checkpoint, the RVE it saved.
+        let given = objects.get("rve");
+        let template =
+            match (given.and_then(|o| o.downcast_ref::<Rve>()), given.and_then(|o| o.downcast_ref::<DemSim>())) {
+                (Some(rve), _) => rve.clone(),
+                (None, Some(dem)) => Rve::prepare(dem.clone(), params.owner())?,
+                (None, None) => {
+                    return Err(GraniteError::MissingParameter {
+                        name: "rve".into(),
+                        context: params.owner().into(),
+                        expected: "a prepared periodic DEM sample: a dem() simulation with periodic(...)".into(),
+                    })
+                }
+            };
         let inertial_number = params.positive("inertial_number")?;
         let strategy = params.get("strategy");
         if strategy != 0.0 && strategy != 1.0 {
@@ -233,10 +226,9 @@ impl DemRve {
                 "must be 0, 1 or 2",
             ));
         }
-        let s = &template.spheres;
-        let mass: f64 = s.mass.iter().sum();
+        let mass = template.mass();
         let volume = template.solid_volume();
-        let mean_diameter = 2.0 * s.radius.iter().sum::<f64>() / s.len() as f64;
+        let mean_diameter = template.mean_diameter();
         let grain_size = if params.is_set("grain_size") { params.positive("grain_size")? } else { mean_diameter };
         let g = params.non_negative("gravity")?;
         let max_steps = params.count("max_dem_steps")?;
@@ -257,10 +249,6 @@ impl DemRve {
                 Some(DeviceRves::new(d.0.clone()))
             }
         };
-        let mut template = template;
-        template.set_sequential(true);
-        template.cell_control = None;
-        template.gravity = [0.0; 3];
         let mut law = DemRve {
             weight: mass * g,
             density: mass / volume,
@@ -304,8 +292,8 @@ pub struct DeformationPlan {
 
 impl DemRve {
     /// P^min of eq. 4.2: the RVE's weight over the area of its bottom face.
-    pub fn p_min(&self, sim: &DemSim) -> f64 {
-        sim.cell.as_ref().map(|cell| self.p_min_of_cell(&cell.h)).unwrap_or(0.0)
+    pub fn p_min(&self, rve: &Rve) -> f64 {
+        self.p_min_of_cell(&rve.cell())
     }
 
     /// P^min of eq. 4.2 for a cell of base vectors `h` (columns).
@@ -398,7 +386,7 @@ impl ConstitutiveLaw for DemRve {
             let report = self.step_own(index, &batch.dstrain[k], rve)?;
             self.record(
                 &report,
-                rve.sim.spheres.len(),
+                rve.rve.sphere_count(),
                 &mut batch.stress[k],
                 &mut batch.state[k * STATE.len()..][..STATE.len()],
             );
@@ -421,7 +409,7 @@ impl PointObjects for DemRve {
         }
         let mut rves = self.rves.write().map_err(|_| GraniteError::Other("RVE store poisoned".into()))?;
         for &here in here {
-            rves.push(Mutex::new(here.then(|| Rve { sim: self.template.clone(), stress: None })));
+            rves.push(Mutex::new(here.then(|| PointRve { rve: self.template.clone(), stress: None })));
         }
         Ok(())
     }
@@ -453,7 +441,7 @@ impl PointObjects for DemRve {
             None => state.len() / STATE.len(),
         };
         let steps: f64 = state.chunks(STATE.len()).map(|st| st[state::DEM_STEPS]).sum();
-        vec![("rve_active", active as f64), ("rve_sphere_steps", steps * self.template.spheres.len() as f64)]
+        vec![("rve_active", active as f64), ("rve_sphere_steps", steps * self.template.sphere_count() as f64)]
     }
     fn process_savings(&self) -> f64 {
         *self.shared_sphere_steps.lock().unwrap_or_else(|e| e.into_inner())
@@ -468,7 +456,7 @@ impl PointObjects for DemRve {
         ];
         if let Some(a) = &self.activation {
             let followed = a.lock().unwrap_or_else(|e| e.into_inner()).followed();
-            let skipped = followed.leader_dem_steps * self.template.spheres.len() as f64;
+            let skipped = followed.leader_dem_steps * self.template.sphere_count() as f64;
             out.push(("rve_point_steps_followed".to_string(), followed.point_steps.into()));
             out.push(("rve_sphere_steps_followed".to_string(), skipped.into()));
         }
@@ -497,21 +485,20 @@ impl PointObjects for DemRve {
         }
     }
     fn point_object(&self, point: usize) -> Result<serde_json::Value> {
-        self.with_rve(point, |sim| sim.to_json())
+        self.with_rve(point, |rve| rve.to_json())
             .unwrap_or_else(|| Err(GraniteError::Other(format!("no RVE of material point {point} in this process"))))
     }
     fn adopt_point_object(&self, point: usize, object: serde_json::Value) -> Result<()> {
-        let mut sim = DemSim::from_json_like(object, &self.template)?;
-        sim.set_sequential(true);
+        let rve = Rve::from_json_like(object, &self.template)?;
         if let Some((from, to)) = self.twins.lock().unwrap_or_else(|e| e.into_inner()).detach(point) {
             self.copy_rve(from, to)?;
         }
         if let Some(device) = &self.device {
-            return device.put(point, sim);
+            return device.put(point, rve);
         }
         let rves = self.rves.read().map_err(|_| GraniteError::Other("RVE store poisoned".into()))?;
         let slot = rves.get(point).ok_or_else(|| GraniteError::Other(format!("no material point {point}")))?;
-        *slot.lock().unwrap_or_else(|e| e.into_inner()) = Some(Rve { sim, stress: None });
+        *slot.lock().unwrap_or_else(|e| e.into_inner()) = Some(PointRve { rve, stress: None });
         Ok(())
     }
     fn save_objects_from(&self, points: Vec<serde_json::Value>) -> Result<Option<serde_json::Value>> {
@@ -562,34 +549,7 @@ impl PointObjects for DemRve {
         vec![format!("RVE of material point {point} (said once for all RVEs): {event}")]
     }
     fn object_frame(&self, point: usize) -> Option<(Vec<granite_core::math::Vec3>, Vec<granite_core::io::vtk::Field>)> {
-        use granite_core::io::vtk::Field;
-        self.with_rve(point, |sim| {
-            let s = &sim.spheres;
-            let counts = sim.contact_counts();
-            // Mean stress carried by each particle (its share of the Love-Weber sum), as figure 4.6.
-            let mut particle_p = vec![0.0; s.len()];
-            let p = &sim.pairs;
-            for c in 0..p.len() {
-                if !p.touching[c] {
-                    continue;
-                }
-                let (i, j) = (p.a[c] as usize, p.b[c] as usize);
-                let image = sim.cell.as_ref().map(|cell| cell.shift_vector(p.shift[c])).unwrap_or([0.0; 3]);
-                let l: Vec<f64> = (0..3).map(|a| s.x[j][a] + image[a] - s.x[i][a]).collect();
-                let work = p.force[c][0] * l[0] + p.force[c][1] * l[1] + p.force[c][2] * l[2];
-                for k in [i, j] {
-                    let v = 4.0 / 3.0 * std::f64::consts::PI * s.radius[k].powi(3);
-                    particle_p[k] += 0.5 * work / (3.0 * v);
-                }
-            }
-            let fields = vec![
-                Field::float("radius", 1, s.radius.clone()),
-                Field::float("velocity", 3, s.v.iter().flatten().copied().collect()),
-                Field::int("contacts", counts.iter().map(|&c| c as i64)),
-                Field::float("mean_stress", 1, particle_p),
-            ];
-            (s.x.clone(), fields)
-        })
+        self.with_rve(point, |rve| rve.frame())
     }
     fn save_objects(&self) -> Result<Option<serde_json::Value>> {
         let count = match &self.device {
@@ -618,10 +578,10 @@ fn equal_to_earlier(values: &[serde_json::Value]) -> Vec<Option<usize>> {
 }
 
 /// Makes the RVE in slot `to` a copy of the one in slot `from`.
-fn copy_within(rves: &[Mutex<Option<Rve>>], from: usize, to: usize) -> Result<()> {
+fn copy_within(rves: &[Mutex<Option<PointRve>>], from: usize, to: usize) -> Result<()> {
     let copy = {
         let source = rves.get(from).and_then(|r| r.lock().ok());
-        source.as_ref().and_then(|r| r.as_ref()).map(|r| Rve { sim: r.sim.clone(), stress: r.stress })
+        source.as_ref().and_then(|r| r.as_ref()).map(|r| PointRve { rve: r.rve.clone(), stress: r.stress })
     };
     let copy = copy.ok_or_else(|| GraniteError::Other(format!("no RVE of material point {from} to share")))?;
     let slot = rves.get(to).ok_or_else(|| GraniteError::Other(format!("no material point {to}")))?;
@@ -656,41 +616,13 @@ impl DemRve {
     }
 
     /// Carries out an order on this thread (the CPU backend).
-    fn run_on_cpu(&self, index: usize, sim: &mut DemSim, order: &RveOrder) -> Result<RveReport> {
-        if let Some(cell) = sim.cell.as_mut() {
-            cell.velocity_gradient = order.velocity_gradient;
+    fn run_on_cpu(&self, index: usize, rve: &mut Rve, order: &RveOrder) -> Result<RveReport> {
+        let mut report =
+            rve.deform(order).map_err(|e| GraniteError::Other(format!("RVE of material point {index}: {e}")))?;
+        if !report.events.is_empty() {
+            self.tell_once(index, std::mem::take(&mut report.events).swap_remove(0));
         }
-        let of_point = |e: GraniteError| GraniteError::Other(format!("RVE of material point {index}: {e}"));
-        let dt = sim.dt;
-        for _ in 0..order.full_steps {
-            sim.step().map_err(of_point)?;
-        }
-        if order.last_step > 0.0 {
-            sim.dt = order.last_step;
-            let r = sim.step();
-            sim.dt = dt;
-            r.map_err(of_point)?;
-        }
-        if let Some(cell) = sim.cell.as_mut() {
-            cell.velocity_gradient = Matrix3::zeros();
-        }
-        if !sim.events.is_empty() {
-            let first = std::mem::take(&mut sim.events).swap_remove(0);
-            self.tell_once(index, first);
-        }
-        let volume = sim.cell_volume().unwrap_or(1.0);
-        let d = sim.coordination();
-        let counts = sim.contact_counts();
-        Ok(RveReport {
-            stress: sim.love_weber_stress(volume),
-            cell: sim.cell.as_ref().map(|c| c.h).unwrap_or_else(Matrix3::identity),
-            contacts: d.contacts,
-            contact_ends: counts.iter().map(|&c| c as usize).sum(),
-            rattlers: d.rattlers,
-            floaters: d.floaters,
-            steps: order.full_steps + u64::from(order.last_step > 0.0),
-            failure: None,
-        })
+        Ok(report)
     }
 
     /// Passes an RVE event on once for all RVEs (the lowest point's of a step).
@@ -720,17 +652,15 @@ impl DemRve {
     }
 
     /// One point's RVE stepped on this thread by the strain `de` (the CPU backend).
-    fn step_own(&self, index: usize, de: &Voigt, rve: &mut Rve) -> Result<RveReport> {
-        let sim = &mut rve.sim;
-        let before = match rve.stress {
+    fn step_own(&self, index: usize, de: &Voigt, point: &mut PointRve) -> Result<RveReport> {
+        let before = match point.stress {
             Some(stress) => stress,
-            None => sim.love_weber_stress(sim.cell_volume().unwrap_or(1.0)),
+            None => point.rve.stress(),
         };
-        let cell = sim.cell.as_ref().map(|c| c.h).unwrap_or_else(Matrix3::identity);
-        let order = self.order(index, de, &before, &cell, sim.dt)?;
-        rve.stress = None;
-        let report = self.run_on_cpu(index, sim, &order)?;
-        rve.stress = Some(report.stress);
+        let order = self.order(index, de, &before, &point.rve.cell(), point.rve.dt())?;
+        point.stress = None;
+        let report = self.run_on_cpu(index, &mut point.rve, &order)?;
+        point.stress = Some(report.stress);
         Ok(report)
     }
 
@@ -793,7 +723,7 @@ impl DemRve {
             Some(device) => self.step_on_device(device, &stepping, &strain)?,
             None => self.step_on_cpu(&shared.steppers, &strain)?,
         };
-        let spheres = self.template.spheres.len();
+        let spheres = self.template.sphere_count();
         let mut costs = vec![0.0; n];
         let mut report_of = vec![None; n];
         for (point, report, seconds) in &reports {
@@ -859,14 +789,16 @@ impl DemRve {
             // The CPU engine checks each RVE's time step against its contacts as it steps; the
             // device does not, so the prepared sample is checked here once (its warning, or the
             // stop of a time step its contacts cannot follow).
-            let mut sample = self.template.clone();
             let first = stepping.iter().position(|&h| h).unwrap_or(0);
-            sample.check_time_step().map_err(|e| GraniteError::Other(format!("RVE of material point {first}: {e}")))?;
-            for event in sample.events {
+            let events = self
+                .template
+                .check_time_step()
+                .map_err(|e| GraniteError::Other(format!("RVE of material point {first}: {e}")))?;
+            for event in events {
                 self.tell_once(first, event);
             }
         }
-        let dt = self.template.dt;
+        let dt = self.template.dt();
         let reports = device
             .step(|p| stepping[p], |p, stress, cell| self.order(p, &strain[p].unwrap_or([0.0; 6]), stress, cell, dt))?;
         for (point, report) in &reports {
@@ -883,17 +815,17 @@ impl DemRve {
 
 /// Read access to the RVEs (for output of chosen points and tests).
 impl DemRve {
-    pub fn with_rve<R>(&self, index: usize, f: impl FnOnce(&DemSim) -> R) -> Option<R> {
+    pub fn with_rve<R>(&self, index: usize, f: impl FnOnce(&Rve) -> R) -> Option<R> {
         if index >= self.points() {
             return None;
         }
         let index = self.twins.lock().unwrap_or_else(|e| e.into_inner()).object_of(index);
         if let Some(device) = &self.device {
-            return device.get(index).ok().map(|sim| f(&sim));
+            return device.get(index).ok().map(|rve| f(&rve));
         }
         let rves = self.rves.read().ok()?;
         let guard = rves.get(index)?.lock().ok()?;
-        guard.as_ref().map(|rve| f(&rve.sim))
+        guard.as_ref().map(|point| f(&point.rve))
     }
 }
 

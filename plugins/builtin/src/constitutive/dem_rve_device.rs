@@ -3,7 +3,7 @@
 //! of its own order; this keeps which slot holds which point's RVE, and each point's stress and
 //! cell after its last call (the P and P^min of its next plan, eqs. 4.2-4.3).
 
-use granite_core::dem::DemSim;
+use granite_core::dem::Rve;
 use granite_core::ext::{RveBatch, RveDevice, RveOrder, RveReport};
 use granite_core::math::Voigt;
 use granite_core::{GraniteError, Result};
@@ -26,11 +26,8 @@ struct Held {
 }
 
 /// What a point's next plan needs of its RVE: its stress and cell.
-fn measures(sim: &DemSim) -> (Voigt, Matrix3<f64>) {
-    (
-        sim.love_weber_stress(sim.cell_volume().unwrap_or(1.0)),
-        sim.cell.as_ref().map(|c| c.h).unwrap_or_else(Matrix3::identity),
-    )
+fn measures(rve: &Rve) -> (Voigt, Matrix3<f64>) {
+    (rve.stress(), rve.cell())
 }
 
 impl Held {
@@ -43,14 +40,14 @@ impl Held {
     }
 
     /// Appends RVEs to the batch (opening it with the first ones); returns their first slot.
-    fn push(&mut self, device: &dyn RveDevice, sims: Vec<DemSim>) -> Result<usize> {
+    fn push(&mut self, device: &dyn RveDevice, rves: Vec<Rve>) -> Result<usize> {
         let first = self.batch.as_ref().map(|b| b.len()).unwrap_or(0);
-        if sims.is_empty() {
+        if rves.is_empty() {
             return Ok(first);
         }
         match self.batch.as_mut() {
-            Some(batch) => batch.push(sims)?,
-            None => self.batch = Some(device.open(sims)?),
+            Some(batch) => batch.push(rves)?,
+            None => self.batch = Some(device.open(rves)?),
         }
         Ok(first)
     }
@@ -101,22 +98,22 @@ impl DeviceRves {
     }
 
     /// Material points appended: one entry each, with its RVE where it lives in this process.
-    pub(super) fn add(&self, rves: Vec<Option<DemSim>>) -> Result<()> {
+    pub(super) fn add(&self, rves: Vec<Option<Rve>>) -> Result<()> {
         let mut held = self.held()?;
-        let (mut sims, mut points) = (Vec::new(), Vec::new());
+        let (mut here, mut points) = (Vec::new(), Vec::new());
         for rve in rves {
             let point = held.slot.len();
             held.slot.push(None);
             match rve {
-                Some(sim) => {
-                    held.last.push(measures(&sim));
+                Some(rve) => {
+                    held.last.push(measures(&rve));
                     points.push(point);
-                    sims.push(sim);
+                    here.push(rve);
                 }
                 None => held.last.push(([0.0; 6], Matrix3::identity())),
             }
         }
-        let first = held.push(self.device.as_ref(), sims)?;
+        let first = held.push(self.device.as_ref(), here)?;
         for (k, point) in points.into_iter().enumerate() {
             held.slot[point] = Some(first + k);
         }
@@ -139,17 +136,17 @@ impl DeviceRves {
         Ok(())
     }
 
-    /// Puts `sim` as the RVE of `point` (a checkpoint's, or one moved here from another process).
-    pub(super) fn put(&self, point: usize, sim: DemSim) -> Result<()> {
+    /// Puts `rve` as the RVE of `point` (a checkpoint's, or one moved here from another process).
+    pub(super) fn put(&self, point: usize, rve: Rve) -> Result<()> {
         let mut held = self.held()?;
         if point >= held.slot.len() {
             return Err(GraniteError::Other(format!("no material point {point}")));
         }
-        held.last[point] = measures(&sim);
+        held.last[point] = measures(&rve);
         match held.slot[point] {
-            Some(s) => held.batch.as_mut().map(|b| b.set(s, sim)).unwrap_or(Ok(())),
+            Some(s) => held.batch.as_mut().map(|b| b.set(s, rve)).unwrap_or(Ok(())),
             None => {
-                let first = held.push(self.device.as_ref(), vec![sim])?;
+                let first = held.push(self.device.as_ref(), vec![rve])?;
                 held.slot[point] = Some(first);
                 Ok(())
             }
@@ -158,15 +155,15 @@ impl DeviceRves {
 
     /// Makes the RVE of `to` a copy of the RVE of `from`.
     pub(super) fn copy(&self, from: usize, to: usize) -> Result<()> {
-        let sim = self.get(from)?;
-        self.put(to, sim)?;
+        let rve = self.get(from)?;
+        self.put(to, rve)?;
         let mut held = self.held()?;
         held.last[to] = held.last[from];
         Ok(())
     }
 
     /// A copy of the RVE of `point` as it is now.
-    pub(super) fn get(&self, point: usize) -> Result<DemSim> {
+    pub(super) fn get(&self, point: usize) -> Result<Rve> {
         let mut held = self.held()?;
         let s = held.slot(point)?;
         held.batch.as_mut().ok_or_else(|| GraniteError::Other("no RVE on the device".into()))?.get(s)

@@ -1,0 +1,196 @@
+//! The MPM×DEM seam of the DEM: a periodic sample deformed as one piece. An [`Rve`] is made once
+//! from a prepared periodic `DemSim`, and then only deformed by an order (a velocity gradient over
+//! so many DEM steps, thesis eqs. 4.1-4.5) and read back as a response (Love-Weber stress, eq. 4.7,
+//! cell, contact counts, steps taken): what the `dem_rve` law and an RVE device see of the DEM.
+
+use crate::dem::DemSim;
+use crate::error::{GraniteError, Result};
+use crate::ext::contact::ContactLawSource;
+use crate::ext::rve::{RveOrder, RveReport};
+use crate::io::vtk::Field;
+use crate::math::{Vec3, Voigt};
+use nalgebra::Matrix3;
+
+/// A periodic DEM sample stepped only through [`Rve::deform`].
+#[derive(Clone)]
+pub struct Rve {
+    sim: DemSim,
+}
+
+impl Rve {
+    /// The sample of `sim` as an RVE: periodic, with spheres, a contact law and a time step; no
+    /// stress servo or gravity of its own (the MPM strain drives the cell, eq. 4.6), stepped on
+    /// the calling thread (the points' RVEs are the parallel work). `owner` names who asks, in
+    /// errors.
+    pub fn prepare(mut sim: DemSim, owner: &str) -> Result<Rve> {
+        if sim.cell.is_none() {
+            return Err(GraniteError::Setup(format!("{owner}: the `rve` must have a periodic cell")));
+        }
+        if sim.spheres.is_empty() || sim.dt <= 0.0 || sim.laws.is_empty() {
+            return Err(GraniteError::Setup(format!(
+                "{owner}: the `rve` needs spheres, a contact law and a time step"
+            )));
+        }
+        sim.set_sequential(true);
+        sim.cell_control = None;
+        sim.gravity = [0.0; 3];
+        Ok(Rve { sim })
+    }
+
+    /// An RVE saved by [`Rve::to_json`], its contact laws built from `registry`.
+    pub fn from_json(value: serde_json::Value, registry: &dyn ContactLawSource) -> Result<Rve> {
+        let mut sim = DemSim::from_json(value, registry)?;
+        sim.set_sequential(true);
+        Ok(Rve { sim })
+    }
+
+    /// An RVE saved by [`Rve::to_json`] with the contact laws of `like`.
+    pub fn from_json_like(value: serde_json::Value, like: &Rve) -> Result<Rve> {
+        let mut sim = DemSim::from_json_like(value, &like.sim)?;
+        sim.set_sequential(true);
+        Ok(Rve { sim })
+    }
+
+    pub fn to_json(&self) -> Result<serde_json::Value> {
+        self.sim.to_json()
+    }
+
+    /// Carries out `order` on this thread: full steps of the sample's time step under the order's
+    /// velocity gradient, then the shorter last step if any (eq. 4.4); the cell is left at rest.
+    /// What the steps said (a time step above the contacts' bound) comes back in the response.
+    pub fn deform(&mut self, order: &RveOrder) -> Result<RveReport> {
+        let sim = &mut self.sim;
+        if let Some(cell) = sim.cell.as_mut() {
+            cell.velocity_gradient = order.velocity_gradient;
+        }
+        for _ in 0..order.full_steps {
+            sim.step()?;
+        }
+        if order.last_step > 0.0 {
+            let dt = sim.dt;
+            sim.dt = order.last_step;
+            let stepped = sim.step();
+            sim.dt = dt;
+            stepped?;
+        }
+        if let Some(cell) = sim.cell.as_mut() {
+            cell.velocity_gradient = Matrix3::zeros();
+        }
+        let mut report = self.response();
+        report.steps = order.full_steps + u64::from(order.last_step > 0.0);
+        report.events = std::mem::take(&mut self.sim.events);
+        Ok(report)
+    }
+
+    /// The sample as it is, as a response of no steps.
+    pub fn response(&self) -> RveReport {
+        let sim = &self.sim;
+        let d = sim.coordination();
+        let counts = sim.contact_counts();
+        RveReport {
+            stress: self.stress(),
+            cell: self.cell(),
+            contacts: d.contacts,
+            contact_ends: counts.iter().map(|&c| c as usize).sum(),
+            rattlers: d.rattlers,
+            floaters: d.floaters,
+            steps: 0,
+            failure: None,
+            events: Vec::new(),
+        }
+    }
+
+    /// Love-Weber stress of its contacts over the cell's volume (eq. 4.7, tension positive).
+    pub fn stress(&self) -> Voigt {
+        self.sim.love_weber_stress(self.sim.cell_volume().unwrap_or(1.0))
+    }
+
+    /// The periodic cell's base vectors (columns).
+    pub fn cell(&self) -> Matrix3<f64> {
+        self.sim.cell.as_ref().map(|c| c.h).unwrap_or_else(Matrix3::identity)
+    }
+
+    pub fn sphere_count(&self) -> usize {
+        self.sim.spheres.len()
+    }
+
+    /// The DEM time step.
+    pub fn dt(&self) -> f64 {
+        self.sim.dt
+    }
+
+    /// Mass of its spheres (kg).
+    pub fn mass(&self) -> f64 {
+        self.sim.spheres.mass.iter().sum()
+    }
+
+    /// Volume of its spheres (m^3).
+    pub fn solid_volume(&self) -> f64 {
+        self.sim.solid_volume()
+    }
+
+    /// Mean sphere diameter (m).
+    pub fn mean_diameter(&self) -> f64 {
+        let s = &self.sim.spheres;
+        2.0 * s.radius.iter().sum::<f64>() / s.len() as f64
+    }
+
+    /// Bytes this RVE holds.
+    pub fn memory_bytes(&self) -> usize {
+        self.sim.memory_bytes()
+    }
+
+    /// Checks the time step against the sample's contacts as its first step would: the warning
+    /// it gives, or the error of a time step its contacts cannot follow.
+    pub fn check_time_step(&self) -> Result<Vec<String>> {
+        let mut sample = self.sim.clone();
+        sample.check_time_step()?;
+        Ok(sample.events)
+    }
+
+    /// Its spheres for a VTK frame: radius, velocity, contacts, and the mean stress each carries
+    /// (its share of the Love-Weber sum, as the thesis's figure 4.6).
+    pub fn frame(&self) -> (Vec<Vec3>, Vec<Field>) {
+        let sim = &self.sim;
+        let s = &sim.spheres;
+        let counts = sim.contact_counts();
+        let mut particle_p = vec![0.0; s.len()];
+        let p = &sim.pairs;
+        for c in 0..p.len() {
+            if !p.touching[c] {
+                continue;
+            }
+            let (i, j) = (p.a[c] as usize, p.b[c] as usize);
+            let image = sim.cell.as_ref().map(|cell| cell.shift_vector(p.shift[c])).unwrap_or([0.0; 3]);
+            let l: Vec<f64> = (0..3).map(|a| s.x[j][a] + image[a] - s.x[i][a]).collect();
+            let work = p.force[c][0] * l[0] + p.force[c][1] * l[1] + p.force[c][2] * l[2];
+            for k in [i, j] {
+                let v = 4.0 / 3.0 * std::f64::consts::PI * s.radius[k].powi(3);
+                particle_p[k] += 0.5 * work / (3.0 * v);
+            }
+        }
+        let fields = vec![
+            Field::float("radius", 1, s.radius.clone()),
+            Field::float("velocity", 3, s.v.iter().flatten().copied().collect()),
+            Field::int("contacts", counts.iter().map(|&c| c as i64)),
+            Field::float("mean_stress", 1, particle_p),
+        ];
+        (s.x.clone(), fields)
+    }
+
+    /// The DEM simulation inside, to read (a device laying it out, tests, outputs).
+    pub fn dem(&self) -> &DemSim {
+        &self.sim
+    }
+
+    /// The DEM simulation inside, for a device that keeps its own copy of the samples.
+    pub fn into_dem(self) -> DemSim {
+        self.sim
+    }
+
+    /// The sample as it is, not prepared again: a device handing back its copy of an RVE, tests
+    /// stepping a sample they built.
+    pub fn as_is(sim: DemSim) -> Rve {
+        Rve { sim }
+    }
+}
