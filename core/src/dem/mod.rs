@@ -16,6 +16,7 @@ pub mod generate;
 pub mod inspect;
 pub mod measures;
 mod motion;
+mod pairing;
 pub mod particles;
 pub mod picture;
 mod pieces;

@@ -4,6 +4,7 @@
 
 use crate::dem::broad_phase::{periodic_sphere_pairs, sphere_pairs, wall_pairs, Candidate};
 use crate::dem::contacts::{PairList, MAX_HISTORY, MAX_PARAMS};
+use crate::dem::pairing::PairBodies;
 use crate::dem::particles::FREE;
 use crate::dem::sim::DemSim;
 use crate::error::{GraniteError, Result};
@@ -16,14 +17,6 @@ const MERGE_PIECE: usize = 1024;
 const MAX_IMAGES_ACROSS: f64 = 64.0;
 /// Fewest spheres in a simulation renumbered in space before it first runs.
 pub(crate) const MIN_SPHERES_TO_ORDER: usize = 1024;
-
-/// The bodies a pair list joins: their materials (the first body's, and the second's unless it
-/// is a wall), and whether the merge may run in parallel.
-pub(crate) struct PairBodies<'a> {
-    pub material: &'a [u16],
-    pub wall: bool,
-    pub parallel: bool,
-}
 
 impl DemSim {
     /// Brings periodic positions back into the cell and fixes the shifts of their pairs.
@@ -135,38 +128,17 @@ impl DemSim {
         self.merge_with_laws(list, spare, &pieces, strides, body, |a, b| self.info_for(a, b, wall))
     }
 
-    /// [`PairList::merge`] with each new pair given the law of its bodies' materials and its
-    /// parameters from `info`; returns a pair of materials without a contact law, if it met one.
-    pub(crate) fn merge_with_laws(
-        &self,
-        list: &mut PairList,
-        spare: &mut PairList,
-        pieces: &[&[Candidate]],
-        strides: (usize, usize),
-        bodies: PairBodies<'_>,
-        info: impl Fn(usize, usize) -> crate::ext::PairInfo + Sync,
-    ) -> Option<(u16, u16)> {
-        let PairBodies { material, wall, parallel } = bodies;
-        let materials = |a: usize, b: usize| (material[a], if wall { self.walls[b].material } else { material[b] });
-        let missing = list.merge(spare, pieces, strides, parallel, |a, b, law, params| {
-            let (a, b) = (a as usize, b as usize);
-            let pair = materials(a, b);
-            let Some(l) = self.law_for(pair.0, pair.1) else { return false };
-            *law = l;
-            self.laws[l as usize].init_pair(&info(a, b), params);
-            true
-        });
-        missing.map(|(a, b)| materials(a as usize, b as usize))
-    }
-
-    /// The error of a pair of materials without a contact law.
-    pub(crate) fn missing_law(&self, (a, b): (u16, u16)) -> GraniteError {
-        let name = |m: u16| self.materials.get(m as usize).map(|m| m.name.clone()).unwrap_or_default();
-        GraniteError::Setup(format!(
-            "no contact law for materials \"{}\" and \"{}\": give a default law or one for this pair",
-            name(a),
-            name(b)
-        ))
+    /// A new Verlet skin. Candidate lists already built are rebuilt with it now (a state saved
+    /// next holds the new, shorter or longer, lists); otherwise the first step builds them.
+    pub fn set_skin(&mut self, skin: f64) -> Result<()> {
+        if !(skin >= 0.0) {
+            return Err(GraniteError::param("skin", skin, "must be >= 0"));
+        }
+        self.skin = skin;
+        if self.needs_rebuild {
+            return Ok(());
+        }
+        self.rebuild_candidates()
     }
 
     /// Rebuilds the candidate pair lists (keeping the history of pairs still present).

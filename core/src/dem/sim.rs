@@ -245,66 +245,6 @@ impl DemSim {
         Ok(())
     }
 
-    /// Values a pair holds for its law's parameters and history: the most any law keeps (at least
-    /// one of each), so that pairs of different laws share one list.
-    /// Values per pair (parameters, history) the pair lists are laid out for: the most any law uses.
-    pub fn pair_strides(&self) -> (usize, usize) {
-        let most = |count: fn(&Arc<dyn ContactLaw>) -> usize| self.laws.iter().map(count).max().unwrap_or(0).max(1);
-        (most(|l| l.param_count()), most(|l| l.history_count()))
-    }
-
-    /// The law index a key uses: a material pair's own law or, with None, the default law.
-    pub fn law_index(&self, pair: Option<(u16, u16)>) -> Option<u16> {
-        match pair {
-            Some((a, b)) => self.law_for(a, b),
-            None => self.default_law,
-        }
-    }
-
-    /// Gives every candidate pair the law of its two materials now and sets its parameters again
-    /// from that law. A pair whose law keeps its kind (same name as in `old_laws`) keeps its
-    /// history; another starts with none. The pair lists are laid out again when the laws need
-    /// more values per pair.
-    pub(crate) fn refresh_pair_laws(&mut self, old_laws: &[Arc<dyn ContactLaw>]) {
-        let (ps, hs) = self.pair_strides();
-        let mut lists = [std::mem::take(&mut self.pairs), std::mem::take(&mut self.wall_pairs)];
-        for (list, wall) in lists.iter_mut().zip([false, true]) {
-            if list.is_empty() {
-                list.param_stride = ps;
-                list.history_stride = hs;
-                continue;
-            }
-            list.relayout(ps, hs);
-            for k in 0..list.len() {
-                let (a, b) = (list.a[k] as usize, list.b[k] as usize);
-                let mb = if wall { self.walls[b].material } else { self.spheres.material[b] };
-                let Some(law) = self.law_for(self.spheres.material[a], mb) else {
-                    // No law for this pair any more: the next rebuild says so.
-                    self.needs_rebuild = true;
-                    continue;
-                };
-                let same_kind = old_laws.get(list.law[k] as usize).is_some_and(|old| {
-                    let new = &self.laws[law as usize];
-                    old.name() == new.name() && old.history_count() == new.history_count()
-                });
-                list.law[k] = law;
-                let params = &mut list.params[k * ps..(k + 1) * ps];
-                params.fill(0.0);
-                self.laws[law as usize].init_pair(&self.info_for(a, b, wall), params);
-                if !same_kind {
-                    list.history[k * hs..(k + 1) * hs].fill(0.0);
-                    list.touching[k] = false;
-                }
-            }
-        }
-        [self.pairs, self.wall_pairs] = lists;
-        // The spare list is storage for the next rebuild: its layout is set there.
-    }
-
-    pub fn law_for(&self, a: u16, b: u16) -> Option<u16> {
-        self.law_of.get(&(a.min(b), a.max(b))).copied().or(self.default_law)
-    }
-
     pub fn add_sphere(&mut self, material: u16, x: Vec3, radius: f64, v: Vec3) -> Result<usize> {
         let density = self.check_sphere(material, x, radius, v)?;
         self.spheres.push(self.next_id, x, radius, density, material, v);
@@ -363,19 +303,6 @@ impl DemSim {
         let (cell, h0) = (self.cell.as_ref()?, self.cell_reference.as_ref()?);
         let axial = [0, 1, 2].map(|a| (cell.h.column(a).norm() / h0.column(a).norm()).ln());
         Some((axial, (cell.volume() / h0.determinant().abs()).ln()))
-    }
-
-    /// A new Verlet skin. Candidate lists already built are rebuilt with it now (a state saved
-    /// next holds the new, shorter or longer, lists); otherwise the first step builds them.
-    pub fn set_skin(&mut self, skin: f64) -> Result<()> {
-        if !(skin >= 0.0) {
-            return Err(GraniteError::param("skin", skin, "must be >= 0"));
-        }
-        self.skin = skin;
-        if self.needs_rebuild {
-            return Ok(());
-        }
-        self.rebuild_candidates()
     }
 
     /// Approximate memory held by this simulation's arrays, in bytes.
@@ -535,19 +462,6 @@ impl DemSim {
         self.needs_rebuild = true;
     }
 
-    fn pair_info(&self, i: usize, j: Option<usize>) -> PairInfo {
-        let s = &self.spheres;
-        let (r2, m2, id2) = match j {
-            Some(j) => (s.radius[j], s.mass[j], s.id[j]),
-            None => (f64::INFINITY, f64::INFINITY, u64::MAX),
-        };
-        let (lo, hi) = (s.id[i].min(id2), s.id[i].max(id2));
-        let seed = crate::ext::contact::uniform(self.seed ^ lo.wrapping_mul(0x100_0000_01B3), hi).to_bits();
-        let elastic = |m: u16| self.materials.get(m as usize).and_then(|m| m.elastic);
-        let e2 = j.and_then(|j| elastic(s.material[j]));
-        PairInfo { radius: [s.radius[i], r2], mass: [s.mass[i], m2], seed, elastic: [elastic(s.material[i]), e2] }
-    }
-
     /// Force the spheres exert on wall `w` in the last step: the opposite of the forces of its
     /// pairs, summed in pair order. Worked out when asked (a pass over the wall pairs), not at
     /// every step, where it was a serial pass of 8 us in a step of the 10k-sphere deposition
@@ -560,18 +474,6 @@ impl DemSim {
             .zip(&pairs.force)
             .filter(|(&b, _)| b as usize == w)
             .fold([0.0; 3], |sum, (_, f)| add3(sum, scale3(*f, -1.0)))
-    }
-
-    /// Info for a sphere-sphere pair or, with `wall` set, a sphere-wall pair.
-    pub fn info_for(&self, i: usize, j: usize, wall: bool) -> PairInfo {
-        if wall {
-            let mut info = self.pair_info(i, None);
-            info.seed ^= (j as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15);
-            info.elastic[1] = self.materials.get(self.walls[j].material as usize).and_then(|m| m.elastic);
-            info
-        } else {
-            self.pair_info(i, Some(j))
-        }
     }
 
     /// Largest stable time step estimate: `min sqrt(m / k_n)` over one-contact oscillators of

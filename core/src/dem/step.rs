@@ -21,11 +21,6 @@ use nalgebra::Matrix3;
 use std::sync::OnceLock;
 use std::time::Instant;
 
-/// Fewest spheres stepped in parallel (enough for several pieces): below, pieces are not
-/// regions of space (see `order_spheres_in_space`), and two threads were slower than one
-/// (periodic RVEs, best of 7: 1000 spheres 110 against 98 us a step; 1500: 121 against 148).
-const MIN_SPHERES_IN_PARALLEL: usize = crate::dem::rebuild::MIN_SPHERES_TO_ORDER;
-
 impl DemSim {
     /// Advances the simulation by one time step.
     pub fn step(&mut self) -> Result<()> {
@@ -204,13 +199,6 @@ impl DemSim {
             self.pairs.shrink_to_fit();
             self.wall_pairs.shrink_to_fit();
         }
-    }
-
-    /// Whether this step runs its stages in parallel pieces of consecutive spheres (and their
-    /// pairs), rather than on the calling thread (an RVE, one thread, or too few spheres). Both
-    /// make the same sums in the same order (see `write_back`).
-    pub(crate) fn in_parallel(&self) -> bool {
-        !self.sequential && self.spheres.len() >= MIN_SPHERES_IN_PARALLEL && rayon::current_num_threads() > 1
     }
 
     /// Sphere-sphere and sphere-wall contact forces of this step, summed into the spheres' loads

@@ -10,11 +10,11 @@ use super::contact::{detect, detect_plane, Solution, Touch};
 use crate::dem::broad_phase::{sphere_pairs, wall_pairs, Candidate};
 use crate::dem::contacts::PairList;
 use crate::dem::motion::{RigidBody, RigidMotion};
-use crate::dem::rebuild::PairBodies;
+use crate::dem::pairing::PairBodies;
 use crate::dem::sim::DemSim;
 use crate::dem::walls::WallShape;
 use crate::error::{GraniteError, Result};
-use crate::ext::{ContactBatch, PairInfo};
+use crate::ext::ContactBatch;
 use crate::math::{add3, cross3, sub3, Vec3};
 use rayon::prelude::*;
 
@@ -50,25 +50,6 @@ impl DemSim {
             return self.skin;
         }
         0.1 * self.potentials.bounding_radii().into_iter().fold(f64::INFINITY, f64::min)
-    }
-
-    /// The pair info of particles `i` and `j` (or of `i` and wall `j`).
-    pub(crate) fn potential_info(&self, i: usize, j: usize, wall: bool) -> PairInfo {
-        let p = &self.potentials;
-        let elastic = |m: u16| self.materials.get(m as usize).and_then(|m| m.elastic);
-        let (r2, m2, id2, e2) = if wall {
-            (f64::INFINITY, f64::INFINITY, u64::MAX - j as u64, elastic(self.walls[j].material))
-        } else {
-            (p.shape_of(j).bounding_radius, p.contact_mass(j), p.id[j], elastic(p.material[j]))
-        };
-        let (lo, hi) = (p.id[i].min(id2), p.id[i].max(id2));
-        let seed = crate::ext::contact::uniform(self.seed ^ lo.wrapping_mul(0x100_0000_01B3), hi).to_bits();
-        PairInfo {
-            radius: [p.shape_of(i).bounding_radius, r2],
-            mass: [p.contact_mass(i), m2],
-            seed,
-            elastic: [elastic(p.material[i]), e2],
-        }
     }
 
     /// Rebuilds the potential particles' candidate lists (pairs still present keep their

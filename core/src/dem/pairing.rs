@@ -1,0 +1,161 @@
+//! Contact physics of a pair (YADE's `Ip2` functors): which contact law a pair of materials gets,
+//! the per-pair values it is laid out for, the pair's `PairInfo` (radii, masses, elastic moduli, a
+//! seed drawn from the two ids) its law sets its parameters from, and new candidate pairs merged
+//! into a list with their law and parameters. Geometry (`contact_stage.rs`, `potential/`) and the
+//! laws themselves (`ext::ContactLaw`) are apart from it.
+
+use crate::dem::broad_phase::Candidate;
+use crate::dem::contacts::PairList;
+use crate::dem::sim::DemSim;
+use crate::error::GraniteError;
+use crate::ext::{ContactLaw, PairInfo};
+use std::sync::Arc;
+
+/// The bodies a pair list joins: their materials (the first body's, and the second's unless it
+/// is a wall), and whether the merge may run in parallel.
+pub(crate) struct PairBodies<'a> {
+    pub material: &'a [u16],
+    pub wall: bool,
+    pub parallel: bool,
+}
+
+impl DemSim {
+    /// Values per pair (parameters, history) the pair lists are laid out for: the most any law
+    /// keeps (at least one of each), so that pairs of different laws share one list.
+    pub fn pair_strides(&self) -> (usize, usize) {
+        let most = |count: fn(&Arc<dyn ContactLaw>) -> usize| self.laws.iter().map(count).max().unwrap_or(0).max(1);
+        (most(|l| l.param_count()), most(|l| l.history_count()))
+    }
+
+    /// The law index a key uses: a material pair's own law or, with None, the default law.
+    pub fn law_index(&self, pair: Option<(u16, u16)>) -> Option<u16> {
+        match pair {
+            Some((a, b)) => self.law_for(a, b),
+            None => self.default_law,
+        }
+    }
+
+    /// Gives every candidate pair the law of its two materials now and sets its parameters again
+    /// from that law. A pair whose law keeps its kind (same name as in `old_laws`) keeps its
+    /// history; another starts with none. The pair lists are laid out again when the laws need
+    /// more values per pair.
+    pub(crate) fn refresh_pair_laws(&mut self, old_laws: &[Arc<dyn ContactLaw>]) {
+        let (ps, hs) = self.pair_strides();
+        let mut lists = [std::mem::take(&mut self.pairs), std::mem::take(&mut self.wall_pairs)];
+        for (list, wall) in lists.iter_mut().zip([false, true]) {
+            if list.is_empty() {
+                list.param_stride = ps;
+                list.history_stride = hs;
+                continue;
+            }
+            list.relayout(ps, hs);
+            for k in 0..list.len() {
+                let (a, b) = (list.a[k] as usize, list.b[k] as usize);
+                let mb = if wall { self.walls[b].material } else { self.spheres.material[b] };
+                let Some(law) = self.law_for(self.spheres.material[a], mb) else {
+                    // No law for this pair any more: the next rebuild says so.
+                    self.needs_rebuild = true;
+                    continue;
+                };
+                let same_kind = old_laws.get(list.law[k] as usize).is_some_and(|old| {
+                    let new = &self.laws[law as usize];
+                    old.name() == new.name() && old.history_count() == new.history_count()
+                });
+                list.law[k] = law;
+                let params = &mut list.params[k * ps..(k + 1) * ps];
+                params.fill(0.0);
+                self.laws[law as usize].init_pair(&self.info_for(a, b, wall), params);
+                if !same_kind {
+                    list.history[k * hs..(k + 1) * hs].fill(0.0);
+                    list.touching[k] = false;
+                }
+            }
+        }
+        [self.pairs, self.wall_pairs] = lists;
+        // The spare list is storage for the next rebuild: its layout is set there.
+    }
+
+    /// The law of a pair of materials: its own, else the default one.
+    pub fn law_for(&self, a: u16, b: u16) -> Option<u16> {
+        self.law_of.get(&(a.min(b), a.max(b))).copied().or(self.default_law)
+    }
+
+    /// [`PairList::merge`] with each new pair given the law of its bodies' materials and its
+    /// parameters from `info`; returns a pair of materials without a contact law, if it met one.
+    pub(crate) fn merge_with_laws(
+        &self,
+        list: &mut PairList,
+        spare: &mut PairList,
+        pieces: &[&[Candidate]],
+        strides: (usize, usize),
+        bodies: PairBodies<'_>,
+        info: impl Fn(usize, usize) -> crate::ext::PairInfo + Sync,
+    ) -> Option<(u16, u16)> {
+        let PairBodies { material, wall, parallel } = bodies;
+        let materials = |a: usize, b: usize| (material[a], if wall { self.walls[b].material } else { material[b] });
+        let missing = list.merge(spare, pieces, strides, parallel, |a, b, law, params| {
+            let (a, b) = (a as usize, b as usize);
+            let pair = materials(a, b);
+            let Some(l) = self.law_for(pair.0, pair.1) else { return false };
+            *law = l;
+            self.laws[l as usize].init_pair(&info(a, b), params);
+            true
+        });
+        missing.map(|(a, b)| materials(a as usize, b as usize))
+    }
+
+    /// The error of a pair of materials without a contact law.
+    pub(crate) fn missing_law(&self, (a, b): (u16, u16)) -> GraniteError {
+        let name = |m: u16| self.materials.get(m as usize).map(|m| m.name.clone()).unwrap_or_default();
+        GraniteError::Setup(format!(
+            "no contact law for materials \"{}\" and \"{}\": give a default law or one for this pair",
+            name(a),
+            name(b)
+        ))
+    }
+
+    /// Info for spheres `i` and `j` (None: `i` against a rigid, infinitely large body).
+    pub(crate) fn pair_info(&self, i: usize, j: Option<usize>) -> PairInfo {
+        let s = &self.spheres;
+        let (r2, m2, id2) = match j {
+            Some(j) => (s.radius[j], s.mass[j], s.id[j]),
+            None => (f64::INFINITY, f64::INFINITY, u64::MAX),
+        };
+        let (lo, hi) = (s.id[i].min(id2), s.id[i].max(id2));
+        let seed = crate::ext::contact::uniform(self.seed ^ lo.wrapping_mul(0x100_0000_01B3), hi).to_bits();
+        let elastic = |m: u16| self.materials.get(m as usize).and_then(|m| m.elastic);
+        let e2 = j.and_then(|j| elastic(s.material[j]));
+        PairInfo { radius: [s.radius[i], r2], mass: [s.mass[i], m2], seed, elastic: [elastic(s.material[i]), e2] }
+    }
+
+    /// Info for a sphere-sphere pair or, with `wall` set, a sphere-wall pair.
+    pub fn info_for(&self, i: usize, j: usize, wall: bool) -> PairInfo {
+        if wall {
+            let mut info = self.pair_info(i, None);
+            info.seed ^= (j as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15);
+            info.elastic[1] = self.materials.get(self.walls[j].material as usize).and_then(|m| m.elastic);
+            info
+        } else {
+            self.pair_info(i, Some(j))
+        }
+    }
+
+    /// The pair info of particles `i` and `j` (or of `i` and wall `j`).
+    pub(crate) fn potential_info(&self, i: usize, j: usize, wall: bool) -> PairInfo {
+        let p = &self.potentials;
+        let elastic = |m: u16| self.materials.get(m as usize).and_then(|m| m.elastic);
+        let (r2, m2, id2, e2) = if wall {
+            (f64::INFINITY, f64::INFINITY, u64::MAX - j as u64, elastic(self.walls[j].material))
+        } else {
+            (p.shape_of(j).bounding_radius, p.contact_mass(j), p.id[j], elastic(p.material[j]))
+        };
+        let (lo, hi) = (p.id[i].min(id2), p.id[i].max(id2));
+        let seed = crate::ext::contact::uniform(self.seed ^ lo.wrapping_mul(0x100_0000_01B3), hi).to_bits();
+        PairInfo {
+            radius: [p.shape_of(i).bounding_radius, r2],
+            mass: [p.contact_mass(i), m2],
+            seed,
+            elastic: [elastic(p.material[i]), e2],
+        }
+    }
+}
