@@ -22,6 +22,7 @@ pub struct Registry {
     velocity_updates: IndexMap<String, Arc<dyn VelocityUpdateFactory>>,
     contact_laws: IndexMap<String, Arc<dyn ContactLawFactory>>,
     shapes: IndexMap<String, Arc<dyn ShapeModelFactory>>,
+    body_kinds: IndexMap<String, Arc<dyn crate::ext::BodyKindFactory>>,
     rve_devices: IndexMap<String, Arc<dyn crate::ext::RveDevice>>,
 }
 
@@ -102,6 +103,25 @@ impl Registry {
 
     pub fn add_shape(&mut self, factory: Arc<dyn ShapeModelFactory>) {
         self.shapes.insert(factory.name().to_string(), factory);
+    }
+
+    pub fn add_body_kind(&mut self, factory: Arc<dyn crate::ext::BodyKindFactory>) {
+        self.body_kinds.insert(factory.name().to_string(), factory);
+    }
+
+    pub fn body_kind_names(&self) -> Vec<String> {
+        self.body_kinds.keys().cloned().collect()
+    }
+
+    pub fn body_kind(&self, name: &str) -> Result<&Arc<dyn crate::ext::BodyKindFactory>> {
+        lookup(&self.body_kinds, name, "body kind")
+    }
+
+    /// A shape of body kind `kind` from given parameters.
+    pub fn build_body_shape(&self, kind: &str, given: &ParamMap) -> Result<Arc<dyn crate::ext::BodyShape>> {
+        let factory = self.body_kind(kind)?;
+        let params = Params::resolve(&format!("{} body", factory.name()), factory.param_specs(), given)?;
+        factory.build(params)
     }
 
     pub fn shape_names(&self) -> Vec<String> {

@@ -122,6 +122,14 @@ impl DemSim {
             }
         }
         d.particles += p.len();
+        let k = &self.kinds;
+        for i in 0..k.len() {
+            d.max_height = d.max_height.max(k.x[i][0] * up[0] + k.x[i][1] * up[1] + k.x[i][2] * up[2]);
+            if !k.fixed[i] {
+                rigid(&mut d, k.mass[i], (k.v[i], k.w[i], k.x[i]), &k.q[i], k.inertia[i], k.force[i]);
+            }
+        }
+        d.particles += k.len();
         for i in 0..n {
             let (m, v, w, x) = (s.mass[i], s.v[i], s.w[i], s.x[i]);
             d.max_height = d.max_height.max(x[0] * up[0] + x[1] * up[1] + x[2] * up[2]);

@@ -11,12 +11,23 @@ use crate::error::GraniteError;
 use crate::ext::{ContactLaw, PairInfo};
 use std::sync::Arc;
 
-/// The bodies a pair list joins: their materials (the first body's, and the second's unless it
-/// is a wall), and whether the merge may run in parallel.
+/// The bodies a pair list joins: the first bodies' materials, what the second bodies are, and
+/// whether the merge may run in parallel.
 pub(crate) struct PairBodies<'a> {
     pub material: &'a [u16],
-    pub wall: bool,
+    pub other: Other<'a>,
     pub parallel: bool,
+}
+
+/// The second bodies of a pair list.
+#[derive(Clone, Copy)]
+pub(crate) enum Other<'a> {
+    /// Bodies of the first ones' set.
+    Same,
+    /// The simulation's walls.
+    Walls,
+    /// Bodies of another set, of these materials (spheres met by bodies of a plugin kind).
+    Of(&'a [u16]),
 }
 
 impl DemSim {
@@ -91,8 +102,15 @@ impl DemSim {
         bodies: PairBodies<'_>,
         info: impl Fn(usize, usize) -> crate::ext::PairInfo + Sync,
     ) -> Option<(u16, u16)> {
-        let PairBodies { material, wall, parallel } = bodies;
-        let materials = |a: usize, b: usize| (material[a], if wall { self.walls[b].material } else { material[b] });
+        let PairBodies { material, other, parallel } = bodies;
+        let materials = |a: usize, b: usize| {
+            let second = match other {
+                Other::Same => material[b],
+                Other::Walls => self.walls[b].material,
+                Other::Of(materials) => materials[b],
+            };
+            (material[a], second)
+        };
         let missing = list.merge(spare, pieces, strides, parallel, |a, b, law, params| {
             let (a, b) = (a as usize, b as usize);
             let pair = materials(a, b);

@@ -4,7 +4,7 @@
 
 use crate::dem::broad_phase::{periodic_sphere_pairs, sphere_pairs, wall_pairs, Candidate};
 use crate::dem::contacts::{PairList, MAX_HISTORY, MAX_PARAMS};
-use crate::dem::pairing::PairBodies;
+use crate::dem::pairing::{Other, PairBodies};
 use crate::dem::particles::FREE;
 use crate::dem::sim::DemSim;
 use crate::error::{GraniteError, Result};
@@ -124,7 +124,8 @@ impl DemSim {
     ) -> Option<(u16, u16)> {
         // Pieces of at most MERGE_PIECE pairs (a periodic search hands over one sorted list).
         let pieces: Vec<&[Candidate]> = candidates.iter().flat_map(|b| b.chunks(MERGE_PIECE)).collect();
-        let body = PairBodies { material: &self.spheres.material, wall, parallel: self.in_parallel() };
+        let other = if wall { Other::Walls } else { Other::Same };
+        let body = PairBodies { material: &self.spheres.material, other, parallel: self.in_parallel() };
         self.merge_with_laws(list, spare, &pieces, strides, body, |a, b| self.info_for(a, b, wall))
     }
 
@@ -200,6 +201,7 @@ impl DemSim {
         self.radius_max_at_build = self.spheres.largest_radius();
         self.radius_min_at_build = self.spheres.smallest_radius();
         self.rebuild_potential_pairs()?;
+        self.rebuild_kind_pairs()?;
         self.needs_rebuild = false;
         self.rebuilds += 1;
         Ok(())

@@ -98,6 +98,9 @@ pub struct DemSim {
     /// Seconds the potential particles' contacts spent in detection and in their laws (with the
     /// sums), since the simulation began: what `granite bench potential` reports.
     pub potential_seconds: [f64; 2],
+    /// Bodies of a plugin kind (capsules, ...), their candidate lists and loads for the spheres
+    /// (see `dem::kinds`).
+    pub kinds: crate::dem::kinds::KindScene,
 }
 
 impl Default for DemSim {
@@ -151,6 +154,7 @@ impl DemSim {
             potential_wall_pairs: PairList::default(),
             potential_x_at_build: Vec::new(),
             potential_seconds: [0.0; 2],
+            kinds: Default::default(),
         }
     }
 
@@ -497,6 +501,16 @@ impl DemSim {
             consider(self.law_for(mi, mi), self_pair);
             for (w, wall) in self.walls.iter().enumerate() {
                 consider(self.law_for(mi, wall.material), self.info_for(i, w, true));
+            }
+        }
+        let k = &self.kinds;
+        for i in (0..k.len()).filter(|&i| !k.fixed[i]) {
+            let mi = k.material[i];
+            let mut self_pair = self.kind_info(i, i, crate::dem::pairing::Other::Same);
+            self_pair.seed = 0;
+            consider(self.law_for(mi, mi), self_pair);
+            for (w, wall) in self.walls.iter().enumerate() {
+                consider(self.law_for(mi, wall.material), self.kind_info(i, w, crate::dem::pairing::Other::Walls));
             }
         }
         let p = &self.potentials;

@@ -117,6 +117,12 @@ impl DemSim {
 
     /// Whether the state format holds everything of this simulation: not potential particles.
     fn savable(&self) -> Result<()> {
+        if let Some(kind) = self.kinds.kind.as_ref().filter(|_| !self.kinds.is_empty()) {
+            return Err(GraniteError::Setup(format!(
+                "a simulation with {} bodies cannot be saved: the DEM state format holds spheres, clumps and walls",
+                kind.name
+            )));
+        }
         if self.potentials.is_empty() {
             Ok(())
         } else {

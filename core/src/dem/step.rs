@@ -59,7 +59,16 @@ impl DemSim {
         let motion = Motion::new(self.gravity, self.damping, self.dt, affine);
         let tracking = self.energy.is_some();
         let mut energy_before = None;
-        let mut moved = if parallel && !check && self.external.is_empty() && !tracking {
+        // Bodies of a plugin kind meet spheres where they all are at the step's start: their
+        // reactions join the spheres' loads before the spheres move.
+        if !self.kinds.is_empty() {
+            if let Err(e) = self.kind_contacts() {
+                self.needs_rebuild = true;
+                return Err(e);
+            }
+        }
+        let sphere_loads = !self.kinds.sphere_loads.is_empty();
+        let mut moved = if parallel && !check && self.external.is_empty() && !tracking && !sphere_loads {
             self.contacts_and_motion(&motion)
         } else {
             // The stability check reads this step's contacts before anything moves, so that a
@@ -71,6 +80,7 @@ impl DemSim {
             let history = tracking.then(|| (self.pairs.history.clone(), self.wall_pairs.history.clone()));
             self.contacts();
             self.apply_external_loads();
+            self.apply_kind_sphere_loads();
             if check {
                 self.check_time_step()?;
             }
@@ -98,6 +108,12 @@ impl DemSim {
         } else {
             let motion = RigidMotion { gravity: self.gravity, damping: self.damping, dt: self.dt, affine: None };
             self.potential_step(&motion)?
+        };
+        let kind_moved = if self.kinds.is_empty() {
+            0.0
+        } else {
+            let motion = RigidMotion { gravity: self.gravity, damping: self.damping, dt: self.dt, affine: None };
+            self.kind_motion(&motion)?
         };
         let mut wall_moved: f64 = 0.0;
         for (w, at) in self.walls.iter_mut().zip(&self.walls_at_build) {
@@ -154,6 +170,12 @@ impl DemSim {
         let affine_growth = strain_since_build * (2.0 * self.radius_max_at_build + self.skin);
         if 2.0 * moved + affine_growth > self.skin || moved + wall_moved > self.skin {
             self.needs_rebuild = true;
+        }
+        if !self.kinds.is_empty() {
+            let skin = self.kind_skin();
+            if 2.0 * kind_moved > skin || kind_moved + wall_moved > skin {
+                self.needs_rebuild = true;
+            }
         }
         if !self.potentials.is_empty() {
             let skin = self.potential_skin();

@@ -3,12 +3,14 @@
 //!
 //! [`Registry`]: crate::registry::Registry
 
+pub mod body;
 pub mod constitutive;
 pub mod contact;
 pub mod rve;
 pub mod shape;
 pub mod velocity_update;
 
+pub use body::{BodyGeometry, BodyKindFactory, BodyShape};
 pub use constitutive::{ConstitutiveLaw, ConstitutiveLawFactory, LawBatch, PointObjects};
 pub use contact::{ContactBatch, ContactLaw, ContactLawFactory, PairInfo};
 pub use rve::{RveBatch, RveDevice, RveOrder, RveReport};

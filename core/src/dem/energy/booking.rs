@@ -43,6 +43,12 @@ impl DemSim {
                 "energy tracking covers spheres and clumps, not potential particles".into(),
             ));
         }
+        if let Some(kind) = self.kinds.kind.as_ref().filter(|_| !self.kinds.is_empty()) {
+            return Err(GraniteError::Setup(format!(
+                "energy tracking covers spheres and clumps, not {} bodies",
+                kind.name
+            )));
+        }
         if let Some(law) = self.laws.iter().find(|l| !l.tracks_dissipation()) {
             return Err(GraniteError::Setup(format!(
                 "contact law `{}` does not account for its losses: energy cannot be tracked with it",

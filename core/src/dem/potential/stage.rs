@@ -10,7 +10,7 @@ use super::contact::{detect, detect_plane, Solution, Touch};
 use crate::dem::broad_phase::{sphere_pairs, wall_pairs, Candidate};
 use crate::dem::contacts::PairList;
 use crate::dem::motion::{RigidBody, RigidMotion};
-use crate::dem::pairing::PairBodies;
+use crate::dem::pairing::{Other, PairBodies};
 use crate::dem::sim::DemSim;
 use crate::dem::walls::WallShape;
 use crate::error::{GraniteError, Result};
@@ -105,7 +105,8 @@ impl DemSim {
         wall: bool,
     ) -> Option<(u16, u16)> {
         let pieces: Vec<&[Candidate]> = candidates.iter().map(|b| &b[..]).collect();
-        let bodies = PairBodies { material: &self.potentials.material, wall, parallel: false };
+        let other = if wall { Other::Walls } else { Other::Same };
+        let bodies = PairBodies { material: &self.potentials.material, other, parallel: false };
         self.merge_with_laws(list, &mut PairList::default(), &pieces, strides, bodies, |a, b| {
             self.potential_info(a, b, wall)
         })

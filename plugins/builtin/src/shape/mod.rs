@@ -1,6 +1,7 @@
 //! Grain shapes: a sphere, the 4-sphere tetrahedral clump of the JGS round robin (thesis 2.2.1,
 //! table 2.3), and potential particles: the rounded tetrahedron fitted to that clump (thesis
-//! 2.2.2.2, table 2.2) and rounded boxes (the thesis's container parts).
+//! 2.2.2.2, table 2.2) and rounded boxes (the thesis's container parts); and capsules, a body
+//! kind of their own (`capsule.rs`).
 
 use granite_core::dem::clump::tetrahedral_members;
 use granite_core::dem::potential::shape::{box_planes, PotentialShape, MASS_RESOLUTION};
@@ -10,7 +11,10 @@ use granite_core::params::{ParamSpec, Params};
 use granite_core::{Registry, Result};
 use std::sync::Arc;
 
+pub mod capsule;
+
 pub fn register(registry: &mut Registry) {
+    registry.add_body_kind(Arc::new(capsule::CapsuleKind));
     registry.add_shape(Arc::new(SphereFactory));
     registry.add_shape(Arc::new(TetraFactory));
     registry.add_shape(Arc::new(PotentialTetraFactory));

@@ -1,0 +1,587 @@
+//! Bodies of plugin kinds (`ext::body`: capsules, ...) in a DEM simulation: their storage and
+//! set-up, their candidate lists (with one another, plane walls and spheres, from their bounding
+//! spheres), and their part of a step. A step finds every contact of the bodies at its start, the
+//! kind's geometry called once per list; runs the contact laws of the materials on them in pair
+//! order; hands the spheres their reactions before the spheres move; and moves the bodies as rigid
+//! bodies after the spheres. Results do not depend on the number of threads.
+
+use crate::dem::broad_phase::{sphere_pairs, wall_pairs, Candidate};
+use crate::dem::contacts::PairList;
+use crate::dem::motion::{RigidBody, RigidMotion};
+use crate::dem::pairing::{Other, PairBodies};
+use crate::dem::sim::DemSim;
+use crate::dem::walls::WallShape;
+use crate::error::{GraniteError, Result};
+use crate::ext::body::{Ball, BodyGeometry, BodyKindFactory, BodyShape, KindBodies, Plane, Touch};
+use crate::ext::{ContactBatch, ContactLaw, PairInfo};
+use crate::io::vtk::{Field, PolyData};
+use crate::math::{add3, cross3, sub3, Vec3};
+use nalgebra::UnitQuaternion;
+use std::sync::Arc;
+
+/// The kind a simulation's bodies are of: its name, geometry and shape values per body.
+#[derive(Clone)]
+pub struct KindInUse {
+    pub name: String,
+    pub geometry: Arc<dyn BodyGeometry>,
+    pub stride: usize,
+}
+
+/// The bodies of plugin kinds, their candidate lists and what a step leaves for the spheres.
+#[derive(Clone, Default)]
+pub struct KindScene {
+    /// None until the first body.
+    pub kind: Option<KindInUse>,
+    pub shapes: Vec<Arc<dyn BodyShape>>,
+    pub shape: Vec<u32>,
+    /// Each body's shape values ([`BodyShape::values`]), `stride` a body.
+    pub values: Vec<f64>,
+    pub id: Vec<u64>,
+    pub material: Vec<u16>,
+    /// Centre of mass, velocity, angular velocity (world frame), orientation (body to world).
+    pub x: Vec<Vec3>,
+    pub v: Vec<Vec3>,
+    pub w: Vec<Vec3>,
+    pub q: Vec<UnitQuaternion<f64>>,
+    pub mass: Vec<f64>,
+    /// Principal moments of inertia (body frame).
+    pub inertia: Vec<Vec3>,
+    /// Moved by their own velocity and spin only (container parts).
+    pub fixed: Vec<bool>,
+    pub force: Vec<Vec3>,
+    pub torque: Vec<Vec3>,
+    pub(crate) pairs: PairList,
+    pub(crate) wall_pairs: PairList,
+    /// Pairs (body, sphere).
+    pub(crate) sphere_pairs: PairList,
+    pub(crate) x_at_build: Vec<Vec3>,
+    /// Loads on spheres from this step's contacts (sphere, force, torque), in pair order.
+    pub(crate) sphere_loads: Vec<(u32, Vec3, Vec3)>,
+}
+
+impl KindScene {
+    pub fn len(&self) -> usize {
+        self.x.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.x.is_empty()
+    }
+
+    pub fn bounding_radius(&self, i: usize) -> f64 {
+        self.shapes[self.shape[i] as usize].bounding_radius()
+    }
+
+    /// Touching contacts of the bodies (with one another, walls and spheres).
+    pub fn contact_count(&self) -> usize {
+        self.pairs.touching_count() + self.wall_pairs.touching_count() + self.sphere_pairs.touching_count()
+    }
+
+    fn view(&self) -> KindBodies<'_> {
+        let stride = self.kind.as_ref().map(|k| k.stride).unwrap_or(0);
+        KindBodies { x: &self.x, q: &self.q, values: &self.values, stride }
+    }
+
+    /// Mass for a contact's effective mass: infinite for a fixed body.
+    fn contact_mass(&self, i: usize) -> f64 {
+        if self.fixed[i] {
+            f64::INFINITY
+        } else {
+            self.mass[i]
+        }
+    }
+
+    /// Kinetic energy of the free bodies (translation and rotation).
+    pub fn kinetic_energy(&self) -> f64 {
+        (0..self.len())
+            .filter(|&i| !self.fixed[i])
+            .map(|i| {
+                let (v, w) = (self.v[i], self.w[i]);
+                let rot = self.q[i].to_rotation_matrix();
+                let body_w = rot.inverse() * nalgebra::Vector3::new(w[0], w[1], w[2]);
+                let spin: f64 = (0..3).map(|a| self.inertia[i][a] * body_w[a] * body_w[a]).sum();
+                0.5 * self.mass[i] * (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]) + 0.5 * spin
+            })
+            .sum()
+    }
+}
+
+/// A touching contact of a body: its list slot, geometry and relative motion.
+struct Found {
+    slot: usize,
+    touch: Touch,
+    rel_velocity: Vec3,
+    rel_spin: Vec3,
+}
+
+/// A body of a kind to add ([`DemSim::add_body`]).
+pub struct NewBody<'a> {
+    pub kind: &'a dyn BodyKindFactory,
+    pub shape: Arc<dyn BodyShape>,
+    pub material: u16,
+    pub x: Vec3,
+    pub q: UnitQuaternion<f64>,
+    pub v: Vec3,
+    pub w: Vec3,
+    pub fixed: bool,
+}
+
+impl DemSim {
+    /// Adds a body of a plugin kind; returns its index among the bodies.
+    pub fn add_body(&mut self, body: NewBody<'_>) -> Result<usize> {
+        let NewBody { kind, shape, material, x, q, v, w, fixed } = body;
+        if !self.potentials.is_empty() {
+            return Err(GraniteError::Setup(format!(
+                "{} bodies and potential particles do not meet: a simulation holds one or the other",
+                kind.name()
+            )));
+        }
+        if self.cell.is_some() {
+            return Err(GraniteError::Setup(format!(
+                "{} bodies run in open domains, not in a periodic cell",
+                kind.name()
+            )));
+        }
+        if self.energy.is_some() {
+            return Err(GraniteError::Setup(format!(
+                "the energy tracker covers spheres and clumps: turn it off (track_energy(false)) before adding {} bodies",
+                kind.name()
+            )));
+        }
+        if let Some(used) = &self.kinds.kind {
+            if used.name != kind.name() {
+                return Err(GraniteError::Setup(format!(
+                    "this simulation holds {} bodies: bodies of one plugin kind meet spheres, walls and one another, \
+                     not {} bodies",
+                    used.name,
+                    kind.name()
+                )));
+            }
+        }
+        let density = self
+            .materials
+            .get(material as usize)
+            .ok_or_else(|| GraniteError::Setup(format!("no material with index {material}")))?
+            .density;
+        let values = shape.values();
+        if values.len() != kind.values_per_shape() {
+            return Err(GraniteError::Other(format!(
+                "body kind {}: a shape gave {} values, its geometry reads {}",
+                kind.name(),
+                values.len(),
+                kind.values_per_shape()
+            )));
+        }
+        let (volume, inertia) = (shape.volume(), shape.inertia_per_density());
+        let finite = |v: &[f64]| v.iter().all(|c| c.is_finite());
+        if !(volume > 0.0 && finite(&x) && finite(&v) && finite(&w) && inertia.iter().all(|&i| i > 0.0)) {
+            return Err(GraniteError::Setup(format!(
+                "a {} body needs a volume and moments of inertia > 0 and a finite position and velocity",
+                kind.name()
+            )));
+        }
+        let k = &mut self.kinds;
+        if k.kind.is_none() {
+            k.kind = Some(KindInUse {
+                name: kind.name().to_string(),
+                geometry: kind.geometry(),
+                stride: kind.values_per_shape(),
+            });
+        }
+        let index = match k.shapes.iter().position(|s| Arc::ptr_eq(s, &shape)) {
+            Some(i) => i,
+            None => {
+                k.shapes.push(shape);
+                k.shapes.len() - 1
+            }
+        };
+        k.shape.push(index as u32);
+        k.values.extend(values);
+        k.id.push(self.next_id);
+        k.material.push(material);
+        k.x.push(x);
+        k.v.push(v);
+        k.w.push(w);
+        k.q.push(q);
+        k.mass.push(density * volume);
+        k.inertia.push(inertia.map(|i| density * i));
+        k.fixed.push(fixed);
+        k.force.push([0.0; 3]);
+        k.torque.push([0.0; 3]);
+        self.next_id += 1;
+        self.needs_rebuild = true;
+        Ok(k.len() - 1)
+    }
+
+    /// The Verlet skin of the bodies: the simulation's, or a tenth of the smallest bounding
+    /// radius when none is set.
+    pub(crate) fn kind_skin(&self) -> f64 {
+        if self.skin > 0.0 {
+            return self.skin;
+        }
+        0.1 * (0..self.kinds.len()).map(|i| self.kinds.bounding_radius(i)).fold(f64::INFINITY, f64::min)
+    }
+
+    /// The pair info of body `i` and body `j`, wall `j` or sphere `j`.
+    pub(crate) fn kind_info(&self, i: usize, j: usize, other: Other<'_>) -> PairInfo {
+        let k = &self.kinds;
+        let elastic = |m: u16| self.materials.get(m as usize).and_then(|m| m.elastic);
+        let s = &self.spheres;
+        let (r2, m2, id2, e2) = match other {
+            Other::Same => (k.bounding_radius(j), k.contact_mass(j), k.id[j], elastic(k.material[j])),
+            Other::Walls => (f64::INFINITY, f64::INFINITY, u64::MAX - j as u64, elastic(self.walls[j].material)),
+            Other::Of(_) => (s.radius[j], s.mass[j], s.id[j], elastic(s.material[j])),
+        };
+        let (lo, hi) = (k.id[i].min(id2), k.id[i].max(id2));
+        let seed = crate::ext::contact::uniform(self.seed ^ lo.wrapping_mul(0x100_0000_01B3), hi).to_bits();
+        PairInfo {
+            radius: [k.bounding_radius(i), r2],
+            mass: [k.contact_mass(i), m2],
+            seed,
+            elastic: [elastic(k.material[i]), e2],
+        }
+    }
+
+    /// Rebuilds the bodies' candidate lists (pairs still present keep their history). Called
+    /// with the spheres' rebuild.
+    pub(crate) fn rebuild_kind_pairs(&mut self) -> Result<()> {
+        if self.kinds.is_empty() {
+            return Ok(());
+        }
+        if let Some(w) = self.walls.iter().find(|w| !matches!(w.shape, WallShape::Plane { .. })) {
+            let name = self.kinds.kind.as_ref().map(|k| k.name.clone()).unwrap_or_default();
+            return Err(GraniteError::Setup(format!(
+                "wall \"{}\": {name} bodies meet plane walls (wall_plane, box_walls), spheres and one another",
+                w.name
+            )));
+        }
+        let k = &self.kinds;
+        let ns = self.spheres.len();
+        // One broad phase over the spheres and then the bodies (bounding spheres): a pair whose
+        // first index is a body's is a body pair (both bodies) or a (body, sphere) pair.
+        let mut x = self.spheres.x.clone();
+        x.extend_from_slice(&k.x);
+        let mut radii = self.spheres.radius.clone();
+        radii.extend((0..k.len()).map(|i| k.bounding_radius(i)));
+        let skin = self.kind_skin();
+        let found = sphere_pairs(&x, &radii, skin);
+        let fixed = &k.fixed;
+        let (mut bodies, mut spheres): (Vec<Vec<Candidate>>, Vec<Vec<Candidate>>) = (Vec::new(), Vec::new());
+        for block in &found {
+            let (mut b, mut s) = (Vec::new(), Vec::new());
+            for &(a, c, shift) in block.iter().filter(|p| p.0 as usize >= ns) {
+                let i = a - ns as u32;
+                if c as usize >= ns {
+                    // Fixed bodies are moved, not pushed: their contacts with one another would
+                    // change nothing.
+                    let j = c - ns as u32;
+                    if !(fixed[i as usize] && fixed[j as usize]) {
+                        b.push((i, j, shift));
+                    }
+                } else {
+                    s.push((i, c, shift));
+                }
+            }
+            bodies.push(b);
+            spheres.push(s);
+        }
+        let mut walls = wall_pairs(&k.x, &radii[ns..], &self.walls, skin);
+        walls.iter_mut().for_each(|block| block.retain(|&(a, _, _)| !fixed[a as usize]));
+        let strides = self.pair_strides();
+        let mut lists = [
+            std::mem::take(&mut self.kinds.pairs),
+            std::mem::take(&mut self.kinds.wall_pairs),
+            std::mem::take(&mut self.kinds.sphere_pairs),
+        ];
+        let mut missing = None;
+        for (list, (candidates, other)) in lists.iter_mut().zip([
+            (&bodies, Other::Same),
+            (&walls, Other::Walls),
+            (&spheres, Other::Of(&self.spheres.material)),
+        ]) {
+            let pieces: Vec<&[Candidate]> = candidates.iter().map(|b| &b[..]).collect();
+            let owners = PairBodies { material: &self.kinds.material, other, parallel: false };
+            let none = self.merge_with_laws(list, &mut PairList::default(), &pieces, strides, owners, |a, b| {
+                self.kind_info(a, b, other)
+            });
+            missing = missing.or(none);
+        }
+        [self.kinds.pairs, self.kinds.wall_pairs, self.kinds.sphere_pairs] = lists;
+        if let Some(pair) = missing {
+            return Err(self.missing_law(pair));
+        }
+        self.kinds.x_at_build = self.kinds.x.clone();
+        Ok(())
+    }
+
+    /// The bodies' contacts at the start of a step: loads summed into the bodies (and, for the
+    /// spheres, into `sphere_loads`) in pair order.
+    pub(crate) fn kind_contacts(&mut self) -> Result<()> {
+        let k = &mut self.kinds;
+        k.force.iter_mut().for_each(|f| *f = [0.0; 3]);
+        k.torque.iter_mut().for_each(|t| *t = [0.0; 3]);
+        k.sphere_loads.clear();
+        let Some(kind) = k.kind.clone() else { return Ok(()) };
+        let own = self.pair_strides().1;
+        let lists = [
+            std::mem::take(&mut self.kinds.pairs),
+            std::mem::take(&mut self.kinds.wall_pairs),
+            std::mem::take(&mut self.kinds.sphere_pairs),
+        ];
+        let mut kept = Vec::with_capacity(3);
+        for (mut list, side) in lists.into_iter().zip([Side::Bodies, Side::Walls, Side::Spheres]) {
+            let touching = self.touching(&mut list, kind.geometry.as_ref(), side, own)?;
+            let (force, moment) = laws_in_pair_order(&self.laws, &mut list, &touching, self.dt);
+            self.sum_kind_loads(&mut list, &touching, (&force, &moment), side);
+            kept.push(list);
+        }
+        let mut kept = kept.into_iter();
+        for slot in [&mut self.kinds.pairs, &mut self.kinds.wall_pairs, &mut self.kinds.sphere_pairs] {
+            *slot = kept.next().unwrap_or_default();
+        }
+        Ok(())
+    }
+
+    /// The touching pairs of a list, from one call of the kind's geometry; pairs found apart
+    /// start their law's history again at their next touch.
+    fn touching(&self, list: &mut PairList, geometry: &dyn BodyGeometry, side: Side, own: usize) -> Result<Vec<Found>> {
+        let k = &self.kinds;
+        let view = k.view();
+        let mut out = vec![None; list.len()];
+        match side {
+            Side::Bodies => {
+                let pairs: Vec<(u32, u32)> = list.a.iter().copied().zip(list.b.iter().copied()).collect();
+                geometry.pairs(&view, &pairs, &mut out);
+            }
+            Side::Walls => {
+                let pairs: Vec<(u32, Plane)> = list
+                    .a
+                    .iter()
+                    .zip(&list.b)
+                    .map(|(&a, &b)| {
+                        let wall = &self.walls[b as usize];
+                        let normal = match wall.shape {
+                            WallShape::Plane { normal } => normal,
+                            _ => [0.0; 3],
+                        };
+                        (a, Plane { point: wall.position, normal })
+                    })
+                    .collect();
+                geometry.planes(&view, &pairs, &mut out);
+            }
+            Side::Spheres => {
+                let s = &self.spheres;
+                let pairs: Vec<(u32, Ball)> = list
+                    .a
+                    .iter()
+                    .zip(&list.b)
+                    .map(|(&a, &b)| (a, Ball { centre: s.x[b as usize], radius: s.radius[b as usize] }))
+                    .collect();
+                geometry.spheres(&view, &pairs, &mut out);
+            }
+        }
+        let hs = list.history_stride;
+        let mut found = Vec::new();
+        for (slot, touch) in out.into_iter().enumerate() {
+            let Some(touch) = touch else {
+                if list.touching[slot] {
+                    list.touching[slot] = false;
+                    list.force[slot] = [0.0; 3];
+                    list.history[slot * hs..slot * hs + own].iter_mut().for_each(|h| *h = 0.0);
+                }
+                continue;
+            };
+            if !(touch.overlap.is_finite() && touch.normal.iter().chain(&touch.point).all(|c| c.is_finite())) {
+                return Err(GraniteError::Unstable {
+                    step: self.step,
+                    time: self.time,
+                    reason: format!(
+                        "the {} geometry gave a non-finite contact for body {}; the time step may be too large",
+                        k.kind.as_ref().map(|k| k.name.as_str()).unwrap_or(""),
+                        k.id[list.a[slot] as usize]
+                    ),
+                });
+            }
+            let (i, j) = (list.a[slot] as usize, list.b[slot] as usize);
+            let at = |v: Vec3, w: Vec3, x: Vec3| add3(v, cross3(w, sub3(touch.point, x)));
+            let first = at(k.v[i], k.w[i], k.x[i]);
+            let (second, spin) = match side {
+                Side::Bodies => (at(k.v[j], k.w[j], k.x[j]), k.w[j]),
+                Side::Walls => (self.walls[j].velocity, [0.0; 3]),
+                Side::Spheres => {
+                    let s = &self.spheres;
+                    (at(s.v[j], s.w[j], s.x[j]), s.w[j])
+                }
+            };
+            found.push(Found { slot, touch, rel_velocity: sub3(second, first), rel_spin: sub3(spin, k.w[i]) });
+        }
+        Ok(found)
+    }
+
+    /// Adds each touching contact's force and moment to its two bodies in pair order: the
+    /// law's force acts on the list's first body, its opposite on the second (a sphere's goes to
+    /// `sphere_loads`; a wall takes none).
+    fn sum_kind_loads(
+        &mut self,
+        list: &mut PairList,
+        touching: &[Found],
+        (force, moment): (&[Vec3], &[Vec3]),
+        side: Side,
+    ) {
+        let k = &mut self.kinds;
+        for (e, found) in touching.iter().enumerate() {
+            let slot = found.slot;
+            let (i, j) = (list.a[slot] as usize, list.b[slot] as usize);
+            let (f, m, point) = (force[e], moment[e], found.touch.point);
+            list.touching[slot] = true;
+            list.force[slot] = f;
+            k.force[i] = add3(k.force[i], f);
+            k.torque[i] = add3(k.torque[i], add3(cross3(sub3(point, k.x[i]), f), m));
+            let back = [-f[0], -f[1], -f[2]];
+            match side {
+                Side::Bodies => {
+                    k.force[j] = add3(k.force[j], back);
+                    k.torque[j] = sub3(add3(k.torque[j], cross3(sub3(point, k.x[j]), back)), m);
+                }
+                Side::Walls => {}
+                Side::Spheres => {
+                    let torque = sub3(cross3(sub3(point, self.spheres.x[j]), back), m);
+                    k.sphere_loads.push((j as u32, back, torque));
+                }
+            }
+        }
+    }
+
+    /// Adds the bodies' reactions on the spheres to the spheres' loads, in pair order.
+    pub(crate) fn apply_kind_sphere_loads(&mut self) {
+        let s = &mut self.spheres;
+        for &(i, f, t) in &self.kinds.sphere_loads {
+            let i = i as usize;
+            s.force[i] = add3(s.force[i], f);
+            s.torque[i] = add3(s.torque[i], t);
+        }
+    }
+
+    /// Moves the bodies by this step's loads; returns the largest distance a body's centre
+    /// moved since the lists were built.
+    pub(crate) fn kind_motion(&mut self, motion: &RigidMotion) -> Result<f64> {
+        let k = &mut self.kinds;
+        let dt = motion.dt;
+        let mut moved: f64 = 0.0;
+        for i in 0..k.len() {
+            if k.fixed[i] {
+                for a in 0..3 {
+                    k.x[i][a] += k.v[i][a] * dt;
+                }
+                let w = nalgebra::Vector3::new(k.w[i][0], k.w[i][1], k.w[i][2]);
+                k.q[i] = UnitQuaternion::from_scaled_axis(w * dt) * k.q[i];
+            } else {
+                let body = RigidBody { x: &mut k.x[i], v: &mut k.v[i], w: &mut k.w[i], q: &mut k.q[i] };
+                body.advance((k.mass[i], k.inertia[i]), (k.force[i], k.torque[i]), motion);
+            }
+            let d = sub3(k.x[i], k.x_at_build.get(i).copied().unwrap_or(k.x[i]));
+            let distance = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+            if !(distance.is_finite() && k.v[i].iter().chain(&k.w[i]).all(|c| c.is_finite())) {
+                return Err(GraniteError::Unstable {
+                    step: self.step,
+                    time: self.time,
+                    reason: format!(
+                        "non-finite position or velocity of {} body {} (x = {:?}, v = {:?}); the time step may be too large",
+                        k.kind.as_ref().map(|k| k.name.as_str()).unwrap_or(""),
+                        k.id[i],
+                        k.x[i],
+                        k.v[i]
+                    ),
+                });
+            }
+            moved = moved.max(distance);
+        }
+        Ok(moved)
+    }
+
+    /// The bodies' surfaces, with id, material, fixed, velocity and force per triangle.
+    pub fn kinds_picture(&self) -> PolyData {
+        let k = &self.kinds;
+        let mut picture = PolyData::default();
+        let surfaces: Vec<(Vec<Vec3>, Vec<[usize; 3]>)> = k.shapes.iter().map(|s| s.surface()).collect();
+        let (mut id, mut material, mut fixed, mut velocity, mut force) =
+            (Vec::new(), Vec::new(), Vec::new(), Vec::new(), Vec::new());
+        for i in 0..k.len() {
+            let (points, triangles) = &surfaces[k.shape[i] as usize];
+            let first = picture.points.len() as u32;
+            let rot = k.q[i].to_rotation_matrix();
+            picture.points.extend(points.iter().map(|b| {
+                let w = rot * nalgebra::Vector3::new(b[0], b[1], b[2]);
+                [k.x[i][0] + w[0], k.x[i][1] + w[1], k.x[i][2] + w[2]]
+            }));
+            for t in triangles {
+                picture.polygons.push(t.iter().map(|&c| first + c as u32).collect());
+                id.push(k.id[i] as i64);
+                material.push(k.material[i] as i64);
+                fixed.push(k.fixed[i] as i64);
+                velocity.extend(k.v[i]);
+                force.extend(k.force[i]);
+            }
+        }
+        picture.cell_fields = vec![
+            Field::int("id", id),
+            Field::int("material", material),
+            Field::int("fixed", fixed),
+            Field::float("velocity", 3, velocity),
+            Field::float("force", 3, force),
+        ];
+        picture
+    }
+}
+
+/// What the second body of a list's pairs is.
+#[derive(Clone, Copy)]
+enum Side {
+    Bodies,
+    Walls,
+    Spheres,
+}
+
+/// Runs each law on the touching contacts of `list` that are its own, in pair order; the force
+/// and extra moment on each contact's first body, in the order of `touching`.
+fn laws_in_pair_order(
+    laws: &[Arc<dyn ContactLaw>],
+    list: &mut PairList,
+    touching: &[Found],
+    dt: f64,
+) -> (Vec<Vec3>, Vec<Vec3>) {
+    let n = touching.len();
+    let (mut force, mut moment) = (vec![[0.0; 3]; n], vec![[0.0; 3]; n]);
+    let strides = (list.param_stride, list.history_stride);
+    for (l, law) in laws.iter().enumerate() {
+        let members: Vec<usize> = (0..n).filter(|&e| list.law[touching[e].slot] as usize == l).collect();
+        if members.is_empty() {
+            continue;
+        }
+        let pick = |f: &dyn Fn(&Found) -> Vec3| members.iter().map(|&e| f(&touching[e])).collect::<Vec<Vec3>>();
+        let normal = pick(&|f| f.touch.normal);
+        let rel_velocity = pick(&|f| f.rel_velocity);
+        let rel_spin = pick(&|f| f.rel_spin);
+        let overlap: Vec<f64> = members.iter().map(|&e| touching[e].touch.overlap).collect();
+        let slot: Vec<u32> = members.iter().map(|&e| touching[e].slot as u32).collect();
+        let (mut f, mut m) = (vec![[0.0; 3]; members.len()], vec![[0.0; 3]; members.len()]);
+        law.compute(ContactBatch {
+            normal: &normal,
+            overlap: &overlap,
+            rel_velocity: &rel_velocity,
+            rel_spin: &rel_spin,
+            slot: &slot,
+            strides,
+            params: &list.params,
+            history: &mut list.history,
+            force: &mut f,
+            moment: &mut m,
+            dt,
+        });
+        for (s, &e) in members.iter().enumerate() {
+            force[e] = f[s];
+            moment[e] = m[s];
+        }
+    }
+    (force, moment)
+}

@@ -1,0 +1,296 @@
+//! Capsules (spherocylinders): the points within `radius` of a segment of `length`, a body kind
+//! of its own. In the body frame the segment runs along z, from `-length/2` to `length/2`,
+//! through the centre of mass.
+//!
+//! Contacts are those of the swept spheres: between two capsules, along the line joining the
+//! closest points of their segments; against a sphere, from the segment's point nearest the
+//! centre; against a plane, one contact whose depth is the deeper end's and whose point is the
+//! ends' points weighed by their depths (a capsule lying flat bears at its middle, one tilting
+//! shifts its bearing continuously towards the end going down).
+
+use granite_core::error::{GraniteError, Result};
+use granite_core::ext::body::{Ball, BodyGeometry, BodyKindFactory, BodyShape, KindBodies, Plane, Touch};
+use granite_core::math::Vec3;
+use granite_core::params::{ParamSpec, Params};
+use std::f64::consts::PI;
+use std::sync::Arc;
+
+pub struct CapsuleKind;
+
+const SPECS: &[ParamSpec] = &[
+    ParamSpec::required("radius", "radius of the capsule (of its cylinder and end caps) in m, > 0"),
+    ParamSpec::required("length", "length of its cylinder (between the centres of the end caps) in m, >= 0"),
+];
+
+impl BodyKindFactory for CapsuleKind {
+    fn name(&self) -> &str {
+        "capsule"
+    }
+    fn description(&self) -> &str {
+        "spherocylinders: a cylinder of `length` with hemispherical caps of `radius`"
+    }
+    fn param_specs(&self) -> &[ParamSpec] {
+        SPECS
+    }
+    fn build(&self, params: Params) -> Result<Arc<dyn BodyShape>> {
+        let radius = params.positive("radius")?;
+        let length = params.get("length");
+        if !(length >= 0.0 && length.is_finite()) {
+            return Err(GraniteError::param_in(format!("`length` of {}", params.owner()), length, "must be >= 0"));
+        }
+        Ok(Arc::new(Capsule { radius, half: 0.5 * length }))
+    }
+    fn values_per_shape(&self) -> usize {
+        2
+    }
+    fn geometry(&self) -> Arc<dyn BodyGeometry> {
+        Arc::new(CapsuleGeometry)
+    }
+}
+
+/// A capsule of `radius` around the segment from `-half` to `half` along z.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Capsule {
+    pub radius: f64,
+    pub half: f64,
+}
+
+impl Capsule {
+    /// Volumes of the cylinder and of the two caps together (a sphere).
+    fn parts(&self) -> (f64, f64) {
+        let r = self.radius;
+        (PI * r * r * 2.0 * self.half, 4.0 / 3.0 * PI * r * r * r)
+    }
+}
+
+impl BodyShape for Capsule {
+    fn kind(&self) -> &str {
+        "capsule"
+    }
+    fn values(&self) -> Vec<f64> {
+        vec![self.radius, self.half]
+    }
+    fn bounding_radius(&self) -> f64 {
+        self.radius + self.half
+    }
+    fn volume(&self) -> f64 {
+        let (cylinder, caps) = self.parts();
+        cylinder + caps
+    }
+    fn inertia_per_density(&self) -> Vec3 {
+        let (r, h) = (self.radius, self.half);
+        let (cylinder, caps) = self.parts();
+        let axial = cylinder * r * r / 2.0 + caps * 2.0 / 5.0 * r * r;
+        // Each cap about a diameter through the capsule's centre: its own 2/5 m r^2 about its base,
+        // moved to its centroid (3r/8 from the base), then to the centre (h + 3r/8 away).
+        let across =
+            cylinder * (r * r / 4.0 + (2.0 * h) * (2.0 * h) / 12.0) + caps * (0.4 * r * r + h * h + 0.75 * h * r);
+        [across, across, axial]
+    }
+    fn surface(&self) -> (Vec<Vec3>, Vec<[usize; 3]>) {
+        const AROUND: usize = 16;
+        const CAP_RINGS: usize = 4;
+        let (r, h) = (self.radius, self.half);
+        // Rings from the bottom pole to the top one: the lower cap's, then the upper cap's.
+        let mut rings: Vec<(f64, f64)> = Vec::new();
+        for k in 1..=CAP_RINGS {
+            let a = -PI / 2.0 + PI / 2.0 * k as f64 / CAP_RINGS as f64;
+            rings.push((r * a.cos(), -h + r * a.sin()));
+        }
+        for k in 0..CAP_RINGS {
+            let a = PI / 2.0 * k as f64 / CAP_RINGS as f64;
+            rings.push((r * a.cos(), h + r * a.sin()));
+        }
+        let mut points = vec![[0.0, 0.0, -h - r]];
+        for &(rho, z) in &rings {
+            for j in 0..AROUND {
+                let t = 2.0 * PI * j as f64 / AROUND as f64;
+                points.push([rho * t.cos(), rho * t.sin(), z]);
+            }
+        }
+        points.push([0.0, 0.0, h + r]);
+        let top = points.len() - 1;
+        let at = |ring: usize, j: usize| 1 + ring * AROUND + j % AROUND;
+        let mut triangles = Vec::new();
+        for j in 0..AROUND {
+            triangles.push([0, at(0, j + 1), at(0, j)]);
+            for ring in 0..rings.len() - 1 {
+                triangles.push([at(ring, j), at(ring, j + 1), at(ring + 1, j + 1)]);
+                triangles.push([at(ring, j), at(ring + 1, j + 1), at(ring + 1, j)]);
+            }
+            triangles.push([at(rings.len() - 1, j), at(rings.len() - 1, j + 1), top]);
+        }
+        (points, triangles)
+    }
+}
+
+struct CapsuleGeometry;
+
+/// The segment of body `i`: its ends and radius, in the world frame.
+fn segment(bodies: &KindBodies<'_>, i: usize) -> (Vec3, Vec3, f64) {
+    let v = bodies.values_of(i);
+    let (r, half) = (v[0], v[1]);
+    let axis = bodies.q[i] * nalgebra::Vector3::z();
+    let x = bodies.x[i];
+    let end = |s: f64| [x[0] + s * half * axis[0], x[1] + s * half * axis[1], x[2] + s * half * axis[2]];
+    (end(-1.0), end(1.0), r)
+}
+
+fn sub(a: Vec3, b: Vec3) -> Vec3 {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+
+fn dot(a: Vec3, b: Vec3) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+fn along(a: Vec3, d: Vec3, t: f64) -> Vec3 {
+    [a[0] + t * d[0], a[1] + t * d[1], a[2] + t * d[2]]
+}
+
+fn cross(a: Vec3, b: Vec3) -> Vec3 {
+    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+}
+
+/// The point of segment `[a, b]` nearest `p`.
+fn nearest_on(a: Vec3, b: Vec3, p: Vec3) -> Vec3 {
+    let d = sub(b, a);
+    let dd = dot(d, d);
+    let t = if dd > 0.0 { (dot(sub(p, a), d) / dd).clamp(0.0, 1.0) } else { 0.0 };
+    along(a, d, t)
+}
+
+/// The closest points of segments `[p0, p1]` and `[q0, q1]`.
+pub fn closest_points(p0: Vec3, p1: Vec3, q0: Vec3, q1: Vec3) -> (Vec3, Vec3) {
+    let (d1, d2, r) = (sub(p1, p0), sub(q1, q0), sub(p0, q0));
+    let (a, e, f) = (dot(d1, d1), dot(d2, d2), dot(d2, r));
+    let tiny = f64::EPSILON * (a + e).max(f64::MIN_POSITIVE);
+    let (s, t) = if a <= tiny && e <= tiny {
+        (0.0, 0.0)
+    } else if a <= tiny {
+        (0.0, (f / e).clamp(0.0, 1.0))
+    } else {
+        let c = dot(d1, r);
+        if e <= tiny {
+            ((-c / a).clamp(0.0, 1.0), 0.0)
+        } else {
+            let b = dot(d1, d2);
+            let denom = a * e - b * b;
+            // Parallel segments: any s; the first end's.
+            let mut s = if denom > tiny * (a + e) { ((b * f - c * e) / denom).clamp(0.0, 1.0) } else { 0.0 };
+            let mut t = (b * s + f) / e;
+            if t < 0.0 {
+                t = 0.0;
+                s = (-c / a).clamp(0.0, 1.0);
+            } else if t > 1.0 {
+                t = 1.0;
+                s = ((b - c) / a).clamp(0.0, 1.0);
+            }
+            (s, t)
+        }
+    };
+    (along(p0, d1, s), along(q0, d2, t))
+}
+
+/// The touch of two swept spheres whose centres are `a` and `b` (radii `ra`, `rb`), the normal
+/// from `a` to `b`; `fallback` is the normal to use when the centres coincide.
+fn swept_touch(a: Vec3, ra: f64, b: Vec3, rb: f64, fallback: Vec3) -> Option<Touch> {
+    let d = sub(b, a);
+    let distance = dot(d, d).sqrt();
+    let overlap = ra + rb - distance;
+    if !(overlap > 0.0) {
+        return None;
+    }
+    let normal = if distance > 0.0 { d.map(|c| c / distance) } else { fallback };
+    Some(Touch { normal, overlap, point: along(a, normal, ra - 0.5 * overlap) })
+}
+
+/// A unit vector, or `z` for a zero one.
+fn unit_or_z(v: Vec3) -> Vec3 {
+    let n = dot(v, v).sqrt();
+    if n > 0.0 {
+        v.map(|c| c / n)
+    } else {
+        [0.0, 0.0, 1.0]
+    }
+}
+
+impl BodyGeometry for CapsuleGeometry {
+    fn pairs(&self, bodies: &KindBodies<'_>, pairs: &[(u32, u32)], out: &mut [Option<Touch>]) {
+        for (slot, &(i, j)) in out.iter_mut().zip(pairs) {
+            let (a0, a1, ra) = segment(bodies, i as usize);
+            let (b0, b1, rb) = segment(bodies, j as usize);
+            let (pa, pb) = closest_points(a0, a1, b0, b1);
+            // Segments crossing each other: across both axes, towards the second body.
+            let across = cross(sub(a1, a0), sub(b1, b0));
+            let towards = sub(bodies.x[j as usize], bodies.x[i as usize]);
+            let fallback = unit_or_z(if dot(across, towards) < 0.0 { across.map(|c| -c) } else { across });
+            *slot = swept_touch(pa, ra, pb, rb, fallback);
+        }
+    }
+
+    fn planes(&self, bodies: &KindBodies<'_>, pairs: &[(u32, Plane)], out: &mut [Option<Touch>]) {
+        for (slot, &(i, plane)) in out.iter_mut().zip(pairs) {
+            let (e0, e1, r) = segment(bodies, i as usize);
+            let n = plane.normal;
+            let depth = |e: Vec3| r - dot(sub(e, plane.point), n);
+            let (d0, d1) = (depth(e0), depth(e1));
+            let overlap = d0.max(d1);
+            if !(overlap > 0.0) {
+                *slot = None;
+                continue;
+            }
+            // The bearing point on the segment: the ends weighed by how deep each goes.
+            let (w0, w1) = (d0.max(0.0), d1.max(0.0));
+            let t = w1 / (w0 + w1);
+            let on_segment = along(e0, sub(e1, e0), t);
+            let inward = n.map(|c| -c);
+            *slot = Some(Touch { normal: inward, overlap, point: along(on_segment, inward, r - 0.5 * overlap) });
+        }
+    }
+
+    fn spheres(&self, bodies: &KindBodies<'_>, pairs: &[(u32, Ball)], out: &mut [Option<Touch>]) {
+        for (slot, &(i, ball)) in out.iter_mut().zip(pairs) {
+            let (e0, e1, r) = segment(bodies, i as usize);
+            let p = nearest_on(e0, e1, ball.centre);
+            let fallback = unit_or_z(cross(sub(e1, e0), [1.0, 0.0, 0.0]));
+            *slot = swept_touch(p, r, ball.centre, ball.radius, fallback);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn closest_points_of_crossed_skew_and_parallel_segments() {
+        let near = |a: Vec3, b: Vec3| dot(sub(a, b), sub(a, b)).sqrt() < 1e-15;
+        // Crossed at right angles, 0.3 apart along z.
+        let (p, q) = closest_points([-1.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.2, -1.0, 0.3], [0.2, 1.0, 0.3]);
+        assert!(near(p, [0.2, 0.0, 0.0]) && near(q, [0.2, 0.0, 0.3]), "{p:?} {q:?}");
+        // One ends short of the other: its end is nearest.
+        let (p, q) = closest_points([0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [2.0, 1.0, 0.0], [2.0, 3.0, 0.0]);
+        assert!(near(p, [1.0, 0.0, 0.0]) && near(q, [2.0, 1.0, 0.0]), "{p:?} {q:?}");
+        // Parallel, overlapping along x, 0.5 apart: any pair of facing points, 0.5 apart.
+        let (p, q) = closest_points([0.0, 0.0, 0.0], [2.0, 0.0, 0.0], [1.0, 0.5, 0.0], [3.0, 0.5, 0.0]);
+        let d = sub(q, p);
+        assert!((dot(d, d).sqrt() - 0.5).abs() < 1e-15, "{p:?} {q:?}");
+    }
+
+    #[test]
+    fn mass_properties_tend_to_a_sphere_and_to_a_long_rod() {
+        let r = 0.1;
+        let ball = Capsule { radius: r, half: 0.0 };
+        let sphere_i = 2.0 / 5.0 * ball.volume() * r * r;
+        for i in ball.inertia_per_density() {
+            assert!((i - sphere_i).abs() < 1e-15 * sphere_i);
+        }
+        // A long thin capsule: about m L^2 / 12 across, m r^2 / 2 along its axis.
+        let rod = Capsule { radius: 1e-3, half: 0.5 };
+        let m = rod.volume();
+        let [across, _, axial] = rod.inertia_per_density();
+        assert!((across / (m * 1.0 / 12.0) - 1.0).abs() < 1e-2, "{across}");
+        assert!((axial / (m * 1e-6 / 2.0) - 1.0).abs() < 0.01, "{axial}");
+    }
+}

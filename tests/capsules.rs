@@ -1,0 +1,183 @@
+//! Capsules, a body kind of the built-in plugins, against analytic cases: the overlap and force of
+//! two crossed capsules and of a capsule and a sphere; a capsule rolling without slip down an
+//! incline at `a = g sin(theta) / (1 + I_axis / (m r^2))`; the energy of capsules bouncing in a
+//! frictionless elastic box.
+
+use granite_core::dem::kinds::NewBody;
+use granite_core::dem::walls::{Wall, WallShape};
+use granite_core::dem::DemSim;
+use granite_core::ext::BodyShape;
+use granite_core::math::Vec3;
+use granite_core::registry::{ParamMap, Registry};
+use nalgebra::{UnitQuaternion, Vector3};
+use std::sync::Arc;
+
+fn params(pairs: &[(&str, f64)]) -> ParamMap {
+    pairs.iter().map(|(k, v)| (k.to_string(), *v)).collect()
+}
+
+struct Scene {
+    registry: Registry,
+    sim: DemSim,
+    material: u16,
+}
+
+/// A scene with one material of `density` and the linear law of `law` parameters.
+fn scene(density: f64, law: &[(&str, f64)]) -> Scene {
+    let registry = granite_plugins::default_registry();
+    let mut sim = DemSim::new();
+    let material = sim.add_material("grains", density).unwrap();
+    sim.set_contact_law(registry.build_contact_law("linear", &params(law)).unwrap(), None).unwrap();
+    Scene { registry, sim, material }
+}
+
+impl Scene {
+    fn capsule(&self, radius: f64, length: f64) -> Arc<dyn BodyShape> {
+        self.registry.build_body_shape("capsule", &params(&[("radius", radius), ("length", length)])).unwrap()
+    }
+
+    fn add(&mut self, shape: &Arc<dyn BodyShape>, x: Vec3, q: UnitQuaternion<f64>, v: Vec3, w: Vec3) -> usize {
+        let kind = self.registry.body_kind("capsule").unwrap().clone();
+        let body =
+            NewBody { kind: kind.as_ref(), shape: shape.clone(), material: self.material, x, q, v, w, fixed: false };
+        self.sim.add_body(body).unwrap()
+    }
+}
+
+/// The rotation taking the body's z axis to `axis`.
+fn along(axis: [f64; 3]) -> UnitQuaternion<f64> {
+    UnitQuaternion::rotation_between(&Vector3::z(), &Vector3::from(axis)).unwrap()
+}
+
+#[test]
+fn crossed_capsules_and_a_capsule_and_a_sphere_overlap_and_push_as_the_law_says() {
+    let (r, kn, overlap) = (0.01, 1e5, 1e-4);
+    let mut s = scene(2500.0, &[("kn", kn)]);
+    let shape = s.capsule(r, 0.1);
+    // Along x at the origin, and along y above it, their axes 2r - overlap apart.
+    s.add(&shape, [0.0; 3], along([1.0, 0.0, 0.0]), [0.0; 3], [0.0; 3]);
+    s.add(&shape, [0.03, 0.02, 2.0 * r - overlap], along([0.0, 1.0, 0.0]), [0.0; 3], [0.0; 3]);
+    // A sphere resting on the first capsule's side, further along x.
+    let ball = 0.005;
+    s.sim.add_sphere(s.material, [-0.04, 0.0, -(r + ball - overlap)], ball, [0.0; 3]).unwrap();
+    s.sim.set_dt(1e-8).unwrap();
+    s.sim.step().unwrap();
+    let k = &s.sim.kinds;
+    assert_eq!(k.contact_count(), 2);
+    let push = kn * overlap;
+    // The first capsule: pushed down by the second, up by the sphere: its two forces cancel along z.
+    let expect = |got: Vec3, want: Vec3, what: &str| {
+        let err = (0..3).map(|a| (got[a] - want[a]).abs()).fold(0.0, f64::max);
+        assert!(err < 1e-9 * push, "{what}: {got:?}, expected {want:?}");
+    };
+    expect(k.force[1], [0.0, 0.0, push], "force on the upper capsule");
+    expect(k.force[0], [0.0, 0.0, 0.0], "force on the lower capsule");
+    expect(s.sim.spheres.force[0], [0.0, 0.0, -push], "force on the sphere");
+    // Each force acts at its contact point (on the axes' common perpendicular, and under the
+    // sphere's centre): torques by the lever arms from the centres of mass.
+    let lever = |point: Vec3, centre: Vec3, f: f64| {
+        let d = [point[0] - centre[0], point[1] - centre[1], point[2] - centre[2]];
+        [d[1] * f, -d[0] * f, 0.0]
+    };
+    let depth = r - overlap / 2.0;
+    let upper = [0.03, 0.02, 2.0 * r - overlap];
+    expect(k.torque[1], lever([0.03, 0.0, depth], upper, push), "torque on the upper capsule");
+    let from_upper = lever([0.03, 0.0, depth], [0.0; 3], -push);
+    let from_sphere = lever([-0.04, 0.0, -depth], [0.0; 3], push);
+    expect(k.torque[0], [0.0, from_upper[1] + from_sphere[1], 0.0], "torque on the lower capsule");
+}
+
+#[test]
+fn a_capsule_rolls_down_an_incline_without_slip_at_the_rate_of_its_own_inertia() {
+    let (r, length, theta) = (0.01, 0.04, 15f64.to_radians());
+    let g = 9.81;
+    let kn = 1e5;
+    let mut s = scene(2500.0, &[("kn", kn), ("kt_ratio", 1.0), ("friction", 30.0)]);
+    s.sim.gravity = [0.0, -g, 0.0];
+    // The incline through the origin, going down towards +x; the capsule's axis along z, across
+    // the slope, resting at its equilibrium overlap.
+    let (down, normal) = ([theta.cos(), -theta.sin(), 0.0], [theta.sin(), theta.cos(), 0.0]);
+    s.sim.add_wall(Wall::new("incline", WallShape::Plane { normal }, [0.0; 3], s.material));
+    let shape = s.capsule(r, length);
+    let mass = 2500.0 * shape.volume();
+    let i_axis = 2500.0 * shape.inertia_per_density()[2];
+    let rest = r - mass * g * theta.cos() / kn;
+    s.add(&shape, normal.map(|c| c * rest), UnitQuaternion::identity(), [0.0; 3], [0.0; 3]);
+    let dt = 0.05 * s.sim.critical_dt().unwrap();
+    s.sim.set_dt(dt).unwrap();
+    let duration = 0.3;
+    let steps = (duration / dt).round() as u64;
+    for _ in 0..steps {
+        s.sim.step().unwrap();
+    }
+    let t = s.sim.time;
+    let k = &s.sim.kinds;
+    let travelled = (0..3).map(|a| (k.x[0][a] - normal[a] * rest) * down[a]).sum::<f64>();
+    let expected = g * theta.sin() / (1.0 + i_axis / (mass * r * r));
+    let measured = 2.0 * travelled / (t * t);
+    eprintln!("rolling capsule: a = {measured:.6} m/s^2, expected {expected:.6} ({:+.3e})", measured / expected - 1.0);
+    assert!((measured / expected - 1.0).abs() < 0.01, "a = {measured:.5} m/s^2, expected {expected:.5}");
+    // Rolling without slip: the spin about the axis carries the centre's speed.
+    let speed = (0..3).map(|a| k.v[0][a] * down[a]).sum::<f64>();
+    let spin = -k.w[0][2];
+    assert!((spin * r / speed - 1.0).abs() < 0.01, "w r = {:.5} m/s, v = {speed:.5} m/s", spin * r);
+    // A sliding capsule would go at g sin(theta): well above.
+    assert!(measured < 0.8 * g * theta.sin());
+}
+
+#[test]
+fn capsules_bouncing_in_a_frictionless_elastic_box_keep_their_energy() {
+    let kn = 1e4;
+    let mut s = scene(1000.0, &[("kn", kn)]);
+    let size = 0.2;
+    for (normal, at) in [
+        ([1.0, 0.0, 0.0], [0.0; 3]),
+        ([-1.0, 0.0, 0.0], [size, 0.0, 0.0]),
+        ([0.0, 1.0, 0.0], [0.0; 3]),
+        ([0.0, -1.0, 0.0], [0.0, size, 0.0]),
+        ([0.0, 0.0, 1.0], [0.0; 3]),
+        ([0.0, 0.0, -1.0], [0.0, 0.0, size]),
+    ] {
+        s.sim.add_wall(Wall::new("box", WallShape::Plane { normal }, at, s.material));
+    }
+    let shape = s.capsule(0.01, 0.03);
+    // Eight capsules on a lattice, turned and thrown every way, spinning.
+    let mut n = 0;
+    for i in 0..2 {
+        for j in 0..2 {
+            for k in 0..2 {
+                let x = [0.05 + 0.1 * i as f64, 0.05 + 0.1 * j as f64, 0.05 + 0.1 * k as f64];
+                let f = n as f64;
+                let axis = [1.0 + f, 2.0 - 0.3 * f, 0.5 * f - 1.0];
+                let v = [0.3 * (f - 3.5), 0.2 * (2.0 - f), 0.25 * (f * f / 10.0 - 1.0)];
+                let w = [3.0 - f, 0.5 * f, 2.0];
+                s.add(&shape, x, along(axis), v, w);
+                n += 1;
+            }
+        }
+    }
+    let dt = 0.02 * s.sim.critical_dt().unwrap();
+    s.sim.set_dt(dt).unwrap();
+    let energy = |sim: &DemSim| sim.kinds.kinetic_energy();
+    let e0 = energy(&s.sim);
+    let (mut worst, mut free_checks, mut collisions) = (0.0f64, 0, 0);
+    let mut touching_before = false;
+    for _ in 0..(1.0 / dt) as u64 {
+        s.sim.step().unwrap();
+        let touching = s.sim.kinds.contact_count() > 0;
+        if touching_before && !touching {
+            collisions += 1;
+        }
+        if !touching {
+            worst = worst.max((energy(&s.sim) / e0 - 1.0).abs());
+            free_checks += 1;
+        }
+        touching_before = touching;
+    }
+    eprintln!(
+        "capsules in a box: {collisions} collisions, kinetic energy between them within {worst:.3e} of {e0:.4e} J"
+    );
+    assert!(collisions >= 20, "only {collisions} collisions");
+    assert!(free_checks > 1000);
+    assert!(worst < 1e-4, "kinetic energy between collisions drifted by {worst:.3e} of {e0:.4e} J");
+}
