@@ -246,6 +246,15 @@ pub fn plugin_listing(libraries: &[PathBuf]) -> Result<String> {
             specs(&mut out, f.param_specs());
         }
     }
+    out.push_str(
+        "body kinds (sim.body(NAME, m, centre, #{ PARAMS }), sim.clump_cloud(m, lo, hi, #{ shape: NAME, PARAMS })):\n",
+    );
+    for name in reg.body_kind_names() {
+        if let Ok(f) = reg.body_kind(&name) {
+            let _ = writeln!(out, "  {name}: {}", f.description());
+            specs(&mut out, f.param_specs());
+        }
+    }
     out.push_str("velocity updates (sim.velocity_update(NAME, #{ PARAMS })):\n");
     for name in reg.velocity_update_names() {
         if let Ok(f) = reg.velocity_update_factory(&name) {

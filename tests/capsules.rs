@@ -3,6 +3,8 @@
 //! incline at `a = g sin(theta) / (1 + I_axis / (m r^2))`; the energy of capsules bouncing in a
 //! frictionless elastic box.
 
+mod common;
+
 use granite_core::dem::kinds::NewBody;
 use granite_core::dem::walls::{Wall, WallShape};
 use granite_core::dem::DemSim;
@@ -180,4 +182,29 @@ fn capsules_bouncing_in_a_frictionless_elastic_box_keep_their_energy() {
     assert!(collisions >= 20, "only {collisions} collisions");
     assert!(free_checks > 1000);
     assert!(worst < 1e-4, "kinetic energy between collisions drifted by {worst:.3e} of {e0:.4e} J");
+}
+
+#[test]
+fn capsules_and_spheres_settled_in_a_box_rest_their_weight_on_the_walls() {
+    let report = common::run("dem/capsules_in_a_box.rhai", "capsules_in_a_box", &[], 2).unwrap();
+    let (weight, carried) = (common::summary_f64(&report, "weight"), common::summary_f64(&report, "walls_carry"));
+    assert_eq!(common::summary_f64(&report, "bodies"), 40.0);
+    assert!(common::summary_f64(&report, "contacts") > 100.0, "a packing has contacts between its grains");
+    // At rest the walls' vertical reactions balance the weight; what is left moving (kinetic
+    // energy below 1e-6 J) accounts for less than 0.5 %.
+    assert!(common::summary_f64(&report, "kinetic_energy") < 1e-6);
+    assert!((carried / weight - 1.0).abs() < 5e-3, "the walls carry {carried} N of a weight of {weight} N");
+    assert!(report.out_dir.join("vtk/bodies.pvd").exists());
+}
+
+/// `granite plugins` lists the capsule kind with its parameters.
+#[test]
+fn the_plugins_command_lists_the_capsule_body_kind() {
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_granite")).arg("plugins").output().unwrap();
+    assert!(out.status.success());
+    let text = String::from_utf8_lossy(&out.stdout);
+    let at = text.lines().position(|l| l.trim_start().starts_with("capsule:")).expect("the capsule kind");
+    let params: Vec<&str> =
+        text.lines().skip(at + 1).take(2).map(|l| l.split_whitespace().next().unwrap_or("")).collect();
+    assert_eq!(params, ["radius", "length"], "{text}");
 }

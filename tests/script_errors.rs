@@ -359,3 +359,28 @@ fn adaptive_rve_tolerances_are_checked_by_name() {
     let e = run_err("rve_adaptive_refine", &script("#{ coarsen: 0.01, refine: 0.005 }"), &[]);
     assert!(e.contains("adaptive_refine") && e.contains("must exceed adaptive_coarsen") && e.contains("line 4"), "{e}");
 }
+
+#[test]
+fn a_bad_body_names_the_kind_the_parameter_and_the_line() {
+    let head = "let sim = dem();\nlet m = sim.material(#{ density: 2500.0 });\n";
+    let e = run_err(
+        "capsule_radius",
+        &format!("{head}sim.capsule(m, [0.0, 0.0, 0.0], #{{ radius: -0.01, length: 0.02 }});"),
+        &[],
+    );
+    assert!(e.contains("line 3") && e.contains("`radius`") && e.contains("> 0"), "{e}");
+    let e = run_err(
+        "capsule_key",
+        &format!("{head}sim.capsule(m, [0.0, 0.0, 0.0], #{{ radius: 0.01, lenght: 0.02 }});"),
+        &[],
+    );
+    assert!(e.contains("line 3") && e.contains("lenght"), "{e}");
+    let e = run_err("body_kind", &format!("{head}sim.body(\"cube\", m, [0.0, 0.0, 0.0], #{{ side: 0.01 }});"), &[]);
+    assert!(e.contains("line 3") && e.contains("cube") && e.contains("capsule"), "{e}");
+    let e = run_err(
+        "capsule_in_cell",
+        &format!("{head}sim.periodic([0.1, 0.1, 0.1]);\nsim.capsule(m, [0.05, 0.05, 0.05], #{{ radius: 0.01, length: 0.02 }});"),
+        &[],
+    );
+    assert!(e.contains("line 4") && e.contains("periodic"), "{e}");
+}

@@ -198,6 +198,9 @@ impl Simulation for DemScene {
         if !self.dem.potentials.is_empty() {
             out.push(("potentials", self.dem.potentials_picture()));
         }
+        if !self.dem.kinds.is_empty() {
+            out.push(("bodies", self.dem.kinds_picture()));
+        }
         out
     }
     fn write_points(&self, path: &Path) -> Result<()> {

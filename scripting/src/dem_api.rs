@@ -37,6 +37,36 @@ impl DemMaterialHandle {
     }
 }
 
+/// `clump_cloud` of a body kind: random non-overlapping bodies (by their bounding spheres, and
+/// clear of the spheres and bodies already there), randomly turned.
+fn body_cloud(
+    s: &DemHandle,
+    m: &DemMaterialHandle,
+    (lo, hi): (Vec3, Vec3),
+    count: usize,
+    kind: &str,
+    opts: &Map,
+) -> RhaiResult<i64> {
+    const SKIP: [&str; 3] = ["count", "shape", "seed"];
+    let bound = super::body_api::bounding_radius(s, kind, opts, &SKIP)?;
+    let (seed, existing) = {
+        let st = s.lock();
+        let seed = match get(opts, "seed") {
+            Some(v) => integer(v, "seed")? as u64,
+            None => st.sim.dem.seed,
+        };
+        let (sp, k) = (&st.sim.dem.spheres, &st.sim.dem.kinds);
+        let mut existing: Vec<(Vec3, f64)> = sp.x.iter().copied().zip(sp.radius.iter().copied()).collect();
+        existing.extend((0..k.len()).map(|i| (k.x[i], k.bounding_radius(i))));
+        (seed, existing)
+    };
+    let ctx = s.lock().ctx.clone();
+    let psd = Psd::Uniform { min: bound, max: bound };
+    let centres = cloud(lo, hi, count, &psd, seed, &existing, &|| ctx.interrupted()).or_rhai()?;
+    let centres: Vec<Vec3> = centres.iter().map(|(c, _)| *c).collect();
+    super::body_api::add_cloud(s, kind, m, (opts, &SKIP), &centres, seed)
+}
+
 /// Voxels per axis for the mass properties of overlapping clumps (0.1 % on table 2.3's clump).
 const CLUMP_VOXELS: usize = 400;
 
@@ -320,6 +350,9 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
             let count = integer(get(&opts, "count").unwrap_or(&Dynamic::UNIT), "count")?.max(0) as usize;
             let shape_name =
                 get(&opts, "shape").map(|t| string(t, "shape")).transpose()?.unwrap_or_else(|| "tetra".into());
+            if super::body_api::is_kind(s, &shape_name) {
+                return body_cloud(s, &m, (lo, hi), count, &shape_name, &opts);
+            }
             let shape_params = param_map(&opts, &["count", "shape", "seed"], &shape_name)?;
             let (seed, existing, shape) = {
                 let st = s.lock();

@@ -8,6 +8,7 @@
 #![allow(clippy::needless_range_loop, clippy::neg_cmp_op_on_partial_ord)]
 
 pub mod api_doc;
+mod body_api;
 pub mod convert;
 mod data_memory;
 mod dem_api;
@@ -495,6 +496,7 @@ fn build_engine(ctx: &Arc<ScriptContext>) -> Engine {
     dem_api::register(&mut engine, ctx);
     dem_console::register(&mut engine);
     potential_api::register(&mut engine);
+    body_api::register(&mut engine);
     element::register(&mut engine, ctx);
     script_law::register(&mut engine, ctx);
     engine
@@ -690,6 +692,7 @@ fn write_provenance(
         "velocity_updates": ctx.registry().velocity_update_names(),
         "contact_laws": ctx.registry().contact_law_names(),
         "shapes": ctx.registry().shape_names(),
+        "body_kinds": ctx.registry().body_kind_names(),
         "loaded": ctx.plugins.lock().unwrap().iter().map(|(lib, law, version)| serde_json::json!({ "library": lib, "law": law, "version": version })).collect::<Vec<_>>(),
     });
     let mut p = IndexMap::new();

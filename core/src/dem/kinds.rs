@@ -57,6 +57,9 @@ pub struct KindScene {
     pub(crate) x_at_build: Vec<Vec3>,
     /// Loads on spheres from this step's contacts (sphere, force, torque), in pair order.
     pub(crate) sphere_loads: Vec<(u32, Vec3, Vec3)>,
+    /// Each pair's overlap at this step's contacts (0 where apart), by list: body pairs, walls,
+    /// spheres (for the elastic energy).
+    pub(crate) overlap: [Vec<f64>; 3],
 }
 
 impl KindScene {
@@ -70,6 +73,11 @@ impl KindScene {
 
     pub fn bounding_radius(&self, i: usize) -> f64 {
         self.shapes[self.shape[i] as usize].bounding_radius()
+    }
+
+    /// The candidate lists (body pairs, body-wall, body-sphere) with each pair's last overlap.
+    pub(crate) fn lists(&self) -> [(&PairList, &[f64]); 3] {
+        [(&self.pairs, &self.overlap[0]), (&self.wall_pairs, &self.overlap[1]), (&self.sphere_pairs, &self.overlap[2])]
     }
 
     /// Touching contacts of the bodies (with one another, walls and spheres).
@@ -329,10 +337,16 @@ impl DemSim {
             std::mem::take(&mut self.kinds.sphere_pairs),
         ];
         let mut kept = Vec::with_capacity(3);
-        for (mut list, side) in lists.into_iter().zip([Side::Bodies, Side::Walls, Side::Spheres]) {
+        for (n, (mut list, side)) in lists.into_iter().zip([Side::Bodies, Side::Walls, Side::Spheres]).enumerate() {
             let touching = self.touching(&mut list, kind.geometry.as_ref(), side, own)?;
             let (force, moment) = laws_in_pair_order(&self.laws, &mut list, &touching, self.dt);
             self.sum_kind_loads(&mut list, &touching, (&force, &moment), side);
+            let overlap = &mut self.kinds.overlap[n];
+            overlap.clear();
+            overlap.resize(list.len(), 0.0);
+            for found in &touching {
+                overlap[found.slot] = found.touch.overlap;
+            }
             kept.push(list);
         }
         let mut kept = kept.into_iter();

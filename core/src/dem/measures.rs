@@ -169,6 +169,26 @@ impl DemSim {
                 );
             }
         }
+        for (n, (list, overlap)) in self.kinds.lists().into_iter().enumerate() {
+            let (ps, hs) = (list.param_stride, list.history_stride);
+            for k in (0..list.len()).filter(|&k| list.touching[k]) {
+                let f = list.force[k];
+                contact_force += (f[0] * f[0] + f[1] * f[1] + f[2] * f[2]).sqrt();
+                touching += 1;
+                if n == 1 {
+                    d.wall_contacts += 1;
+                } else {
+                    d.contacts += 1;
+                }
+                let law = &self.laws[list.law[k] as usize];
+                let overlap = overlap.get(k).copied().unwrap_or(0.0);
+                d.elastic_energy += law.elastic_energy(
+                    overlap,
+                    &list.params[k * ps..(k + 1) * ps],
+                    &list.history[k * hs..(k + 1) * hs],
+                );
+            }
+        }
         d.unbalanced_force = if touching > 0 && free > 0 {
             (resultant / free as f64) / (contact_force / touching as f64)
         } else {

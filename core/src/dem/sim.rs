@@ -466,18 +466,19 @@ impl DemSim {
         self.needs_rebuild = true;
     }
 
-    /// Force the spheres exert on wall `w` in the last step: the opposite of the forces of its
+    /// Force the spheres and bodies exert on wall `w` in the last step: the opposite of the forces of its
     /// pairs, summed in pair order. Worked out when asked (a pass over the wall pairs), not at
     /// every step, where it was a serial pass of 8 us in a step of the 10k-sphere deposition
     /// that any number of threads waited for. Zero for a wall index out of range.
     pub fn wall_force(&self, w: usize) -> Vec3 {
-        let pairs = &self.wall_pairs;
-        pairs
-            .b
-            .iter()
-            .zip(&pairs.force)
-            .filter(|(&b, _)| b as usize == w)
-            .fold([0.0; 3], |sum, (_, f)| add3(sum, scale3(*f, -1.0)))
+        [&self.wall_pairs, self.kinds.lists()[1].0].into_iter().fold([0.0; 3], |sum, pairs| {
+            pairs
+                .b
+                .iter()
+                .zip(&pairs.force)
+                .filter(|(&b, _)| b as usize == w)
+                .fold(sum, |sum, (_, f)| add3(sum, scale3(*f, -1.0)))
+        })
     }
 
     /// Largest stable time step estimate: `min sqrt(m / k_n)` over one-contact oscillators of
