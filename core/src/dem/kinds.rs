@@ -7,14 +7,16 @@
 
 use crate::dem::broad_phase::{sphere_pairs, wall_pairs, Candidate};
 use crate::dem::contacts::PairList;
-use crate::dem::motion::{RigidBody, RigidMotion};
+use crate::dem::motion::RigidMotion;
 use crate::dem::pairing::{Other, PairBodies};
+use crate::dem::picture::{rigid_picture, RigidBodies};
+use crate::dem::rigid::{laws_in_pair_order, move_rigid_bodies, LawContact, RigidSet};
 use crate::dem::sim::DemSim;
 use crate::dem::walls::WallShape;
 use crate::error::{GraniteError, Result};
-use crate::ext::body::{Ball, BodyGeometry, BodyKindFactory, BodyShape, KindBodies, Plane, Touch};
-use crate::ext::{ContactBatch, ContactLaw, PairInfo};
-use crate::io::vtk::{Field, PolyData};
+use crate::ext::body::{Ball, BodyGeometry, BodyKindFactory, BodyShape, KindBodies, Plane};
+use crate::ext::PairInfo;
+use crate::io::vtk::PolyData;
 use crate::math::{add3, cross3, sub3, Vec3};
 use nalgebra::UnitQuaternion;
 use std::sync::Arc;
@@ -114,12 +116,10 @@ impl KindScene {
     }
 }
 
-/// A touching contact of a body: its list slot, geometry and relative motion.
+/// A touching contact of a body: what its law takes, and where it acts.
 struct Found {
-    slot: usize,
-    touch: Touch,
-    rel_velocity: Vec3,
-    rel_spin: Vec3,
+    law: LawContact,
+    point: Vec3,
 }
 
 /// A body of a kind to add ([`DemSim::add_body`]).
@@ -339,13 +339,15 @@ impl DemSim {
         let mut kept = Vec::with_capacity(3);
         for (n, (mut list, side)) in lists.into_iter().zip([Side::Bodies, Side::Walls, Side::Spheres]).enumerate() {
             let touching = self.touching(&mut list, kind.geometry.as_ref(), side, own)?;
-            let (force, moment) = laws_in_pair_order(&self.laws, &mut list, &touching, self.dt);
-            self.sum_kind_loads(&mut list, &touching, (&force, &moment), side);
+            let points: Vec<Vec3> = touching.iter().map(|f| f.point).collect();
+            let contacts: Vec<LawContact> = touching.into_iter().map(|f| f.law).collect();
+            let (force, moment) = laws_in_pair_order(&self.laws, &mut list, &contacts, self.dt);
+            self.sum_kind_loads(&mut list, (&contacts, &points), (&force, &moment), side);
             let overlap = &mut self.kinds.overlap[n];
             overlap.clear();
             overlap.resize(list.len(), 0.0);
-            for found in &touching {
-                overlap[found.slot] = found.touch.overlap;
+            for c in &contacts {
+                overlap[c.slot] = c.overlap;
             }
             kept.push(list);
         }
@@ -427,7 +429,14 @@ impl DemSim {
                     (at(s.v[j], s.w[j], s.x[j]), s.w[j])
                 }
             };
-            found.push(Found { slot, touch, rel_velocity: sub3(second, first), rel_spin: sub3(spin, k.w[i]) });
+            let law = LawContact {
+                slot,
+                normal: touch.normal,
+                overlap: touch.overlap,
+                rel_velocity: sub3(second, first),
+                rel_spin: sub3(spin, k.w[i]),
+            };
+            found.push(Found { law, point: touch.point });
         }
         Ok(found)
     }
@@ -438,15 +447,15 @@ impl DemSim {
     fn sum_kind_loads(
         &mut self,
         list: &mut PairList,
-        touching: &[Found],
+        (contacts, points): (&[LawContact], &[Vec3]),
         (force, moment): (&[Vec3], &[Vec3]),
         side: Side,
     ) {
         let k = &mut self.kinds;
-        for (e, found) in touching.iter().enumerate() {
-            let slot = found.slot;
+        for (e, (contact, &point)) in contacts.iter().zip(points).enumerate() {
+            let slot = contact.slot;
             let (i, j) = (list.a[slot] as usize, list.b[slot] as usize);
-            let (f, m, point) = (force[e], moment[e], found.touch.point);
+            let (f, m) = (force[e], moment[e]);
             list.touching[slot] = true;
             list.force[slot] = f;
             k.force[i] = add3(k.force[i], f);
@@ -480,71 +489,46 @@ impl DemSim {
     /// moved since the lists were built.
     pub(crate) fn kind_motion(&mut self, motion: &RigidMotion) -> Result<f64> {
         let k = &mut self.kinds;
-        let dt = motion.dt;
-        let mut moved: f64 = 0.0;
-        for i in 0..k.len() {
-            if k.fixed[i] {
-                for a in 0..3 {
-                    k.x[i][a] += k.v[i][a] * dt;
-                }
-                let w = nalgebra::Vector3::new(k.w[i][0], k.w[i][1], k.w[i][2]);
-                k.q[i] = UnitQuaternion::from_scaled_axis(w * dt) * k.q[i];
-            } else {
-                let body = RigidBody { x: &mut k.x[i], v: &mut k.v[i], w: &mut k.w[i], q: &mut k.q[i] };
-                body.advance((k.mass[i], k.inertia[i]), (k.force[i], k.torque[i]), motion);
-            }
-            let d = sub3(k.x[i], k.x_at_build.get(i).copied().unwrap_or(k.x[i]));
-            let distance = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
-            if !(distance.is_finite() && k.v[i].iter().chain(&k.w[i]).all(|c| c.is_finite())) {
-                return Err(GraniteError::Unstable {
-                    step: self.step,
-                    time: self.time,
-                    reason: format!(
-                        "non-finite position or velocity of {} body {} (x = {:?}, v = {:?}); the time step may be too large",
-                        k.kind.as_ref().map(|k| k.name.as_str()).unwrap_or(""),
-                        k.id[i],
-                        k.x[i],
-                        k.v[i]
-                    ),
-                });
-            }
-            moved = moved.max(distance);
-        }
+        let set = RigidSet {
+            x: &mut k.x,
+            v: &mut k.v,
+            w: &mut k.w,
+            q: &mut k.q,
+            mass: &k.mass,
+            inertia: &k.inertia,
+            fixed: &k.fixed,
+            force: &k.force,
+            torque: &k.torque,
+        };
+        let moved = move_rigid_bodies(set, &k.x_at_build, motion).map_err(|i| GraniteError::Unstable {
+            step: self.step,
+            time: self.time,
+            reason: format!(
+                "non-finite position or velocity of {} body {} (x = {:?}, v = {:?}); the time step may be too large",
+                k.kind.as_ref().map(|k| k.name.as_str()).unwrap_or(""),
+                k.id[i],
+                k.x[i],
+                k.v[i]
+            ),
+        })?;
         Ok(moved)
     }
 
     /// The bodies' surfaces, with id, material, fixed, velocity and force per triangle.
     pub fn kinds_picture(&self) -> PolyData {
         let k = &self.kinds;
-        let mut picture = PolyData::default();
         let surfaces: Vec<(Vec<Vec3>, Vec<[usize; 3]>)> = k.shapes.iter().map(|s| s.surface()).collect();
-        let (mut id, mut material, mut fixed, mut velocity, mut force) =
-            (Vec::new(), Vec::new(), Vec::new(), Vec::new(), Vec::new());
-        for i in 0..k.len() {
-            let (points, triangles) = &surfaces[k.shape[i] as usize];
-            let first = picture.points.len() as u32;
-            let rot = k.q[i].to_rotation_matrix();
-            picture.points.extend(points.iter().map(|b| {
-                let w = rot * nalgebra::Vector3::new(b[0], b[1], b[2]);
-                [k.x[i][0] + w[0], k.x[i][1] + w[1], k.x[i][2] + w[2]]
-            }));
-            for t in triangles {
-                picture.polygons.push(t.iter().map(|&c| first + c as u32).collect());
-                id.push(k.id[i] as i64);
-                material.push(k.material[i] as i64);
-                fixed.push(k.fixed[i] as i64);
-                velocity.extend(k.v[i]);
-                force.extend(k.force[i]);
-            }
-        }
-        picture.cell_fields = vec![
-            Field::int("id", id),
-            Field::int("material", material),
-            Field::int("fixed", fixed),
-            Field::float("velocity", 3, velocity),
-            Field::float("force", 3, force),
-        ];
-        picture
+        let bodies = RigidBodies {
+            shape: &k.shape,
+            x: &k.x,
+            q: &k.q,
+            id: &k.id,
+            material: &k.material,
+            fixed: &k.fixed,
+            v: &k.v,
+            force: &k.force,
+        };
+        rigid_picture(&surfaces, bodies)
     }
 }
 
@@ -554,48 +538,4 @@ enum Side {
     Bodies,
     Walls,
     Spheres,
-}
-
-/// Runs each law on the touching contacts of `list` that are its own, in pair order; the force
-/// and extra moment on each contact's first body, in the order of `touching`.
-fn laws_in_pair_order(
-    laws: &[Arc<dyn ContactLaw>],
-    list: &mut PairList,
-    touching: &[Found],
-    dt: f64,
-) -> (Vec<Vec3>, Vec<Vec3>) {
-    let n = touching.len();
-    let (mut force, mut moment) = (vec![[0.0; 3]; n], vec![[0.0; 3]; n]);
-    let strides = (list.param_stride, list.history_stride);
-    for (l, law) in laws.iter().enumerate() {
-        let members: Vec<usize> = (0..n).filter(|&e| list.law[touching[e].slot] as usize == l).collect();
-        if members.is_empty() {
-            continue;
-        }
-        let pick = |f: &dyn Fn(&Found) -> Vec3| members.iter().map(|&e| f(&touching[e])).collect::<Vec<Vec3>>();
-        let normal = pick(&|f| f.touch.normal);
-        let rel_velocity = pick(&|f| f.rel_velocity);
-        let rel_spin = pick(&|f| f.rel_spin);
-        let overlap: Vec<f64> = members.iter().map(|&e| touching[e].touch.overlap).collect();
-        let slot: Vec<u32> = members.iter().map(|&e| touching[e].slot as u32).collect();
-        let (mut f, mut m) = (vec![[0.0; 3]; members.len()], vec![[0.0; 3]; members.len()]);
-        law.compute(ContactBatch {
-            normal: &normal,
-            overlap: &overlap,
-            rel_velocity: &rel_velocity,
-            rel_spin: &rel_spin,
-            slot: &slot,
-            strides,
-            params: &list.params,
-            history: &mut list.history,
-            force: &mut f,
-            moment: &mut m,
-            dt,
-        });
-        for (s, &e) in members.iter().enumerate() {
-            force[e] = f[s];
-            moment[e] = m[s];
-        }
-    }
-    (force, moment)
 }

@@ -24,6 +24,7 @@ mod pieces;
 pub mod potential;
 mod rebuild;
 pub mod repose;
+mod rigid;
 mod rows;
 pub mod rve;
 pub mod sim;

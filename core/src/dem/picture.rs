@@ -159,34 +159,62 @@ impl DemSim {
     /// centre), with per-triangle `id`, `material`, `velocity`, `force` and `fixed`.
     pub fn potentials_picture(&self) -> PolyData {
         let p = &self.potentials;
-        let mut picture = PolyData::default();
         let surfaces: Vec<(Vec<Vec3>, Vec<[usize; 3]>)> = p.shapes.iter().map(|s| s.surface(2)).collect();
-        let (mut id, mut material, mut fixed, mut velocity, mut force) =
-            (Vec::new(), Vec::new(), Vec::new(), Vec::new(), Vec::new());
-        for i in 0..p.len() {
-            let (points, triangles) = &surfaces[p.shape[i] as usize];
-            let first = picture.points.len() as u32;
-            let rot = p.q[i].to_rotation_matrix();
-            picture.points.extend(points.iter().map(|b| {
-                let w = rot * nalgebra::Vector3::new(b[0], b[1], b[2]);
-                [p.x[i][0] + w[0], p.x[i][1] + w[1], p.x[i][2] + w[2]]
-            }));
-            for t in triangles {
-                picture.polygons.push(t.iter().map(|&k| first + k as u32).collect());
-                id.push(p.id[i] as i64);
-                material.push(p.material[i] as i64);
-                fixed.push(p.fixed[i] as i64);
-                velocity.extend(p.v[i]);
-                force.extend(p.force[i]);
-            }
-        }
-        picture.cell_fields = vec![
-            Field::int("id", id),
-            Field::int("material", material),
-            Field::int("fixed", fixed),
-            Field::float("velocity", 3, velocity),
-            Field::float("force", 3, force),
-        ];
-        picture
+        let bodies = RigidBodies {
+            shape: &p.shape,
+            x: &p.x,
+            q: &p.q,
+            id: &p.id,
+            material: &p.material,
+            fixed: &p.fixed,
+            v: &p.v,
+            force: &p.force,
+        };
+        rigid_picture(&surfaces, bodies)
     }
+}
+
+/// Rigid bodies of shapes of their own, as a picture shows them.
+pub(crate) struct RigidBodies<'a> {
+    pub shape: &'a [u32],
+    pub x: &'a [Vec3],
+    pub q: &'a [nalgebra::UnitQuaternion<f64>],
+    pub id: &'a [u64],
+    pub material: &'a [u16],
+    pub fixed: &'a [bool],
+    pub v: &'a [Vec3],
+    pub force: &'a [Vec3],
+}
+
+/// Each body's shape surface (`surfaces`, in the body frame, by shape) placed at its pose, with
+/// id, material, fixed, velocity and force on each triangle.
+pub(crate) fn rigid_picture(surfaces: &[(Vec<Vec3>, Vec<[usize; 3]>)], b: RigidBodies<'_>) -> PolyData {
+    let mut picture = PolyData::default();
+    let (mut id, mut material, mut fixed, mut velocity, mut force) =
+        (Vec::new(), Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    for i in 0..b.x.len() {
+        let (points, triangles) = &surfaces[b.shape[i] as usize];
+        let first = picture.points.len() as u32;
+        let rot = b.q[i].to_rotation_matrix();
+        picture.points.extend(points.iter().map(|p| {
+            let w = rot * nalgebra::Vector3::new(p[0], p[1], p[2]);
+            [b.x[i][0] + w[0], b.x[i][1] + w[1], b.x[i][2] + w[2]]
+        }));
+        for t in triangles {
+            picture.polygons.push(t.iter().map(|&k| first + k as u32).collect());
+            id.push(b.id[i] as i64);
+            material.push(b.material[i] as i64);
+            fixed.push(b.fixed[i] as i64);
+            velocity.extend(b.v[i]);
+            force.extend(b.force[i]);
+        }
+    }
+    picture.cell_fields = vec![
+        Field::int("id", id),
+        Field::int("material", material),
+        Field::int("fixed", fixed),
+        Field::float("velocity", 3, velocity),
+        Field::float("force", 3, force),
+    ];
+    picture
 }

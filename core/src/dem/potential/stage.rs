@@ -9,12 +9,12 @@
 use super::contact::{detect, detect_plane, Solution, Touch};
 use crate::dem::broad_phase::{sphere_pairs, wall_pairs, Candidate};
 use crate::dem::contacts::PairList;
-use crate::dem::motion::{RigidBody, RigidMotion};
+use crate::dem::motion::RigidMotion;
 use crate::dem::pairing::{Other, PairBodies};
+use crate::dem::rigid::{laws_in_pair_order, move_rigid_bodies, LawContact, RigidSet};
 use crate::dem::sim::DemSim;
 use crate::dem::walls::WallShape;
 use crate::error::{GraniteError, Result};
-use crate::ext::ContactBatch;
 use crate::math::{add3, cross3, sub3, Vec3};
 use rayon::prelude::*;
 
@@ -136,34 +136,25 @@ impl DemSim {
             }
         }
         let p = &mut self.potentials;
-        let dt = motion.dt;
-        let mut moved: f64 = 0.0;
-        for i in 0..p.len() {
-            if p.fixed[i] {
-                // Moved by its own velocity and spin only.
-                for a in 0..3 {
-                    p.x[i][a] += p.v[i][a] * dt;
-                }
-                let w = nalgebra::Vector3::new(p.w[i][0], p.w[i][1], p.w[i][2]);
-                p.q[i] = nalgebra::UnitQuaternion::from_scaled_axis(w * dt) * p.q[i];
-            } else {
-                let body = RigidBody { x: &mut p.x[i], v: &mut p.v[i], w: &mut p.w[i], q: &mut p.q[i] };
-                body.advance((p.mass[i], p.inertia[i]), (p.force[i], p.torque[i]), motion);
-            }
-            let d = sub3(p.x[i], self.potential_x_at_build.get(i).copied().unwrap_or(p.x[i]));
-            let distance = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
-            if !(distance.is_finite() && p.v[i].iter().chain(&p.w[i]).all(|c| c.is_finite())) {
-                return Err(GraniteError::Unstable {
-                    step: self.step,
-                    time: self.time,
-                    reason: format!(
-                        "non-finite position or velocity of potential particle {} (x = {:?}, v = {:?}); the time step may be too large",
-                        p.id[i], p.x[i], p.v[i]
-                    ),
-                });
-            }
-            moved = moved.max(distance);
-        }
+        let set = RigidSet {
+            x: &mut p.x,
+            v: &mut p.v,
+            w: &mut p.w,
+            q: &mut p.q,
+            mass: &p.mass,
+            inertia: &p.inertia,
+            fixed: &p.fixed,
+            force: &p.force,
+            torque: &p.torque,
+        };
+        let moved = move_rigid_bodies(set, &self.potential_x_at_build, motion).map_err(|i| GraniteError::Unstable {
+            step: self.step,
+            time: self.time,
+            reason: format!(
+                "non-finite position or velocity of potential particle {} (x = {:?}, v = {:?}); the time step may be too large",
+                p.id[i], p.x[i], p.v[i]
+            ),
+        })?;
         Ok(moved)
     }
 
@@ -259,38 +250,17 @@ impl DemSim {
             }
         }
         // Each law on its contacts, in pair order.
-        let n = touching.len();
-        let (mut force, mut moment) = (vec![[0.0; 3]; n], vec![[0.0; 3]; n]);
-        for (l, law) in self.laws.iter().enumerate() {
-            let members: Vec<usize> = (0..n).filter(|&e| list.law[touching[e].0] as usize == l).collect();
-            if members.is_empty() {
-                continue;
-            }
-            let pick = |f: &dyn Fn(&Found) -> Vec3| members.iter().map(|&e| f(&touching[e].1)).collect::<Vec<Vec3>>();
-            let normal = pick(&|f| f.touch.normal);
-            let rel_velocity = pick(&|f| f.rel_velocity);
-            let rel_spin = pick(&|f| f.rel_spin);
-            let overlap: Vec<f64> = members.iter().map(|&e| touching[e].1.touch.overlap).collect();
-            let slot: Vec<u32> = members.iter().map(|&e| touching[e].0 as u32).collect();
-            let (mut f, mut m) = (vec![[0.0; 3]; members.len()], vec![[0.0; 3]; members.len()]);
-            law.compute(ContactBatch {
-                normal: &normal,
-                overlap: &overlap,
-                rel_velocity: &rel_velocity,
-                rel_spin: &rel_spin,
-                slot: &slot,
-                strides: (list.param_stride, hs),
-                params: &list.params,
-                history: &mut list.history,
-                force: &mut f,
-                moment: &mut m,
-                dt: self.dt,
-            });
-            for (s, &e) in members.iter().enumerate() {
-                force[e] = f[s];
-                moment[e] = m[s];
-            }
-        }
+        let contacts: Vec<LawContact> = touching
+            .iter()
+            .map(|(k, f)| LawContact {
+                slot: *k,
+                normal: f.touch.normal,
+                overlap: f.touch.overlap,
+                rel_velocity: f.rel_velocity,
+                rel_spin: f.rel_spin,
+            })
+            .collect();
+        let (force, moment) = laws_in_pair_order(&self.laws, &mut list, &contacts, self.dt);
         // Sums in pair order.
         let p = &mut self.potentials;
         for (e, (k, found)) in touching.iter().enumerate() {
