@@ -184,4 +184,7 @@ impl crate::ext::contact::ContactLawSource for Registry {
     fn rve_device(&self, name: &str) -> Result<Arc<dyn crate::ext::RveDevice>> {
         Registry::rve_device(self, name).cloned()
     }
+    fn body_kind(&self, name: &str) -> Result<Arc<dyn crate::ext::BodyKindFactory>> {
+        Registry::body_kind(self, name).cloned()
+    }
 }

@@ -15,14 +15,15 @@ use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
 const FORMAT: &str = "granite-dem-state";
+/// 5: bodies of plugin kinds (capsules, ...).
 /// 4: a stress-controlled cell keeps its servo's integral part.
 /// 3: the file is an envelope (`io::checkpoint_file`: writer, CRC-32) around the state of 2.
 /// 2: a pair of spheres is stored under its larger index (`a > b`); 1 stored it under the smaller.
 /// Bump it whenever `DemState` changes, and read the older ones through an upgrade path.
-const VERSION: u32 = 4;
-/// The oldest version read: 2, whose state is 4's less what was added since: external loads and
+const VERSION: u32 = 5;
+/// The oldest version read: 2, whose state is 5's less what was added since: external loads and
 /// the energy tracker (none), the servo's integral part (zero: the servo learns it again within a
-/// few of its relaxation times).
+/// few of its relaxation times), bodies of plugin kinds (none).
 const OLDEST: u32 = 2;
 
 /// A contact law by registry name and parameters (rebuilt from the registry on load).
@@ -30,6 +31,26 @@ const OLDEST: u32 = 2;
 struct LawRecord {
     name: String,
     params: ParamMap,
+}
+
+/// Bodies of a plugin kind: the kind by name, each shape by the parameters it was built from
+/// (mass properties are computed again from them and the materials' densities).
+#[derive(Serialize, Deserialize)]
+struct BodiesRecord {
+    kind: String,
+    shapes: Vec<ParamMap>,
+    shape: Vec<u32>,
+    id: Vec<u64>,
+    material: Vec<u16>,
+    x: Vec<Vec3>,
+    v: Vec<Vec3>,
+    w: Vec<Vec3>,
+    q: Vec<nalgebra::UnitQuaternion<f64>>,
+    fixed: Vec<bool>,
+    pairs: PairList,
+    wall_pairs: PairList,
+    sphere_pairs: PairList,
+    x_at_build: Vec<Vec3>,
 }
 
 #[derive(Serialize, Deserialize)]
@@ -64,6 +85,8 @@ pub(crate) struct DemState {
     external: Vec<crate::dem::particles::ExternalLoad>,
     #[serde(default)]
     energy: Option<crate::dem::energy::EnergyTracker>,
+    #[serde(default)]
+    bodies: Option<BodiesRecord>,
 }
 
 impl DemSim {
@@ -106,7 +129,85 @@ impl DemSim {
             rebuilds: self.rebuilds,
             external: self.external.clone(),
             energy: self.energy.clone(),
+            bodies: self.bodies_record(),
         }
+    }
+
+    fn bodies_record(&self) -> Option<BodiesRecord> {
+        let k = &self.kinds;
+        let kind = k.kind.as_ref().filter(|_| !k.is_empty())?;
+        Some(BodiesRecord {
+            kind: kind.name.clone(),
+            shapes: k.shapes.iter().map(|s| s.params()).collect(),
+            shape: k.shape.clone(),
+            id: k.id.clone(),
+            material: k.material.clone(),
+            x: k.x.clone(),
+            v: k.v.clone(),
+            w: k.w.clone(),
+            q: k.q.clone(),
+            fixed: k.fixed.clone(),
+            pairs: k.pairs.clone(),
+            wall_pairs: k.wall_pairs.clone(),
+            sphere_pairs: k.sphere_pairs.clone(),
+            x_at_build: k.x_at_build.clone(),
+        })
+    }
+
+    /// The bodies of a saved state, their kind and shapes rebuilt from `registry`.
+    fn restore_bodies(&mut self, record: BodiesRecord, registry: Option<&dyn ContactLawSource>) -> Result<()> {
+        let Some(registry) = registry else {
+            return Err(GraniteError::Other(format!("a state with {} bodies moved without a registry", record.kind)));
+        };
+        let factory = registry.body_kind(&record.kind)?;
+        let shapes = record
+            .shapes
+            .iter()
+            .map(|given| {
+                let params =
+                    crate::params::Params::resolve(&format!("{} body", factory.name()), factory.param_specs(), given)?;
+                factory.build(params)
+            })
+            .collect::<Result<Vec<_>>>()?;
+        let n = record.x.len();
+        let lengths = [
+            ("shape", record.shape.len()),
+            ("id", record.id.len()),
+            ("material", record.material.len()),
+            ("v", record.v.len()),
+            ("w", record.w.len()),
+            ("q", record.q.len()),
+            ("fixed", record.fixed.len()),
+            ("x_at_build", record.x_at_build.len()),
+        ];
+        crate::loaded::same_length("bodies", "x", n, &lengths).map_err(GraniteError::Other)?;
+        let k = &mut self.kinds;
+        k.kind = Some(crate::dem::kinds::KindInUse {
+            name: factory.name().to_string(),
+            geometry: factory.geometry(),
+            stride: factory.values_per_shape(),
+        });
+        for i in 0..n {
+            let shape = shapes.get(record.shape[i] as usize).ok_or_else(|| {
+                GraniteError::Other(format!("body {i}: shape {} of {}", record.shape[i], shapes.len()))
+            })?;
+            let density = self
+                .materials
+                .get(record.material[i] as usize)
+                .ok_or_else(|| GraniteError::Other(format!("body {i}: material {}", record.material[i])))?
+                .density;
+            k.values.extend(shape.values());
+            k.mass.push(density * shape.volume());
+            k.inertia.push(shape.inertia_per_density().map(|c| density * c));
+        }
+        k.shapes = shapes;
+        (k.shape, k.id, k.material, k.x, k.v, k.w, k.q, k.fixed) =
+            (record.shape, record.id, record.material, record.x, record.v, record.w, record.q, record.fixed);
+        k.force = vec![[0.0; 3]; n];
+        k.torque = vec![[0.0; 3]; n];
+        (k.pairs, k.wall_pairs, k.sphere_pairs, k.x_at_build) =
+            (record.pairs, record.wall_pairs, record.sphere_pairs, record.x_at_build);
+        Ok(())
     }
 
     /// The whole state as a JSON value (for checkpoints that embed DEM samples).
@@ -117,12 +218,6 @@ impl DemSim {
 
     /// Whether the state format holds everything of this simulation: not potential particles.
     fn savable(&self) -> Result<()> {
-        if let Some(kind) = self.kinds.kind.as_ref().filter(|_| !self.kinds.is_empty()) {
-            return Err(GraniteError::Setup(format!(
-                "a simulation with {} bodies cannot be saved: the DEM state format holds spheres, clumps and walls",
-                kind.name
-            )));
-        }
         if self.potentials.is_empty() {
             Ok(())
         } else {
@@ -137,7 +232,7 @@ impl DemSim {
     /// A state from [`DemSim::to_json`]; contact laws are rebuilt from `registry`.
     pub fn from_json(value: serde_json::Value, registry: &dyn ContactLawSource) -> Result<DemSim> {
         let st: DemState = serde_json::from_value(value).map_err(|e| GraniteError::Other(format!("DEM state: {e}")))?;
-        Self::from_state(st, &from_registry(registry), "checkpoint")
+        Self::from_state(st, &from_registry(registry), Some(registry), "checkpoint")
     }
 
     /// A state from [`DemSim::to_json`] of a copy of `like` (an RVE moved between processes):
@@ -153,7 +248,7 @@ impl DemSim {
                 ))),
             }
         };
-        Self::from_state(st, &laws, "moved sample")
+        Self::from_state(st, &laws, None, "moved sample")
     }
 
     /// Writes the whole state as JSON (f64 values round-trip exactly), sealed with a checksum.
@@ -191,10 +286,15 @@ impl DemSim {
         let opened = crate::io::checkpoint_file::open(path, text, FORMAT, VERSION, OLDEST)?;
         let st: DemState = serde_json::from_str(opened.state)
             .map_err(|e| GraniteError::Other(format!("{} is not a granite DEM state: {e}", path.display())))?;
-        Self::from_state(st, &from_registry(registry), &path.display().to_string())
+        Self::from_state(st, &from_registry(registry), Some(registry), &path.display().to_string())
     }
 
-    fn from_state(st: DemState, build_law: &LawBuilder, source: &str) -> Result<DemSim> {
+    fn from_state(
+        st: DemState,
+        build_law: &LawBuilder,
+        kinds: Option<&dyn ContactLawSource>,
+        source: &str,
+    ) -> Result<DemSim> {
         if st.format != FORMAT || !(OLDEST..=VERSION).contains(&st.version) {
             return Err(GraniteError::Other(format!(
                 "{source}: format {} version {} (this granite reads {FORMAT} versions {OLDEST} to {VERSION})",
@@ -232,7 +332,10 @@ impl DemSim {
         sim.rebuilds = st.rebuilds;
         sim.external = st.external;
         sim.energy = st.energy;
-        sim.next_id = sim.spheres.id.iter().max().map_or(0, |m| m + 1);
+        if let Some(bodies) = st.bodies {
+            sim.restore_bodies(bodies, kinds).map_err(|e| GraniteError::Other(format!("{source}: {e}")))?;
+        }
+        sim.next_id = sim.spheres.id.iter().chain(&sim.kinds.id).max().map_or(0, |m| m + 1);
         widen_pair_layout(&mut sim);
         check_consistent(&sim).map_err(|e| GraniteError::Other(format!("{source}: not a usable DEM state: {e}")))?;
         // The parallel stages' cuts of the pair lists are found again on the first step, not saved.
@@ -365,7 +468,21 @@ fn check_consistent(sim: &DemSim) -> std::result::Result<(), String> {
     if sim.default_law.is_some_and(|l| l as usize >= laws) || sim.law_of.values().any(|&l| l as usize >= laws) {
         return Err(format!("a material pair uses a contact law beyond the {laws} saved"));
     }
-    for (name, list, others) in [("pairs", &sim.pairs, n), ("wall pairs", &sim.wall_pairs, sim.walls.len())] {
+    let nb = sim.kinds.len();
+    let mut ids = s.id.clone();
+    ids.extend(&sim.kinds.id);
+    crate::loaded::unique_ids("spheres and bodies", &ids)?;
+    let k = &sim.kinds;
+    let walls = sim.walls.len();
+    let (of_spheres, of_bodies) =
+        (format!("the {n} spheres or {walls} walls"), format!("the {nb} bodies, {n} spheres or {walls} walls"));
+    for (name, list, firsts, others, beyond) in [
+        ("pairs", &sim.pairs, n, n, &of_spheres),
+        ("wall pairs", &sim.wall_pairs, n, walls, &of_spheres),
+        ("body pairs", &k.pairs, nb, nb, &of_bodies),
+        ("body-wall pairs", &k.wall_pairs, nb, walls, &of_bodies),
+        ("body-sphere pairs", &k.sphere_pairs, nb, n, &of_bodies),
+    ] {
         let m = list.len();
         let lengths = [
             ("b", list.b.len()),
@@ -375,8 +492,8 @@ fn check_consistent(sim: &DemSim) -> std::result::Result<(), String> {
             ("force", list.force.len()),
         ];
         same_length(name, "a", m, &lengths)?;
-        if list.a.iter().any(|&i| i as usize >= n) || list.b.iter().any(|&j| j as usize >= others) {
-            return Err(format!("{name}: an index beyond the {n} spheres or {} walls", sim.walls.len()));
+        if list.a.iter().any(|&i| i as usize >= firsts) || list.b.iter().any(|&j| j as usize >= others) {
+            return Err(format!("{name}: an index beyond {beyond}"));
         }
         if let Some(&l) = list.law.iter().find(|&&l| l as usize >= laws) {
             return Err(format!("{name}: contact law {l} of {laws}"));

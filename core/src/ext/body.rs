@@ -17,6 +17,8 @@ use std::sync::Arc;
 pub trait BodyShape: Send + Sync + std::fmt::Debug {
     /// The kind's registered name.
     fn kind(&self) -> &str;
+    /// The parameters it was built from (what a saved state rebuilds it with).
+    fn params(&self) -> crate::params::ParamMap;
     /// What the kind's geometry reads of the shape (a capsule: radius and half length), as many
     /// values for every shape of the kind ([`BodyKindFactory::values_per_shape`]).
     fn values(&self) -> Vec<f64>;

@@ -260,6 +260,10 @@ pub trait ContactLawSource {
         name: &str,
         given: &crate::params::ParamMap,
     ) -> crate::error::Result<Box<dyn ContactLaw>>;
+    /// The body kind of this name (a saved state holding bodies of it).
+    fn body_kind(&self, name: &str) -> crate::error::Result<std::sync::Arc<dyn crate::ext::BodyKindFactory>> {
+        Err(crate::GraniteError::Setup(format!("no body kind \"{name}\" here")))
+    }
     /// The RVE device of this name (a checkpoint of RVEs that ran on one).
     fn rve_device(&self, name: &str) -> crate::error::Result<std::sync::Arc<dyn crate::ext::RveDevice>> {
         Err(crate::GraniteError::Setup(format!("no RVE device \"{name}\" here")))

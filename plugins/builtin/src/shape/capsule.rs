@@ -67,6 +67,9 @@ impl BodyShape for Capsule {
     fn kind(&self) -> &str {
         "capsule"
     }
+    fn params(&self) -> granite_core::params::ParamMap {
+        [("radius".to_string(), self.radius), ("length".to_string(), 2.0 * self.half)].into_iter().collect()
+    }
     fn values(&self) -> Vec<f64> {
         vec![self.radius, self.half]
     }
