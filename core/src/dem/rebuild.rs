@@ -151,7 +151,8 @@ impl DemSim {
             )));
         }
         self.wrap_into_cell()?;
-        if self.pairs.is_empty() && self.wall_pairs.is_empty() {
+        // Renumbering would leave the bodies' pairs with spheres pointing at others.
+        if self.pairs.is_empty() && self.wall_pairs.is_empty() && self.kinds.sphere_pairs.is_empty() {
             self.order_spheres_in_space();
         }
         let s = &self.spheres;

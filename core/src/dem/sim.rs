@@ -463,6 +463,9 @@ impl DemSim {
         // Contacts between spheres that stay keep their history.
         self.pairs.retain_spheres(&keep, true);
         self.wall_pairs.retain_spheres(&keep, false);
+        // The bodies' pairs with spheres name them by index: found again at the next rebuild,
+        // their contacts starting afresh.
+        self.kinds.sphere_pairs = Default::default();
         self.needs_rebuild = true;
     }
 
