@@ -247,7 +247,7 @@ pub fn plugin_listing(libraries: &[PathBuf]) -> Result<String> {
         }
     }
     out.push_str(
-        "body kinds (sim.body(NAME, m, centre, #{ PARAMS }), sim.clump_cloud(m, lo, hi, #{ shape: NAME, PARAMS })):\n",
+        "body kinds (sim.add_body(NAME, m, centre, #{ PARAMS }), sim.clump_cloud(m, lo, hi, #{ shape: NAME, PARAMS })):\n",
     );
     for name in reg.body_kind_names() {
         if let Ok(f) = reg.body_kind(&name) {

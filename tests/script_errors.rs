@@ -375,7 +375,7 @@ fn a_bad_body_names_the_kind_the_parameter_and_the_line() {
         &[],
     );
     assert!(e.contains("line 3") && e.contains("lenght"), "{e}");
-    let e = run_err("body_kind", &format!("{head}sim.body(\"cube\", m, [0.0, 0.0, 0.0], #{{ side: 0.01 }});"), &[]);
+    let e = run_err("body_kind", &format!("{head}sim.add_body(\"cube\", m, [0.0, 0.0, 0.0], #{{ side: 0.01 }});"), &[]);
     assert!(e.contains("line 3") && e.contains("cube") && e.contains("capsule"), "{e}");
     let e = run_err(
         "capsule_in_cell",

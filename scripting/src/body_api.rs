@@ -1,5 +1,5 @@
 //! Bodies of plugin kinds from scripts (`ext::body`: capsules, ...): one body of a registered kind
-//! (`sim.body(kind, ...)`, `sim.capsule(...)`), clouds of them (`clump_cloud` with a kind's name,
+//! (`sim.add_body(kind, ...)`, `sim.capsule(...)`), clouds of them (`clump_cloud` with a kind's name,
 //! in dem_api), and reading one back.
 
 use super::convert::{err, get, only_keys, param_map, vector, OrRhai, RhaiResult};
@@ -46,7 +46,7 @@ fn add(s: &DemHandle, kind: &str, m: &DemMaterialHandle, centre: &Dynamic, opts:
     let registry = s.lock().ctx.registry().clone();
     let factory = registry.body_kind(kind).or_rhai()?;
     let known: Vec<&str> = factory.param_specs().iter().map(|p| p.name).chain(OWN_KEYS).collect();
-    only_keys(opts, &known, &format!("sim.body(\"{kind}\", ...)"))?;
+    only_keys(opts, &known, &format!("sim.add_body(\"{kind}\", ...)"))?;
     let shape = registry.build_body_shape(kind, &given).or_rhai()?;
     let fixed = match get(opts, "fixed") {
         Some(d) => d.as_bool().or_else(|_| err("`fixed` is true or false"))?,
@@ -79,9 +79,12 @@ fn index_of(s: &DemHandle, id: i64) -> RhaiResult<usize> {
 }
 
 pub(super) fn register(engine: &mut Engine) {
-    engine.register_fn("body", |s: &mut DemHandle, kind: &str, m: DemMaterialHandle, centre: Dynamic, opts: Map| {
-        add(s, kind, &m, &centre, &opts)
-    });
+    engine.register_fn(
+        "add_body",
+        |s: &mut DemHandle, kind: &str, m: DemMaterialHandle, centre: Dynamic, opts: Map| {
+            add(s, kind, &m, &centre, &opts)
+        },
+    );
     engine.register_fn("capsule", |s: &mut DemHandle, m: DemMaterialHandle, centre: Dynamic, opts: Map| {
         add(s, "capsule", &m, &centre, &opts)
     });
@@ -105,6 +108,18 @@ pub(super) fn register(engine: &mut Engine) {
         map.insert("mass".into(), Dynamic::from(k.mass[i]));
         map.insert("fixed".into(), Dynamic::from(k.fixed[i]));
         Ok::<_, Box<rhai::EvalAltResult>>(map)
+    });
+    engine.register_fn("body_velocity", |s: &mut DemHandle, id: i64, v: Dynamic| {
+        let v = vector(&v, 3, "velocity")?;
+        let i = index_of(s, id)?;
+        s.lock().sim.dem.kinds.v[i] = v;
+        Ok::<_, Box<rhai::EvalAltResult>>(())
+    });
+    engine.register_fn("body_spin", |s: &mut DemHandle, id: i64, w: Dynamic| {
+        let w = vector(&w, 3, "spin")?;
+        let i = index_of(s, id)?;
+        s.lock().sim.dem.kinds.w[i] = w;
+        Ok::<_, Box<rhai::EvalAltResult>>(())
     });
     engine.register_fn("body_ids", |s: &mut DemHandle| {
         s.lock().sim.dem.kinds.id.iter().map(|&i| Dynamic::from(i as i64)).collect::<rhai::Array>()
