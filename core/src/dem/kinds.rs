@@ -171,6 +171,13 @@ impl DemSim {
             .get(material as usize)
             .ok_or_else(|| GraniteError::Setup(format!("no material with index {material}")))?
             .density;
+        if shape.kind() != kind.name() {
+            return Err(GraniteError::Other(format!(
+                "a {} shape given as a {} body: build shapes with their kind's factory",
+                shape.kind(),
+                kind.name()
+            )));
+        }
         let values = shape.values();
         if values.len() != kind.values_per_shape() {
             return Err(GraniteError::Other(format!(
