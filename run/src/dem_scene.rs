@@ -5,10 +5,9 @@
 use crate::simulation::{RunContext, Simulation};
 use granite_core::dem::walls::Wall;
 use granite_core::dem::DemSim;
-use granite_core::error::{GraniteError, Result};
+use granite_core::error::Result;
 use granite_core::io::vtk::Field;
 use granite_core::math::Vec3;
-use std::io::Write;
 use std::path::Path;
 
 /// A DEM simulation as a run driver steps it.
@@ -204,23 +203,18 @@ impl Simulation for DemScene {
         out
     }
     fn write_points(&self, path: &Path) -> Result<()> {
-        let f = std::fs::File::create(path).map_err(|e| GraniteError::io(path, e))?;
-        let mut w = std::io::BufWriter::new(f);
-        let io = |e| GraniteError::io(path, e);
-        writeln!(w, "id,material,x,y,z,radius,vx,vy,vz,wx,wy,wz,contacts").map_err(io)?;
         let s = &self.dem.spheres;
         let counts = self.dem.contact_counts();
-        for i in 0..s.len() {
+        let rows = (0..s.len()).map(|i| {
             let mut row = vec![s.id[i] as f64, s.material[i] as f64];
             row.extend(s.x[i]);
             row.push(s.radius[i]);
             row.extend(s.v[i]);
             row.extend(s.w[i]);
             row.push(counts[i] as f64);
-            let line = row.iter().map(|v| v.to_string()).collect::<Vec<_>>().join(",");
-            writeln!(w, "{line}").map_err(|e| GraniteError::io(path, e))?;
-        }
-        w.flush().map_err(|e| GraniteError::io(path, e))
+            row
+        });
+        crate::output::write_table(path, "id,material,x,y,z,radius,vx,vy,vz,wx,wy,wz,contacts", rows)
     }
     fn diagnostics(&self) -> Vec<(&'static str, f64)> {
         let (cols, vals) = self.series_row();

@@ -2,13 +2,12 @@
 //! `series.csv`, the fields of a VTK frame, the points table, the runout of a collapsing column.
 
 use crate::simulation::{RunContext, RunEnd, Simulation};
-use granite_core::error::{GraniteError, Result};
+use granite_core::error::Result;
 use granite_core::io::vtk::Field;
 use granite_core::math::{deviatoric_strain_norm, p_q, Vec3};
 use granite_core::mpm::boundary::TimeFunction;
 use granite_core::mpm::sim::Snapshot;
 use granite_core::mpm::{MpmSim, ShapeFunctions};
-use std::io::Write;
 use std::path::Path;
 
 /// Reference geometry of a collapsing column, for the runout columns (thesis 5.6-5.9).
@@ -160,16 +159,10 @@ impl Simulation for MpmScene {
         (p.x.clone(), fields)
     }
     fn write_points(&self, path: &Path) -> Result<()> {
-        let f = std::fs::File::create(path).map_err(|e| GraniteError::io(path, e))?;
-        let mut w = std::io::BufWriter::new(f);
-        let io = |e| GraniteError::io(path, e);
-        writeln!(
-            w,
-            "id,material,x,y,z,vx,vy,vz,sxx,syy,szz,sxy,syz,sxz,exx,eyy,ezz,gxy,gyz,gxz,p,q,deviatoric_strain,volume,mass"
-        )
-        .map_err(io)?;
+        const HEADER: &str = "id,material,x,y,z,vx,vy,vz,sxx,syy,szz,sxy,syz,sxz,exx,eyy,ezz,gxy,gyz,gxz,p,q,\
+                              deviatoric_strain,volume,mass";
         let p = &self.mpm.points;
-        for i in 0..p.len() {
+        let rows = (0..p.len()).map(|i| {
             let (mean, q) = p_q(&p.stress[i]);
             let mut row = vec![p.id[i] as f64, p.material[i] as f64];
             row.extend(p.x[i]);
@@ -177,10 +170,9 @@ impl Simulation for MpmScene {
             row.extend(p.stress[i]);
             row.extend(p.strain[i]);
             row.extend([mean, q, deviatoric_strain_norm(&p.strain[i]), p.volume[i], p.mass[i]]);
-            let line = row.iter().map(|v| v.to_string()).collect::<Vec<_>>().join(",");
-            writeln!(w, "{line}").map_err(|e| GraniteError::io(path, e))?;
-        }
-        w.flush().map_err(|e| GraniteError::io(path, e))
+            row
+        });
+        crate::output::write_table(path, HEADER, rows)
     }
     fn diagnostics(&self) -> Vec<(&'static str, f64)> {
         let sim = &self.mpm;

@@ -154,3 +154,18 @@ impl Output {
         Ok(())
     }
 }
+
+/// Writes a CSV table: `header` (comma-separated names), then one line of `rows` a row, each value
+/// as Rust prints an f64 (the shortest text that reads back the same).
+pub fn write_table(path: &std::path::Path, header: &str, rows: impl Iterator<Item = Vec<f64>>) -> Result<()> {
+    use granite_core::error::GraniteError;
+    use std::io::Write;
+    let io = |e| GraniteError::io(path, e);
+    let mut w = std::io::BufWriter::new(std::fs::File::create(path).map_err(io)?);
+    writeln!(w, "{header}").map_err(io)?;
+    for row in rows {
+        let line = row.iter().map(|v| v.to_string()).collect::<Vec<_>>().join(",");
+        writeln!(w, "{line}").map_err(io)?;
+    }
+    w.flush().map_err(io)
+}
