@@ -735,9 +735,18 @@ fn speedup_over(base: &mut Option<f64>, rate: f64) -> f64 {
 /// plane walls and settled for `settle` steps: as 4-sphere clumps (`tetra`) or as the thesis's
 /// rounded tetrahedra (`potential_tetra`), from the same centres and orientations.
 pub fn resin_heap(shape: &str, count: usize, settle: usize) -> Result<granite_core::dem::DemSim> {
+    use granite_core::dem::kinds::NewBody;
     use granite_core::dem::walls::{Wall, WallShape};
+    /// A grain of spheres (a shape model) or a body of a plugin kind.
+    enum Grain {
+        Clump(Box<dyn granite_core::ext::ShapeModel>),
+        Body(std::sync::Arc<dyn granite_core::ext::BodyKindFactory>, std::sync::Arc<dyn granite_core::ext::BodyShape>),
+    }
     let reg = crate::registry();
-    let model = reg.build_shape(shape, &ParamMap::new())?;
+    let grain = match reg.body_kind(shape) {
+        Ok(kind) => Grain::Body(kind.clone(), kind.build_from(&ParamMap::new())?),
+        Err(_) => Grain::Clump(reg.build_shape(shape, &ParamMap::new())?),
+    };
     let mut sim = granite_core::dem::DemSim::new();
     sim.seed = 1;
     let resin = sim.add_material("resin", 943.0)?;
@@ -745,7 +754,10 @@ pub fn resin_heap(shape: &str, count: usize, settle: usize) -> Result<granite_co
     let law = params(&[("kn", 1200.0), ("kt_ratio", 0.773), ("friction", friction), ("restitution", 0.8)]);
     sim.set_contact_law(reg.build_contact_law("visco_elastic", &law)?, None)?;
     // Grains on a lattice of 1.1 bounding diameters, 8 across, in a box 10 across.
-    let bound = model.bounding_radius();
+    let bound = match &grain {
+        Grain::Clump(model) => model.bounding_radius(),
+        Grain::Body(_, body) => body.bounding_radius(),
+    };
     let spacing = 2.2 * bound;
     let across = 8usize;
     let width = (across + 2) as f64 * spacing;
@@ -756,20 +768,28 @@ pub fn resin_heap(shape: &str, count: usize, settle: usize) -> Result<granite_co
         sim.add_wall(Wall::new("", WallShape::Plane { normal: n }, position, resin));
     }
     sim.skin = 0.2 * bound;
-    let (potential, template) = (model.potential(), model.members());
-    let props = match potential {
-        Some(_) => None,
-        None => Some(granite_core::dem::clump::mass_properties(&template, 943.0, 400)?),
+    let template = match &grain {
+        Grain::Clump(model) => model.members(),
+        Grain::Body(..) => Vec::new(),
+    };
+    let props = match &grain {
+        Grain::Clump(_) => Some(granite_core::dem::clump::mass_properties(&template, 943.0, 400)?),
+        Grain::Body(..) => None,
     };
     for k in 0..count {
         let (i, j, l) = (k % across, (k / across) % across, k / (across * across));
         let c = [(1.5 + i as f64) * spacing, (1.5 + j as f64) * spacing, (0.6 + l as f64) * spacing];
         let u = [0, 1, 2].map(|a| granite_core::ext::contact::uniform(7, (3 * k + a) as u64));
         let (members, q) = granite_core::dem::clump::place_template(&template, c, u);
-        match (&potential, &props) {
-            (Some(p), _) => sim.add_potential(resin, p, c, q, [0.0; 3], false)?,
-            (None, Some(props)) => sim.add_clump_with(resin, &members, &props.transformed(&q, c))?,
-            (None, None) => return Err(granite_core::GraniteError::Other(format!("shape `{shape}` has no members"))),
+        match (&grain, &props) {
+            (Grain::Body(kind, body), _) => {
+                let shape = body.clone();
+                let v = [0.0; 3];
+                let new = NewBody { kind: kind.as_ref(), shape, material: resin, x: c, q, v, w: v, fixed: false };
+                sim.add_body(new)?
+            }
+            (Grain::Clump(_), Some(props)) => sim.add_clump_with(resin, &members, &props.transformed(&q, c))?,
+            (Grain::Clump(_), None) => unreachable!("a clump's mass properties are computed above"),
         };
     }
     sim.gravity = [0.0, 0.0, -9.81];
@@ -794,21 +814,21 @@ pub fn potential(count: usize, steps: usize, repeat: usize) -> Result<()> {
         for _ in 0..repeat.max(1) {
             for (k, (_, heap)) in heaps.iter().enumerate() {
                 let mut sim = heap.clone();
-                let before = sim.potential_seconds;
+                let before = sim.kinds.seconds;
                 let t = Instant::now();
                 for _ in 0..steps {
                     sim.step()?;
                 }
                 let secs = t.elapsed().as_secs_f64();
                 if secs < times[k].0 {
-                    split = if k == 1 { [sim.potential_seconds[0] - before[0], sim.potential_seconds[1] - before[1]] } else { split };
+                    split = if k == 1 { [sim.kinds.seconds[0] - before[0], sim.kinds.seconds[1] - before[1]] } else { split };
                 }
                 times[k] = (times[k].0.min(secs), times[k].1.max(secs));
             }
         }
         let per = |secs: f64| secs / (count * steps) as f64 * 1e6;
         for (k, (label, heap)) in heaps.iter().enumerate() {
-            let contacts = heap.pairs.touching_count() + heap.wall_pairs.touching_count() + heap.potential_contact_count();
+            let contacts = heap.pairs.touching_count() + heap.wall_pairs.touching_count() + heap.kinds.contact_count();
             granite_core::outln!(
                 "{label:<20} {:>7.3} us a grain-step ({:.3})  {} contacts at the start, {:.2} a grain",
                 per(times[k].0),

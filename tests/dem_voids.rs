@@ -37,19 +37,23 @@ fn void_ratio_methods_agree_with_a_simple_cubic_packing() {
 /// the 0.3 % their volume's integration leaves.
 #[test]
 fn void_ratio_of_a_simple_cubic_packing_of_potential_particles() {
-    use granite_core::dem::potential::shape::{box_planes, PotentialShape, MASS_RESOLUTION};
+    use granite_core::ext::BodyKindFactory;
+    use granite_plugins::shape::potential::shape::box_planes;
+    use granite_plugins::shape::potential::{add, planes_params, NewPotential, PotentialBody, PotentialPlanesKind};
     let (n, r) = (10, 0.01);
-    let ball =
-        std::sync::Arc::new(PotentialShape::new(&box_planes([0.5 * r; 3]), 0.3 * r, r, 1.0, MASS_RESOLUTION).unwrap());
+    let ball = PotentialPlanesKind.build_from(&planes_params(&box_planes([0.5 * r; 3]), 0.3 * r, r, 1.0)).unwrap();
     let mut sim = DemSim::new();
     let m = sim.add_material("m", 2500.0).unwrap();
-    let s = ball.sphere_centre;
+    let s = PotentialBody::shape_of(ball.as_ref()).unwrap().sphere_centre;
     for i in 0..n {
         for j in 0..n {
             for k in 0..n {
                 // The centre of mass sits where the integration put it, a hair off the sphere's centre.
                 let x = [(2 * i + 1) as f64 * r - s[0], (2 * j + 1) as f64 * r - s[1], (2 * k + 1) as f64 * r - s[2]];
-                sim.add_potential(m, &ball, x, nalgebra::UnitQuaternion::identity(), [0.0; 3], false).unwrap();
+                let q = nalgebra::UnitQuaternion::identity();
+                let new =
+                    NewPotential { shape: ball.clone(), material: m, x, q, v: [0.0; 3], w: [0.0; 3], fixed: false };
+                add(&mut sim, new).unwrap();
             }
         }
     }

@@ -4,10 +4,15 @@
 
 mod common;
 
-use granite_core::dem::potential::shape::{box_planes, PotentialShape, MASS_RESOLUTION};
-use granite_core::dem::potential::{detect, detect_plane, Placed};
 use granite_core::dem::{DemSim, Wall, WallShape};
+use granite_core::ext::{BodyKindFactory, BodyShape};
+use granite_core::math::Vec3;
 use granite_core::registry::ParamMap;
+use granite_plugins::shape::potential::contact::{detect, detect_plane, Placed, Pose};
+use granite_plugins::shape::potential::shape::box_planes;
+use granite_plugins::shape::potential::{
+    add, planes_params, NewPotential, PotentialBody, PotentialPlanesKind, PotentialTetraKind,
+};
 use nalgebra::{UnitQuaternion, Vector3};
 use std::sync::Arc;
 
@@ -17,8 +22,28 @@ fn law(name: &str, params: &[(&str, f64)]) -> Box<dyn granite_core::ext::Contact
 }
 
 /// A k = 1 potential particle: a sphere of radius `radius` (its planes do not count).
-fn ball(radius: f64) -> Arc<PotentialShape> {
-    Arc::new(PotentialShape::new(&box_planes([0.5 * radius; 3]), 0.3 * radius, radius, 1.0, MASS_RESOLUTION).unwrap())
+fn ball(radius: f64) -> Arc<dyn BodyShape> {
+    PotentialPlanesKind.build_from(&planes_params(&box_planes([0.5 * radius; 3]), 0.3 * radius, radius, 1.0)).unwrap()
+}
+
+/// Adds a free potential particle of `shape`; its index.
+fn particle(
+    sim: &mut DemSim,
+    material: u16,
+    shape: &Arc<dyn BodyShape>,
+    x: Vec3,
+    q: UnitQuaternion<f64>,
+    v: Vec3,
+) -> usize {
+    let new = NewPotential { shape: shape.clone(), material, x, q, v, w: [0.0; 3], fixed: false };
+    add(sim, new).unwrap()
+}
+
+/// Particle `i`'s potential where it is.
+fn placed(sim: &DemSim, i: usize) -> Placed {
+    let k = &sim.kinds;
+    let shape = PotentialBody::shape_of(k.shapes[k.shape[i] as usize].as_ref()).unwrap();
+    Placed::new(shape, &Pose { position: k.x[i], rotation: *k.q[i].to_rotation_matrix().matrix() })
 }
 
 /// Normal force on the first body at every step of a head-on collision at `speed` each, in a
@@ -32,10 +57,10 @@ fn collision(add: impl Fn(&mut DemSim, u16, f64, f64), radius: f64, speed: f64, 
     (0..steps)
         .map(|_| {
             sim.step().unwrap();
-            if sim.potentials.is_empty() {
+            if sim.kinds.is_empty() {
                 sim.spheres.force[0][0]
             } else {
-                sim.potentials.force[0][0]
+                sim.kinds.force[0][0]
             }
         })
         .collect()
@@ -64,8 +89,8 @@ fn k_one_particles_collide_like_spheres() {
     let particles = collision(
         |sim, m, half, v| {
             let q = UnitQuaternion::identity();
-            sim.add_potential(m, &shape, [-half, 0.0, 0.0], q, [v, 0.0, 0.0], false).unwrap();
-            sim.add_potential(m, &shape, [half, 0.0, 0.0], q, [-v, 0.0, 0.0], false).unwrap();
+            particle(sim, m, &shape, [-half, 0.0, 0.0], q, [v, 0.0, 0.0]);
+            particle(sim, m, &shape, [half, 0.0, 0.0], q, [-v, 0.0, 0.0]);
         },
         radius,
         speed,
@@ -88,7 +113,7 @@ fn k_one_particles_collide_like_spheres() {
 #[test]
 fn a_cube_rests_on_a_wall_with_its_weight_in_the_spring() {
     let (half, r) = (4e-3, 1e-3);
-    let cube = Arc::new(PotentialShape::new(&box_planes([half; 3]), r, 10.0 * half, 0.01, 80).unwrap());
+    let cube = PotentialPlanesKind.build_from(&planes_params(&box_planes([half; 3]), r, 10.0 * half, 0.01)).unwrap();
     let mut sim = DemSim::new();
     let resin = sim.add_material("resin", 1111.0).unwrap();
     let kn = 1200.0;
@@ -101,14 +126,14 @@ fn a_cube_rests_on_a_wall_with_its_weight_in_the_spring() {
     // Tilted a little, dropped from 1 mm above the floor.
     let tilt = UnitQuaternion::from_axis_angle(&Vector3::x_axis(), 0.05);
     let height = half + r + 1e-3;
-    sim.add_potential(resin, &cube, [0.0, 0.0, height], tilt, [0.0; 3], false).unwrap();
+    particle(&mut sim, resin, &cube, [0.0, 0.0, height], tilt, [0.0; 3]);
     sim.gravity = [0.0, 0.0, -9.81];
     sim.set_damping(0.3).unwrap();
     sim.set_dt(0.1 * sim.critical_dt().unwrap()).unwrap();
     for _ in 0..40_000 {
         sim.step().unwrap();
     }
-    let p = &sim.potentials;
+    let p = &sim.kinds;
     let weight = p.mass[0] * 9.81;
     assert!(
         (p.force[0][2] / weight - 1.0).abs() < 1e-3,
@@ -118,8 +143,7 @@ fn a_cube_rests_on_a_wall_with_its_weight_in_the_spring() {
     // The face lies flat: the cube settled square on the floor.
     let up = p.q[0] * Vector3::z();
     assert!(up[2] > 1.0 - 1e-6, "top face normal {up:?}");
-    let pose = p.pose(0);
-    let (_, touch) = detect_plane(&Placed::new(p.shape_of(0), &pose), [0.0; 3], [0.0, 0.0, 1.0], None).unwrap();
+    let (_, touch) = detect_plane(&placed(&sim, 0), [0.0; 3], [0.0, 0.0, 1.0], None).unwrap();
     let overlap = touch.expect("resting on the floor").overlap;
     assert!((kn * overlap / weight - 1.0).abs() < 1e-3, "K_n u_n = {} N against {weight} N", kn * overlap);
 }
@@ -127,7 +151,7 @@ fn a_cube_rests_on_a_wall_with_its_weight_in_the_spring() {
 /// The energy a box of tumbling tetrahedra carries: kinetic (translation and rotation), gravity
 /// and the springs of the contacts (between particles and with the walls).
 fn energy(sim: &DemSim, kn: f64) -> f64 {
-    let p = &sim.potentials;
+    let p = &sim.kinds;
     let g = sim.gravity;
     let mut e = 0.0;
     for i in 0..p.len() {
@@ -138,18 +162,16 @@ fn energy(sim: &DemSim, kn: f64) -> f64 {
         e += 0.5 * p.mass[i] * (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]) + 0.5 * spin;
         e -= p.mass[i] * (g[0] * p.x[i][0] + g[1] * p.x[i][1] + g[2] * p.x[i][2]);
     }
-    let poses: Vec<_> = (0..p.len()).map(|i| p.pose(i)).collect();
-    for i in 0..p.len() {
-        let a = Placed::new(p.shape_of(i), &poses[i]);
-        for (j, pose) in poses.iter().enumerate().take(i) {
-            let b = Placed::new(p.shape_of(j), pose);
-            if let Some(t) = detect(&a, &b, None).unwrap().touch {
+    let all: Vec<Placed> = (0..p.len()).map(|i| placed(sim, i)).collect();
+    for (i, a) in all.iter().enumerate() {
+        for b in all.iter().take(i) {
+            if let Some(t) = detect(a, b, None).unwrap().touch {
                 e += 0.5 * kn * t.overlap * t.overlap;
             }
         }
         for w in &sim.walls {
             let WallShape::Plane { normal } = w.shape else { unreachable!() };
-            if let (_, Some(t)) = detect_plane(&a, w.position, normal, None).unwrap() {
+            if let (_, Some(t)) = detect_plane(a, w.position, normal, None).unwrap() {
                 e += 0.5 * kn * t.overlap * t.overlap;
             }
         }
@@ -166,7 +188,9 @@ fn tetrahedra_in_a_box(threads: usize, k: f64, dt_factor: f64) -> (DemSim, f64, 
     let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
     pool.install(|| {
         let (r_s, r_clump) = (0.3101e-2, 0.5e-2);
-        let shape = Arc::new(PotentialShape::rounded_tetrahedron(r_s, r_clump, 2f64.sqrt() * r_s, k).unwrap());
+        let given: ParamMap =
+            [("r_sphere", r_s), ("r_clump", r_clump), ("k", k)].iter().map(|(n, v)| (n.to_string(), *v)).collect();
+        let shape = PotentialTetraKind.build_from(&given).unwrap();
         let mut sim = DemSim::new();
         let resin = sim.add_material("resin", 1111.0).unwrap();
         let kn = 1200.0;
@@ -187,9 +211,8 @@ fn tetrahedra_in_a_box(threads: usize, k: f64, dt_factor: f64) -> (DemSim, f64, 
                 for l in 0..3 {
                     let x = [0.008 + 0.013 * i as f64, 0.008 + 0.013 * j as f64, 0.008 + 0.012 * l as f64];
                     let q = UnitQuaternion::from_euler_angles(0.3 * k as f64, 0.7 * k as f64, 1.1 * k as f64);
-                    let index =
-                        sim.add_potential(resin, &shape, x, q, [0.05 * (k % 3) as f64, -0.03, 0.0], false).unwrap();
-                    sim.potentials.w[index] = [10.0 * (k % 2) as f64, 5.0, -7.0];
+                    let index = particle(&mut sim, resin, &shape, x, q, [0.05 * (k % 3) as f64, -0.03, 0.0]);
+                    sim.kinds.w[index] = [10.0 * (k % 2) as f64, 5.0, -7.0];
                     k += 1;
                 }
             }
@@ -201,7 +224,7 @@ fn tetrahedra_in_a_box(threads: usize, k: f64, dt_factor: f64) -> (DemSim, f64, 
         let (mut largest_kinetic, mut contacts): (f64, usize) = (0.0, 0);
         for _ in 0..steps {
             sim.step().unwrap();
-            let p = &sim.potentials;
+            let p = &sim.kinds;
             let kinetic: f64 = (0..p.len()).map(|i| 0.5 * p.mass[i] * p.v[i].iter().map(|c| c * c).sum::<f64>()).sum();
             largest_kinetic = largest_kinetic.max(kinetic);
             contacts += p.force.iter().filter(|f| f.iter().any(|c| *c != 0.0)).count();
@@ -236,7 +259,7 @@ fn tetrahedra_drift_in_energy_only_by_their_contact_geometry() {
     let drift = |dt_factor: f64| {
         let (sim, start, kinetic, contacts) = tetrahedra_in_a_box(2, 0.65, dt_factor);
         assert!(contacts > 5000, "{contacts} particle-steps in contact");
-        assert!(sim.potentials.w.iter().any(|w| w.iter().any(|c| c.abs() > 1.0)), "the particles turn");
+        assert!(sim.kinds.w.iter().any(|w| w.iter().any(|c| c.abs() > 1.0)), "the particles turn");
         (energy(&sim, 1200.0) - start) / kinetic
     };
     let (coarse, fine) = (drift(0.05), drift(0.025));
@@ -249,8 +272,8 @@ fn tetrahedra_drift_in_energy_only_by_their_contact_geometry() {
 fn the_same_motion_on_one_and_two_threads() {
     let (one, ..) = tetrahedra_in_a_box(1, 0.65, 0.2);
     let (two, ..) = tetrahedra_in_a_box(2, 0.65, 0.2);
-    assert_eq!(one.potentials.x, two.potentials.x);
-    assert_eq!(one.potentials.w, two.potentials.w);
+    assert_eq!(one.kinds.x, two.kinds.x);
+    assert_eq!(one.kinds.w, two.kinds.w);
 }
 
 /// A script drops a cloud of the thesis's rounded tetrahedra (`potential_tetra`, table 2.2) onto
@@ -294,7 +317,7 @@ summary("kinetic_energy", sim.diagnostics().kinetic_energy);
     assert!((floor / -weight - 1.0).abs() < 0.01, "floor force {floor} N, weight {weight} N");
     // A tetrahedron's centre lies at least its inradius plus r above the floor's top (-0.001 m).
     assert!(get("lowest_centre") > -0.001 + 0.3101e-2, "lowest centre {}", get("lowest_centre"));
-    assert!(out.join("vtk/potentials.pvd").is_file());
+    assert!(out.join("vtk/bodies.pvd").is_file());
 }
 
 /// The thesis scene with potential particles at its small default size (300 particles) with short

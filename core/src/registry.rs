@@ -119,9 +119,7 @@ impl Registry {
 
     /// A shape of body kind `kind` from given parameters.
     pub fn build_body_shape(&self, kind: &str, given: &ParamMap) -> Result<Arc<dyn crate::ext::BodyShape>> {
-        let factory = self.body_kind(kind)?;
-        let params = Params::resolve(&format!("{} body", factory.name()), factory.param_specs(), given)?;
-        factory.build(params)
+        self.body_kind(kind)?.build_from(given)
     }
 
     pub fn shape_names(&self) -> Vec<String> {

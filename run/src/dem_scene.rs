@@ -31,7 +31,7 @@ pub const DEEP_OVERLAP: f64 = 0.1;
 /// Everything a whole-state snapshot needs.
 pub struct DemSnapshot {
     spheres: granite_core::dem::Spheres,
-    potentials: granite_core::dem::potential::Potentials,
+    bodies: granite_core::dem::kinds::KindScene,
     walls: Vec<Wall>,
     time: f64,
     step: u64,
@@ -194,9 +194,6 @@ impl Simulation for DemScene {
         if !self.dem.walls.is_empty() {
             out.push(("walls", self.dem.walls_picture()));
         }
-        if !self.dem.potentials.is_empty() {
-            out.push(("potentials", self.dem.potentials_picture()));
-        }
         if !self.dem.kinds.is_empty() {
             out.push(("bodies", self.dem.kinds_picture()));
         }
@@ -223,7 +220,7 @@ impl Simulation for DemScene {
     fn snapshot(&self) -> DemSnapshot {
         DemSnapshot {
             spheres: self.dem.spheres.clone(),
-            potentials: self.dem.potentials.clone(),
+            bodies: self.dem.kinds.clone(),
             walls: self.dem.walls.clone(),
             time: self.dem.time,
             step: self.dem.step,
@@ -231,7 +228,7 @@ impl Simulation for DemScene {
     }
     fn restore(&mut self, s: DemSnapshot) {
         self.dem.spheres = s.spheres;
-        self.dem.potentials = s.potentials;
+        self.dem.kinds = s.bodies;
         self.dem.walls = s.walls;
         self.dem.time = s.time;
         self.dem.step = s.step;

@@ -41,13 +41,28 @@ fn vector_or_zero(opts: &Map, key: &str) -> RhaiResult<Vec3> {
 
 /// Adds one body of `kind`; its id.
 fn add(s: &DemHandle, kind: &str, m: &DemMaterialHandle, centre: &Dynamic, opts: &Map) -> RhaiResult<i64> {
-    let centre = vector(centre, 3, "centre")?;
     let given = param_map(opts, &OWN_KEYS, kind)?;
     let registry = s.lock().ctx.registry().clone();
     let factory = registry.body_kind(kind).or_rhai()?;
     let known: Vec<&str> = factory.param_specs().iter().map(|p| p.name).chain(OWN_KEYS).collect();
     only_keys(opts, &known, &format!("sim.add_body(\"{kind}\", ...)"))?;
-    let shape = registry.build_body_shape(kind, &given).or_rhai()?;
+    add_with(s, kind, &given, m, centre, opts)
+}
+
+/// Adds one body of `kind` from its shape's parameters `given`, placed and set moving as `opts`
+/// says (`axis` or `rotation`, `velocity`, `spin`, `fixed`); its id.
+pub(super) fn add_with(
+    s: &DemHandle,
+    kind: &str,
+    given: &granite_core::params::ParamMap,
+    m: &DemMaterialHandle,
+    centre: &Dynamic,
+    opts: &Map,
+) -> RhaiResult<i64> {
+    let centre = vector(centre, 3, "centre")?;
+    let registry = s.lock().ctx.registry().clone();
+    let factory = registry.body_kind(kind).or_rhai()?;
+    let shape = factory.build_from(given).or_rhai()?;
     let fixed = match get(opts, "fixed") {
         Some(d) => d.as_bool().or_else(|_| err("`fixed` is true or false"))?,
         None => false,
@@ -69,7 +84,7 @@ fn add(s: &DemHandle, kind: &str, m: &DemMaterialHandle, centre: &Dynamic, opts:
 }
 
 /// The index of the body with `id`.
-fn index_of(s: &DemHandle, id: i64) -> RhaiResult<usize> {
+pub(super) fn index_of(s: &DemHandle, id: i64) -> RhaiResult<usize> {
     let st = s.lock();
     let k = &st.sim.dem.kinds;
     match k.id.iter().position(|&i| i as i64 == id) {
@@ -88,27 +103,35 @@ pub(super) fn register(engine: &mut Engine) {
     engine.register_fn("capsule", |s: &mut DemHandle, m: DemMaterialHandle, centre: Dynamic, opts: Map| {
         add(s, "capsule", &m, &centre, &opts)
     });
-    engine.register_fn("body_state", |s: &mut DemHandle, id: i64| {
-        let i = index_of(s, id)?;
-        let st = s.lock();
-        let k = &st.sim.dem.kinds;
-        let array = |v: Vec3| Dynamic::from(v.iter().map(|c| Dynamic::from(*c)).collect::<rhai::Array>());
-        let q = k.q[i].scaled_axis();
-        let axis = k.q[i] * Vector3::z();
-        let mut map = Map::new();
-        map.insert("id".into(), Dynamic::from(k.id[i] as i64));
-        map.insert("kind".into(), Dynamic::from(k.kind.as_ref().map(|k| k.name.clone()).unwrap_or_default()));
-        map.insert("position".into(), array(k.x[i]));
-        map.insert("rotation".into(), array([q[0], q[1], q[2]]));
-        map.insert("axis".into(), array([axis[0], axis[1], axis[2]]));
-        map.insert("velocity".into(), array(k.v[i]));
-        map.insert("spin".into(), array(k.w[i]));
-        map.insert("force".into(), array(k.force[i]));
-        map.insert("torque".into(), array(k.torque[i]));
-        map.insert("mass".into(), Dynamic::from(k.mass[i]));
-        map.insert("fixed".into(), Dynamic::from(k.fixed[i]));
-        Ok::<_, Box<rhai::EvalAltResult>>(map)
-    });
+    engine.register_fn("body_state", state);
+    register_motion(engine);
+}
+
+/// A body's state as a map.
+pub(super) fn state(s: &mut DemHandle, id: i64) -> RhaiResult<Map> {
+    let i = index_of(s, id)?;
+    let st = s.lock();
+    let k = &st.sim.dem.kinds;
+    let array = |v: Vec3| Dynamic::from(v.iter().map(|c| Dynamic::from(*c)).collect::<rhai::Array>());
+    let q = k.q[i].scaled_axis();
+    let axis = k.q[i] * Vector3::z();
+    let mut map = Map::new();
+    map.insert("id".into(), Dynamic::from(k.id[i] as i64));
+    map.insert("kind".into(), Dynamic::from(k.kind.as_ref().map(|k| k.name.clone()).unwrap_or_default()));
+    map.insert("position".into(), array(k.x[i]));
+    map.insert("rotation".into(), array([q[0], q[1], q[2]]));
+    map.insert("axis".into(), array([axis[0], axis[1], axis[2]]));
+    map.insert("velocity".into(), array(k.v[i]));
+    map.insert("spin".into(), array(k.w[i]));
+    map.insert("force".into(), array(k.force[i]));
+    map.insert("torque".into(), array(k.torque[i]));
+    map.insert("mass".into(), Dynamic::from(k.mass[i]));
+    map.insert("volume".into(), Dynamic::from(k.shapes[k.shape[i] as usize].volume()));
+    map.insert("fixed".into(), Dynamic::from(k.fixed[i]));
+    Ok(map)
+}
+
+fn register_motion(engine: &mut Engine) {
     engine.register_fn("body_velocity", |s: &mut DemHandle, id: i64, v: Dynamic| {
         let v = vector(&v, 3, "velocity")?;
         let i = index_of(s, id)?;

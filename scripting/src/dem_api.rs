@@ -367,20 +367,9 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
             let template = shape.members();
             let bound = shape.bounding_radius();
             // Reference points kept apart by the grains' bounding spheres; orientations uniformly random.
-            let existing = match shape.potential() {
-                Some(_) => {
-                    let p = &s.lock().sim.dem.potentials;
-                    p.x.iter().copied().zip(p.bounding_radii()).collect()
-                }
-                None => existing,
-            };
             let ctx = s.lock().ctx.clone();
             let psd = Psd::Uniform { min: bound, max: bound };
             let centres = cloud(lo, hi, count, &psd, seed, &existing, &|| ctx.interrupted()).or_rhai()?;
-            if let Some(potential) = shape.potential() {
-                let centres: Vec<_> = centres.iter().map(|(c, _)| *c).collect();
-                return super::potential_api::add_cloud(s, &m, &potential, &centres, seed);
-            }
             let index = m.index_in(s)?;
             let density = s.lock().sim.dem.materials[index as usize].density;
             let props = granite_core::dem::clump::mass_properties(&template, density, CLUMP_VOXELS).or_rhai()?;
@@ -549,12 +538,12 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
         if lost > 0 {
             st.sim.dem.remove_spheres(&keep);
         }
-        // Potential particles by their centres; fixed ones are container parts and stay.
-        let p = &st.sim.dem.potentials;
-        let keep: Vec<bool> = (0..p.len()).map(|i| p.fixed[i] || inside(&p.x[i])).collect();
+        // Bodies of plugin kinds by their centres; fixed ones are container parts and stay.
+        let k = &st.sim.dem.kinds;
+        let keep: Vec<bool> = (0..k.len()).map(|i| k.fixed[i] || inside(&k.x[i])).collect();
         let gone = keep.iter().filter(|k| !**k).count();
         if gone > 0 {
-            st.sim.dem.remove_potentials(&keep);
+            st.sim.dem.remove_bodies(&keep);
             lost += gone;
         }
         Ok::<_, Box<rhai::EvalAltResult>>(lost as i64)
@@ -756,9 +745,9 @@ fn register_measures(engine: &mut Engine) {
         let positions = {
             let st = s.lock();
             let dem = &st.sim.dem;
-            // Spheres (clump members) and the free potential particles' monitor points.
+            // Spheres (clump members) and the free bodies' monitor points.
             let mut positions = dem.spheres.x.clone();
-            positions.extend(dem.potentials.monitor_positions());
+            positions.extend(dem.kinds.monitor_positions());
             positions
         };
         let r = measure(&positions, &heap, d, x_min, x_max).or_rhai()?;

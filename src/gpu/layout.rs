@@ -208,8 +208,8 @@ impl LawConstants {
         if sim.cell.is_none() {
             return refuse("has no periodic cell");
         }
-        if !sim.walls.is_empty() || !sim.clumps.is_empty() || !sim.potentials.is_empty() {
-            return refuse("holds walls, clumps or potential particles (the device steps spheres only)");
+        if !sim.walls.is_empty() || !sim.clumps.is_empty() || !sim.kinds.is_empty() {
+            return refuse("holds walls, clumps or bodies of plugin kinds (the device steps spheres only)");
         }
         if sim.spheres.blocked.iter().any(|&b| b != 0) || !sim.external.is_empty() || sim.energy.is_some() {
             return refuse("has blocked spheres, external loads or an energy tracker");

@@ -1,9 +1,10 @@
-//! Bodies of plugin kinds (`ext::body`: capsules, ...) in a DEM simulation: their storage and
-//! set-up, their candidate lists (with one another, plane walls and spheres, from their bounding
-//! spheres), and their part of a step. A step finds every contact of the bodies at its start, the
-//! kind's geometry called once per list; runs the contact laws of the materials on them in pair
-//! order; hands the spheres their reactions before the spheres move; and moves the bodies as rigid
-//! bodies after the spheres. Results do not depend on the number of threads.
+//! Bodies of plugin kinds (`ext::body`: capsules, potential particles, ...) in a DEM simulation:
+//! their storage and set-up, their candidate lists (with one another, plane walls and spheres,
+//! from their bounding spheres), and their part of a step. A step places the bodies once, finds
+//! every contact of the bodies at its start, the kind's geometry called once per list; runs the
+//! contact laws of the materials on them in pair order; hands the spheres their reactions before
+//! the spheres move; and moves the bodies as rigid bodies after the spheres. Results do not depend
+//! on the number of threads.
 
 use crate::dem::broad_phase::{sphere_pairs, wall_pairs, Candidate};
 use crate::dem::contacts::PairList;
@@ -14,19 +15,35 @@ use crate::dem::rigid::{laws_in_pair_order, move_rigid_bodies, LawContact, Rigid
 use crate::dem::sim::DemSim;
 use crate::dem::walls::WallShape;
 use crate::error::{GraniteError, Result};
-use crate::ext::body::{Ball, BodyGeometry, BodyKindFactory, BodyShape, KindBodies, Plane};
+use crate::ext::body::{
+    Ball, BodyGeometry, BodyKindFactory, BodyShape, KindBodies, PairFailure, PlacedBodies, Plane, WarmStarts,
+};
 use crate::ext::PairInfo;
 use crate::io::vtk::PolyData;
 use crate::math::{add3, cross3, sub3, Vec3};
 use nalgebra::UnitQuaternion;
 use std::sync::Arc;
 
-/// The kind a simulation's bodies are of: its name, geometry and shape values per body.
+/// The geometry family a simulation's bodies are of: its name, geometry, shape values per body
+/// and warm-start values per pair.
 #[derive(Clone)]
 pub struct KindInUse {
     pub name: String,
     pub geometry: Arc<dyn BodyGeometry>,
     pub stride: usize,
+    pub warm: usize,
+}
+
+impl KindInUse {
+    pub fn of(factory: &dyn BodyKindFactory) -> KindInUse {
+        let geometry = factory.geometry();
+        KindInUse {
+            name: factory.family().to_string(),
+            warm: geometry.warm_values(),
+            geometry,
+            stride: factory.values_per_shape(),
+        }
+    }
 }
 
 /// The bodies of plugin kinds, their candidate lists and what a step leaves for the spheres.
@@ -62,6 +79,9 @@ pub struct KindScene {
     /// Each pair's overlap at this step's contacts (0 where apart), by list: body pairs, walls,
     /// spheres (for the elastic energy).
     pub(crate) overlap: [Vec<f64>; 3],
+    /// Seconds the contacts spent in the geometry and in the laws (with the sums) since the
+    /// simulation began: what `granite bench potential` reports.
+    pub seconds: [f64; 2],
 }
 
 impl KindScene {
@@ -89,7 +109,56 @@ impl KindScene {
 
     fn view(&self) -> KindBodies<'_> {
         let stride = self.kind.as_ref().map(|k| k.stride).unwrap_or(0);
-        KindBodies { x: &self.x, q: &self.q, values: &self.values, stride }
+        KindBodies { x: &self.x, q: &self.q, values: &self.values, stride, shape: &self.shape, shapes: &self.shapes }
+    }
+
+    /// The world positions of the monitor points ([`BodyShape::monitor_points`]) of the free
+    /// bodies: fixed ones are container parts, not grains of a heap.
+    pub fn monitor_positions(&self) -> Vec<Vec3> {
+        let mut out = Vec::new();
+        for i in (0..self.len()).filter(|&i| !self.fixed[i]) {
+            for b in self.shapes[self.shape[i] as usize].monitor_points() {
+                let w = self.q[i] * nalgebra::Vector3::new(b[0], b[1], b[2]);
+                out.push([self.x[i][0] + w[0], self.x[i][1] + w[1], self.x[i][2] + w[2]]);
+            }
+        }
+        out
+    }
+
+    /// Keeps the bodies whose flag is true, in order; the pairs between those that stay keep
+    /// their history.
+    pub(crate) fn retain(&mut self, keep: &[bool]) {
+        fn kept<T: Clone>(v: &mut Vec<T>, keep: &[bool]) {
+            let mut k = keep.iter();
+            v.retain(|_| *k.next().unwrap_or(&true));
+        }
+        let stride = self.kind.as_ref().map_or(0, |k| k.stride);
+        if stride > 0 {
+            let mut values = Vec::with_capacity(self.values.len());
+            for (i, chunk) in self.values.chunks(stride).enumerate() {
+                if keep.get(i).copied().unwrap_or(true) {
+                    values.extend_from_slice(chunk);
+                }
+            }
+            self.values = values;
+        }
+        kept(&mut self.shape, keep);
+        kept(&mut self.id, keep);
+        kept(&mut self.material, keep);
+        kept(&mut self.x, keep);
+        kept(&mut self.v, keep);
+        kept(&mut self.w, keep);
+        kept(&mut self.q, keep);
+        kept(&mut self.mass, keep);
+        kept(&mut self.inertia, keep);
+        kept(&mut self.fixed, keep);
+        kept(&mut self.force, keep);
+        kept(&mut self.torque, keep);
+        kept(&mut self.x_at_build, keep);
+        self.pairs.retain_spheres(keep, true);
+        self.wall_pairs.retain_spheres(keep, false);
+        self.sphere_pairs.retain_spheres(keep, false);
+        self.overlap = Default::default();
     }
 
     /// Mass for a contact's effective mass: infinite for a fixed body.
@@ -138,12 +207,6 @@ impl DemSim {
     /// Adds a body of a plugin kind; returns its index among the bodies.
     pub fn add_body(&mut self, body: NewBody<'_>) -> Result<usize> {
         let NewBody { kind, shape, material, x, q, v, w, fixed } = body;
-        if !self.potentials.is_empty() {
-            return Err(GraniteError::Setup(format!(
-                "{} bodies and potential particles do not meet: a simulation holds one or the other",
-                kind.name()
-            )));
-        }
         if self.cell.is_some() {
             return Err(GraniteError::Setup(format!(
                 "{} bodies run in open domains, not in a periodic cell",
@@ -156,10 +219,10 @@ impl DemSim {
                 kind.name()
             )));
         }
-        if let Some(used) = &self.kinds.kind {
-            if used.name != kind.name() {
+        if let Some(used) = self.kinds.kind.as_ref().filter(|_| !self.kinds.is_empty()) {
+            if used.name != kind.family() {
                 return Err(GraniteError::Setup(format!(
-                    "this simulation holds {} bodies: bodies of one plugin kind meet spheres, walls and one another, \
+                    "this simulation holds {} bodies: bodies of one plugin family meet spheres, walls and one another, \
                      not {} bodies",
                     used.name,
                     kind.name()
@@ -196,12 +259,8 @@ impl DemSim {
             )));
         }
         let k = &mut self.kinds;
-        if k.kind.is_none() {
-            k.kind = Some(KindInUse {
-                name: kind.name().to_string(),
-                geometry: kind.geometry(),
-                stride: kind.values_per_shape(),
-            });
+        if k.kind.is_none() || k.is_empty() {
+            k.kind = Some(KindInUse::of(kind));
         }
         let index = match k.shapes.iter().position(|s| Arc::ptr_eq(s, &shape)) {
             Some(i) => i,
@@ -226,6 +285,12 @@ impl DemSim {
         self.next_id += 1;
         self.needs_rebuild = true;
         Ok(k.len() - 1)
+    }
+
+    /// Removes the bodies whose flag is false; the pairs of those that stay keep their history.
+    pub fn remove_bodies(&mut self, keep: &[bool]) {
+        self.kinds.retain(keep);
+        self.needs_rebuild = true;
     }
 
     /// The Verlet skin of the bodies: the simulation's, or a tenth of the smallest bounding
@@ -302,7 +367,7 @@ impl DemSim {
         }
         let mut walls = wall_pairs(&k.x, &radii[ns..], &self.walls, skin);
         walls.iter_mut().for_each(|block| block.retain(|&(a, _, _)| !fixed[a as usize]));
-        let strides = self.pair_strides();
+        let strides = self.kind_strides();
         let mut lists = [
             std::mem::take(&mut self.kinds.pairs),
             std::mem::take(&mut self.kinds.wall_pairs),
@@ -329,6 +394,12 @@ impl DemSim {
         Ok(())
     }
 
+    /// Values per pair of the bodies' lists: the laws' then the geometry's warm starts.
+    pub(crate) fn kind_strides(&self) -> (usize, usize) {
+        let (p, h) = self.pair_strides();
+        (p, h + self.kinds.kind.as_ref().map_or(0, |k| k.warm))
+    }
+
     /// The bodies' contacts at the start of a step: loads summed into the bodies (and, for the
     /// spheres, into `sphere_loads`) in pair order.
     pub(crate) fn kind_contacts(&mut self) -> Result<()> {
@@ -338,14 +409,22 @@ impl DemSim {
         k.sphere_loads.clear();
         let Some(kind) = k.kind.clone() else { return Ok(()) };
         let own = self.pair_strides().1;
-        let lists = [
+        let started = std::time::Instant::now();
+        let mut lists = [
             std::mem::take(&mut self.kinds.pairs),
             std::mem::take(&mut self.kinds.wall_pairs),
             std::mem::take(&mut self.kinds.sphere_pairs),
         ];
-        let mut kept = Vec::with_capacity(3);
-        for (n, (mut list, side)) in lists.into_iter().zip([Side::Bodies, Side::Walls, Side::Spheres]).enumerate() {
-            let touching = self.touching(&mut list, kind.geometry.as_ref(), side, own)?;
+        let sides = [Side::Bodies, Side::Walls, Side::Spheres];
+        let mut found = Vec::with_capacity(3);
+        {
+            let placed = kind.geometry.place(self.kinds.view())?;
+            for (list, &side) in lists.iter_mut().zip(&sides) {
+                found.push(self.touching(list, placed.as_ref(), side, (own, kind.warm))?);
+            }
+        }
+        let detected = std::time::Instant::now();
+        for (n, ((mut list, side), touching)) in lists.into_iter().zip(sides).zip(found).enumerate() {
             let points: Vec<Vec3> = touching.iter().map(|f| f.point).collect();
             let contacts: Vec<LawContact> = touching.into_iter().map(|f| f.law).collect();
             let (force, moment) = laws_in_pair_order(&self.laws, &mut list, &contacts, self.dt);
@@ -356,25 +435,36 @@ impl DemSim {
             for c in &contacts {
                 overlap[c.slot] = c.overlap;
             }
-            kept.push(list);
+            let slot = match side {
+                Side::Bodies => &mut self.kinds.pairs,
+                Side::Walls => &mut self.kinds.wall_pairs,
+                Side::Spheres => &mut self.kinds.sphere_pairs,
+            };
+            *slot = list;
         }
-        let mut kept = kept.into_iter();
-        for slot in [&mut self.kinds.pairs, &mut self.kinds.wall_pairs, &mut self.kinds.sphere_pairs] {
-            *slot = kept.next().unwrap_or_default();
-        }
+        self.kinds.seconds[0] += (detected - started).as_secs_f64();
+        self.kinds.seconds[1] += detected.elapsed().as_secs_f64();
         Ok(())
     }
 
-    /// The touching pairs of a list, from one call of the kind's geometry; pairs found apart
-    /// start their law's history again at their next touch.
-    fn touching(&self, list: &mut PairList, geometry: &dyn BodyGeometry, side: Side, own: usize) -> Result<Vec<Found>> {
+    /// The touching pairs of a list, from one call of the placed bodies' geometry; pairs found
+    /// apart start their law's history again at their next touch. `(own, warm)`: the law's
+    /// history values a pair, and the geometry's after them.
+    fn touching(
+        &self,
+        list: &mut PairList,
+        placed: &dyn PlacedBodies,
+        side: Side,
+        (own, warm): (usize, usize),
+    ) -> Result<Vec<Found>> {
         let k = &self.kinds;
-        let view = k.view();
         let mut out = vec![None; list.len()];
-        match side {
+        let hs = list.history_stride;
+        let starts = WarmStarts::new(&mut list.history, hs, own, warm);
+        let done = match side {
             Side::Bodies => {
                 let pairs: Vec<(u32, u32)> = list.a.iter().copied().zip(list.b.iter().copied()).collect();
-                geometry.pairs(&view, &pairs, &mut out);
+                placed.pairs(&pairs, starts, &mut out)
             }
             Side::Walls => {
                 let pairs: Vec<(u32, Plane)> = list
@@ -390,7 +480,7 @@ impl DemSim {
                         (a, Plane { point: wall.position, normal })
                     })
                     .collect();
-                geometry.planes(&view, &pairs, &mut out);
+                placed.planes(&pairs, starts, &mut out)
             }
             Side::Spheres => {
                 let s = &self.spheres;
@@ -400,10 +490,19 @@ impl DemSim {
                     .zip(&list.b)
                     .map(|(&a, &b)| (a, Ball { centre: s.x[b as usize], radius: s.radius[b as usize] }))
                     .collect();
-                geometry.spheres(&view, &pairs, &mut out);
+                placed.spheres(&pairs, starts, &mut out)
             }
+        };
+        if let Err(PairFailure { pair, reason }) = done {
+            return Err(GraniteError::Unstable {
+                step: self.step,
+                time: self.time,
+                reason: format!(
+                    "the contact of {}; the bodies may overlap too deeply: lower the time step",
+                    self.pair_name(list, pair, side, &reason)
+                ),
+            });
         }
-        let hs = list.history_stride;
         let mut found = Vec::new();
         for (slot, touch) in out.into_iter().enumerate() {
             let Some(touch) = touch else {
@@ -446,6 +545,19 @@ impl DemSim {
             found.push(Found { law, point: touch.point });
         }
         Ok(found)
+    }
+
+    /// A pair of a list in words, for a diagnostic: "potential bodies 3 and 7: <reason>".
+    fn pair_name(&self, list: &PairList, pair: usize, side: Side, reason: &str) -> String {
+        let k = &self.kinds;
+        let kind = k.kind.as_ref().map(|k| k.name.as_str()).unwrap_or("");
+        let (i, j) = (list.a[pair] as usize, list.b[pair] as usize);
+        let id = k.id[i];
+        match side {
+            Side::Bodies => format!("{kind} bodies {id} and {}: {reason}", k.id[j]),
+            Side::Walls => format!("{kind} body {id} and wall \"{}\": {reason}", self.walls[j].name),
+            Side::Spheres => format!("{kind} body {id} and sphere {}: {reason}", self.spheres.id[j]),
+        }
     }
 
     /// Adds each touching contact's force and moment to its two bodies in pair order: the

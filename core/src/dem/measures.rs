@@ -114,14 +114,6 @@ impl DemSim {
         for c in 0..cl.len() {
             rigid(&mut d, cl.mass[c], (cl.v[c], cl.w[c], cl.x[c]), &cl.q[c], cl.inertia[c], cl.force[c]);
         }
-        let p = &self.potentials;
-        for i in 0..p.len() {
-            d.max_height = d.max_height.max(p.x[i][0] * up[0] + p.x[i][1] * up[1] + p.x[i][2] * up[2]);
-            if !p.fixed[i] {
-                rigid(&mut d, p.mass[i], (p.v[i], p.w[i], p.x[i]), &p.q[i], p.inertia[i], p.force[i]);
-            }
-        }
-        d.particles += p.len();
         let k = &self.kinds;
         for i in 0..k.len() {
             d.max_height = d.max_height.max(k.x[i][0] * up[0] + k.x[i][1] * up[1] + k.x[i][2] * up[2]);

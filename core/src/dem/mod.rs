@@ -21,7 +21,6 @@ mod pairing;
 pub mod particles;
 pub mod picture;
 mod pieces;
-pub mod potential;
 mod rebuild;
 pub mod repose;
 mod rigid;

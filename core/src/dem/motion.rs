@@ -370,7 +370,7 @@ pub(super) fn integrate_clumps(
     moved
 }
 
-/// What moves every free rigid body (clump or potential particle) in a step.
+/// What moves every free rigid body (clump or body of a plugin kind) in a step.
 pub(crate) struct RigidMotion {
     pub gravity: Vec3,
     pub damping: f64,

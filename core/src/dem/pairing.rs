@@ -1,7 +1,7 @@
 //! Contact physics of a pair (YADE's `Ip2` functors): which contact law a pair of materials gets,
 //! the per-pair values it is laid out for, the pair's `PairInfo` (radii, masses, elastic moduli, a
 //! seed drawn from the two ids) its law sets its parameters from, and new candidate pairs merged
-//! into a list with their law and parameters. Geometry (`contact_stage.rs`, `potential/`) and the
+//! into a list with their law and parameters. Geometry (`contact_stage.rs`, a body kind's) and the
 //! laws themselves (`ext::ContactLaw`) are apart from it.
 
 use crate::dem::broad_phase::Candidate;
@@ -155,25 +155,6 @@ impl DemSim {
             info
         } else {
             self.pair_info(i, Some(j))
-        }
-    }
-
-    /// The pair info of particles `i` and `j` (or of `i` and wall `j`).
-    pub(crate) fn potential_info(&self, i: usize, j: usize, wall: bool) -> PairInfo {
-        let p = &self.potentials;
-        let elastic = |m: u16| self.materials.get(m as usize).and_then(|m| m.elastic);
-        let (r2, m2, id2, e2) = if wall {
-            (f64::INFINITY, f64::INFINITY, u64::MAX - j as u64, elastic(self.walls[j].material))
-        } else {
-            (p.shape_of(j).bounding_radius, p.contact_mass(j), p.id[j], elastic(p.material[j]))
-        };
-        let (lo, hi) = (p.id[i].min(id2), p.id[i].max(id2));
-        let seed = crate::ext::contact::uniform(self.seed ^ lo.wrapping_mul(0x100_0000_01B3), hi).to_bits();
-        PairInfo {
-            radius: [p.shape_of(i).bounding_radius, r2],
-            mass: [p.contact_mass(i), m2],
-            seed,
-            elastic: [elastic(p.material[i]), e2],
         }
     }
 }

@@ -154,26 +154,6 @@ impl DemSim {
     }
 }
 
-impl DemSim {
-    /// The potential particles' surfaces (`f = 0`, triangulated along 128 directions from each
-    /// centre), with per-triangle `id`, `material`, `velocity`, `force` and `fixed`.
-    pub fn potentials_picture(&self) -> PolyData {
-        let p = &self.potentials;
-        let surfaces: Vec<(Vec<Vec3>, Vec<[usize; 3]>)> = p.shapes.iter().map(|s| s.surface(2)).collect();
-        let bodies = RigidBodies {
-            shape: &p.shape,
-            x: &p.x,
-            q: &p.q,
-            id: &p.id,
-            material: &p.material,
-            fixed: &p.fixed,
-            v: &p.v,
-            force: &p.force,
-        };
-        rigid_picture(&surfaces, bodies)
-    }
-}
-
 /// Rigid bodies of shapes of their own, as a picture shows them.
 pub(crate) struct RigidBodies<'a> {
     pub shape: &'a [u32],

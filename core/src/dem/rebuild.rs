@@ -201,7 +201,6 @@ impl DemSim {
         self.h_at_build = self.cell.as_ref().map(|c| c.h);
         self.radius_max_at_build = self.spheres.largest_radius();
         self.radius_min_at_build = self.spheres.smallest_radius();
-        self.rebuild_potential_pairs()?;
         self.rebuild_kind_pairs()?;
         self.needs_rebuild = false;
         self.rebuilds += 1;

@@ -22,10 +22,6 @@ pub struct DemMaterial {
     pub elastic: Option<Elastic>,
 }
 
-/// Why a scene holds spheres (and clumps) or potential particles, not both.
-pub(crate) const MIXED_SHAPES: &str = "spheres (and clumps) and potential particles do not meet one another: a \
-     simulation holds one kind or the other";
-
 #[derive(Clone)]
 pub struct DemSim {
     pub spheres: Spheres,
@@ -89,17 +85,8 @@ pub struct DemSim {
     /// The energy balance, when tracked (see `energy.rs`).
     pub energy: Option<crate::dem::energy::EnergyTracker>,
     pub(crate) next_id: u64,
-    /// Potential particles (see `dem::potential`), their candidate pairs with one another and
-    /// with the walls, and their centres when those lists were built.
-    pub potentials: crate::dem::potential::Potentials,
-    pub(crate) potential_pairs: PairList,
-    pub(crate) potential_wall_pairs: PairList,
-    pub(crate) potential_x_at_build: Vec<Vec3>,
-    /// Seconds the potential particles' contacts spent in detection and in their laws (with the
-    /// sums), since the simulation began: what `granite bench potential` reports.
-    pub potential_seconds: [f64; 2],
-    /// Bodies of a plugin kind (capsules, ...), their candidate lists and loads for the spheres
-    /// (see `dem::kinds`).
+    /// Bodies of a plugin kind (potential particles, capsules, ...), their candidate lists and
+    /// loads for the spheres (see `dem::kinds`).
     pub kinds: crate::dem::kinds::KindScene,
 }
 
@@ -149,11 +136,6 @@ impl DemSim {
             external: Vec::new(),
             energy: None,
             next_id: 0,
-            potentials: Default::default(),
-            potential_pairs: PairList::default(),
-            potential_wall_pairs: PairList::default(),
-            potential_x_at_build: Vec::new(),
-            potential_seconds: [0.0; 2],
             kinds: Default::default(),
         }
     }
@@ -260,9 +242,6 @@ impl DemSim {
     /// A sphere a step can move: finite position and velocity, a radius whose mass at the
     /// material's density is finite and > 0. Returns that density.
     pub(crate) fn check_sphere(&self, material: u16, x: Vec3, radius: f64, v: Vec3) -> Result<f64> {
-        if !self.potentials.is_empty() {
-            return Err(GraniteError::Setup(MIXED_SHAPES.into()));
-        }
         if !(radius > 0.0 && radius.is_finite()) {
             return Err(GraniteError::param("radius", radius, "must be > 0"));
         }
@@ -485,7 +464,7 @@ impl DemSim {
     }
 
     /// Largest stable time step estimate: `min sqrt(m / k_n)` over one-contact oscillators of
-    /// each sphere (and each free potential particle) with a copy of itself and with each wall
+    /// each sphere (and each free body of a plugin kind) with a copy of itself and with each wall
     /// (multiply by ~0.2-0.3 for packings).
     pub fn critical_dt(&self) -> Option<f64> {
         let mut best: Option<f64> = None;
@@ -515,16 +494,6 @@ impl DemSim {
             consider(self.law_for(mi, mi), self_pair);
             for (w, wall) in self.walls.iter().enumerate() {
                 consider(self.law_for(mi, wall.material), self.kind_info(i, w, crate::dem::pairing::Other::Walls));
-            }
-        }
-        let p = &self.potentials;
-        for i in (0..p.len()).filter(|&i| !p.fixed[i]) {
-            let mi = p.material[i];
-            let mut self_pair = self.potential_info(i, i, false);
-            self_pair.seed = 0;
-            consider(self.law_for(mi, mi), self_pair);
-            for (w, wall) in self.walls.iter().enumerate() {
-                consider(self.law_for(mi, wall.material), self.potential_info(i, w, true));
             }
         }
         best

@@ -33,12 +33,15 @@ struct LawRecord {
     params: ParamMap,
 }
 
-/// Bodies of a plugin kind: the kind by name, each shape by the parameters it was built from
-/// (mass properties are computed again from them and the materials' densities).
+/// Bodies of a plugin kind: the family by name, each shape by its kind and the parameters it
+/// was built from (mass properties are computed again from them and the materials' densities).
 #[derive(Serialize, Deserialize)]
 struct BodiesRecord {
     kind: String,
     shapes: Vec<ParamMap>,
+    /// Each shape's kind (absent in states of one kind per family: `kind` then).
+    #[serde(default)]
+    shape_kinds: Vec<String>,
     shape: Vec<u32>,
     id: Vec<u64>,
     material: Vec<u16>,
@@ -139,6 +142,7 @@ impl DemSim {
         Some(BodiesRecord {
             kind: kind.name.clone(),
             shapes: k.shapes.iter().map(|s| s.params()).collect(),
+            shape_kinds: k.shapes.iter().map(|s| s.kind().to_string()).collect(),
             shape: k.shape.clone(),
             id: k.id.clone(),
             material: k.material.clone(),
@@ -159,15 +163,11 @@ impl DemSim {
         let Some(registry) = registry else {
             return Err(GraniteError::Other(format!("a state with {} bodies moved without a registry", record.kind)));
         };
-        let factory = registry.body_kind(&record.kind)?;
-        let shapes = record
-            .shapes
-            .iter()
-            .map(|given| {
-                let params =
-                    crate::params::Params::resolve(&format!("{} body", factory.name()), factory.param_specs(), given)?;
-                factory.build(params)
-            })
+        // A state of one kind per family names the family's kind for every shape.
+        let kind_of = |s: usize| record.shape_kinds.get(s).unwrap_or(&record.kind);
+        let factory = registry.body_kind(kind_of(0))?;
+        let shapes = (0..record.shapes.len())
+            .map(|s| registry.body_kind(kind_of(s))?.build_from(&record.shapes[s]))
             .collect::<Result<Vec<_>>>()?;
         let n = record.x.len();
         let lengths = [
@@ -182,11 +182,7 @@ impl DemSim {
         ];
         crate::loaded::same_length("bodies", "x", n, &lengths).map_err(GraniteError::Other)?;
         let k = &mut self.kinds;
-        k.kind = Some(crate::dem::kinds::KindInUse {
-            name: factory.name().to_string(),
-            geometry: factory.geometry(),
-            stride: factory.values_per_shape(),
-        });
+        k.kind = Some(crate::dem::kinds::KindInUse::of(factory.as_ref()));
         for i in 0..n {
             let shape = shapes.get(record.shape[i] as usize).ok_or_else(|| {
                 GraniteError::Other(format!("body {i}: shape {} of {}", record.shape[i], shapes.len()))
@@ -212,21 +208,7 @@ impl DemSim {
 
     /// The whole state as a JSON value (for checkpoints that embed DEM samples).
     pub fn to_json(&self) -> Result<serde_json::Value> {
-        self.savable()?;
         serde_json::to_value(self.to_state()).map_err(|e| GraniteError::Other(format!("DEM state: {e}")))
-    }
-
-    /// Whether the state format holds everything of this simulation: not potential particles.
-    fn savable(&self) -> Result<()> {
-        if self.potentials.is_empty() {
-            Ok(())
-        } else {
-            Err(GraniteError::Setup(
-                "a simulation with potential particles cannot be saved: the DEM state format holds spheres, clumps \
-                 and walls"
-                    .into(),
-            ))
-        }
     }
 
     /// A state from [`DemSim::to_json`]; contact laws are rebuilt from `registry`.
@@ -258,7 +240,6 @@ impl DemSim {
 
     /// [`DemSim::save`], recording `written_by` (the program and its commit) in the file.
     pub fn save_as(&self, path: &Path, written_by: &str) -> Result<()> {
-        self.savable()?;
         let state = serde_json::to_string(&self.to_state())
             .map_err(|e| GraniteError::Other(format!("{}: {e}", path.display())))?;
         let text = crate::io::checkpoint_file::seal(FORMAT, VERSION, written_by, &state);

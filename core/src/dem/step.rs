@@ -102,13 +102,6 @@ impl DemSim {
             );
             moved = farther(moved, clump_moved);
         }
-        // Potential particles: their contacts see the walls where they were at the step's start.
-        let potential_moved = if self.potentials.is_empty() {
-            0.0
-        } else {
-            let motion = RigidMotion { gravity: self.gravity, damping: self.damping, dt: self.dt, affine: None };
-            self.potential_step(&motion)?
-        };
         let kind_moved = if self.kinds.is_empty() {
             0.0
         } else {
@@ -174,12 +167,6 @@ impl DemSim {
         if !self.kinds.is_empty() {
             let skin = self.kind_skin();
             if 2.0 * kind_moved > skin || kind_moved + wall_moved > skin {
-                self.needs_rebuild = true;
-            }
-        }
-        if !self.potentials.is_empty() {
-            let skin = self.potential_skin();
-            if 2.0 * potential_moved > skin || potential_moved + wall_moved > skin {
                 self.needs_rebuild = true;
             }
         }

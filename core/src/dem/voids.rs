@@ -6,23 +6,35 @@ use crate::dem::delaunay::{tet_volume, tetrahedralize};
 use crate::dem::particles::FREE;
 use crate::dem::sim::DemSim;
 use crate::ext::contact::uniform;
+use crate::ext::BodyShape;
 use crate::math::Vec3;
+use nalgebra::UnitQuaternion;
 use rayon::prelude::*;
+use std::sync::Arc;
 
 /// A particle as the void-ratio methods see it: its spheres (one, or a clump's members) and the
-/// volume of their union; for a potential particle, its bounding sphere (centre and reach) and
-/// its potential, which decides what lies inside it.
+/// volume of their union; for a body of a plugin kind, its bounding sphere (centre and reach) and
+/// its shape where it is, which decides what lies inside it.
 #[derive(Debug, Clone)]
 pub struct Grain {
     pub spheres: Vec<(Vec3, f64)>,
     pub volume: f64,
-    pub potential: Option<crate::dem::potential::Placed>,
+    pub body: Option<PlacedShape>,
+}
+
+/// A body's shape at its pose.
+#[derive(Debug, Clone)]
+pub struct PlacedShape {
+    pub shape: Arc<dyn BodyShape>,
+    pub x: Vec3,
+    pub q: UnitQuaternion<f64>,
 }
 
 impl Grain {
     fn contains(&self, p: Vec3) -> bool {
-        if let Some(placed) = &self.potential {
-            return placed.value(p) <= 0.0;
+        if let Some(b) = &self.body {
+            let local = b.q.inverse() * nalgebra::Vector3::new(p[0] - b.x[0], p[1] - b.x[1], p[2] - b.x[2]);
+            return b.shape.contains([local[0], local[1], local[2]]);
         }
         self.spheres.iter().any(|(c, r)| (p[0] - c[0]).powi(2) + (p[1] - c[1]).powi(2) + (p[2] - c[2]).powi(2) <= r * r)
     }
@@ -40,7 +52,7 @@ impl Grain {
     }
 }
 
-/// The grains of a simulation: free spheres, clumps and potential particles (fixed ones, the
+/// The grains of a simulation: free spheres, clumps and bodies of plugin kinds (fixed ones, the
 /// container's parts, left out).
 pub fn grains(sim: &DemSim) -> Vec<Grain> {
     let s = &sim.spheres;
@@ -49,7 +61,7 @@ pub fn grains(sim: &DemSim) -> Vec<Grain> {
         .map(|i| Grain {
             spheres: vec![(s.x[i], s.radius[i])],
             volume: 4.0 / 3.0 * std::f64::consts::PI * s.radius[i].powi(3),
-            potential: None,
+            body: None,
         })
         .collect();
     for c in 0..sim.clumps.len() {
@@ -57,15 +69,15 @@ pub fn grains(sim: &DemSim) -> Vec<Grain> {
             let i = sim.clumps.members[m] as usize;
             (s.x[i], s.radius[i])
         });
-        out.push(Grain { spheres: spheres.collect(), volume: sim.clumps.volume[c], potential: None });
+        out.push(Grain { spheres: spheres.collect(), volume: sim.clumps.volume[c], body: None });
     }
-    let p = &sim.potentials;
-    for i in (0..p.len()).filter(|&i| !p.fixed[i]) {
-        let shape = p.shape_of(i);
+    let k = &sim.kinds;
+    for i in (0..k.len()).filter(|&i| !k.fixed[i]) {
+        let shape = k.shapes[k.shape[i] as usize].clone();
         out.push(Grain {
-            spheres: vec![(p.x[i], shape.bounding_radius)],
-            volume: shape.volume,
-            potential: Some(crate::dem::potential::Placed::new(shape, &p.pose(i))),
+            spheres: vec![(k.x[i], shape.bounding_radius())],
+            volume: shape.volume(),
+            body: Some(PlacedShape { shape, x: k.x[i], q: k.q[i] }),
         });
     }
     out

@@ -1,15 +1,21 @@
-//! Body kinds: rigid bodies of a shape a plugin brings (capsules, ...), beside the engine's own
-//! spheres and clumps. A kind registers a factory that builds its shapes from parameters and the
-//! contact geometry of its pairs: with one another, with plane walls and with spheres, each
-//! called once per pair list (YADE's `Ig2` functors, without a virtual call per contact). The
-//! engine keeps the bodies (pose, velocity, mass properties), finds candidate pairs from their
-//! bounding spheres, runs the registered contact laws on what the geometry found, sums the loads
-//! in pair order and moves the bodies (`dem::kinds`).
+//! Body kinds: rigid bodies of a shape a plugin brings (capsules, potential particles, ...),
+//! beside the engine's own spheres and clumps. A kind registers a factory that builds its shapes
+//! from parameters and the contact geometry of its pairs: with one another, with plane walls and
+//! with spheres, each called once per pair list (YADE's `Ig2` functors, without a virtual call per
+//! contact). The engine keeps the bodies (pose, velocity, mass properties), finds candidate pairs
+//! from their bounding spheres, runs the registered contact laws on what the geometry found, sums
+//! the loads in pair order and moves the bodies (`dem::kinds`).
+//!
+//! Once a step the geometry places the bodies where they are ([`BodyGeometry::place`]: a
+//! potential particle moves its planes into the world frame there); the three pair lists are then
+//! handed to what it placed. A geometry whose solve starts from the last step's solution keeps
+//! values per pair ([`BodyGeometry::warm_values`]) that the engine stores with the pair.
 
 use crate::error::Result;
 use crate::math::Vec3;
-use crate::params::{ParamSpec, Params};
+use crate::params::{ParamMap, ParamSpec, Params};
 use nalgebra::UnitQuaternion;
+use rayon::prelude::*;
 use std::sync::Arc;
 
 /// One shape of a body kind, in its body frame: the centre of mass at the origin, principal
@@ -30,6 +36,17 @@ pub trait BodyShape: Send + Sync + std::fmt::Debug {
     fn inertia_per_density(&self) -> Vec3;
     /// A closed triangulated surface (vertices, triangles) for pictures.
     fn surface(&self) -> (Vec<Vec3>, Vec<[usize; 3]>);
+    /// Whether point `p` (body frame) lies in the body: what the void ratio's sub-volume method
+    /// asks.
+    fn contains(&self, p: Vec3) -> bool;
+    /// Points (body frame) the heap measures follow the body by; its centre of mass unless the
+    /// kind says better.
+    fn monitor_points(&self) -> Vec<Vec3> {
+        vec![[0.0; 3]]
+    }
+    /// The shape as its own type, for its kind's geometry to read once a step (never per
+    /// contact).
+    fn as_any(&self) -> &dyn std::any::Any;
 }
 
 /// A body kind as the registry holds it.
@@ -38,9 +55,21 @@ pub trait BodyKindFactory: Send + Sync {
     fn description(&self) -> &str {
         ""
     }
+    /// The geometry family the kind's bodies belong to: kinds of one family share a geometry and
+    /// meet in one simulation (a rounded tetrahedron and a rounded box are both potential
+    /// particles). The kind's own name unless it says otherwise.
+    fn family(&self) -> &str {
+        self.name()
+    }
     fn param_specs(&self) -> &[ParamSpec];
     /// A shape of this kind from resolved parameters.
     fn build(&self, params: Params) -> Result<Arc<dyn BodyShape>>;
+    /// A shape from parameters as a user or a saved state gives them ([`BodyShape::params`]):
+    /// checked against [`BodyKindFactory::param_specs`], then built. A kind whose shapes take a
+    /// list of values (the planes of a potential particle) reads them here itself.
+    fn build_from(&self, given: &ParamMap) -> Result<Arc<dyn BodyShape>> {
+        self.build(Params::resolve(&format!("{} body", self.name()), self.param_specs(), given)?)
+    }
     /// Values each shape gives its geometry ([`BodyShape::values`]).
     fn values_per_shape(&self) -> usize;
     /// The contact geometry of this kind's pairs.
@@ -48,12 +77,16 @@ pub trait BodyKindFactory: Send + Sync {
 }
 
 /// Bodies of one kind as their geometry reads them, at the start of a step: centres of mass,
-/// orientations (body frame to world), and each body's shape values (`stride` a body).
+/// orientations (body frame to world), each body's shape values (`stride` a body), and each
+/// body's shape among the distinct `shapes`.
+#[derive(Clone, Copy)]
 pub struct KindBodies<'a> {
     pub x: &'a [Vec3],
     pub q: &'a [UnitQuaternion<f64>],
     pub values: &'a [f64],
     pub stride: usize,
+    pub shape: &'a [u32],
+    pub shapes: &'a [Arc<dyn BodyShape>],
 }
 
 impl KindBodies<'_> {
@@ -87,13 +120,83 @@ pub struct Ball {
     pub radius: f64,
 }
 
-/// The contact geometry of a body kind. Each call takes a whole pair list and fills `out` (as
-/// long as the list): a touch, or None where the two are apart.
+/// The values a geometry keeps per pair of a list from one step to the next (its warm starts),
+/// `count` a pair: they sit in the pair's history after its law's (`stride` values a pair from
+/// `offset`). They start at zero for a new pair and stay while the pair is a candidate.
+pub struct WarmStarts<'a> {
+    history: &'a mut [f64],
+    stride: usize,
+    offset: usize,
+    count: usize,
+}
+
+impl<'a> WarmStarts<'a> {
+    /// The warm starts of a list whose history holds `stride` values a pair, the geometry's
+    /// `count` from `offset`.
+    pub fn new(history: &'a mut [f64], stride: usize, offset: usize, count: usize) -> WarmStarts<'a> {
+        assert!(offset + count <= stride || count == 0, "warm starts beyond a pair's history");
+        WarmStarts { history, stride, offset, count }
+    }
+
+    pub fn count(&self) -> usize {
+        self.count
+    }
+
+    /// Each pair's values, in pair order (empty slices when the geometry keeps none).
+    pub fn per_pair(&mut self) -> Vec<&mut [f64]> {
+        let (offset, count) = (self.offset, self.count);
+        if count == 0 {
+            return Vec::new();
+        }
+        self.history.chunks_mut(self.stride).map(|c| &mut c[offset..offset + count]).collect()
+    }
+
+    /// Each pair's values for a parallel pass, in pair order (`count` must be > 0).
+    pub fn par_per_pair(&mut self) -> impl IndexedParallelIterator<Item = &mut [f64]> + '_ {
+        let (offset, count) = (self.offset, self.count);
+        self.history.par_chunks_mut(self.stride.max(1)).map(move |c| &mut c[offset..offset + count])
+    }
+}
+
+/// A contact a geometry could not settle: the pair (its index in the list) and why.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PairFailure {
+    pub pair: usize,
+    pub reason: String,
+}
+
+/// The contact geometry of a body kind: the bodies placed once a step, then the pair lists.
 pub trait BodyGeometry: Send + Sync {
+    /// Values each pair keeps for the geometry from one step to the next ([`WarmStarts`]).
+    fn warm_values(&self) -> usize {
+        0
+    }
+    /// The bodies where they are at this step's start, ready for the pair lists.
+    fn place<'a>(&'a self, bodies: KindBodies<'a>) -> Result<Box<dyn PlacedBodies + 'a>>;
+}
+
+/// A kind's bodies placed for a step. Each call takes a whole pair list and fills `out` (as long
+/// as the list): a touch, or None where the two are apart; `warm` holds the list's warm starts.
+pub trait PlacedBodies: Sync {
     /// Pairs of bodies of this kind, `(i, j)`; the normal points from `i` to `j`.
-    fn pairs(&self, bodies: &KindBodies<'_>, pairs: &[(u32, u32)], out: &mut [Option<Touch>]);
+    fn pairs(
+        &self,
+        pairs: &[(u32, u32)],
+        warm: WarmStarts<'_>,
+        out: &mut [Option<Touch>],
+    ) -> std::result::Result<(), PairFailure>;
     /// Bodies against plane walls, `(i, plane)`; the normal points from the body into the wall.
-    fn planes(&self, bodies: &KindBodies<'_>, pairs: &[(u32, Plane)], out: &mut [Option<Touch>]);
+    fn planes(
+        &self,
+        pairs: &[(u32, Plane)],
+        warm: WarmStarts<'_>,
+        out: &mut [Option<Touch>],
+    ) -> std::result::Result<(), PairFailure>;
     /// Bodies against spheres, `(i, sphere)`; the normal points from the body to the sphere.
-    fn spheres(&self, bodies: &KindBodies<'_>, pairs: &[(u32, Ball)], out: &mut [Option<Touch>]);
+    fn spheres(
+        &self,
+        pairs: &[(u32, Ball)],
+        warm: WarmStarts<'_>,
+        out: &mut [Option<Touch>],
+    ) -> std::result::Result<(), PairFailure>;
 }

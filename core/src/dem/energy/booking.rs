@@ -38,11 +38,6 @@ impl DemSim {
         if self.cell.is_some() {
             return Err(GraniteError::Setup("energy tracking covers open domains, not periodic cells".into()));
         }
-        if !self.potentials.is_empty() {
-            return Err(GraniteError::Setup(
-                "energy tracking covers spheres and clumps, not potential particles".into(),
-            ));
-        }
         if let Some(kind) = self.kinds.kind.as_ref().filter(|_| !self.kinds.is_empty()) {
             return Err(GraniteError::Setup(format!(
                 "energy tracking covers spheres and clumps, not {} bodies",

@@ -9,7 +9,9 @@
 //! shifts its bearing continuously towards the end going down).
 
 use granite_core::error::{GraniteError, Result};
-use granite_core::ext::body::{Ball, BodyGeometry, BodyKindFactory, BodyShape, KindBodies, Plane, Touch};
+use granite_core::ext::body::{
+    Ball, BodyGeometry, BodyKindFactory, BodyShape, KindBodies, PairFailure, PlacedBodies, Plane, Touch, WarmStarts,
+};
 use granite_core::math::Vec3;
 use granite_core::params::{ParamSpec, Params};
 use std::f64::consts::PI;
@@ -125,9 +127,32 @@ impl BodyShape for Capsule {
         }
         (points, triangles)
     }
+    fn contains(&self, p: Vec3) -> bool {
+        let z = p[2].clamp(-self.half, self.half);
+        p[0] * p[0] + p[1] * p[1] + (p[2] - z) * (p[2] - z) <= self.radius * self.radius
+    }
+    /// The centres of the end caps: a heap's surface follows both ends.
+    fn monitor_points(&self) -> Vec<Vec3> {
+        vec![[0.0, 0.0, -self.half], [0.0, 0.0, self.half]]
+    }
+    fn as_any(&self) -> &dyn std::any::Any {
+        self
+    }
 }
 
 struct CapsuleGeometry;
+
+impl BodyGeometry for CapsuleGeometry {
+    fn place<'a>(&'a self, bodies: KindBodies<'a>) -> Result<Box<dyn PlacedBodies + 'a>> {
+        Ok(Box::new(PlacedCapsules { bodies }))
+    }
+}
+
+/// Capsules at a step's start: their segments are found per pair from the poses (a segment costs
+/// a rotation, less than keeping it).
+struct PlacedCapsules<'a> {
+    bodies: KindBodies<'a>,
+}
 
 /// The segment of body `i`: its ends and radius, in the world frame.
 fn segment(bodies: &KindBodies<'_>, i: usize) -> (Vec3, Vec3, f64) {
@@ -218,8 +243,14 @@ fn unit_or_z(v: Vec3) -> Vec3 {
     }
 }
 
-impl BodyGeometry for CapsuleGeometry {
-    fn pairs(&self, bodies: &KindBodies<'_>, pairs: &[(u32, u32)], out: &mut [Option<Touch>]) {
+impl PlacedBodies for PlacedCapsules<'_> {
+    fn pairs(
+        &self,
+        pairs: &[(u32, u32)],
+        _: WarmStarts<'_>,
+        out: &mut [Option<Touch>],
+    ) -> std::result::Result<(), PairFailure> {
+        let bodies = &self.bodies;
         for (slot, &(i, j)) in out.iter_mut().zip(pairs) {
             let (a0, a1, ra) = segment(bodies, i as usize);
             let (b0, b1, rb) = segment(bodies, j as usize);
@@ -230,9 +261,16 @@ impl BodyGeometry for CapsuleGeometry {
             let fallback = unit_or_z(if dot(across, towards) < 0.0 { across.map(|c| -c) } else { across });
             *slot = swept_touch(pa, ra, pb, rb, fallback);
         }
+        Ok(())
     }
 
-    fn planes(&self, bodies: &KindBodies<'_>, pairs: &[(u32, Plane)], out: &mut [Option<Touch>]) {
+    fn planes(
+        &self,
+        pairs: &[(u32, Plane)],
+        _: WarmStarts<'_>,
+        out: &mut [Option<Touch>],
+    ) -> std::result::Result<(), PairFailure> {
+        let bodies = &self.bodies;
         for (slot, &(i, plane)) in out.iter_mut().zip(pairs) {
             let (e0, e1, r) = segment(bodies, i as usize);
             let n = plane.normal;
@@ -250,15 +288,23 @@ impl BodyGeometry for CapsuleGeometry {
             let inward = n.map(|c| -c);
             *slot = Some(Touch { normal: inward, overlap, point: along(on_segment, inward, r - 0.5 * overlap) });
         }
+        Ok(())
     }
 
-    fn spheres(&self, bodies: &KindBodies<'_>, pairs: &[(u32, Ball)], out: &mut [Option<Touch>]) {
+    fn spheres(
+        &self,
+        pairs: &[(u32, Ball)],
+        _: WarmStarts<'_>,
+        out: &mut [Option<Touch>],
+    ) -> std::result::Result<(), PairFailure> {
+        let bodies = &self.bodies;
         for (slot, &(i, ball)) in out.iter_mut().zip(pairs) {
             let (e0, e1, r) = segment(bodies, i as usize);
             let p = nearest_on(e0, e1, ball.centre);
             let fallback = unit_or_z(cross(sub(e1, e0), [1.0, 0.0, 0.0]));
             *slot = swept_touch(p, r, ball.centre, ball.radius, fallback);
         }
+        Ok(())
     }
 }
 

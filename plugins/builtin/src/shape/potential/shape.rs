@@ -12,8 +12,8 @@
 //! axes of inertia, so that a particle's pose is a position and a rotation, and its inertia three
 //! numbers.
 
-use crate::error::{GraniteError, Result};
-use crate::math::{dot3, Vec3};
+use granite_core::error::{GraniteError, Result};
+use granite_core::math::{dot3, Vec3};
 use nalgebra::{Matrix3, SymmetricEigen, Vector3};
 
 /// A potential particle's shape in its body frame (see the module's text).
@@ -471,7 +471,7 @@ mod tests {
     fn the_tetrahedron_is_followed_by_the_clumps_sphere_centres() {
         let (r_s, r_clump) = (0.3101e-2, 0.5e-2);
         let shape = PotentialShape::rounded_tetrahedron(r_s, r_clump, 2f64.sqrt() * r_s, 0.65).unwrap();
-        let centres = crate::dem::clump::tetrahedral_members([0.0; 3], r_s, r_clump).unwrap();
+        let centres = granite_core::dem::clump::tetrahedral_members([0.0; 3], r_s, r_clump).unwrap();
         assert_eq!(shape.monitor_points.len(), 4);
         for (c, _) in centres {
             let nearest = shape

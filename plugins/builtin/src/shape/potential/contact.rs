@@ -21,7 +21,7 @@
 //! search on each particle (thesis 2.2.3).
 
 use super::shape::{potential, PotentialShape};
-use crate::math::{dot3, Vec3};
+use granite_core::math::{dot3, Vec3};
 use nalgebra::{Matrix3, Vector3};
 
 /// How far from the optimal value of `max(f_A, f_B)` a solution may be. Potentials are
@@ -90,6 +90,21 @@ impl Placed {
         self.modulus = 2.0 * self.weights[1];
         self.bounding_radius = shape.bounding_radius;
         self.standoff = if shape.k < 1.0 { shape.r / (1.0 - shape.k).sqrt() } else { f64::INFINITY };
+    }
+
+    /// A sphere of `radius` about `centre` as a potential (`k = 1`, no planes): what a particle
+    /// meets a sphere of the scene as.
+    pub fn sphere(centre: Vec3, radius: f64) -> Placed {
+        let weights = [0.0, 1.0 / (radius * radius)];
+        Placed {
+            planes: Vec::new(),
+            sphere_centre: centre,
+            position: centre,
+            weights,
+            modulus: 2.0 * weights[1],
+            bounding_radius: radius,
+            standoff: f64::INFINITY,
+        }
     }
 
     pub fn value(&self, x: Vec3) -> f64 {
