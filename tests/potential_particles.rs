@@ -57,7 +57,8 @@ fn collision(add: impl Fn(&mut DemSim, u16, f64, f64), radius: f64, speed: f64, 
     (0..steps)
         .map(|_| {
             sim.step().unwrap();
-            if sim.kinds.is_empty() {
+            // The first body is a sphere where there is one.
+            if sim.kinds.is_empty() || !sim.spheres.is_empty() {
                 sim.spheres.force[0][0]
             } else {
                 sim.kinds.force[0][0]
@@ -105,6 +106,45 @@ fn k_one_particles_collide_like_spheres() {
         // The particles' mass comes from a grid integration of the sphere (0.1 % off): their
         // curve is stretched by half of that in time.
         assert!((s - p).abs() < 0.01 * peak, "step {step}: spheres {s} N, particles {p} N (peak {peak} N)");
+    }
+}
+
+/// A sphere and a k = 1 potential particle meet in one scene: their collision follows the
+/// force-time curve of two spheres within 1 % of its peak, as two such particles do (the
+/// particle's mass comes from a grid integration, 0.1 % off).
+#[test]
+fn a_sphere_and_a_k_one_particle_collide_like_two_spheres() {
+    let radius: f64 = 5e-3;
+    let speed = 0.5;
+    let mass = 2500.0 * 4.0 / 3.0 * std::f64::consts::PI * radius.powi(3);
+    let dt = 0.01 * (0.5 * mass / 1e4f64).sqrt();
+    let steps = (2.0 * (0.1 * radius) / speed / dt) as usize + 400;
+    let spheres = collision(
+        |sim, m, half, v| {
+            sim.add_sphere(m, [-half, 0.0, 0.0], radius, [v, 0.0, 0.0]).unwrap();
+            sim.add_sphere(m, [half, 0.0, 0.0], radius, [-v, 0.0, 0.0]).unwrap();
+        },
+        radius,
+        speed,
+        dt,
+        steps,
+    );
+    let shape = ball(radius);
+    let mixed = collision(
+        |sim, m, half, v| {
+            sim.add_sphere(m, [-half, 0.0, 0.0], radius, [v, 0.0, 0.0]).unwrap();
+            particle(sim, m, &shape, [half, 0.0, 0.0], UnitQuaternion::identity(), [-v, 0.0, 0.0]);
+        },
+        radius,
+        speed,
+        dt,
+        steps,
+    );
+    let peak = spheres.iter().fold(0.0f64, |m, f| m.max(f.abs()));
+    assert!(peak > 0.0 && mixed.iter().filter(|f| **f != 0.0).count() > 100, "the sphere and the particle collide");
+    assert_eq!(*mixed.last().unwrap(), 0.0, "the collision ends within the run");
+    for (step, (s, p)) in spheres.iter().zip(&mixed).enumerate() {
+        assert!((s - p).abs() < 0.01 * peak, "step {step}: spheres {s} N, sphere and particle {p} N (peak {peak} N)");
     }
 }
 
@@ -184,7 +224,7 @@ fn energy(sim: &DemSim, kn: f64) -> f64 {
 /// damping, stepped at `dt_factor` of the critical time step for the time of 6000 steps at 0.05.
 /// Returns the simulation, its energy at the start, the largest kinetic energy of the run and the
 /// particle-steps spent in contact.
-fn tetrahedra_in_a_box(threads: usize, k: f64, dt_factor: f64) -> (DemSim, f64, f64, usize) {
+fn tetrahedra_in_a_box(threads: usize, k: f64, dt_factor: f64, steps: usize) -> (DemSim, f64, f64, usize) {
     let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
     pool.install(|| {
         let (r_s, r_clump) = (0.3101e-2, 0.5e-2);
@@ -219,7 +259,8 @@ fn tetrahedra_in_a_box(threads: usize, k: f64, dt_factor: f64) -> (DemSim, f64, 
         }
         sim.gravity = [0.0, 0.0, -9.81];
         sim.set_dt(dt_factor * sim.critical_dt().unwrap()).unwrap();
-        let steps = (6000.0 * 0.05 / dt_factor) as usize;
+        // By default the time of 6000 steps at 0.05 of the critical step.
+        let steps = if steps > 0 { steps } else { (6000.0 * 0.05 / dt_factor) as usize };
         let start = energy(&sim, kn);
         let (mut largest_kinetic, mut contacts): (f64, usize) = (0.0, 0);
         for _ in 0..steps {
@@ -238,7 +279,7 @@ fn tetrahedra_in_a_box(threads: usize, k: f64, dt_factor: f64) -> (DemSim, f64, 
 /// order (9e-5 of the kinetic energy exchanged, measured).
 #[test]
 fn spheres_keep_their_energy_over_many_contacts() {
-    let (sim, start, kinetic, contacts) = tetrahedra_in_a_box(2, 1.0, 0.05);
+    let (sim, start, kinetic, contacts) = tetrahedra_in_a_box(2, 1.0, 0.05, 0);
     let end = energy(&sim, 1200.0);
     assert!(contacts > 5000, "the particles meet the walls and one another ({contacts} particle-steps in contact)");
     assert!(
@@ -257,7 +298,7 @@ fn spheres_keep_their_energy_over_many_contacts() {
 #[test]
 fn tetrahedra_drift_in_energy_only_by_their_contact_geometry() {
     let drift = |dt_factor: f64| {
-        let (sim, start, kinetic, contacts) = tetrahedra_in_a_box(2, 0.65, dt_factor);
+        let (sim, start, kinetic, contacts) = tetrahedra_in_a_box(2, 0.65, dt_factor, 0);
         assert!(contacts > 5000, "{contacts} particle-steps in contact");
         assert!(sim.kinds.w.iter().any(|w| w.iter().any(|c| c.abs() > 1.0)), "the particles turn");
         (energy(&sim, 1200.0) - start) / kinetic
@@ -268,10 +309,47 @@ fn tetrahedra_drift_in_energy_only_by_their_contact_geometry() {
     assert!(fine / coarse > 0.5, "drift {coarse} at 0.05 of the critical step, {fine} at 0.025");
 }
 
+/// Potential particles and spheres in a box, saved part way and loaded again (the shapes rebuilt
+/// from their kinds' parameters, the pairs with their warm starts): the run goes on bit for bit
+/// as the straight one.
+#[test]
+fn a_saved_state_with_potential_particles_and_spheres_resumes_bit_for_bit() {
+    let registry = granite_plugins::default_registry();
+    let build = || {
+        let (mut sim, ..) = tetrahedra_in_a_box(1, 0.65, 0.2, 300);
+        let m = sim.kinds.material[0];
+        for k in 0..6 {
+            let x = [0.004 + 0.004 * k as f64, 0.025, 0.03];
+            sim.add_sphere(m, x, 1.5e-3, [0.0, -0.05, 0.0]).unwrap();
+        }
+        sim.set_damping(0.5).unwrap();
+        sim
+    };
+    let steps = 3000;
+    let mut straight = build();
+    for _ in 0..2 * steps {
+        straight.step().unwrap();
+    }
+    let mut first = build();
+    for _ in 0..steps {
+        first.step().unwrap();
+    }
+    assert!(first.kinds.contact_count() >= 5, "the saved state has {} contacts", first.kinds.contact_count());
+    let path = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("potential_state.json");
+    first.save(&path).unwrap();
+    let mut resumed = DemSim::load(&path, &registry).unwrap();
+    for _ in 0..steps {
+        resumed.step().unwrap();
+    }
+    let (a, b) = (&straight.kinds, &resumed.kinds);
+    assert!(a.x == b.x && a.v == b.v && a.w == b.w && a.q == b.q, "the resumed particles parted from the straight run");
+    assert!(straight.spheres.x == resumed.spheres.x && straight.spheres.v == resumed.spheres.v);
+}
+
 #[test]
 fn the_same_motion_on_one_and_two_threads() {
-    let (one, ..) = tetrahedra_in_a_box(1, 0.65, 0.2);
-    let (two, ..) = tetrahedra_in_a_box(2, 0.65, 0.2);
+    let (one, ..) = tetrahedra_in_a_box(1, 0.65, 0.2, 0);
+    let (two, ..) = tetrahedra_in_a_box(2, 0.65, 0.2, 0);
     assert_eq!(one.kinds.x, two.kinds.x);
     assert_eq!(one.kinds.w, two.kinds.w);
 }
@@ -318,6 +396,60 @@ summary("kinetic_energy", sim.diagnostics().kinetic_energy);
     // A tetrahedron's centre lies at least its inradius plus r above the floor's top (-0.001 m).
     assert!(get("lowest_centre") > -0.001 + 0.3101e-2, "lowest centre {}", get("lowest_centre"));
     assert!(out.join("vtk/bodies.pvd").is_file());
+}
+
+/// Spheres and rounded tetrahedra poured together into a box built of fixed potential boxes
+/// (a floor and four sides, as the thesis builds its devices): once they rest, the box carries
+/// the weight of both within 1 %, and no sphere has sunk into the floor.
+#[test]
+fn spheres_and_rounded_tetrahedra_rest_together_in_a_potential_box() {
+    let out = common::run_text(
+        "potential_mixed_heap",
+        r#"
+let sim = dem(#{ seed: 5 });
+let resin = sim.material(#{ name: "resin", density: 943.0 });
+sim.contact_law("visco_elastic", #{ kn: 1200.0, kt_ratio: 0.773, friction: 35.5, restitution: 0.8 });
+// The grains first: a cloud keeps clear of the bounding spheres of what is there already.
+sim.clump_cloud(resin, [-0.022, -0.022, 0.004], [0.022, 0.022, 0.04], #{ count: 20, shape: "potential_tetra" });
+sim.cloud(resin, [-0.022, -0.022, 0.045], [0.022, 0.022, 0.07], #{ count: 40, radius: 0.003 });
+let part = |x, y, z, hx, hy, hz| sim.potential(resin, [x, y, z], #{ shape: "potential_box", hx: hx, hy: hy, hz: hz, fixed: true });
+part.call(0.0, 0.0, -0.005, 0.03, 0.03, 0.004);
+for side in [-1.0, 1.0] {
+    part.call(0.034 * side, 0.0, 0.03, 0.004, 0.038, 0.03);
+    part.call(0.0, 0.034 * side, 0.03, 0.03, 0.004, 0.03);
+}
+sim.gravity([0.0, 0.0, -9.81]);
+sim.damping(0.3);
+sim.dt(0.2 * sim.critical_dt());
+sim.run_until(0.8);
+let weight = 0.0;
+let carried = 0.0;
+for id in sim.potential_ids() {
+    let b = sim.potential_body(id);
+    if b.fixed { carried -= b.force[2]; } else { weight += 9.81 * b.mass; }
+}
+let lowest = 1.0;
+let ids = sim.ids();
+for id in ids {
+    let s = sim.body(id);
+    weight += 9.81 * s.mass;
+    lowest = min(lowest, s.position[2]);
+}
+summary("spheres", ids.len());
+summary("weight", weight);
+summary("carried", carried);
+summary("lowest_sphere", lowest);
+"#,
+    );
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    let get = |k: &str| summary[k].as_f64().unwrap_or_else(|| panic!("no {k}"));
+    assert_eq!(get("spheres"), 40.0);
+    let (weight, carried) = (get("weight"), get("carried"));
+    assert!((carried / weight - 1.0).abs() < 0.01, "the box carries {carried} N, the weight is {weight} N");
+    // The floor's top is at -0.001 m (and its rounding above): a sphere resting on it has its
+    // centre about its radius higher.
+    assert!(get("lowest_sphere") > -0.001 + 0.9 * 0.003, "lowest sphere centre {}", get("lowest_sphere"));
 }
 
 /// The thesis scene with potential particles at its small default size (300 particles) with short
