@@ -79,6 +79,9 @@ pub struct KindScene {
     /// Each pair's overlap at this step's contacts (0 where apart), by list: body pairs, walls,
     /// spheres (for the elastic energy).
     pub(crate) overlap: [Vec<f64>; 3],
+    /// This step's touching contacts by list, with their contact points: what the energy
+    /// tracker reads of them.
+    pub(crate) touches: [Vec<(LawContact, Vec3)>; 3],
     /// Seconds the contacts spent in the geometry and in the laws (with the sums) since the
     /// simulation began: what `granite bench potential` reports.
     pub seconds: [f64; 2],
@@ -210,12 +213,6 @@ impl DemSim {
         if self.cell.is_some() {
             return Err(GraniteError::Setup(format!(
                 "{} bodies run in open domains, not in a periodic cell",
-                kind.name()
-            )));
-        }
-        if self.energy.is_some() {
-            return Err(GraniteError::Setup(format!(
-                "the energy tracker covers spheres and clumps: turn it off (track_energy(false)) before adding {} bodies",
                 kind.name()
             )));
         }
@@ -394,6 +391,13 @@ impl DemSim {
         Ok(())
     }
 
+    /// The history of the bodies' lists (body pairs, walls, spheres): what the energy tracker
+    /// compares a step's with.
+    pub(crate) fn kind_histories(&self) -> [Vec<f64>; 3] {
+        let k = &self.kinds;
+        [k.pairs.history.clone(), k.wall_pairs.history.clone(), k.sphere_pairs.history.clone()]
+    }
+
     /// Values per pair of the bodies' lists: the laws' then the geometry's warm starts.
     pub(crate) fn kind_strides(&self) -> (usize, usize) {
         let (p, h) = self.pair_strides();
@@ -425,6 +429,7 @@ impl DemSim {
         }
         let detected = std::time::Instant::now();
         for (n, ((mut list, side), touching)) in lists.into_iter().zip(sides).zip(found).enumerate() {
+            self.kinds.touches[n] = touching.iter().map(|f| (f.law, f.point)).collect();
             let points: Vec<Vec3> = touching.iter().map(|f| f.point).collect();
             let contacts: Vec<LawContact> = touching.into_iter().map(|f| f.law).collect();
             let (force, moment) = laws_in_pair_order(&self.laws, &mut list, &contacts, self.dt);

@@ -11,6 +11,7 @@ use std::sync::Arc;
 
 /// One touching contact as a law takes it: its slot in the list, normal, overlap, velocity of
 /// the second body relative to the first at the contact point, and relative spin.
+#[derive(Debug, Clone, Copy)]
 pub(crate) struct LawContact {
     pub slot: usize,
     pub normal: Vec3,

@@ -61,6 +61,7 @@ impl DemSim {
         let mut energy_before = None;
         // Bodies of a plugin kind meet spheres where they all are at the step's start: their
         // reactions join the spheres' loads before the spheres move.
+        let kind_history = (tracking && !self.kinds.is_empty()).then(|| self.kind_histories());
         if !self.kinds.is_empty() {
             if let Err(e) = self.kind_contacts() {
                 self.needs_rebuild = true;
@@ -84,7 +85,7 @@ impl DemSim {
             if check {
                 self.check_time_step()?;
             }
-            energy_before = history.map(|history| self.energy_before_motion(history));
+            energy_before = history.map(|history| self.energy_before_motion(history, kind_history));
             integrate(&mut self.spheres, &self.x_at_build, &motion)
         };
         if deformed.is_some() {

@@ -17,6 +17,10 @@ pub(crate) struct BeforeMotion {
     clumps: Vec<(Vec3, Vec3, Vec3, nalgebra::Matrix3<f64>)>,
     /// History of the sphere pairs and of the wall pairs before the contact stage.
     history: (Vec<f64>, Vec<f64>),
+    /// Bodies of a plugin kind, as clumps; and the history of their lists (body pairs, walls,
+    /// spheres) before their contacts.
+    bodies: Vec<(Vec3, Vec3, Vec3, nalgebra::Matrix3<f64>)>,
+    body_history: [Vec<f64>; 3],
 }
 
 fn dot(a: Vec3, b: Vec3) -> f64 {
@@ -25,6 +29,33 @@ fn dot(a: Vec3, b: Vec3) -> f64 {
 
 fn cross(a: Vec3, b: Vec3) -> Vec3 {
     [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+}
+
+/// A rigid body's step (a clump, or a body of a plugin kind): its kinetic energy across the
+/// step, its gravitational energy before it, and the damping's work. Translation as a sphere's;
+/// rotation by Euler's equations in the world frame, `I w' = T - w x (I w)`: damping is the part
+/// of the change beyond that free one. (The gyroscopic term and the turning of `I` make the
+/// rotational energy only approximately conserved by the integration: an error of the scheme,
+/// not a loss.) `was`: centre, velocity, spin and world inertia before the step.
+fn rigid_energies(
+    (x0, v0, w0, i_world): (Vec3, Vec3, Vec3, nalgebra::Matrix3<f64>),
+    (m, v1, w1): (f64, Vec3, Vec3),
+    (force, torque): (Vec3, Vec3),
+    g: Vec3,
+    dt: f64,
+) -> [f64; 3] {
+    let (mut kinetic, mut damping) = (0.0, 0.0);
+    for a in 0..3 {
+        kinetic += 0.5 * m * v0[a] * v1[a];
+        let extra = m * ((v1[a] - v0[a]) / dt - (force[a] / m + g[a]));
+        damping -= extra * 0.5 * (v0[a] + v1[a]) * dt;
+    }
+    let (w0v, w1v) = (nalgebra::Vector3::from(w0), nalgebra::Vector3::from(w1));
+    kinetic += 0.5 * w0v.dot(&(i_world * w1v));
+    let free = nalgebra::Vector3::from(torque) - w0v.cross(&(i_world * w0v));
+    let extra = i_world * ((w1v - w0v) / dt) - free;
+    damping -= extra.dot(&(0.5 * (w0v + w1v))) * dt;
+    [kinetic, -m * dot(g, x0), damping]
 }
 
 impl DemSim {
@@ -38,12 +69,6 @@ impl DemSim {
         if self.cell.is_some() {
             return Err(GraniteError::Setup("energy tracking covers open domains, not periodic cells".into()));
         }
-        if let Some(kind) = self.kinds.kind.as_ref().filter(|_| !self.kinds.is_empty()) {
-            return Err(GraniteError::Setup(format!(
-                "energy tracking covers spheres and clumps, not {} bodies",
-                kind.name
-            )));
-        }
         if let Some(law) = self.laws.iter().find(|l| !l.tracks_dissipation()) {
             return Err(GraniteError::Setup(format!(
                 "contact law `{}` does not account for its losses: energy cannot be tracked with it",
@@ -55,17 +80,31 @@ impl DemSim {
     }
 
     /// What the tracker keeps of a step before its motion (called after the contact stage).
-    pub(crate) fn energy_before_motion(&self, history: (Vec<f64>, Vec<f64>)) -> BeforeMotion {
+    pub(crate) fn energy_before_motion(
+        &self,
+        history: (Vec<f64>, Vec<f64>),
+        body_history: Option<[Vec<f64>; 3]>,
+    ) -> BeforeMotion {
         let s = &self.spheres;
-        let cl = &self.clumps;
-        let clumps = (0..cl.len())
-            .map(|c| {
-                let rot = cl.q[c].to_rotation_matrix();
-                let body = nalgebra::Matrix3::from_diagonal(&nalgebra::Vector3::from(cl.inertia[c]));
-                (cl.x[c], cl.v[c], cl.w[c], rot.matrix() * body * rot.matrix().transpose())
-            })
-            .collect();
-        BeforeMotion { x: s.x.clone(), v: s.v.clone(), w: s.w.clone(), clumps, history }
+        let rigid = |x: &[Vec3], v: &[Vec3], w: &[Vec3], q: &[nalgebra::UnitQuaternion<f64>], inertia: &[Vec3]| {
+            (0..x.len())
+                .map(|c| {
+                    let rot = q[c].to_rotation_matrix();
+                    let body = nalgebra::Matrix3::from_diagonal(&nalgebra::Vector3::from(inertia[c]));
+                    (x[c], v[c], w[c], rot.matrix() * body * rot.matrix().transpose())
+                })
+                .collect::<Vec<_>>()
+        };
+        let (cl, k) = (&self.clumps, &self.kinds);
+        BeforeMotion {
+            x: s.x.clone(),
+            v: s.v.clone(),
+            w: s.w.clone(),
+            clumps: rigid(&cl.x, &cl.v, &cl.w, &cl.q, &cl.inertia),
+            history,
+            bodies: rigid(&k.x, &k.v, &k.w, &k.q, &k.inertia),
+            body_history: body_history.unwrap_or_default(),
+        }
     }
 
     /// Contact energies of the step, at the positions its forces came from: the elastic energy,
@@ -147,6 +186,64 @@ impl DemSim {
             // A moving wall works on the sphere through the contact.
             walls += dot(self.wall_pairs.force[k], wall.velocity) * self.dt;
         }
+        let (e, f, v, w) = self.body_contact_energies(b);
+        (elastic + e, friction + f, viscous + v, walls + w)
+    }
+
+    /// The contact energies of the bodies of a plugin kind (with one another, walls and
+    /// spheres), from the contacts their step found: elastic energy, losses, and the work of
+    /// moving walls on them.
+    fn body_contact_energies(&self, b: &BeforeMotion) -> (f64, f64, f64, f64) {
+        let (k, s) = (&self.kinds, &self.spheres);
+        let (mut elastic, mut friction, mut viscous, mut walls) = (0.0, 0.0, 0.0, 0.0);
+        // A body's or a sphere's velocity at `point` over the step: the mean of before and after.
+        let mean_at = |(x, v0, w0): (Vec3, Vec3, Vec3), (v1, w1): (Vec3, Vec3), point: Vec3| {
+            let arm = [0, 1, 2].map(|a| point[a] - x[a]);
+            let (v, w) = ([0, 1, 2].map(|a| 0.5 * (v0[a] + v1[a])), [0, 1, 2].map(|a| 0.5 * (w0[a] + w1[a])));
+            let spin = cross(w, arm);
+            [0, 1, 2].map(|a| v[a] + spin[a])
+        };
+        let body = |i: usize, point: Vec3| {
+            let (x, v, w, _) = b.bodies[i];
+            mean_at((x, v, w), (k.v[i], k.w[i]), point)
+        };
+        for (n, ((list, _), touches)) in k.lists().into_iter().zip(&k.touches).enumerate() {
+            let (ps, hs) = (list.param_stride, list.history_stride);
+            let before = &b.body_history[n];
+            for &(c, point) in touches {
+                let slot = c.slot;
+                let (i, j) = (list.a[slot] as usize, list.b[slot] as usize);
+                let second = match n {
+                    0 => body(j, point),
+                    1 => self.walls[j].velocity,
+                    _ => mean_at((b.x[j], b.v[j], b.w[j]), (s.v[j], s.w[j]), point),
+                };
+                let first = body(i, point);
+                let law = &self.laws[list.law[slot] as usize];
+                let params = &list.params[slot * ps..(slot + 1) * ps];
+                let after = &list.history[slot * hs..(slot + 1) * hs];
+                elastic += law.elastic_energy(c.overlap, params, after);
+                let Some(history_before) = before.get(slot * hs..(slot + 1) * hs) else { continue };
+                let step = ContactStep {
+                    normal: c.normal,
+                    overlap: c.overlap,
+                    rel_velocity: c.rel_velocity,
+                    mean_rel_velocity: [0, 1, 2].map(|a| second[a] - first[a]),
+                    rel_spin: c.rel_spin,
+                    dt: self.dt,
+                    params,
+                    history_before,
+                    history_after: after,
+                    force: list.force[slot],
+                };
+                let (f, v) = law.dissipation(&step);
+                friction += f;
+                viscous += v;
+                if n == 1 {
+                    walls += dot(list.force[slot], self.walls[j].velocity) * self.dt;
+                }
+            }
+        }
         (elastic, friction, viscous, walls)
     }
 
@@ -182,26 +279,22 @@ impl DemSim {
                 account(inertia, before.w[i][a], s.w[i][a], s.torque[i][a] / inertia, blocked & (dof::RX << a) != 0);
             }
         }
-        // Clumps: their members' motion is the clump's. Translation as a sphere's; rotation by
-        // Euler's equations in the world frame, `I w' = T - w x (I w)`: damping is the part of the
-        // change beyond that free one. (The gyroscopic term and the turning of `I` make the
-        // rotational energy only approximately conserved by the integration: an error of the
-        // scheme, not a loss.)
+        // Clumps: their members' motion is the clump's.
         let cl = &self.clumps;
-        for (c, &(x0, v0, w0, i_world)) in before.clumps.iter().enumerate() {
-            let m = cl.mass[c];
-            gravitational -= m * dot(g, x0);
-            let (v1, w1) = (cl.v[c], cl.w[c]);
-            for a in 0..3 {
-                kinetic += 0.5 * m * v0[a] * v1[a];
-                let extra = m * ((v1[a] - v0[a]) / dt - (cl.force[c][a] / m + g[a]));
-                damping -= extra * 0.5 * (v0[a] + v1[a]) * dt;
+        for (c, &was) in before.clumps.iter().enumerate() {
+            let e = rigid_energies(was, (cl.mass[c], cl.v[c], cl.w[c]), (cl.force[c], cl.torque[c]), g, dt);
+            (kinetic, gravitational, damping) = (kinetic + e[0], gravitational + e[1], damping + e[2]);
+        }
+        // Bodies of a plugin kind: the free ones as clumps; a fixed one, moved at its own
+        // velocity and spin, works on what it touches against the loads they put on it.
+        let k = &self.kinds;
+        for (i, &was) in before.bodies.iter().enumerate() {
+            if k.fixed[i] {
+                boundary -= (dot(k.force[i], was.1) + dot(k.torque[i], was.2)) * dt;
+                continue;
             }
-            let (w0v, w1v) = (nalgebra::Vector3::from(w0), nalgebra::Vector3::from(w1));
-            kinetic += 0.5 * w0v.dot(&(i_world * w1v));
-            let free = nalgebra::Vector3::from(cl.torque[c]) - w0v.cross(&(i_world * w0v));
-            let extra = i_world * ((w1v - w0v) / dt) - free;
-            damping -= extra.dot(&(0.5 * (w0v + w1v))) * dt;
+            let e = rigid_energies(was, (k.mass[i], k.v[i], k.w[i]), (k.force[i], k.torque[i]), g, dt);
+            (kinetic, gravitational, damping) = (kinetic + e[0], gravitational + e[1], damping + e[2]);
         }
         // External loads are in the spheres' forces: their work, over the step's mean velocities.
         for load in &self.external {

@@ -9,9 +9,13 @@
 //!   (`ContactLaw::dissipation`), summed;
 //! - damping: the work Cundall's damping took, `-m (a - F/m - g) . v_n dt` per free degree of
 //!   freedom, `a = (v_(n+1/2) - v_(n-1/2))/dt` and `v_n` the mean of the two;
-//! - boundary work: done on the spheres by moving walls (each wall contact's force times the
-//!   wall's velocity), by blocked degrees of freedom (the force that kept their velocity), and by
-//!   external loads.
+//! - boundary work: done on the spheres and bodies by moving walls (each wall contact's force
+//!   times the wall's velocity), by fixed bodies moving at their own velocity and spin (the loads
+//!   on them times those), by blocked degrees of freedom (the force that kept their velocity), and
+//!   by external loads.
+//!
+//! Clumps and the bodies of plugin kinds (capsules, potential particles) are rigid bodies: their
+//! rotation is booked by Euler's equations in the world frame.
 //!
 //! `kinetic + gravitational + elastic + friction + viscous + damping - boundary` stays constant.
 
