@@ -1,26 +1,20 @@
 //! Bodies of plugin kinds (`ext::body`: capsules, potential particles, ...) in a DEM simulation:
-//! their storage and set-up, their candidate lists (with one another, plane walls and spheres,
-//! from their bounding spheres), and their part of a step. A step places the bodies once, finds
-//! every contact of the bodies at its start, the kind's geometry called once per list; runs the
-//! contact laws of the materials on them in pair order; hands the spheres their reactions before
-//! the spheres move; and moves the bodies as rigid bodies after the spheres. Results do not depend
-//! on the number of threads.
+//! their storage and set-up, and their candidate lists (with one another, plane walls and
+//! spheres, from their bounding spheres), rebuilt with the spheres'. Their part of a step is
+//! `kind_stage.rs`.
 
 use crate::dem::broad_phase::{sphere_pairs, wall_pairs, Candidate};
 use crate::dem::contacts::PairList;
-use crate::dem::motion::RigidMotion;
 use crate::dem::pairing::{Other, PairBodies};
 use crate::dem::picture::{rigid_picture, RigidBodies};
-use crate::dem::rigid::{laws_in_pair_order, move_rigid_bodies, LawContact, RigidSet};
+use crate::dem::rigid::LawContact;
 use crate::dem::sim::DemSim;
 use crate::dem::walls::WallShape;
 use crate::error::{GraniteError, Result};
-use crate::ext::body::{
-    Ball, BodyGeometry, BodyKindFactory, BodyShape, KindBodies, PairFailure, PlacedBodies, Plane, WarmStarts,
-};
+use crate::ext::body::{BodyGeometry, BodyKindFactory, BodyShape, KindBodies};
 use crate::ext::PairInfo;
 use crate::io::vtk::PolyData;
-use crate::math::{add3, cross3, sub3, Vec3};
+use crate::math::Vec3;
 use nalgebra::UnitQuaternion;
 use std::sync::Arc;
 
@@ -110,7 +104,7 @@ impl KindScene {
         self.pairs.touching_count() + self.wall_pairs.touching_count() + self.sphere_pairs.touching_count()
     }
 
-    fn view(&self) -> KindBodies<'_> {
+    pub(crate) fn view(&self) -> KindBodies<'_> {
         let stride = self.kind.as_ref().map(|k| k.stride).unwrap_or(0);
         KindBodies { x: &self.x, q: &self.q, values: &self.values, stride, shape: &self.shape, shapes: &self.shapes }
     }
@@ -173,6 +167,12 @@ impl KindScene {
         }
     }
 
+    /// The history of the lists (body pairs, walls, spheres): what the energy tracker compares a
+    /// step's with.
+    pub(crate) fn histories(&self) -> [Vec<f64>; 3] {
+        [self.pairs.history.clone(), self.wall_pairs.history.clone(), self.sphere_pairs.history.clone()]
+    }
+
     /// Kinetic energy of the free bodies (translation and rotation).
     pub fn kinetic_energy(&self) -> f64 {
         (0..self.len())
@@ -186,12 +186,6 @@ impl KindScene {
             })
             .sum()
     }
-}
-
-/// A touching contact of a body: what its law takes, and where it acts.
-struct Found {
-    law: LawContact,
-    point: Vec3,
 }
 
 /// A body of a kind to add ([`DemSim::add_body`]).
@@ -391,251 +385,10 @@ impl DemSim {
         Ok(())
     }
 
-    /// The history of the bodies' lists (body pairs, walls, spheres): what the energy tracker
-    /// compares a step's with.
-    pub(crate) fn kind_histories(&self) -> [Vec<f64>; 3] {
-        let k = &self.kinds;
-        [k.pairs.history.clone(), k.wall_pairs.history.clone(), k.sphere_pairs.history.clone()]
-    }
-
     /// Values per pair of the bodies' lists: the laws' then the geometry's warm starts.
     pub(crate) fn kind_strides(&self) -> (usize, usize) {
         let (p, h) = self.pair_strides();
         (p, h + self.kinds.kind.as_ref().map_or(0, |k| k.warm))
-    }
-
-    /// The bodies' contacts at the start of a step: loads summed into the bodies (and, for the
-    /// spheres, into `sphere_loads`) in pair order.
-    pub(crate) fn kind_contacts(&mut self) -> Result<()> {
-        let k = &mut self.kinds;
-        k.force.iter_mut().for_each(|f| *f = [0.0; 3]);
-        k.torque.iter_mut().for_each(|t| *t = [0.0; 3]);
-        k.sphere_loads.clear();
-        let Some(kind) = k.kind.clone() else { return Ok(()) };
-        let own = self.pair_strides().1;
-        let started = std::time::Instant::now();
-        let mut lists = [
-            std::mem::take(&mut self.kinds.pairs),
-            std::mem::take(&mut self.kinds.wall_pairs),
-            std::mem::take(&mut self.kinds.sphere_pairs),
-        ];
-        let sides = [Side::Bodies, Side::Walls, Side::Spheres];
-        let mut found = Vec::with_capacity(3);
-        {
-            let placed = kind.geometry.place(self.kinds.view())?;
-            for (list, &side) in lists.iter_mut().zip(&sides) {
-                found.push(self.touching(list, placed.as_ref(), side, (own, kind.warm))?);
-            }
-        }
-        let detected = std::time::Instant::now();
-        for (n, ((mut list, side), touching)) in lists.into_iter().zip(sides).zip(found).enumerate() {
-            self.kinds.touches[n] = touching.iter().map(|f| (f.law, f.point)).collect();
-            let points: Vec<Vec3> = touching.iter().map(|f| f.point).collect();
-            let contacts: Vec<LawContact> = touching.into_iter().map(|f| f.law).collect();
-            let (force, moment) = laws_in_pair_order(&self.laws, &mut list, &contacts, self.dt);
-            self.sum_kind_loads(&mut list, (&contacts, &points), (&force, &moment), side);
-            let overlap = &mut self.kinds.overlap[n];
-            overlap.clear();
-            overlap.resize(list.len(), 0.0);
-            for c in &contacts {
-                overlap[c.slot] = c.overlap;
-            }
-            let slot = match side {
-                Side::Bodies => &mut self.kinds.pairs,
-                Side::Walls => &mut self.kinds.wall_pairs,
-                Side::Spheres => &mut self.kinds.sphere_pairs,
-            };
-            *slot = list;
-        }
-        self.kinds.seconds[0] += (detected - started).as_secs_f64();
-        self.kinds.seconds[1] += detected.elapsed().as_secs_f64();
-        Ok(())
-    }
-
-    /// The touching pairs of a list, from one call of the placed bodies' geometry; pairs found
-    /// apart start their law's history again at their next touch. `(own, warm)`: the law's
-    /// history values a pair, and the geometry's after them.
-    fn touching(
-        &self,
-        list: &mut PairList,
-        placed: &dyn PlacedBodies,
-        side: Side,
-        (own, warm): (usize, usize),
-    ) -> Result<Vec<Found>> {
-        let k = &self.kinds;
-        let mut out = vec![None; list.len()];
-        let hs = list.history_stride;
-        let starts = WarmStarts::new(&mut list.history, hs, own, warm);
-        let done = match side {
-            Side::Bodies => {
-                let pairs: Vec<(u32, u32)> = list.a.iter().copied().zip(list.b.iter().copied()).collect();
-                placed.pairs(&pairs, starts, &mut out)
-            }
-            Side::Walls => {
-                let pairs: Vec<(u32, Plane)> = list
-                    .a
-                    .iter()
-                    .zip(&list.b)
-                    .map(|(&a, &b)| {
-                        let wall = &self.walls[b as usize];
-                        let normal = match wall.shape {
-                            WallShape::Plane { normal } => normal,
-                            _ => [0.0; 3],
-                        };
-                        (a, Plane { point: wall.position, normal })
-                    })
-                    .collect();
-                placed.planes(&pairs, starts, &mut out)
-            }
-            Side::Spheres => {
-                let s = &self.spheres;
-                let pairs: Vec<(u32, Ball)> = list
-                    .a
-                    .iter()
-                    .zip(&list.b)
-                    .map(|(&a, &b)| (a, Ball { centre: s.x[b as usize], radius: s.radius[b as usize] }))
-                    .collect();
-                placed.spheres(&pairs, starts, &mut out)
-            }
-        };
-        if let Err(PairFailure { pair, reason }) = done {
-            return Err(GraniteError::Unstable {
-                step: self.step,
-                time: self.time,
-                reason: format!(
-                    "the contact of {}; the bodies may overlap too deeply: lower the time step",
-                    self.pair_name(list, pair, side, &reason)
-                ),
-            });
-        }
-        let mut found = Vec::new();
-        for (slot, touch) in out.into_iter().enumerate() {
-            let Some(touch) = touch else {
-                if list.touching[slot] {
-                    list.touching[slot] = false;
-                    list.force[slot] = [0.0; 3];
-                    list.history[slot * hs..slot * hs + own].iter_mut().for_each(|h| *h = 0.0);
-                }
-                continue;
-            };
-            if !(touch.overlap.is_finite() && touch.normal.iter().chain(&touch.point).all(|c| c.is_finite())) {
-                return Err(GraniteError::Unstable {
-                    step: self.step,
-                    time: self.time,
-                    reason: format!(
-                        "the {} geometry gave a non-finite contact for body {}; the time step may be too large",
-                        k.kind.as_ref().map(|k| k.name.as_str()).unwrap_or(""),
-                        k.id[list.a[slot] as usize]
-                    ),
-                });
-            }
-            let (i, j) = (list.a[slot] as usize, list.b[slot] as usize);
-            let at = |v: Vec3, w: Vec3, x: Vec3| add3(v, cross3(w, sub3(touch.point, x)));
-            let first = at(k.v[i], k.w[i], k.x[i]);
-            let (second, spin) = match side {
-                Side::Bodies => (at(k.v[j], k.w[j], k.x[j]), k.w[j]),
-                Side::Walls => (self.walls[j].velocity, [0.0; 3]),
-                Side::Spheres => {
-                    let s = &self.spheres;
-                    (at(s.v[j], s.w[j], s.x[j]), s.w[j])
-                }
-            };
-            let law = LawContact {
-                slot,
-                normal: touch.normal,
-                overlap: touch.overlap,
-                rel_velocity: sub3(second, first),
-                rel_spin: sub3(spin, k.w[i]),
-            };
-            found.push(Found { law, point: touch.point });
-        }
-        Ok(found)
-    }
-
-    /// A pair of a list in words, for a diagnostic: "potential bodies 3 and 7: <reason>".
-    fn pair_name(&self, list: &PairList, pair: usize, side: Side, reason: &str) -> String {
-        let k = &self.kinds;
-        let kind = k.kind.as_ref().map(|k| k.name.as_str()).unwrap_or("");
-        let (i, j) = (list.a[pair] as usize, list.b[pair] as usize);
-        let id = k.id[i];
-        match side {
-            Side::Bodies => format!("{kind} bodies {id} and {}: {reason}", k.id[j]),
-            Side::Walls => format!("{kind} body {id} and wall \"{}\": {reason}", self.walls[j].name),
-            Side::Spheres => format!("{kind} body {id} and sphere {}: {reason}", self.spheres.id[j]),
-        }
-    }
-
-    /// Adds each touching contact's force and moment to its two bodies in pair order: the
-    /// law's force acts on the list's first body, its opposite on the second (a sphere's goes to
-    /// `sphere_loads`; a wall takes none).
-    fn sum_kind_loads(
-        &mut self,
-        list: &mut PairList,
-        (contacts, points): (&[LawContact], &[Vec3]),
-        (force, moment): (&[Vec3], &[Vec3]),
-        side: Side,
-    ) {
-        let k = &mut self.kinds;
-        for (e, (contact, &point)) in contacts.iter().zip(points).enumerate() {
-            let slot = contact.slot;
-            let (i, j) = (list.a[slot] as usize, list.b[slot] as usize);
-            let (f, m) = (force[e], moment[e]);
-            list.touching[slot] = true;
-            list.force[slot] = f;
-            k.force[i] = add3(k.force[i], f);
-            k.torque[i] = add3(k.torque[i], add3(cross3(sub3(point, k.x[i]), f), m));
-            let back = [-f[0], -f[1], -f[2]];
-            match side {
-                Side::Bodies => {
-                    k.force[j] = add3(k.force[j], back);
-                    k.torque[j] = sub3(add3(k.torque[j], cross3(sub3(point, k.x[j]), back)), m);
-                }
-                Side::Walls => {}
-                Side::Spheres => {
-                    let torque = sub3(cross3(sub3(point, self.spheres.x[j]), back), m);
-                    k.sphere_loads.push((j as u32, back, torque));
-                }
-            }
-        }
-    }
-
-    /// Adds the bodies' reactions on the spheres to the spheres' loads, in pair order.
-    pub(crate) fn apply_kind_sphere_loads(&mut self) {
-        let s = &mut self.spheres;
-        for &(i, f, t) in &self.kinds.sphere_loads {
-            let i = i as usize;
-            s.force[i] = add3(s.force[i], f);
-            s.torque[i] = add3(s.torque[i], t);
-        }
-    }
-
-    /// Moves the bodies by this step's loads; returns the largest distance a body's centre
-    /// moved since the lists were built.
-    pub(crate) fn kind_motion(&mut self, motion: &RigidMotion) -> Result<f64> {
-        let k = &mut self.kinds;
-        let set = RigidSet {
-            x: &mut k.x,
-            v: &mut k.v,
-            w: &mut k.w,
-            q: &mut k.q,
-            mass: &k.mass,
-            inertia: &k.inertia,
-            fixed: &k.fixed,
-            force: &k.force,
-            torque: &k.torque,
-        };
-        let moved = move_rigid_bodies(set, &k.x_at_build, motion).map_err(|i| GraniteError::Unstable {
-            step: self.step,
-            time: self.time,
-            reason: format!(
-                "non-finite position or velocity of {} body {} (x = {:?}, v = {:?}); the time step may be too large",
-                k.kind.as_ref().map(|k| k.name.as_str()).unwrap_or(""),
-                k.id[i],
-                k.x[i],
-                k.v[i]
-            ),
-        })?;
-        Ok(moved)
     }
 
     /// The bodies' surfaces, with id, material, fixed, velocity and force per triangle.
@@ -654,12 +407,4 @@ impl DemSim {
         };
         rigid_picture(&surfaces, bodies)
     }
-}
-
-/// What the second body of a list's pairs is.
-#[derive(Clone, Copy)]
-enum Side {
-    Bodies,
-    Walls,
-    Spheres,
 }

@@ -14,6 +14,7 @@ pub mod delaunay;
 pub mod energy;
 pub mod generate;
 pub mod inspect;
+pub mod kind_stage;
 pub mod kinds;
 pub mod measures;
 mod motion;

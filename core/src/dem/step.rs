@@ -8,6 +8,7 @@ use crate::dem::contact_stage::{
     SharedPairs,
 };
 use crate::dem::contacts::PairList;
+use crate::dem::kind_stage::{BodyContacts, BodyMotion, SphereReactions, Surroundings};
 use crate::dem::motion::{
     farther, gather_piece, integrate, integrate_clumps, GatherJob, Motion, PieceState, RigidMotion, SphereConstants,
 };
@@ -61,9 +62,18 @@ impl DemSim {
         let mut energy_before = None;
         // Bodies of a plugin kind meet spheres where they all are at the step's start: their
         // reactions join the spheres' loads before the spheres move.
-        let kind_history = (tracking && !self.kinds.is_empty()).then(|| self.kind_histories());
+        let kind_history = (tracking && !self.kinds.is_empty()).then(|| self.kinds.histories());
         if !self.kinds.is_empty() {
-            if let Err(e) = self.kind_contacts() {
+            let around = Surroundings {
+                spheres: &self.spheres,
+                walls: &self.walls,
+                laws: &self.laws,
+                law_history: self.pair_strides().1,
+                dt: self.dt,
+                step: self.step,
+                time: self.time,
+            };
+            if let Err(e) = BodyContacts::run(&mut self.kinds, &around) {
                 self.needs_rebuild = true;
                 return Err(e);
             }
@@ -81,7 +91,7 @@ impl DemSim {
             let history = tracking.then(|| (self.pairs.history.clone(), self.wall_pairs.history.clone()));
             self.contacts();
             self.apply_external_loads();
-            self.apply_kind_sphere_loads();
+            SphereReactions::run(&self.kinds, &mut self.spheres);
             if check {
                 self.check_time_step()?;
             }
@@ -107,7 +117,7 @@ impl DemSim {
             0.0
         } else {
             let motion = RigidMotion { gravity: self.gravity, damping: self.damping, dt: self.dt, affine: None };
-            self.kind_motion(&motion)?
+            BodyMotion::run(&mut self.kinds, &motion, (self.step, self.time))?
         };
         let mut wall_moved: f64 = 0.0;
         for (w, at) in self.walls.iter_mut().zip(&self.walls_at_build) {
