@@ -384,3 +384,36 @@ fn a_bad_body_names_the_kind_the_parameter_and_the_line() {
     );
     assert!(e.contains("line 4") && e.contains("periodic"), "{e}");
 }
+
+#[test]
+fn a_bad_potential_particle_names_what_is_wrong_and_the_line() {
+    let head = "let sim = dem();\nlet m = sim.material(#{ density: 2500.0 });\n";
+    let e = run_err(
+        "potential_shape",
+        &format!("{head}sim.potential(m, [0.0, 0.0, 0.0], #{{ shape: \"capsule\" }});"),
+        &[],
+    );
+    assert!(e.contains("line 3") && e.contains("potential_tetra") && e.contains("capsule"), "{e}");
+    let e = run_err(
+        "potential_plane",
+        &format!(
+            "{head}sim.potential(m, [0.0, 0.0, 0.0], #{{ planes: [[0.0, 0.0, 1.0]], r: 0.001, R: 0.004, k: 0.5 }});"
+        ),
+        &[],
+    );
+    assert!(e.contains("line 3") && e.contains("plane 1") && e.contains("[a, b, c, d]"), "{e}");
+    let e = run_err(
+        "potential_k",
+        &format!("{head}sim.potential(m, [0.0, 0.0, 0.0], #{{ shape: \"potential_tetra\", k: 1.5 }});"),
+        &[],
+    );
+    assert!(e.contains("line 3") && e.contains("`k`") && e.contains("(0, 1]"), "{e}");
+    let e = run_err(
+        "potential_and_capsule",
+        &format!(
+            "{head}sim.potential(m, [0.0, 0.0, 0.0], #{{ shape: \"potential_tetra\" }});\nsim.capsule(m, [0.1, 0.0, 0.0], #{{ radius: 0.01, length: 0.02 }});"
+        ),
+        &[],
+    );
+    assert!(e.contains("line 4") && e.contains("potential") && e.contains("capsule"), "{e}");
+}
