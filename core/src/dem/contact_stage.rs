@@ -11,6 +11,46 @@ use crate::math::{add3 as add, cross3 as cross, dot3, mat_vec, sub3 as sub, Vec3
 use std::ops::Range;
 use std::sync::Arc;
 
+/// What the spheres' contact stage reads besides the spheres and their pairs.
+pub(crate) struct SphereSurroundings<'a> {
+    pub walls: &'a [Wall],
+    pub laws: &'a [Arc<dyn ContactLaw>],
+    pub dt: f64,
+    pub cell: Option<&'a PeriodicCell>,
+}
+
+/// The spheres' contact stage on one thread (`DemSim::contacts_and_motion` is the parallel step,
+/// fused with the motion). Reads the spheres' positions, velocities and radii and the
+/// surroundings; writes the pairs' contacts, forces and history, and the spheres' forces and
+/// torques (sphere–sphere and sphere–wall), summed in pair order.
+pub(crate) struct SphereContacts;
+
+impl SphereContacts {
+    pub(crate) fn run(
+        spheres: &mut crate::dem::particles::Spheres,
+        (pairs, wall_pairs): (&mut PairList, &mut PairList),
+        around: &SphereSurroundings<'_>,
+    ) {
+        let strides = (pairs.param_stride, pairs.history_stride);
+        let crate::dem::particles::Spheres { x, v, w, radius, force, torque, .. } = spheres;
+        let rotation = around.laws.iter().any(|l| l.resists_rotation());
+        let sp = Motions { first: 0, x, v, w, radius, cell: around.cell, rotation };
+        let mut scratch = ScratchGuard::take();
+        let mut none = Handover::default();
+        contact_job_wide(ContactJob {
+            sp: &sp,
+            walls: around.walls,
+            sphere_pairs: PairChunk::whole(pairs, strides),
+            wall_pairs: PairChunk::whole(wall_pairs, strides),
+            laws: around.laws,
+            dt: around.dt,
+            scratch: &mut scratch,
+            loads: Loads { first: 0, force, torque, handover: &mut none, starts: &[] },
+        });
+        debug_assert!(none.0.is_empty(), "one piece holds every pair");
+    }
+}
+
 /// Pairs per law call.
 const CHUNK: usize = 128;
 

@@ -4,8 +4,8 @@
 
 use crate::dem::cell::{shift_after_flip, AxisGoal};
 use crate::dem::contact_stage::{
-    contact_job_wide, piece_range, ContactJob, Handover, Handovers, Loads, Motions, PairChunk, ScratchGuard,
-    SharedPairs,
+    contact_job_wide, piece_range, ContactJob, Handover, Handovers, Loads, Motions, ScratchGuard, SharedPairs,
+    SphereContacts, SphereSurroundings,
 };
 use crate::dem::contacts::PairList;
 use crate::dem::kind_stage::{BodyContacts, BodyMotion, SphereReactions, Surroundings};
@@ -16,8 +16,8 @@ use crate::dem::particles::Spheres;
 use crate::dem::pieces::PieceBounds;
 use crate::dem::rows::SharedRows;
 use crate::dem::sim::DemSim;
+use crate::dem::walls::WallMotion;
 use crate::error::{GraniteError, Result};
-use crate::math::sub3 as sub;
 use nalgebra::Matrix3;
 use std::sync::OnceLock;
 use std::time::Instant;
@@ -89,7 +89,9 @@ impl DemSim {
             // not production runs) work between the contact stage and the motion, so they take
             // this path too.
             let history = tracking.then(|| (self.pairs.history.clone(), self.wall_pairs.history.clone()));
-            self.contacts();
+            let around =
+                SphereSurroundings { walls: &self.walls, laws: &self.laws, dt: self.dt, cell: self.cell.as_ref() };
+            SphereContacts::run(&mut self.spheres, (&mut self.pairs, &mut self.wall_pairs), &around);
             self.apply_external_loads();
             SphereReactions::run(&self.kinds, &mut self.spheres);
             if check {
@@ -119,14 +121,7 @@ impl DemSim {
             let motion = RigidMotion { gravity: self.gravity, damping: self.damping, dt: self.dt, affine: None };
             BodyMotion::run(&mut self.kinds, &motion, (self.step, self.time))?
         };
-        let mut wall_moved: f64 = 0.0;
-        for (w, at) in self.walls.iter_mut().zip(&self.walls_at_build) {
-            for a in 0..3 {
-                w.position[a] += w.velocity[a] * self.dt;
-            }
-            let d = sub(w.position, *at);
-            wall_moved = wall_moved.max((d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt());
-        }
+        let wall_moved = WallMotion::run(&mut self.walls, &self.walls_at_build, self.dt);
         // The tracker closes the step once everything has moved (clumps and walls too).
         if let Some(before) = energy_before {
             self.energy_after_motion(before);
@@ -219,28 +214,6 @@ impl DemSim {
             self.pairs.shrink_to_fit();
             self.wall_pairs.shrink_to_fit();
         }
-    }
-
-    /// Sphere-sphere and sphere-wall contact forces of this step, summed into the spheres' loads
-    /// on this thread (see [`DemSim::contacts_and_motion`] for the parallel step).
-    fn contacts(&mut self) {
-        let strides = (self.pairs.param_stride, self.pairs.history_stride);
-        let Spheres { x, v, w, radius, force, torque, .. } = &mut self.spheres;
-        let rotation = self.laws.iter().any(|l| l.resists_rotation());
-        let sp = Motions { first: 0, x, v, w, radius, cell: self.cell.as_ref(), rotation };
-        let mut scratch = ScratchGuard::take();
-        let mut none = Handover::default();
-        contact_job_wide(ContactJob {
-            sp: &sp,
-            walls: &self.walls,
-            sphere_pairs: PairChunk::whole(&mut self.pairs, strides),
-            wall_pairs: PairChunk::whole(&mut self.wall_pairs, strides),
-            laws: &self.laws,
-            dt: self.dt,
-            scratch: &mut scratch,
-            loads: Loads { first: 0, force, torque, handover: &mut none, starts: &[] },
-        });
-        debug_assert!(none.0.is_empty(), "one piece holds every pair");
     }
 
     /// The contact stage and the gather with the integration of a parallel step, in one pass

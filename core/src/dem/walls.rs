@@ -25,6 +25,25 @@ pub struct Wall {
     pub material: u16,
 }
 
+/// The walls' motion: each wall moves by its velocity over the step. Reads the time step and
+/// where the walls were when the lists were built; writes their positions. Returns the largest
+/// distance a wall moved since the lists were built.
+pub(crate) struct WallMotion;
+
+impl WallMotion {
+    pub(crate) fn run(walls: &mut [Wall], at_build: &[Vec3], dt: f64) -> f64 {
+        let mut moved: f64 = 0.0;
+        for (w, at) in walls.iter_mut().zip(at_build) {
+            for a in 0..3 {
+                w.position[a] += w.velocity[a] * dt;
+            }
+            let d = [0, 1, 2].map(|a| w.position[a] - at[a]);
+            moved = moved.max((d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt());
+        }
+        moved
+    }
+}
+
 impl Wall {
     /// Whether `other` is the same surface (a plane given through another of its points included):
     /// spheres would touch both, with twice the stiffness.
