@@ -67,85 +67,60 @@ fn collision(add: impl Fn(&mut DemSim, u16, f64, f64), radius: f64, speed: f64, 
         .collect()
 }
 
-/// Thesis figure 2.6: two k = 1 potential particles colliding follow the force-time curve of two
-/// spheres under the same visco-elastic law (same restitution), within 1 % of its peak.
-#[test]
-fn k_one_particles_collide_like_spheres() {
-    let radius: f64 = 5e-3;
+/// Radius of the colliding bodies (m).
+const RADIUS: f64 = 5e-3;
+
+/// Two bodies of radius [`RADIUS`] meeting head-on at 0.5 m/s each, in a scene `add` builds (it
+/// gets the material, the half distance, the speed and a `k = 1` particle's shape): the force on
+/// the first follows the force-time curve of two spheres under the same law within 1 % of its
+/// peak. (A particle's mass comes from a grid integration of the sphere, 0.1 % off: its curve is
+/// stretched by half of that in time.)
+fn collides_like_two_spheres(add: impl Fn(&mut DemSim, u16, f64, f64, &Arc<dyn BodyShape>)) {
     let speed = 0.5;
-    let mass = 2500.0 * 4.0 / 3.0 * std::f64::consts::PI * radius.powi(3);
+    let mass = 2500.0 * 4.0 / 3.0 * std::f64::consts::PI * RADIUS.powi(3);
     let dt = 0.01 * (0.5 * mass / 1e4f64).sqrt();
-    let steps = (2.0 * (0.1 * radius) / speed / dt) as usize + 400;
+    let steps = (2.0 * (0.1 * RADIUS) / speed / dt) as usize + 400;
     let spheres = collision(
         |sim, m, half, v| {
-            sim.add_sphere(m, [-half, 0.0, 0.0], radius, [v, 0.0, 0.0]).unwrap();
-            sim.add_sphere(m, [half, 0.0, 0.0], radius, [-v, 0.0, 0.0]).unwrap();
+            sim.add_sphere(m, [-half, 0.0, 0.0], RADIUS, [v, 0.0, 0.0]).unwrap();
+            sim.add_sphere(m, [half, 0.0, 0.0], RADIUS, [-v, 0.0, 0.0]).unwrap();
         },
-        radius,
+        RADIUS,
         speed,
         dt,
         steps,
     );
-    let shape = ball(radius);
-    let particles = collision(
-        |sim, m, half, v| {
-            let q = UnitQuaternion::identity();
-            particle(sim, m, &shape, [-half, 0.0, 0.0], q, [v, 0.0, 0.0]);
-            particle(sim, m, &shape, [half, 0.0, 0.0], q, [-v, 0.0, 0.0]);
-        },
-        radius,
-        speed,
-        dt,
-        steps,
-    );
+    let shape = ball(RADIUS);
+    let other = collision(|sim, m, half, v| add(sim, m, half, v, &shape), RADIUS, speed, dt, steps);
     let peak = spheres.iter().fold(0.0f64, |m, f| m.max(f.abs()));
-    let touching = spheres.iter().filter(|f| **f != 0.0).count();
-    assert!(peak > 0.0 && touching > 100, "the spheres collide ({touching} steps in contact)");
+    let touching = other.iter().filter(|f| **f != 0.0).count();
+    assert!(peak > 0.0 && touching > 100, "the bodies collide ({touching} steps in contact)");
     assert_eq!(*spheres.last().unwrap(), 0.0, "the collision ends within the run");
-    for (step, (s, p)) in spheres.iter().zip(&particles).enumerate() {
-        // The particles' mass comes from a grid integration of the sphere (0.1 % off): their
-        // curve is stretched by half of that in time.
-        assert!((s - p).abs() < 0.01 * peak, "step {step}: spheres {s} N, particles {p} N (peak {peak} N)");
+    assert_eq!(*other.last().unwrap(), 0.0, "the collision ends within the run");
+    for (step, (s, p)) in spheres.iter().zip(&other).enumerate() {
+        assert!((s - p).abs() < 0.01 * peak, "step {step}: spheres {s} N, these bodies {p} N (peak {peak} N)");
     }
 }
 
+/// Thesis figure 2.6: two k = 1 potential particles colliding follow the force-time curve of two
+/// spheres under the same visco-elastic law (same restitution).
+#[test]
+fn k_one_particles_collide_like_spheres() {
+    collides_like_two_spheres(|sim, m, half, v, shape| {
+        let q = UnitQuaternion::identity();
+        particle(sim, m, shape, [-half, 0.0, 0.0], q, [v, 0.0, 0.0]);
+        particle(sim, m, shape, [half, 0.0, 0.0], q, [-v, 0.0, 0.0]);
+    });
+}
+
 /// A sphere and a k = 1 potential particle meet in one scene: their collision follows the
-/// force-time curve of two spheres within 1 % of its peak, as two such particles do (the
-/// particle's mass comes from a grid integration, 0.1 % off).
+/// force-time curve of two spheres, as two such particles do.
 #[test]
 fn a_sphere_and_a_k_one_particle_collide_like_two_spheres() {
-    let radius: f64 = 5e-3;
-    let speed = 0.5;
-    let mass = 2500.0 * 4.0 / 3.0 * std::f64::consts::PI * radius.powi(3);
-    let dt = 0.01 * (0.5 * mass / 1e4f64).sqrt();
-    let steps = (2.0 * (0.1 * radius) / speed / dt) as usize + 400;
-    let spheres = collision(
-        |sim, m, half, v| {
-            sim.add_sphere(m, [-half, 0.0, 0.0], radius, [v, 0.0, 0.0]).unwrap();
-            sim.add_sphere(m, [half, 0.0, 0.0], radius, [-v, 0.0, 0.0]).unwrap();
-        },
-        radius,
-        speed,
-        dt,
-        steps,
-    );
-    let shape = ball(radius);
-    let mixed = collision(
-        |sim, m, half, v| {
-            sim.add_sphere(m, [-half, 0.0, 0.0], radius, [v, 0.0, 0.0]).unwrap();
-            particle(sim, m, &shape, [half, 0.0, 0.0], UnitQuaternion::identity(), [-v, 0.0, 0.0]);
-        },
-        radius,
-        speed,
-        dt,
-        steps,
-    );
-    let peak = spheres.iter().fold(0.0f64, |m, f| m.max(f.abs()));
-    assert!(peak > 0.0 && mixed.iter().filter(|f| **f != 0.0).count() > 100, "the sphere and the particle collide");
-    assert_eq!(*mixed.last().unwrap(), 0.0, "the collision ends within the run");
-    for (step, (s, p)) in spheres.iter().zip(&mixed).enumerate() {
-        assert!((s - p).abs() < 0.01 * peak, "step {step}: spheres {s} N, sphere and particle {p} N (peak {peak} N)");
-    }
+    collides_like_two_spheres(|sim, m, half, v, shape| {
+        sim.add_sphere(m, [-half, 0.0, 0.0], RADIUS, [v, 0.0, 0.0]).unwrap();
+        particle(sim, m, shape, [half, 0.0, 0.0], UnitQuaternion::identity(), [-v, 0.0, 0.0]);
+    });
 }
 
 /// A cube resting on a plane under gravity, with damping: its contact carries its weight,
