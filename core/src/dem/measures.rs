@@ -91,7 +91,7 @@ impl DemSim {
         };
         let mut resultant = 0.0;
         let mut free = 0usize;
-        // A rigid body's (clump's, potential particle's) energies and resultant force.
+        // A rigid body's (a clump's, a body's of a plugin kind) energies and resultant force.
         let mut rigid = |d: &mut DemDiagnostics,
                          m: f64,
                          (v, w, x): (Vec3, Vec3, Vec3),

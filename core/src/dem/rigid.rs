@@ -1,6 +1,5 @@
-//! What the stages of rigid bodies of their own (potential particles, bodies of plugin kinds)
-//! share: the contact laws run on their touching pairs in pair order, and the bodies moved by
-//! their loads.
+//! What the stages of rigid bodies of plugin kinds use: the contact laws run on their touching
+//! pairs in pair order, and the bodies moved by their loads.
 
 use crate::dem::contacts::PairList;
 use crate::dem::motion::{RigidBody, RigidMotion};
