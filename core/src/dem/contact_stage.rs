@@ -19,7 +19,7 @@ pub(crate) struct SphereSurroundings<'a> {
     pub cell: Option<&'a PeriodicCell>,
 }
 
-/// The spheres' contact stage on one thread (`DemSim::contacts_and_motion` is the parallel step,
+/// The spheres' contact stage on one thread (`ContactsAndMotion` in step.rs is the parallel step,
 /// fused with the motion). Reads the spheres' positions, velocities and radii and the
 /// surroundings; writes the pairs' contacts, forces and history, and the spheres' forces and
 /// torques (sphere–sphere and sphere–wall), summed in pair order.

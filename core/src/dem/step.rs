@@ -18,6 +18,7 @@ use crate::dem::rows::SharedRows;
 use crate::dem::sim::DemSim;
 use crate::dem::walls::WallMotion;
 use crate::error::{GraniteError, Result};
+use crate::math::Vec3;
 use nalgebra::Matrix3;
 use std::sync::OnceLock;
 use std::time::Instant;
@@ -80,7 +81,16 @@ impl DemSim {
         }
         let sphere_loads = !self.kinds.sphere_loads.is_empty();
         let mut moved = if parallel && !check && self.external.is_empty() && !tracking && !sphere_loads {
-            self.contacts_and_motion(&motion)
+            let around =
+                SphereSurroundings { walls: &self.walls, laws: &self.laws, dt: self.dt, cell: self.cell.as_ref() };
+            ContactsAndMotion::run(
+                &mut self.spheres,
+                (&mut self.pairs, &mut self.wall_pairs),
+                (&mut self.piece_bounds, &mut self.handovers),
+                &around,
+                (&self.x_at_build, self.rebuilds),
+                &motion,
+            )
         } else {
             // The stability check reads this step's contacts before anything moves, so that a
             // step it stops leaves the spheres where they were. It comes once in 1000 steps at
@@ -215,34 +225,45 @@ impl DemSim {
             self.wall_pairs.shrink_to_fit();
         }
     }
+}
 
-    /// The contact stage and the gather with the integration of a parallel step, in one pass
-    /// (`par::run_pieces_then`): a piece's spheres move as soon as no contact piece that reads
-    /// them is still running, so a worker done with its contacts moves spheres instead of waiting
-    /// for the other's. The same sums in the same order as [`DemSim::contacts`] then
-    /// `integrate`: see `write_back` and `gather_piece`. Returns the largest displacement (see
-    /// `integrate`).
-    fn contacts_and_motion(&mut self, motion: &Motion) -> f64 {
-        let strides = (self.pairs.param_stride, self.pairs.history_stride);
-        self.piece_bounds.refresh(self.spheres.len(), self.rebuilds, &self.pairs, &self.wall_pairs);
-        let bounds = &self.piece_bounds;
+/// The spheres' contact stage and their motion in one parallel pass (`par::run_pieces_then`): a
+/// piece's spheres move as soon as no contact piece that reads them is still running, so a worker
+/// done with its contacts moves spheres instead of waiting for the other's. The same sums in the
+/// same order as [`SphereContacts`] then `integrate`: see `write_back` and `gather_piece`. Reads
+/// the surroundings, the spheres' constants and where they were at the build; writes the spheres'
+/// motion and loads, the pairs' contacts and history, and the pieces' cuts and handovers.
+/// Returns the largest displacement (see `integrate`).
+pub(super) struct ContactsAndMotion;
+
+impl ContactsAndMotion {
+    pub(super) fn run(
+        spheres: &mut Spheres,
+        (pairs, wall_pairs): (&mut PairList, &mut PairList),
+        (pieces, handovers): (&mut PieceBounds, &mut Handovers),
+        around: &SphereSurroundings<'_>,
+        (x_at_build, rebuilds): (&[Vec3], u64),
+        motion: &Motion,
+    ) -> f64 {
+        let strides = (pairs.param_stride, pairs.history_stride);
+        pieces.refresh(spheres.len(), rebuilds, pairs, wall_pairs);
+        let bounds = &*pieces;
         let starts = &bounds.spheres[..];
-        let Spheres { x, v, w, radius, force, torque, mass, inertia, blocked, clump, .. } = &mut self.spheres;
-        let rotation = self.laws.iter().any(|l| l.resists_rotation());
+        let Spheres { x, v, w, radius, force, torque, mass, inertia, blocked, clump, .. } = spheres;
+        let rotation = around.laws.iter().any(|l| l.resists_rotation());
         let (x, v, w) = (SharedRows::new(x), SharedRows::new(v), SharedRows::new(w));
-        let (walls, laws, dt, cell) = (&self.walls, &self.laws[..], self.dt, self.cell.as_ref());
+        let (walls, laws, dt, cell) = (around.walls, around.laws, around.dt, around.cell);
         let n = starts.len() - 1;
         // Each piece borrows its own pairs, loads and handover in the worker that claims it. Cut
         // and lent from here, in slots that the workers then emptied, each step's descriptors
         // (some 350 bytes a piece) were written over cache lines the other core had last
         // written: 5-8 us of this serial setup in the 10k-sphere deposition on two threads.
         let (sphere_cuts, wall_cuts) = (&bounds.sphere_pairs[..], &bounds.wall_pairs[..]);
-        let (sphere_list, wall_list) =
-            (SharedPairs::new(&mut self.pairs, strides), SharedPairs::new(&mut self.wall_pairs, strides));
+        let (sphere_list, wall_list) = (SharedPairs::new(pairs, strides), SharedPairs::new(wall_pairs, strides));
         let (force, torque) = (SharedRows::new(force), SharedRows::new(torque));
-        let handovers = SharedRows::new(self.handovers.fit(n));
+        let handovers = SharedRows::new(handovers.fit(n));
         let (mass, inertia, blocked, clump, x_at_build) =
-            (&mass[..], &inertia[..], &blocked[..], &clump[..], &self.x_at_build[..]);
+            (&mass[..], &inertia[..], &blocked[..], &clump[..], x_at_build);
         // Who ran each piece's contacts, and for how long (see `PieceBounds::learn`).
         let contacts_timed: Vec<OnceLock<(usize, f64)>> = (0..n).map(|_| OnceLock::new()).collect();
         let timed = |started: Instant| (rayon::current_thread_index().unwrap_or(0), started.elapsed().as_secs_f64());
@@ -307,7 +328,7 @@ impl DemSim {
         );
         let timings: Vec<[(usize, f64); 2]> =
             contacts_timed.iter().zip(&moved).map(|(c, m)| [c.get().copied().unwrap_or_default(), m.1]).collect();
-        self.piece_bounds.learn(&timings);
+        pieces.learn(&timings);
         moved.into_iter().map(|m| m.0).fold(0.0, farther)
     }
 }
