@@ -427,6 +427,27 @@ summary("lowest_sphere", lowest);
     assert!(get("lowest_sphere") > -0.001 + 0.9 * 0.003, "lowest sphere centre {}", get("lowest_sphere"));
 }
 
+/// A potential particle of planes of its own comes the same from `sim.potential(#{ planes })` and
+/// from `sim.add_body("potential", ...)` with the planes as `a1, b1, c1, d1, ...`: the same mass.
+#[test]
+fn a_particle_of_planes_comes_from_add_body_as_from_sim_potential() {
+    let out = common::run_text(
+        "potential_of_planes",
+        r#"
+let sim = dem();
+let m = sim.material(#{ density: 1000.0 });
+let a = sim.potential(m, [0.0, 0.0, 0.0], #{ planes: [[0.0, 0.0, 1.0, 0.002], [0.0, 0.0, -1.0, 0.002]], r: 0.001, R: 0.004, k: 0.5 });
+let b = sim.add_body("potential", m, [0.1, 0.0, 0.0], #{ r: 0.001, R: 0.004, k: 0.5, a1: 0.0, b1: 0.0, c1: 1.0, d1: 0.002, a2: 0.0, b2: 0.0, c2: -1.0, d2: 0.002 });
+summary("mass_a", sim.potential_body(a).mass);
+summary("mass_b", sim.body_state(b).mass);
+"#,
+    );
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    let (a, b) = (summary["mass_a"].as_f64().unwrap(), summary["mass_b"].as_f64().unwrap());
+    assert!(a > 0.0 && a == b, "masses {a} and {b} kg");
+}
+
 /// The thesis scene with potential particles at its small default size (300 particles) with short
 /// settling and rest times: the
 /// device opens, part of the particles flow out and are erased, and what stays is a heap at

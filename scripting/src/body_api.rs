@@ -45,7 +45,13 @@ fn add(s: &DemHandle, kind: &str, m: &DemMaterialHandle, centre: &Dynamic, opts:
     let registry = s.lock().ctx.registry().clone();
     let factory = registry.body_kind(kind).or_rhai()?;
     let known: Vec<&str> = factory.param_specs().iter().map(|p| p.name).chain(OWN_KEYS).collect();
-    only_keys(opts, &known, &format!("sim.add_body(\"{kind}\", ...)"))?;
+    // A kind whose shapes take a list of values (the planes of a potential particle: a1, b1, ...)
+    // names them itself: what it builds from is allowed.
+    if let Err(e) = only_keys(opts, &known, &format!("sim.add_body(\"{kind}\", ...)")) {
+        if factory.build_from(&given).is_err() {
+            return Err(e);
+        }
+    }
     add_with(s, kind, &given, m, centre, opts)
 }
 
