@@ -74,12 +74,7 @@ fn finite3(v: Vec3, name: &str) -> Result<Vec3> {
 impl DemSim {
     /// Index of the sphere with `id` now, or None when no sphere has it (never made, or erased).
     pub fn sphere_index(&self, id: u64) -> Option<usize> {
-        let ids = &self.spheres.id;
-        // Before any reordering or erasure the id is the index.
-        if (id as usize) < ids.len() && ids[id as usize] == id {
-            return Some(id as usize);
-        }
-        ids.iter().position(|&i| i == id)
+        self.spheres.index_of(id)
     }
 
     /// The index of sphere `id`, or an error that says there is none.
@@ -195,27 +190,9 @@ impl DemSim {
         Ok(before - self.spheres.len())
     }
 
-    /// Index of the sphere an external load acts on, from its remembered index when that still
-    /// holds the sphere.
+    /// Index of the sphere an external load acts on.
     pub(crate) fn load_index(&self, load: &ExternalLoad) -> Option<usize> {
-        match self.spheres.id.get(load.index) {
-            Some(&id) if id == load.id => Some(load.index),
-            _ => self.sphere_index(load.id),
-        }
-    }
-
-    /// Adds the lasting external loads to the spheres' forces and torques of this step.
-    pub(crate) fn apply_external_loads(&mut self) {
-        for k in 0..self.external.len() {
-            let Some(i) = self.load_index(&self.external[k]) else { continue };
-            let load = &mut self.external[k];
-            load.index = i;
-            let s = &mut self.spheres;
-            for a in 0..3 {
-                s.force[i][a] += load.force[a];
-                s.torque[i][a] += load.torque[a];
-            }
-        }
+        load.index_in(&self.spheres)
     }
 }
 

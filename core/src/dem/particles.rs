@@ -57,6 +57,15 @@ pub fn compacted_indices(keep: &[bool]) -> Vec<u32> {
 pub const FREE: u32 = u32::MAX;
 
 impl Spheres {
+    /// The index of the sphere with `id`.
+    pub fn index_of(&self, id: u64) -> Option<usize> {
+        // Before any reordering or erasure the id is the index.
+        if (id as usize) < self.id.len() && self.id[id as usize] == id {
+            return Some(id as usize);
+        }
+        self.id.iter().position(|&i| i == id)
+    }
+
     pub fn len(&self) -> usize {
         self.x.len()
     }
@@ -143,4 +152,32 @@ pub struct ExternalLoad {
     /// spheres for it once they are numbered in space (ids no longer their indices).
     #[serde(skip)]
     pub(crate) index: usize,
+}
+
+impl ExternalLoad {
+    /// Index of the sphere the load acts on, from its remembered index when that still holds
+    /// the sphere.
+    pub(crate) fn index_in(&self, spheres: &Spheres) -> Option<usize> {
+        match spheres.id.get(self.index) {
+            Some(&id) if id == self.id => Some(self.index),
+            _ => spheres.index_of(self.id),
+        }
+    }
+}
+
+/// The lasting external loads' stage. Reads the loads; writes the spheres' forces and torques of
+/// this step, and where each load found its sphere.
+pub(crate) struct ExternalLoads;
+
+impl ExternalLoads {
+    pub(crate) fn run(loads: &mut [ExternalLoad], spheres: &mut Spheres) {
+        for load in loads {
+            let Some(i) = load.index_in(spheres) else { continue };
+            load.index = i;
+            for a in 0..3 {
+                spheres.force[i][a] += load.force[a];
+                spheres.torque[i][a] += load.torque[a];
+            }
+        }
+    }
 }

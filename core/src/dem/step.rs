@@ -12,7 +12,7 @@ use crate::dem::kind_stage::{BodyContacts, BodyMotion, SphereReactions, Surround
 use crate::dem::motion::{
     farther, gather_piece, integrate, integrate_clumps, GatherJob, Motion, PieceState, RigidMotion, SphereConstants,
 };
-use crate::dem::particles::Spheres;
+use crate::dem::particles::{ExternalLoads, Spheres};
 use crate::dem::pieces::PieceBounds;
 use crate::dem::rows::SharedRows;
 use crate::dem::sim::DemSim;
@@ -102,7 +102,7 @@ impl DemSim {
             let around =
                 SphereSurroundings { walls: &self.walls, laws: &self.laws, dt: self.dt, cell: self.cell.as_ref() };
             SphereContacts::run(&mut self.spheres, (&mut self.pairs, &mut self.wall_pairs), &around);
-            self.apply_external_loads();
+            ExternalLoads::run(&mut self.external, &mut self.spheres);
             SphereReactions::run(&self.kinds, &mut self.spheres);
             if check {
                 self.check_time_step()?;
