@@ -75,12 +75,6 @@ impl BodyContacts {
             let contacts: Vec<LawContact> = touching.into_iter().map(|f| f.law).collect();
             let (force, moment) = laws_in_pair_order(around.laws, &mut list, &contacts, around.dt);
             Self::sum_loads(bodies, around.spheres, &mut list, (&contacts, &points), (&force, &moment), side);
-            let overlap = &mut bodies.overlap[n];
-            overlap.clear();
-            overlap.resize(list.len(), 0.0);
-            for c in &contacts {
-                overlap[c.slot] = c.overlap;
-            }
             let slot = match side {
                 Side::Bodies => &mut bodies.pairs,
                 Side::Walls => &mut bodies.wall_pairs,

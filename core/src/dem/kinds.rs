@@ -70,11 +70,8 @@ pub struct KindScene {
     pub(crate) x_at_build: Vec<Vec3>,
     /// Loads on spheres from this step's contacts (sphere, force, torque), in pair order.
     pub(crate) sphere_loads: Vec<(u32, Vec3, Vec3)>,
-    /// Each pair's overlap at this step's contacts (0 where apart), by list: body pairs, walls,
-    /// spheres (for the elastic energy).
-    pub(crate) overlap: [Vec<f64>; 3],
-    /// This step's touching contacts by list, with their contact points: what the energy
-    /// tracker reads of them.
+    /// This step's touching contacts by list (body pairs, walls, spheres), in pair order, with
+    /// their contact points: what the energy tracker and the measures read of them.
     pub(crate) touches: [Vec<(LawContact, Vec3)>; 3],
     /// Seconds the contacts spent in the geometry and in the laws (with the sums) since the
     /// simulation began: what `granite bench potential` reports.
@@ -94,9 +91,10 @@ impl KindScene {
         self.shapes[self.shape[i] as usize].bounding_radius()
     }
 
-    /// The candidate lists (body pairs, body-wall, body-sphere) with each pair's last overlap.
-    pub(crate) fn lists(&self) -> [(&PairList, &[f64]); 3] {
-        [(&self.pairs, &self.overlap[0]), (&self.wall_pairs, &self.overlap[1]), (&self.sphere_pairs, &self.overlap[2])]
+    /// The candidate lists (body pairs, body-wall, body-sphere) with their last step's touching
+    /// contacts.
+    pub(crate) fn lists(&self) -> [(&PairList, &[(LawContact, Vec3)]); 3] {
+        [(&self.pairs, &self.touches[0]), (&self.wall_pairs, &self.touches[1]), (&self.sphere_pairs, &self.touches[2])]
     }
 
     /// Touching contacts of the bodies (with one another, walls and spheres).
@@ -125,20 +123,8 @@ impl KindScene {
     /// Keeps the bodies whose flag is true, in order; the pairs between those that stay keep
     /// their history.
     pub(crate) fn retain(&mut self, keep: &[bool]) {
-        fn kept<T: Clone>(v: &mut Vec<T>, keep: &[bool]) {
-            let mut k = keep.iter();
-            v.retain(|_| *k.next().unwrap_or(&true));
-        }
-        let stride = self.kind.as_ref().map_or(0, |k| k.stride);
-        if stride > 0 {
-            let mut values = Vec::with_capacity(self.values.len());
-            for (i, chunk) in self.values.chunks(stride).enumerate() {
-                if keep.get(i).copied().unwrap_or(true) {
-                    values.extend_from_slice(chunk);
-                }
-            }
-            self.values = values;
-        }
+        use crate::mpm::points::{retain_by as kept, retain_strided};
+        retain_strided(&mut self.values, self.kind.as_ref().map_or(0, |k| k.stride), keep);
         kept(&mut self.shape, keep);
         kept(&mut self.id, keep);
         kept(&mut self.material, keep);
@@ -155,7 +141,7 @@ impl KindScene {
         self.pairs.retain_spheres(keep, true);
         self.wall_pairs.retain_spheres(keep, false);
         self.sphere_pairs.retain_spheres(keep, false);
-        self.overlap = Default::default();
+        self.touches = Default::default();
     }
 
     /// Mass for a contact's effective mass: infinite for a fixed body.

@@ -161,7 +161,7 @@ impl DemSim {
                 );
             }
         }
-        for (n, (list, overlap)) in self.kinds.lists().into_iter().enumerate() {
+        for (n, (list, touches)) in self.kinds.lists().into_iter().enumerate() {
             let (ps, hs) = (list.param_stride, list.history_stride);
             for k in (0..list.len()).filter(|&k| list.touching[k]) {
                 let f = list.force[k];
@@ -173,7 +173,7 @@ impl DemSim {
                     d.contacts += 1;
                 }
                 let law = &self.laws[list.law[k] as usize];
-                let overlap = overlap.get(k).copied().unwrap_or(0.0);
+                let overlap = touches.binary_search_by_key(&k, |(c, _)| c.slot).map_or(0.0, |t| touches[t].0.overlap);
                 d.elastic_energy += law.elastic_energy(
                     overlap,
                     &list.params[k * ps..(k + 1) * ps],

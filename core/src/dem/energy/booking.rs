@@ -207,7 +207,7 @@ impl DemSim {
             let (x, v, w, _) = b.bodies[i];
             mean_at((x, v, w), (k.v[i], k.w[i]), point)
         };
-        for (n, ((list, _), touches)) in k.lists().into_iter().zip(&k.touches).enumerate() {
+        for (n, (list, touches)) in k.lists().into_iter().enumerate() {
             let (ps, hs) = (list.param_stride, list.history_stride);
             let before = &b.body_history[n];
             for &(c, point) in touches {

@@ -21,6 +21,10 @@
 //! search on each particle (thesis 2.2.3).
 
 use super::shape::{potential, PotentialShape};
+/// The geometry of two touching bodies: unit normal from A towards B, the length along it
+/// between the two surfaces through the contact point, and the middle of that overlap (where
+/// the force acts).
+pub use granite_core::ext::body::Touch;
 use granite_core::math::{dot3, Vec3};
 use nalgebra::{Matrix3, Vector3};
 
@@ -140,17 +144,6 @@ pub struct Solution {
     /// The distances from the point to B's and to A's surface along the normal (the overlap's two
     /// parts): where the next step's searches along the normal start.
     pub depths: [f64; 2],
-}
-
-/// The geometry of two touching particles.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Touch {
-    /// Unit normal from A towards B.
-    pub normal: Vec3,
-    /// Length along the normal between the two surfaces through the contact point (m).
-    pub overlap: f64,
-    /// Middle of that overlap: where the contact force acts.
-    pub point: Vec3,
 }
 
 /// What a solve found: the solution (to start from next time), the optimal value bracket's upper

@@ -12,7 +12,7 @@
 pub mod contact;
 pub mod shape;
 
-use contact::{detect, detect_plane, Placed, Pose, Solution, Touch as Found};
+use contact::{detect, detect_plane, Placed, Pose, Solution};
 use granite_core::ext::body::{
     Ball, BodyGeometry, BodyKindFactory, BodyShape, KindBodies, PairFailure, PlacedBodies, Plane, Touch, WarmStarts,
 };
@@ -392,12 +392,8 @@ impl PlacedPotentials<'_> {
         w[3] = found.solution.lambda;
         w[4] = 1.0;
         w[5..7].copy_from_slice(&found.solution.depths);
-        Ok(found.touch.map(touch))
+        Ok(found.touch)
     }
-}
-
-fn touch(t: Found) -> Touch {
-    Touch { normal: t.normal, overlap: t.overlap, point: t.point }
 }
 
 impl PlacedBodies for PlacedPotentials<'_> {
@@ -430,7 +426,7 @@ impl PlacedBodies for PlacedPotentials<'_> {
             let (deepest, found) = detect_plane(a, plane.point, normal, start).map_err(|e| e.to_string())?;
             w[..3].copy_from_slice(&deepest);
             w[4] = 1.0;
-            Ok(found.map(touch))
+            Ok(found)
         })
     }
 
