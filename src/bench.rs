@@ -127,10 +127,10 @@ pub fn gravity_deposition(count: usize) -> Result<granite_core::dem::DemSim> {
     let lx = side as f64 * spacing;
     let lz = (count as f64 / (side * side) as f64).ceil() * spacing;
     let mut sim = granite_core::dem::DemSim::new();
-    sim.seed = 1;
+    sim.world.seed = 1;
     sim.skin = 0.5 * r;
-    let m = sim.add_material("glass", rho)?;
-    sim.set_contact_law(
+    let m = sim.world.add_material("glass", rho)?;
+    sim.world.set_contact_law(
         reg.build_contact_law("linear", &params(&[("young", young), ("kt_ratio", 0.3), ("friction", 30.0)]))?,
         None,
     )?;
@@ -139,14 +139,14 @@ pub fn gravity_deposition(count: usize) -> Result<granite_core::dem::DemSim> {
         let mut n = [0.0; 3];
         n[a] = if upper { -1.0 } else { 1.0 };
         let position = if upper { [lx, lx, top] } else { [0.0; 3] };
-        sim.add_wall(Wall::new("", WallShape::Plane { normal: n }, position, m));
+        sim.world.add_wall(Wall::new("", WallShape::Plane { normal: n }, position, m));
     }
     for (x, radius) in lattice([0.0; 3], [lx, lx, lz], spacing, r, 0.05 * r, 1)? {
-        sim.add_sphere(m, x, radius, [0.0; 3])?;
+        sim.world.add_sphere(m, x, radius, [0.0; 3])?;
     }
-    sim.gravity = [0.0, 0.0, -9.81];
-    sim.damping = 0.4;
-    sim.set_dt(0.5 * r * (rho / young).sqrt())?;
+    sim.world.gravity = [0.0, 0.0, -9.81];
+    sim.world.damping = 0.4;
+    sim.world.set_dt(0.5 * r * (rho / young).sqrt())?;
     Ok(sim)
 }
 
@@ -160,35 +160,35 @@ pub fn periodic_rve(count: usize, pressure: f64) -> Result<granite_core::dem::De
     let solid = count as f64 * 4.0 / 3.0 * std::f64::consts::PI * r.powi(3) * 1.1;
     let side = (solid / 0.15).cbrt();
     let mut sim = granite_core::dem::DemSim::new();
-    sim.seed = 1;
+    sim.world.seed = 1;
     sim.skin = 0.5 * 0.7 * r;
-    let m = sim.add_material("grains", rho)?;
+    let m = sim.world.add_material("grains", rho)?;
     let law =
         |phi: f64| reg.build_contact_law("linear", &params(&[("young", 1e8), ("kt_ratio", 0.5), ("friction", phi)]));
-    sim.set_contact_law(law(5.0)?, None)?;
-    sim.set_cell(Some(PeriodicCell::new_box([side; 3])));
+    sim.world.set_contact_law(law(5.0)?, None)?;
+    sim.world.set_cell(Some(PeriodicCell::new_box([side; 3])));
     for (x, radius) in
         cloud([0.0; 3], [side; 3], count, &Psd::Uniform { min: 0.7 * r, max: 1.3 * r }, 1, &[], &|| None)?
     {
-        sim.add_sphere(m, x, radius, [0.0; 3])?;
+        sim.world.add_sphere(m, x, radius, [0.0; 3])?;
     }
-    sim.damping = 0.4;
-    sim.set_dt(0.3 * sim.critical_dt().unwrap_or(1e-6))?;
+    sim.world.damping = 0.4;
+    sim.world.set_dt(0.3 * sim.world.critical_dt().unwrap_or(1e-6))?;
     let goal = AxisGoal::Stress { target: -pressure, max_rate: 5.0 };
-    sim.cell_control = Some(CellControl::new([goal; 3], vec![], 200.0));
+    sim.world.cell_control = Some(CellControl::new([goal; 3], vec![], 200.0));
     for round in 0.. {
         for _ in 0..500 {
             sim.step()?;
         }
-        let volume = sim.cell_volume().unwrap_or(1.0);
-        let stress = sim.love_weber_stress(volume);
-        let reached = sim.cell_control.as_ref().is_some_and(|c| c.stress_reached(&stress, 0.01));
-        if (reached && sim.diagnostics().unbalanced_force < 0.01) || round > 400 {
+        let volume = sim.world.cell_volume().unwrap_or(1.0);
+        let stress = sim.world.love_weber_stress(volume);
+        let reached = sim.world.cell_control.as_ref().is_some_and(|c| c.stress_reached(&stress, 0.01));
+        if (reached && sim.world.diagnostics().unbalanced_force < 0.01) || round > 400 {
             break;
         }
     }
-    sim.set_contact_law(law(30.0)?, None)?;
-    sim.cell_control = None;
+    sim.world.set_contact_law(law(30.0)?, None)?;
+    sim.world.cell_control = None;
     // Let the contacts' tangential springs build up again under the new friction.
     for _ in 0..500 {
         sim.step()?;
@@ -289,7 +289,10 @@ pub fn dem(counts: &[usize], steps: usize, threads: &[usize], repeat: usize) -> 
             for _ in 0..steps {
                 sim.step()?;
             }
-            Ok((t.elapsed().as_secs_f64(), (sim.spheres.len(), sim.rebuilds - before, sim.pairs.touching_count())))
+            Ok((
+                t.elapsed().as_secs_f64(),
+                (sim.world.spheres.len(), sim.rebuilds - before, sim.world.pairs.touching_count()),
+            ))
         })?;
         let mut base = None;
         for Timed { threads: n, best, worst, out: (particles, rebuilds, contacts) } in timed {
@@ -304,14 +307,14 @@ pub fn dem(counts: &[usize], steps: usize, threads: &[usize], repeat: usize) -> 
         if threads.iter().any(|&n| n > 1) {
             let mut state = gravity_deposition(count)?;
             pool(1)?.install(|| (0..200).try_for_each(|_| state.step()))?;
-            print_windows(&format!("N = {:>6}  ", state.spheres.len()), &state, threads, repeat)?;
+            print_windows(&format!("N = {:>6}  ", state.world.spheres.len()), &state, threads, repeat)?;
         }
     }
     granite_core::outln!(
         "granite bench dem: 1500-sphere periodic RVE at 100 kPa, constant-volume simple shear, best of {repeat}"
     );
     let mut rve = periodic_rve(1500, 1e5)?;
-    rve.cell_control = Some(granite_core::dem::cell::CellControl::new(
+    rve.world.cell_control = Some(granite_core::dem::cell::CellControl::new(
         [granite_core::dem::cell::AxisGoal::Rate(0.0); 3],
         vec![(0, 2, 1.0)],
         200.0,
@@ -322,7 +325,7 @@ pub fn dem(counts: &[usize], steps: usize, threads: &[usize], repeat: usize) -> 
         for _ in 0..steps {
             sim.step()?;
         }
-        Ok((t.elapsed().as_secs_f64(), sim.pairs.touching_count()))
+        Ok((t.elapsed().as_secs_f64(), sim.world.pairs.touching_count()))
     })?;
     let mut base = None;
     for Timed { threads: n, best, worst, out: contacts } in timed {
@@ -330,10 +333,10 @@ pub fn dem(counts: &[usize], steps: usize, threads: &[usize], repeat: usize) -> 
         let speedup = speedup_over(&mut base, 1.0 / per_step);
         granite_core::outln!(
             "N = {:>6}  threads {n}  {steps} steps  {:>7.4} ms per step ({:.4})  {:>6.2} M particle-steps/s  speed-up {speedup:.2}x  ({contacts} contacts)",
-            rve.spheres.len(),
+            rve.world.spheres.len(),
             per_step * 1e3,
             worst / steps as f64 * 1e3,
-            rve.spheres.len() as f64 / per_step / 1e6
+            rve.world.spheres.len() as f64 / per_step / 1e6
         );
     }
     // The ceiling of the parallel figures above on this machine: every thread steps its own copy
@@ -442,8 +445,8 @@ fn rves_alone(rve: &granite_core::dem::DemSim, copies: usize) -> Result<RvesAlon
     for (sim, _) in sims.iter_mut() {
         sim.set_sequential(true);
         // One MPM step's strain increment spread over its DEM steps, as the dem_rve law does.
-        let rate = TOP_SPEED / (2.0 * CELL) * MPM_DT / (DEM_STEPS as f64 * sim.dt);
-        if let Some(c) = sim.cell.as_mut() {
+        let rate = TOP_SPEED / (2.0 * CELL) * MPM_DT / (DEM_STEPS as f64 * sim.world.dt);
+        if let Some(c) = sim.world.cell.as_mut() {
             c.velocity_gradient[(1, 1)] = -rate;
         }
     }
@@ -489,8 +492,8 @@ fn oedometric_rves(rve: &granite_core::dem::DemSim, comm: Option<granite_core::c
     let bytes = law.point_objects().map(|o| o.bytes_per_point()).unwrap_or(0);
     let m = sim.add_material("sand", 1700.0, law)?;
     let (xs, vols) = cell_points(&mesh, Layout::Gauss, 2, |_| Ok(true))?;
-    let volume = rve.cell_volume().unwrap_or(1.0);
-    sim.add_points(m, &xs, &vols, [0.0; 3], rve.love_weber_stress(volume))?;
+    let volume = rve.world.cell_volume().unwrap_or(1.0);
+    sim.add_points(m, &xs, &vols, [0.0; 3], rve.world.love_weber_stress(volume))?;
     for (face, axis, v) in [("x-", 0, 0.0), ("x+", 0, 0.0), ("y-", 1, 0.0), ("y+", 1, -TOP_SPEED)] {
         let f = Face::parse(face, 2)?;
         sim.boundary.velocity.push(VelocityConstraint {
@@ -508,7 +511,7 @@ fn bench_rve() -> Result<granite_core::dem::DemSim> {
     let mut rve = periodic_rve(125, 1e5)?;
     // The Verlet skin scripts/mpmxdem/prepare_rve.rhai gives an RVE by default (0.05 smallest
     // radii): an RVE deforms slowly, so a thin skin means fewer candidate pairs and few rebuilds.
-    let r_min = rve.spheres.smallest_radius();
+    let r_min = rve.world.spheres.smallest_radius();
     rve.set_skin(0.05 * r_min)?;
     Ok(rve)
 }
@@ -525,7 +528,7 @@ pub fn mpmxdem_mpi(comm: granite_core::comm::Comm, repeat: usize) -> Result<()> 
         granite_core::outln!(
             "granite bench mpmxdem over MPI: 16 points x {}-sphere RVEs, {MPM_STEPS} MPM steps x {DEM_STEPS} DEM steps, \
              {size} processes of 1 thread against 1 process of {size} threads",
-            rve.spheres.len()
+            rve.world.spheres.len()
         );
     }
     let threads_pool = pool(size)?;
@@ -567,7 +570,7 @@ pub fn mpmxdem_mpi(comm: granite_core::comm::Comm, repeat: usize) -> Result<()> 
     }
     let fastest = |v: &[f64]| v.iter().cloned().fold(f64::INFINITY, f64::min);
     let slowest = |v: &[f64]| v.iter().cloned().fold(0.0, f64::max);
-    let sphere_steps = (16 * rve.spheres.len() * DEM_STEPS * MPM_STEPS) as f64;
+    let sphere_steps = (16 * rve.world.spheres.len() * DEM_STEPS * MPM_STEPS) as f64;
     let per_step = |s: f64| 1e6 * s / MPM_STEPS as f64;
     let (t_threads, t_spread) = (fastest(&threaded), fastest(&spread));
     granite_core::outln!(
@@ -629,7 +632,7 @@ pub fn mpmxdem(threads: &[usize], repeat: usize) -> Result<()> {
     let alone_best = alone_best.into_inner().unwrap_or_else(|e| e.into_inner());
     let mut base = None;
     for Timed { threads: n, best: secs, worst, out: (points, bytes) } in timed {
-        let sphere_steps = (points * rve.spheres.len() * DEM_STEPS * MPM_STEPS) as f64;
+        let sphere_steps = (points * rve.world.spheres.len() * DEM_STEPS * MPM_STEPS) as f64;
         let rate = sphere_steps / secs;
         let speedup = speedup_over(&mut base, rate);
         granite_core::outln!(
@@ -748,11 +751,11 @@ pub fn resin_heap(shape: &str, count: usize, settle: usize) -> Result<granite_co
         Err(_) => Grain::Clump(reg.build_shape(shape, &ParamMap::new())?),
     };
     let mut sim = granite_core::dem::DemSim::new();
-    sim.seed = 1;
-    let resin = sim.add_material("resin", 943.0)?;
+    sim.world.seed = 1;
+    let resin = sim.world.add_material("resin", 943.0)?;
     let friction = 0.713f64.atan().to_degrees();
     let law = params(&[("kn", 1200.0), ("kt_ratio", 0.773), ("friction", friction), ("restitution", 0.8)]);
-    sim.set_contact_law(reg.build_contact_law("visco_elastic", &law)?, None)?;
+    sim.world.set_contact_law(reg.build_contact_law("visco_elastic", &law)?, None)?;
     // Grains on a lattice of 1.1 bounding diameters, 8 across, in a box 10 across.
     let bound = match &grain {
         Grain::Clump(model) => model.bounding_radius(),
@@ -765,7 +768,7 @@ pub fn resin_heap(shape: &str, count: usize, settle: usize) -> Result<granite_co
         let mut n = [0.0; 3];
         n[a] = if upper { -1.0 } else { 1.0 };
         let position = if upper { [width, width, 0.0] } else { [0.0; 3] };
-        sim.add_wall(Wall::new("", WallShape::Plane { normal: n }, position, resin));
+        sim.world.add_wall(Wall::new("", WallShape::Plane { normal: n }, position, resin));
     }
     sim.skin = 0.2 * bound;
     let template = match &grain {
@@ -786,15 +789,15 @@ pub fn resin_heap(shape: &str, count: usize, settle: usize) -> Result<granite_co
                 let shape = body.clone();
                 let v = [0.0; 3];
                 let new = NewBody { kind: kind.as_ref(), shape, material: resin, x: c, q, v, w: v, fixed: false };
-                sim.add_body(new)?
+                sim.world.add_body(new)?
             }
-            (Grain::Clump(_), Some(props)) => sim.add_clump_with(resin, &members, &props.transformed(&q, c))?,
+            (Grain::Clump(_), Some(props)) => sim.world.add_clump_with(resin, &members, &props.transformed(&q, c))?,
             (Grain::Clump(_), None) => unreachable!("a clump's mass properties are computed above"),
         };
     }
-    sim.gravity = [0.0, 0.0, -9.81];
-    sim.set_damping(0.3)?;
-    sim.set_dt(7.86e-5)?;
+    sim.world.gravity = [0.0, 0.0, -9.81];
+    sim.world.set_damping(0.3)?;
+    sim.world.set_dt(7.86e-5)?;
     for _ in 0..settle {
         sim.step()?;
     }
@@ -814,21 +817,21 @@ pub fn potential(count: usize, steps: usize, repeat: usize) -> Result<()> {
         for _ in 0..repeat.max(1) {
             for (k, (_, heap)) in heaps.iter().enumerate() {
                 let mut sim = heap.clone();
-                let before = sim.kinds.seconds;
+                let before = sim.world.kinds.seconds;
                 let t = Instant::now();
                 for _ in 0..steps {
                     sim.step()?;
                 }
                 let secs = t.elapsed().as_secs_f64();
                 if secs < times[k].0 {
-                    split = if k == 1 { [sim.kinds.seconds[0] - before[0], sim.kinds.seconds[1] - before[1]] } else { split };
+                    split = if k == 1 { [sim.world.kinds.seconds[0] - before[0], sim.world.kinds.seconds[1] - before[1]] } else { split };
                 }
                 times[k] = (times[k].0.min(secs), times[k].1.max(secs));
             }
         }
         let per = |secs: f64| secs / (count * steps) as f64 * 1e6;
         for (k, (label, heap)) in heaps.iter().enumerate() {
-            let contacts = heap.pairs.touching_count() + heap.wall_pairs.touching_count() + heap.kinds.contact_count();
+            let contacts = heap.world.pairs.touching_count() + heap.world.wall_pairs.touching_count() + heap.world.kinds.contact_count();
             granite_core::outln!(
                 "{label:<20} {:>7.3} us a grain-step ({:.3})  {} contacts at the start, {:.2} a grain",
                 per(times[k].0),
@@ -870,7 +873,7 @@ impl DeviceScene {
             // Thesis 5.4: 400 points (0.1 m cells), each a 2000-sphere RVE.
             "column" => {
                 let mut rve = periodic_rve(2000, 1e5)?;
-                let r_min = rve.spheres.smallest_radius();
+                let r_min = rve.world.spheres.smallest_radius();
                 rve.set_skin(0.05 * r_min)?;
                 Ok(DeviceScene { name: "column", rve, copies: 400, calls: 5, dem_steps: DEM_STEPS as u64 })
             }
@@ -883,12 +886,12 @@ impl DeviceScene {
     /// The velocity gradient of one call (the oedometric scene's strain rate).
     fn gradient(&self) -> nalgebra::Matrix3<f64> {
         let mut l = nalgebra::Matrix3::zeros();
-        l[(1, 1)] = -TOP_SPEED / (2.0 * CELL) * MPM_DT / (self.dem_steps as f64 * self.rve.dt);
+        l[(1, 1)] = -TOP_SPEED / (2.0 * CELL) * MPM_DT / (self.dem_steps as f64 * self.rve.world.dt);
         l
     }
 
     fn sphere_steps(&self) -> f64 {
-        (self.copies * self.rve.spheres.len() * self.calls) as f64 * self.dem_steps as f64
+        (self.copies * self.rve.world.spheres.len() * self.calls) as f64 * self.dem_steps as f64
     }
 }
 

@@ -28,8 +28,8 @@ struct Scene {
 fn scene(density: f64, law: &[(&str, f64)]) -> Scene {
     let registry = granite_plugins::default_registry();
     let mut sim = DemSim::new();
-    let material = sim.add_material("grains", density).unwrap();
-    sim.set_contact_law(registry.build_contact_law("linear", &params(law)).unwrap(), None).unwrap();
+    let material = sim.world.add_material("grains", density).unwrap();
+    sim.world.set_contact_law(registry.build_contact_law("linear", &params(law)).unwrap(), None).unwrap();
     Scene { registry, sim, material }
 }
 
@@ -42,7 +42,7 @@ impl Scene {
         let kind = self.registry.body_kind("capsule").unwrap().clone();
         let body =
             NewBody { kind: kind.as_ref(), shape: shape.clone(), material: self.material, x, q, v, w, fixed: false };
-        self.sim.add_body(body).unwrap()
+        self.sim.world.add_body(body).unwrap()
     }
 }
 
@@ -61,10 +61,10 @@ fn crossed_capsules_and_a_capsule_and_a_sphere_overlap_and_push_as_the_law_says(
     s.add(&shape, [0.03, 0.02, 2.0 * r - overlap], along([0.0, 1.0, 0.0]), [0.0; 3], [0.0; 3]);
     // A sphere resting on the first capsule's side, further along x.
     let ball = 0.005;
-    s.sim.add_sphere(s.material, [-0.04, 0.0, -(r + ball - overlap)], ball, [0.0; 3]).unwrap();
-    s.sim.set_dt(1e-8).unwrap();
+    s.sim.world.add_sphere(s.material, [-0.04, 0.0, -(r + ball - overlap)], ball, [0.0; 3]).unwrap();
+    s.sim.world.set_dt(1e-8).unwrap();
     s.sim.step().unwrap();
-    let k = &s.sim.kinds;
+    let k = &s.sim.world.kinds;
     assert_eq!(k.contact_count(), 2);
     let push = kn * overlap;
     // The first capsule: pushed down by the second, up by the sphere: its two forces cancel along z.
@@ -74,7 +74,7 @@ fn crossed_capsules_and_a_capsule_and_a_sphere_overlap_and_push_as_the_law_says(
     };
     expect(k.force[1], [0.0, 0.0, push], "force on the upper capsule");
     expect(k.force[0], [0.0, 0.0, 0.0], "force on the lower capsule");
-    expect(s.sim.spheres.force[0], [0.0, 0.0, -push], "force on the sphere");
+    expect(s.sim.world.spheres.force[0], [0.0, 0.0, -push], "force on the sphere");
     // Each force acts at its contact point (on the axes' common perpendicular, and under the
     // sphere's centre): torques by the lever arms from the centres of mass.
     let lever = |point: Vec3, centre: Vec3, f: f64| {
@@ -95,25 +95,25 @@ fn a_capsule_rolls_down_an_incline_without_slip_at_the_rate_of_its_own_inertia()
     let g = 9.81;
     let kn = 1e5;
     let mut s = scene(2500.0, &[("kn", kn), ("kt_ratio", 1.0), ("friction", 30.0)]);
-    s.sim.gravity = [0.0, -g, 0.0];
+    s.sim.world.gravity = [0.0, -g, 0.0];
     // The incline through the origin, going down towards +x; the capsule's axis along z, across
     // the slope, resting at its equilibrium overlap.
     let (down, normal) = ([theta.cos(), -theta.sin(), 0.0], [theta.sin(), theta.cos(), 0.0]);
-    s.sim.add_wall(Wall::new("incline", WallShape::Plane { normal }, [0.0; 3], s.material));
+    s.sim.world.add_wall(Wall::new("incline", WallShape::Plane { normal }, [0.0; 3], s.material));
     let shape = s.capsule(r, length);
     let mass = 2500.0 * shape.volume();
     let i_axis = 2500.0 * shape.inertia_per_density()[2];
     let rest = r - mass * g * theta.cos() / kn;
     s.add(&shape, normal.map(|c| c * rest), UnitQuaternion::identity(), [0.0; 3], [0.0; 3]);
-    let dt = 0.05 * s.sim.critical_dt().unwrap();
-    s.sim.set_dt(dt).unwrap();
+    let dt = 0.05 * s.sim.world.critical_dt().unwrap();
+    s.sim.world.set_dt(dt).unwrap();
     let duration = 0.3;
     let steps = (duration / dt).round() as u64;
     for _ in 0..steps {
         s.sim.step().unwrap();
     }
-    let t = s.sim.time;
-    let k = &s.sim.kinds;
+    let t = s.sim.world.time;
+    let k = &s.sim.world.kinds;
     let travelled = (0..3).map(|a| (k.x[0][a] - normal[a] * rest) * down[a]).sum::<f64>();
     let expected = g * theta.sin() / (1.0 + i_axis / (mass * r * r));
     let measured = 2.0 * travelled / (t * t);
@@ -140,7 +140,7 @@ fn capsules_bouncing_in_a_frictionless_elastic_box_keep_their_energy() {
         ([0.0, 0.0, 1.0], [0.0; 3]),
         ([0.0, 0.0, -1.0], [0.0, 0.0, size]),
     ] {
-        s.sim.add_wall(Wall::new("box", WallShape::Plane { normal }, at, s.material));
+        s.sim.world.add_wall(Wall::new("box", WallShape::Plane { normal }, at, s.material));
     }
     let shape = s.capsule(0.01, 0.03);
     // Eight capsules on a lattice, turned and thrown every way, spinning.
@@ -158,15 +158,15 @@ fn capsules_bouncing_in_a_frictionless_elastic_box_keep_their_energy() {
             }
         }
     }
-    let dt = 0.02 * s.sim.critical_dt().unwrap();
-    s.sim.set_dt(dt).unwrap();
-    let energy = |sim: &DemSim| sim.kinds.kinetic_energy();
+    let dt = 0.02 * s.sim.world.critical_dt().unwrap();
+    s.sim.world.set_dt(dt).unwrap();
+    let energy = |sim: &DemSim| sim.world.kinds.kinetic_energy();
     let e0 = energy(&s.sim);
     let (mut worst, mut free_checks, mut collisions) = (0.0f64, 0, 0);
     let mut touching_before = false;
     for _ in 0..(1.0 / dt) as u64 {
         s.sim.step().unwrap();
-        let touching = s.sim.kinds.contact_count() > 0;
+        let touching = s.sim.world.kinds.contact_count() > 0;
         if touching_before && !touching {
             collisions += 1;
         }
@@ -215,8 +215,8 @@ fn the_plugins_command_lists_the_capsule_body_kind() {
 fn a_saved_state_with_capsules_resumes_bit_for_bit() {
     let build = || {
         let mut s = scene(2500.0, &[("kn", 1e5), ("kt_ratio", 0.5), ("friction", 25.0)]);
-        s.sim.gravity = [0.0, 0.0, -9.81];
-        s.sim.add_wall(Wall::new("floor", WallShape::Plane { normal: [0.0, 0.0, 1.0] }, [0.0; 3], s.material));
+        s.sim.world.gravity = [0.0, 0.0, -9.81];
+        s.sim.world.add_wall(Wall::new("floor", WallShape::Plane { normal: [0.0, 0.0, 1.0] }, [0.0; 3], s.material));
         let shape = s.capsule(0.01, 0.03);
         // Four capsules side by side on the floor, each pressing on the next, and a sphere in
         // each groove between two of them: every kind of pair touches from the start.
@@ -229,11 +229,11 @@ fn a_saved_state_with_capsules_resumes_bit_for_bit() {
         }
         let height = r - overlap + ((r + ball - overlap).powi(2) - (gap / 2.0).powi(2)).sqrt();
         for k in 0..3 {
-            s.sim.add_sphere(s.material, [(k as f64 + 0.5) * gap, 0.0, height], ball, [0.0; 3]).unwrap();
+            s.sim.world.add_sphere(s.material, [(k as f64 + 0.5) * gap, 0.0, height], ball, [0.0; 3]).unwrap();
         }
-        s.sim.set_damping(0.2).unwrap();
-        let dt = 0.2 * s.sim.critical_dt().unwrap();
-        s.sim.set_dt(dt).unwrap();
+        s.sim.world.set_damping(0.2).unwrap();
+        let dt = 0.2 * s.sim.world.critical_dt().unwrap();
+        s.sim.world.set_dt(dt).unwrap();
         s
     };
     let steps = 2000;
@@ -245,7 +245,7 @@ fn a_saved_state_with_capsules_resumes_bit_for_bit() {
     for _ in 0..steps {
         first.sim.step().unwrap();
     }
-    let k = &first.sim.kinds;
+    let k = &first.sim.world.kinds;
     assert!(k.contact_count() >= 10, "the saved state has {} contacts", k.contact_count());
     let path = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("capsules_state.json");
     first.sim.save(&path).unwrap();
@@ -253,9 +253,12 @@ fn a_saved_state_with_capsules_resumes_bit_for_bit() {
     for _ in 0..steps {
         resumed.step().unwrap();
     }
-    let (a, b) = (&straight.sim.kinds, &resumed.kinds);
+    let (a, b) = (&straight.sim.world.kinds, &resumed.world.kinds);
     assert!(a.x == b.x && a.v == b.v && a.w == b.w && a.q == b.q, "the resumed bodies parted from the straight run");
-    assert!(straight.sim.spheres.x == resumed.spheres.x && straight.sim.spheres.v == resumed.spheres.v);
+    assert!(
+        straight.sim.world.spheres.x == resumed.world.spheres.x
+            && straight.sim.world.spheres.v == resumed.world.spheres.v
+    );
     assert_eq!(a.contact_count(), b.contact_count());
 }
 

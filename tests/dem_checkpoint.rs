@@ -11,16 +11,18 @@ fn saved_state_resumes_bit_for_bit() {
     let path = dir.join("state.json");
     sim.save(&path).unwrap();
     let mut resumed = granite_core::dem::DemSim::load(&path, &granite::registry()).unwrap();
-    assert!(sim.pairs.touching_count() > 500, "the checkpoint must hold contacts with history");
+    assert!(sim.world.pairs.touching_count() > 500, "the checkpoint must hold contacts with history");
     for _ in 0..400 {
         sim.step().unwrap();
         resumed.step().unwrap();
     }
     assert!(
-        sim.spheres.x == resumed.spheres.x && sim.spheres.v == resumed.spheres.v && sim.spheres.w == resumed.spheres.w
+        sim.world.spheres.x == resumed.world.spheres.x
+            && sim.world.spheres.v == resumed.world.spheres.v
+            && sim.world.spheres.w == resumed.world.spheres.w
     );
-    assert_eq!(sim.pairs.history, resumed.pairs.history);
-    assert_eq!(sim.time.to_bits(), resumed.time.to_bits());
+    assert_eq!(sim.world.pairs.history, resumed.world.pairs.history);
+    assert_eq!(sim.world.time.to_bits(), resumed.world.time.to_bits());
 }
 
 /// A state file edited by hand, truncated or written by another program is refused with what is
@@ -35,9 +37,9 @@ fn inconsistent_state_files_are_refused_with_the_reason() {
     std::fs::create_dir_all(&dir).unwrap();
     let good = sim.to_json().unwrap();
     assert!(!good["pairs"]["a"].as_array().unwrap().is_empty(), "the state must hold pairs");
-    let (n, laws, materials) = (sim.spheres.len(), sim.laws.len(), sim.materials.len());
+    let (n, laws, materials) = (sim.world.spheres.len(), sim.world.laws.len(), sim.world.materials.len());
     type Edit = fn(&mut serde_json::Value);
-    let (id_3, id_5, id_7) = (sim.spheres.id[3], sim.spheres.id[5], sim.spheres.id[7]);
+    let (id_3, id_5, id_7) = (sim.world.spheres.id[3], sim.world.spheres.id[5], sim.world.spheres.id[7]);
     let edits: [(&str, Edit, String); 12] = [
         // Scripts read the step as a signed integer: u64::MAX would show as -1.
         ("step", |s| s["step"] = u64::MAX.into(), format!("a step up to {}", i64::MAX)),
@@ -104,11 +106,11 @@ fn a_state_with_fewer_values_a_pair_is_widened() {
     let mut sim = granite::bench::gravity_deposition(300).unwrap();
     let params: granite_core::registry::ParamMap =
         [("young", 1e8), ("poisson", 0.25), ("friction", 30.0)].iter().map(|(k, v)| (k.to_string(), *v)).collect();
-    sim.set_contact_law(granite::registry().build_contact_law("hertz_mindlin", &params).unwrap(), None).unwrap();
+    sim.world.set_contact_law(granite::registry().build_contact_law("hertz_mindlin", &params).unwrap(), None).unwrap();
     for _ in 0..1500 {
         sim.step().unwrap();
     }
-    assert!(sim.pairs.touching_count() > 50, "the state must hold touching contacts");
+    assert!(sim.world.pairs.touching_count() > 50, "the state must hold touching contacts");
     let mut json = sim.to_json().unwrap();
     for list in ["pairs", "wall_pairs"] {
         let l = &mut json[list];
@@ -120,10 +122,10 @@ fn a_state_with_fewer_values_a_pair_is_widened() {
         l["param_stride"] = serde_json::Value::from(4);
     }
     let mut resumed = granite_core::dem::DemSim::from_json(json, &granite::registry()).unwrap();
-    assert_eq!(resumed.pairs.param_stride, 5);
+    assert_eq!(resumed.world.pairs.param_stride, 5);
     for _ in 0..300 {
         sim.step().unwrap();
         resumed.step().unwrap();
     }
-    assert!(sim.spheres.x == resumed.spheres.x && sim.spheres.v == resumed.spheres.v);
+    assert!(sim.world.spheres.x == resumed.world.spheres.x && sim.world.spheres.v == resumed.world.spheres.v);
 }

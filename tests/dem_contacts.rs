@@ -32,18 +32,18 @@ struct Outcome {
 fn collide(law: &str, law_params: &[(&str, f64)], against_wall: bool, speed: f64, dt_fraction: f64) -> (Outcome, f64) {
     let reg = granite::registry();
     let mut sim = DemSim::new();
-    let m = sim.add_material("glass", 2500.0).unwrap();
-    sim.set_contact_law(reg.build_contact_law(law, &params(law_params)).unwrap(), None).unwrap();
+    let m = sim.world.add_material("glass", 2500.0).unwrap();
+    sim.world.set_contact_law(reg.build_contact_law(law, &params(law_params)).unwrap(), None).unwrap();
     let r = 0.01;
-    sim.add_sphere(m, [0.0, 0.0, 0.0], r, [speed, 0.0, 0.0]).unwrap();
+    sim.world.add_sphere(m, [0.0, 0.0, 0.0], r, [speed, 0.0, 0.0]).unwrap();
     if against_wall {
-        sim.add_wall(Wall::new("wall", WallShape::Plane { normal: [-1.0, 0.0, 0.0] }, [r + 1e-4, 0.0, 0.0], m));
+        sim.world.add_wall(Wall::new("wall", WallShape::Plane { normal: [-1.0, 0.0, 0.0] }, [r + 1e-4, 0.0, 0.0], m));
     } else {
-        sim.add_sphere(m, [2.0 * r + 1e-4, 0.0, 0.0], r, [-speed, 0.0, 0.0]).unwrap();
+        sim.world.add_sphere(m, [2.0 * r + 1e-4, 0.0, 0.0], r, [-speed, 0.0, 0.0]).unwrap();
     }
-    let m1 = sim.spheres.mass[0];
+    let m1 = sim.world.spheres.mass[0];
     let m_eff = if against_wall { m1 } else { 0.5 * m1 };
-    let kn = sim.laws[0].max_normal_stiffness(&granite_core::ext::PairInfo {
+    let kn = sim.world.laws[0].max_normal_stiffness(&granite_core::ext::PairInfo {
         radius: [r, if against_wall { f64::INFINITY } else { r }],
         mass: [m1, if against_wall { f64::INFINITY } else { m1 }],
         seed: 0,
@@ -51,8 +51,8 @@ fn collide(law: &str, law_params: &[(&str, f64)], against_wall: bool, speed: f64
     });
     let w0 = (kn / m_eff).sqrt();
     sim.skin = 0.5 * r;
-    sim.set_dt(dt_fraction / w0).unwrap();
-    let kinetic = |s: &DemSim| s.diagnostics().kinetic_energy;
+    sim.world.set_dt(dt_fraction / w0).unwrap();
+    let kinetic = |s: &DemSim| s.world.diagnostics().kinetic_energy;
     let before = kinetic(&sim);
     let rel_before = if against_wall { speed } else { 2.0 * speed };
     let mut in_contact = 0u64;
@@ -60,9 +60,9 @@ fn collide(law: &str, law_params: &[(&str, f64)], against_wall: bool, speed: f64
     for _ in 0..2_000_000 {
         sim.step().unwrap();
         let touching = if against_wall {
-            sim.wall_pairs.force.iter().any(|f| f[0] != 0.0)
+            sim.world.wall_pairs.force.iter().any(|f| f[0] != 0.0)
         } else {
-            sim.pairs.force.iter().any(|f| f[0] != 0.0)
+            sim.world.pairs.force.iter().any(|f| f[0] != 0.0)
         };
         if touching {
             started = true;
@@ -71,11 +71,11 @@ fn collide(law: &str, law_params: &[(&str, f64)], against_wall: bool, speed: f64
             break;
         }
     }
-    let v = &sim.spheres.v;
+    let v = &sim.world.spheres.v;
     let rel_after = if against_wall { -v[0][0] } else { v[1][0] - v[0][0] };
     let out = Outcome {
         restitution: rel_after / rel_before,
-        contact_time: in_contact as f64 * sim.dt,
+        contact_time: in_contact as f64 * sim.world.dt,
         kinetic_before: before,
         kinetic_after: kinetic(&sim),
     };
@@ -206,35 +206,35 @@ fn hertz_overlap_and_mindlin_shear_stiffness_of_a_resting_sphere() {
     let (young, poisson, r, rho, g) = (1e7, 0.3, 0.01, 2500.0, 9.81);
     let reg = granite::registry();
     let mut sim = DemSim::new();
-    let m = sim.add_material("grain", rho).unwrap();
+    let m = sim.world.add_material("grain", rho).unwrap();
     let law =
         reg.build_contact_law("hertz_mindlin", &params(&[("young", young), ("poisson", poisson), ("friction", 60.0)]));
-    sim.set_contact_law(law.unwrap(), None).unwrap();
-    sim.add_sphere(m, [0.0, 0.0, r], r, [0.0; 3]).unwrap();
-    sim.spheres.blocked[0] = dof::RX | dof::RY | dof::RZ;
-    sim.add_wall(Wall::new("floor", WallShape::Plane { normal: [0.0, 0.0, 1.0] }, [0.0; 3], m));
+    sim.world.set_contact_law(law.unwrap(), None).unwrap();
+    sim.world.add_sphere(m, [0.0, 0.0, r], r, [0.0; 3]).unwrap();
+    sim.world.spheres.blocked[0] = dof::RX | dof::RY | dof::RZ;
+    sim.world.add_wall(Wall::new("floor", WallShape::Plane { normal: [0.0, 0.0, 1.0] }, [0.0; 3], m));
     sim.skin = 0.1 * r;
-    sim.damping = 0.4;
-    sim.gravity = [0.0, 0.0, -g];
-    sim.set_dt(0.2 * sim.critical_dt().unwrap()).unwrap();
+    sim.world.damping = 0.4;
+    sim.world.gravity = [0.0, 0.0, -g];
+    sim.world.set_dt(0.2 * sim.world.critical_dt().unwrap()).unwrap();
     for _ in 0..20_000 {
         sim.step().unwrap();
     }
-    let mass = sim.spheres.mass[0];
+    let mass = sim.world.spheres.mass[0];
     let e_eff = young / (2.0 * (1.0 - poisson * poisson));
     let g_eff = young / (2.0 * (1.0 + poisson)) / (2.0 * (2.0 - poisson));
     let delta = (3.0 * mass * g / (4.0 * e_eff * r.sqrt())).powf(2.0 / 3.0);
-    let settled = sim.spheres.x[0];
+    let settled = sim.world.spheres.x[0];
     assert!((r - settled[2] - delta).abs() < 0.01 * delta, "overlap {} m, Hertz gives {delta} m", r - settled[2]);
 
     let tilt = 0.3;
-    sim.gravity = [tilt * g, 0.0, -g];
+    sim.world.gravity = [tilt * g, 0.0, -g];
     for _ in 0..20_000 {
         sim.step().unwrap();
     }
     let kt = 8.0 * g_eff * (r * delta).sqrt();
     let expected = tilt * mass * g / kt;
-    let shift = sim.spheres.x[0][0] - settled[0];
+    let shift = sim.world.spheres.x[0][0] - settled[0];
     assert!((shift - expected).abs() < 0.01 * expected, "tangential shift {shift} m, Mindlin gives {expected} m");
 }
 
@@ -246,37 +246,37 @@ fn hertz_overlap_and_mindlin_shear_stiffness_of_a_resting_sphere() {
 fn different_laws_in_one_chunk_keep_their_own_restitution() {
     let reg = granite::registry();
     let mut sim = DemSim::new();
-    let elastic = sim.add_material("elastic", 2500.0).unwrap();
-    let damped = sim.add_material("damped", 2500.0).unwrap();
+    let elastic = sim.world.add_material("elastic", 2500.0).unwrap();
+    let damped = sim.world.add_material("damped", 2500.0).unwrap();
     let laws = [(elastic, "linear", 1.0), (damped, "visco_elastic", 0.8)];
     for (m, law, e) in laws {
         let mut p = params(&[("kn", 1e5)]);
         if e < 1.0 {
             p.insert("restitution".into(), e);
         }
-        sim.set_contact_law(reg.build_contact_law(law, &p).unwrap(), Some((m, m))).unwrap();
+        sim.world.set_contact_law(reg.build_contact_law(law, &p).unwrap(), Some((m, m))).unwrap();
     }
     let (r, speed) = (0.01, 0.5);
     for k in 0..6 {
         let (m, _, _) = laws[k % 2];
         let y = 0.1 * k as f64;
-        sim.add_sphere(m, [0.0, y, 0.0], r, [speed, 0.0, 0.0]).unwrap();
-        sim.add_sphere(m, [2.0 * r + 1e-4, y, 0.0], r, [-speed, 0.0, 0.0]).unwrap();
+        sim.world.add_sphere(m, [0.0, y, 0.0], r, [speed, 0.0, 0.0]).unwrap();
+        sim.world.add_sphere(m, [2.0 * r + 1e-4, y, 0.0], r, [-speed, 0.0, 0.0]).unwrap();
     }
     sim.skin = 0.5 * r;
-    let m_eff = 0.5 * sim.spheres.mass[0];
-    sim.set_dt(2e-3 / (1e5 / m_eff).sqrt()).unwrap();
+    let m_eff = 0.5 * sim.world.spheres.mass[0];
+    sim.world.set_dt(2e-3 / (1e5 / m_eff).sqrt()).unwrap();
     // Until both contacts have started and ended.
     let mut touched = false;
     for _ in 0..2_000_000 {
         sim.step().unwrap();
-        let touching = sim.pairs.touching.iter().any(|&t| t);
+        let touching = sim.world.pairs.touching.iter().any(|&t| t);
         touched |= touching;
         if touched && !touching {
             break;
         }
     }
-    let v = &sim.spheres.v;
+    let v = &sim.world.spheres.v;
     for k in 0..6 {
         let (_, law, e) = laws[k % 2];
         let rebound = (v[2 * k + 1][0] - v[2 * k][0]) / (2.0 * speed);
@@ -290,27 +290,32 @@ fn different_laws_in_one_chunk_keep_their_own_restitution() {
 #[test]
 fn each_wall_carries_the_weight_along_its_normal() {
     let mut sim = DemSim::new();
-    let m = sim.add_material("glass", 2500.0).unwrap();
-    sim.set_contact_law(granite::registry().build_contact_law("linear", &params(&[("kn", 1e4)])).unwrap(), None)
+    let m = sim.world.add_material("glass", 2500.0).unwrap();
+    sim.world
+        .set_contact_law(granite::registry().build_contact_law("linear", &params(&[("kn", 1e4)])).unwrap(), None)
         .unwrap();
     let r = 0.01;
-    sim.add_sphere(m, [r, 0.0, r], r, [0.0; 3]).unwrap();
-    sim.add_wall(Wall::new("far", WallShape::Plane { normal: [0.0, -1.0, 0.0] }, [0.0, 0.5, 0.0], m));
-    sim.add_wall(Wall::new("floor", WallShape::Plane { normal: [0.0, 0.0, 1.0] }, [0.0; 3], m));
-    sim.add_wall(Wall::new("side", WallShape::Plane { normal: [1.0, 0.0, 0.0] }, [0.0; 3], m));
+    sim.world.add_sphere(m, [r, 0.0, r], r, [0.0; 3]).unwrap();
+    sim.world.add_wall(Wall::new("far", WallShape::Plane { normal: [0.0, -1.0, 0.0] }, [0.0, 0.5, 0.0], m));
+    sim.world.add_wall(Wall::new("floor", WallShape::Plane { normal: [0.0, 0.0, 1.0] }, [0.0; 3], m));
+    sim.world.add_wall(Wall::new("side", WallShape::Plane { normal: [1.0, 0.0, 0.0] }, [0.0; 3], m));
     let g = [-3.0, 0.0, -9.81];
-    sim.gravity = g;
-    sim.damping = 0.4;
+    sim.world.gravity = g;
+    sim.world.damping = 0.4;
     sim.skin = 0.5 * r;
-    sim.set_dt(0.1 * (sim.spheres.mass[0] / 1e4).sqrt()).unwrap();
+    sim.world.set_dt(0.1 * (sim.world.spheres.mass[0] / 1e4).sqrt()).unwrap();
     for _ in 0..20_000 {
         sim.step().unwrap();
     }
-    assert!(sim.diagnostics().kinetic_energy < 1e-18, "not at rest: Ek = {}", sim.diagnostics().kinetic_energy);
-    let weight = g.map(|c| sim.spheres.mass[0] * c);
+    assert!(
+        sim.world.diagnostics().kinetic_energy < 1e-18,
+        "not at rest: Ek = {}",
+        sim.world.diagnostics().kinetic_energy
+    );
+    let weight = g.map(|c| sim.world.spheres.mass[0] * c);
     // What the sphere exerts on each wall.
-    assert_eq!(sim.wall_force(0), [0.0; 3]);
-    let (floor, side) = (sim.wall_force(1), sim.wall_force(2));
+    assert_eq!(sim.world.wall_force(0), [0.0; 3]);
+    let (floor, side) = (sim.world.wall_force(1), sim.world.wall_force(2));
     let tolerance = 1e-9 * weight[2].abs();
     assert!(
         (floor[2] - weight[2]).abs() < tolerance && floor[0] == 0.0 && floor[1] == 0.0,
@@ -321,5 +326,5 @@ fn each_wall_carries_the_weight_along_its_normal() {
         "side {side:?}, weight {weight:?}"
     );
     // Out of range: nothing.
-    assert_eq!(sim.wall_force(3), [0.0; 3]);
+    assert_eq!(sim.world.wall_force(3), [0.0; 3]);
 }

@@ -10,7 +10,7 @@ fn deposit(threads: usize) -> (Vec<[f64; 3]>, Vec<[f64; 3]>, usize) {
         for _ in 0..1500 {
             sim.step().unwrap();
         }
-        (sim.spheres.x.clone(), sim.spheres.w.clone(), sim.pairs.touching_count())
+        (sim.world.spheres.x.clone(), sim.world.spheres.w.clone(), sim.world.pairs.touching_count())
     })
 }
 
@@ -28,10 +28,10 @@ fn gravity_deposition_is_thread_count_independent() {
 /// An empty simulation of "grains" of `density` with the linear law (`young`, kt/kn 0.5, 30°).
 fn frictional(density: f64, young: f64) -> (granite_core::dem::DemSim, u16) {
     let mut sim = granite_core::dem::DemSim::new();
-    let m = sim.add_material("grains", density).unwrap();
+    let m = sim.world.add_material("grains", density).unwrap();
     let params = [("young", young), ("kt_ratio", 0.5), ("friction", 30.0)];
     let params = params.iter().map(|(k, v)| (k.to_string(), *v)).collect();
-    sim.set_contact_law(granite::registry().build_contact_law("linear", &params).unwrap(), None).unwrap();
+    sim.world.set_contact_law(granite::registry().build_contact_law("linear", &params).unwrap(), None).unwrap();
     (sim, m)
 }
 
@@ -47,37 +47,37 @@ fn sheared_periodic(threads: usize, sequential: bool, servo: bool) -> (Vec<[f64;
         let spacing = 1.9 * r;
         let width = side as f64 * spacing;
         let (mut sim, m) = frictional(2650.0, 1e8);
-        sim.set_cell(Some(PeriodicCell::new_box([width; 3])));
+        sim.world.set_cell(Some(PeriodicCell::new_box([width; 3])));
         let hi = [width - 0.5 * spacing + r; 3];
         for (x, radius) in lattice([0.5 * spacing - r; 3], hi, spacing, r * 0.93, 0.01 * r, 7).unwrap() {
-            sim.add_sphere(m, x, radius, [0.0; 3]).unwrap();
+            sim.world.add_sphere(m, x, radius, [0.0; 3]).unwrap();
         }
         sim.set_sequential(sequential);
-        sim.set_dt(0.2 * sim.critical_dt().unwrap()).unwrap();
+        sim.world.set_dt(0.2 * sim.world.critical_dt().unwrap()).unwrap();
         // Squeezed 5 % on every axis while sheared: the lattice neighbours come into contact.
-        let l = &mut sim.cell.as_mut().unwrap().velocity_gradient;
+        let l = &mut sim.world.cell.as_mut().unwrap().velocity_gradient;
         for a in 0..3 {
-            l[(a, a)] = -0.05 / (300.0 * sim.dt);
+            l[(a, a)] = -0.05 / (300.0 * sim.world.dt);
         }
-        l[(0, 2)] = 0.1 / (300.0 * sim.dt);
+        l[(0, 2)] = 0.1 / (300.0 * sim.world.dt);
         for _ in 0..300 {
             sim.step().unwrap();
         }
         if servo {
             // Half the present mean stress, and no rate limit: the servo's rate follows the
             // stress it sums to the last bit.
-            let stress = sim.love_weber_stress(sim.cell_volume().unwrap());
+            let stress = sim.world.love_weber_stress(sim.world.cell_volume().unwrap());
             let target = 0.5 * (stress[0] + stress[1] + stress[2]) / 3.0;
             assert!(target < 0.0, "the packing must be compressed ({stress:?})");
             let goal = AxisGoal::Stress { target, max_rate: f64::INFINITY };
-            sim.cell_control = Some(CellControl::new([goal; 3], vec![], 200.0));
+            sim.world.cell_control = Some(CellControl::new([goal; 3], vec![], 200.0));
             for _ in 0..100 {
                 sim.step().unwrap();
             }
-            let l = sim.cell.as_ref().unwrap().velocity_gradient;
+            let l = sim.world.cell.as_ref().unwrap().velocity_gradient;
             assert!((0..3).all(|a| l[(a, a)] != 0.0), "the servo does not move the cell: {l}");
         }
-        (sim.spheres.x.clone(), sim.spheres.w.clone(), sim.pairs.touching_count())
+        (sim.world.spheres.x.clone(), sim.world.spheres.w.clone(), sim.world.pairs.touching_count())
     })
 }
 
@@ -152,7 +152,7 @@ fn falling_clumps(threads: usize, sequential: bool) -> (Vec<[f64; 3]>, Vec<[f64;
             let mut n = [0.0; 3];
             n[a] = if upper { -1.0 } else { 1.0 };
             let position = if upper { [side; 3] } else { [0.0; 3] };
-            sim.add_wall(Wall::new("", WallShape::Plane { normal: n }, position, m));
+            sim.world.add_wall(Wall::new("", WallShape::Plane { normal: n }, position, m));
         }
         // Layer by layer, nx by nx clumps a layer.
         for (i, j, k) in (0..300).map(|n| (n % nx, n / nx % nx, n / (nx * nx))) {
@@ -160,16 +160,16 @@ fn falling_clumps(threads: usize, sequential: bool) -> (Vec<[f64; 3]>, Vec<[f64;
             let members = tetrahedral_members(centre, r_sphere, r_clump).unwrap();
             // Alternating sideways velocities: the clumps collide and spin on their way down.
             let v = if (i + j + k) % 2 == 0 { [0.05, -0.03, 0.0] } else { [-0.04, 0.02, 0.0] };
-            sim.add_clump(m, &members, v, 16).unwrap();
+            sim.world.add_clump(m, &members, v, 16).unwrap();
         }
         sim.set_sequential(sequential);
-        sim.gravity = [0.0, 0.0, -9.81];
-        sim.damping = 0.2;
-        sim.set_dt(0.3 * sim.critical_dt().unwrap()).unwrap();
+        sim.world.gravity = [0.0, 0.0, -9.81];
+        sim.world.damping = 0.2;
+        sim.world.set_dt(0.3 * sim.world.critical_dt().unwrap()).unwrap();
         for _ in 0..1500 {
             sim.step().unwrap();
         }
-        (sim.spheres.x.clone(), sim.spheres.w.clone(), sim.pairs.touching_count())
+        (sim.world.spheres.x.clone(), sim.world.spheres.w.clone(), sim.world.pairs.touching_count())
     })
 }
 

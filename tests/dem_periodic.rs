@@ -12,11 +12,11 @@ fn params(pairs: &[(&str, f64)]) -> ParamMap {
 
 fn sim_with_law(kn: f64) -> (DemSim, u16) {
     let mut sim = DemSim::new();
-    let m = sim.add_material("m", 2500.0).unwrap();
+    let m = sim.world.add_material("m", 2500.0).unwrap();
     let law = granite::registry()
         .build_contact_law("linear", &params(&[("kn", kn), ("kt_ratio", 0.5), ("friction", 20.0)]))
         .unwrap();
-    sim.set_contact_law(law, None).unwrap();
+    sim.world.set_contact_law(law, None).unwrap();
     (sim, m)
 }
 
@@ -24,39 +24,39 @@ fn sim_with_law(kn: f64) -> (DemSim, u16) {
 fn sheared_gas_moves_affinely_through_flips() {
     let (mut sim, m) = sim_with_law(1e4);
     let size = 1.0;
-    sim.set_cell(Some(PeriodicCell::new_box([size; 3])));
+    sim.world.set_cell(Some(PeriodicCell::new_box([size; 3])));
     // A dilute gas: 5 x 5 x 5 small spheres at rest, far from each other.
     let mut x0 = Vec::new();
     for i in 0..5 {
         for j in 0..5 {
             for k in 0..5 {
                 let x = [0.1 + 0.2 * i as f64, 0.1 + 0.2 * j as f64, 0.1 + 0.2 * k as f64];
-                sim.add_sphere(m, x, 0.01, [0.0; 3]).unwrap();
+                sim.world.add_sphere(m, x, 0.01, [0.0; 3]).unwrap();
                 x0.push(x);
             }
         }
     }
     sim.skin = 0.005;
     let rate = 2.0;
-    sim.cell.as_mut().unwrap().velocity_gradient[(0, 2)] = rate;
-    sim.set_dt(1e-3).unwrap();
+    sim.world.cell.as_mut().unwrap().velocity_gradient[(0, 2)] = rate;
+    sim.world.set_dt(1e-3).unwrap();
     let steps = 800; // total shear strain 1.6: flips at 0.5 and 1.5
     for _ in 0..steps {
         sim.step().unwrap();
     }
-    let cell = sim.cell.as_ref().unwrap();
+    let cell = sim.world.cell.as_ref().unwrap();
     assert!(cell.flips >= 2, "expected flips, got {}", cell.flips);
-    assert_eq!(sim.spheres.len(), 125, "no particle may be lost");
-    let gamma = rate * sim.time;
+    assert_eq!(sim.world.spheres.len(), 125, "no particle may be lost");
+    let gamma = rate * sim.world.time;
     let inv = cell.inverse();
-    for (i, x) in sim.spheres.x.iter().enumerate() {
+    for (i, x) in sim.world.spheres.x.iter().enumerate() {
         // Affine image of the start position, compared modulo the (flipped) lattice.
         let expect = [x0[i][0] + gamma * x0[i][2], x0[i][1], x0[i][2]];
         let d = [x[0] - expect[0], x[1] - expect[1], x[2] - expect[2]];
         let s = cell.reduced(&inv, d);
         let frac: f64 = s.iter().map(|c| (c - c.round()).abs()).fold(0.0, f64::max);
         assert!(frac < 1e-9, "sphere {i} left the affine field: reduced offset {s:?}");
-        assert!(sim.spheres.v[i].iter().all(|c| c.abs() < 1e-12), "fluctuation velocity appeared");
+        assert!(sim.world.spheres.v[i].iter().all(|c| c.abs() < 1e-12), "fluctuation velocity appeared");
     }
 }
 
@@ -67,15 +67,15 @@ fn sheared_gas_moves_affinely_through_flips() {
 #[test]
 fn a_free_sphere_keeps_its_velocity_in_a_deforming_cell() {
     let (mut sim, m) = sim_with_law(1e4);
-    sim.set_cell(Some(PeriodicCell::new_box([1.0; 3])));
+    sim.world.set_cell(Some(PeriodicCell::new_box([1.0; 3])));
     let (x0, v0) = ([0.5, 0.4, 0.3], [0.01, -0.02, 0.03]);
-    sim.add_sphere(m, x0, 0.01, v0).unwrap();
+    sim.world.add_sphere(m, x0, 0.01, v0).unwrap();
     // Shear, stretch and compression together.
     let l = nalgebra::Matrix3::new(0.1, 0.0, 0.5, 0.0, 0.05, 0.0, 0.2, 0.0, -0.15);
-    sim.cell.as_mut().unwrap().velocity_gradient = l;
-    sim.set_dt(1e-3).unwrap();
+    sim.world.cell.as_mut().unwrap().velocity_gradient = l;
+    sim.world.set_dt(1e-3).unwrap();
     let whole = |sim: &DemSim| {
-        let (x, v) = (sim.spheres.x[0], sim.spheres.v[0]);
+        let (x, v) = (sim.world.spheres.x[0], sim.world.spheres.v[0]);
         let lx = l * nalgebra::Vector3::new(x[0], x[1], x[2]);
         [v[0] + lx[0], v[1] + lx[1], v[2] + lx[2]]
     };
@@ -85,7 +85,7 @@ fn a_free_sphere_keeps_its_velocity_in_a_deforming_cell() {
         sim.step().unwrap();
     }
     let t = steps as f64 * 1e-3;
-    let (v_end, x) = (whole(&sim), sim.spheres.x[0]);
+    let (v_end, x) = (whole(&sim), sim.world.spheres.x[0]);
     for a in 0..3 {
         assert!((v_end[a] - v_start[a]).abs() < 1e-14, "velocity {v_end:?}, started at {v_start:?}");
         // Well inside the cell: no wrapping to undo.
@@ -95,7 +95,7 @@ fn a_free_sphere_keeps_its_velocity_in_a_deforming_cell() {
     // The fluctuation did change, by -L (x - x0): the test is not one of a sphere at rest in the field.
     let moved = l * nalgebra::Vector3::new(x[0] - x0[0], x[1] - x0[1], x[2] - x0[2]);
     for a in 0..3 {
-        assert!((sim.spheres.v[0][a] - (v0[a] - moved[a])).abs() < 1e-12);
+        assert!((sim.world.spheres.v[0][a] - (v0[a] - moved[a])).abs() < 1e-12);
     }
     assert!(moved.norm() > 1e-3);
 }
@@ -104,17 +104,18 @@ fn a_free_sphere_keeps_its_velocity_in_a_deforming_cell() {
 fn cubic_packing(n: usize, r: f64, delta: f64, kn: f64) -> DemSim {
     let (mut sim, m) = sim_with_law(kn);
     let d = 2.0 * r - delta;
-    sim.set_cell(Some(PeriodicCell::new_box([n as f64 * d; 3])));
+    sim.world.set_cell(Some(PeriodicCell::new_box([n as f64 * d; 3])));
     for i in 0..n {
         for j in 0..n {
             for k in 0..n {
-                sim.add_sphere(m, [(i as f64 + 0.5) * d, (j as f64 + 0.5) * d, (k as f64 + 0.5) * d], r, [0.0; 3])
+                sim.world
+                    .add_sphere(m, [(i as f64 + 0.5) * d, (j as f64 + 0.5) * d, (k as f64 + 0.5) * d], r, [0.0; 3])
                     .unwrap();
             }
         }
     }
     sim.skin = 0.1 * r;
-    sim.set_dt(1e-7).unwrap();
+    sim.world.set_dt(1e-7).unwrap();
     sim
 }
 
@@ -131,8 +132,8 @@ fn love_weber_stress_of_a_cubic_packing() {
         // pushes with kn delta over the branch d: sigma_xx = -kn delta d / d^3 (compression
         // negative).
         let expected = -kn * delta / (d * d);
-        assert_eq!(sim.pairs.touching_count(), 3 * n * n * n, "{n} spheres a side");
-        let s = sim.love_weber_stress(sim.cell_volume().unwrap());
+        assert_eq!(sim.world.pairs.touching_count(), 3 * n * n * n, "{n} spheres a side");
+        let s = sim.world.love_weber_stress(sim.world.cell_volume().unwrap());
         for a in 0..3 {
             assert!(
                 (s[a] - expected).abs() < 1e-9 * expected.abs(),
@@ -143,7 +144,7 @@ fn love_weber_stress_of_a_cubic_packing() {
         for a in 3..6 {
             assert!(s[a].abs() < 1e-9 * expected.abs());
         }
-        assert!(sim.spheres.v.iter().flatten().all(|c| c.abs() < 1e-12), "n = {n}: the balanced lattice moved");
+        assert!(sim.world.spheres.v.iter().flatten().all(|c| c.abs() < 1e-12), "n = {n}: the balanced lattice moved");
     }
 }
 
@@ -175,45 +176,46 @@ fn a_thin_cell_steps_as_the_same_packing_in_a_thicker_one() {
     let size = [nx as f64 * spacing, thick, nz as f64 * spacing];
     let build = |copies: usize| {
         let (mut sim, m) = sim_with_law(kn);
-        sim.set_cell(Some(PeriodicCell::new_box([size[0], copies as f64 * thick, size[2]])));
+        sim.world.set_cell(Some(PeriodicCell::new_box([size[0], copies as f64 * thick, size[2]])));
         for c in 0..copies {
             for (x, r) in &spheres {
-                sim.add_sphere(m, [x[0], x[1] + c as f64 * thick, x[2]], *r, [0.0; 3]).unwrap();
+                sim.world.add_sphere(m, [x[0], x[1] + c as f64 * thick, x[2]], *r, [0.0; 3]).unwrap();
             }
         }
         sim.skin = 0.1 * r0;
-        sim.set_dt(2e-6).unwrap();
+        sim.world.set_dt(2e-6).unwrap();
         // Simple shear across the thin axis: a sphere's fluctuation velocity changes by -L v dt
         // (a free sphere keeps its whole velocity), the same in every image only where L L = 0.
-        sim.cell.as_mut().unwrap().velocity_gradient[(0, 1)] = 50.0;
+        sim.world.cell.as_mut().unwrap().velocity_gradient[(0, 1)] = 50.0;
         sim
     };
     let (mut thin, mut thick_sim) = (build(1), build(3));
     let reach = 2.0 * r0 + thin.skin;
-    assert!(thin.cell.as_ref().unwrap().widths()[1] < reach && 3.0 * thick >= 2.0 * reach);
+    assert!(thin.world.cell.as_ref().unwrap().widths()[1] < reach && 3.0 * thick >= 2.0 * reach);
     for step in 0..400 {
         thin.step().unwrap();
         thick_sim.step().unwrap();
         if step == 0 {
             assert!(
-                (0..thin.pairs.len()).any(|k| thin.pairs.touching[k] && thin.pairs.a[k] == thin.pairs.b[k]),
+                (0..thin.world.pairs.len())
+                    .any(|k| thin.world.pairs.touching[k] && thin.world.pairs.a[k] == thin.world.pairs.b[k]),
                 "no sphere touches its own image: the test checks nothing there"
             );
         }
     }
-    let st = thin.love_weber_stress(thin.cell_volume().unwrap());
-    let sk = thick_sim.love_weber_stress(thick_sim.cell_volume().unwrap());
+    let st = thin.world.love_weber_stress(thin.world.cell_volume().unwrap());
+    let sk = thick_sim.world.love_weber_stress(thick_sim.world.cell_volume().unwrap());
     assert!(st[1] < 0.0 && st[3].abs() > 0.0, "the packing is compressed and sheared: {st:?}");
     let scale = st.iter().map(|v| v.abs()).fold(0.0, f64::max);
     for a in 0..6 {
         assert!((st[a] - sk[a]).abs() < 1e-6 * scale, "sigma[{a}]: thin cell {}, thick cell {}", st[a], sk[a]);
     }
     // Contacts: three copies of each in the thick cell.
-    assert_eq!(3 * thin.pairs.touching_count(), thick_sim.pairs.touching_count());
+    assert_eq!(3 * thin.world.pairs.touching_count(), thick_sim.world.pairs.touching_count());
     let n = spheres.len();
     for i in 0..n {
         for c in 0..3 {
-            let (a, b) = (thin.spheres.v[i], thick_sim.spheres.v[c * n + i]);
+            let (a, b) = (thin.world.spheres.v[i], thick_sim.world.spheres.v[c * n + i]);
             let dv = (0..3).map(|q| (a[q] - b[q]).abs()).fold(0.0, f64::max);
             assert!(
                 dv < 1e-6 * (1e-3 + a.iter().map(|v| v.abs()).fold(0.0, f64::max)),
@@ -231,28 +233,28 @@ fn flipping_keeps_every_contact() {
     // across it with a tiny rate: the packing is sheared affinely, every contact must survive.
     let size = n as f64 * (2.0 * r - delta);
     {
-        let cell = sim.cell.as_mut().unwrap();
+        let cell = sim.world.cell.as_mut().unwrap();
         cell.h[(0, 2)] = 0.5 * size - 1e-12;
     }
     // Move the particles with the cell: x += gamma z.
-    for x in sim.spheres.x.iter_mut() {
+    for x in sim.world.spheres.x.iter_mut() {
         x[0] += (0.5 - 1e-12 / size) * x[2];
     }
-    sim.needs_rebuild_for_tests();
+    sim.world.needs_rebuild_for_tests();
     sim.step().unwrap();
-    let before = sim.pairs.touching_count();
-    let volume = sim.cell_volume().unwrap();
-    let stress_before = sim.love_weber_stress(volume);
+    let before = sim.world.pairs.touching_count();
+    let volume = sim.world.cell_volume().unwrap();
+    let stress_before = sim.world.love_weber_stress(volume);
     assert!(before > 0);
-    sim.cell.as_mut().unwrap().velocity_gradient[(0, 2)] = 1e-3;
-    let flips = sim.cell.as_ref().unwrap().flips;
+    sim.world.cell.as_mut().unwrap().velocity_gradient[(0, 2)] = 1e-3;
+    let flips = sim.world.cell.as_ref().unwrap().flips;
     for _ in 0..3 {
         sim.step().unwrap();
     }
-    assert_eq!(sim.cell.as_ref().unwrap().flips, flips + 1, "the cell should have flipped once");
-    assert_eq!(sim.spheres.len(), n * n * n);
-    assert_eq!(sim.pairs.touching_count(), before, "contacts lost or created by the flip");
-    let stress_after = sim.love_weber_stress(sim.cell_volume().unwrap());
+    assert_eq!(sim.world.cell.as_ref().unwrap().flips, flips + 1, "the cell should have flipped once");
+    assert_eq!(sim.world.spheres.len(), n * n * n);
+    assert_eq!(sim.world.pairs.touching_count(), before, "contacts lost or created by the flip");
+    let stress_after = sim.world.love_weber_stress(sim.world.cell_volume().unwrap());
     for a in 0..6 {
         assert!(
             (stress_after[a] - stress_before[a]).abs() <= 1e-6 * stress_before[0].abs(),

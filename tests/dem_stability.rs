@@ -25,25 +25,25 @@ const OVERLAP: f64 = 0.01;
 /// (the frictionless lattice's fastest mode).
 fn lattice_with(kt_ratio: f64, friction: f64) -> DemSim {
     let mut sim = DemSim::new();
-    let m = sim.add_material("m", DENSITY).unwrap();
+    let m = sim.world.add_material("m", DENSITY).unwrap();
     let law = granite::registry()
         .build_contact_law("linear", &params(&[("kn", KN), ("kt_ratio", kt_ratio), ("friction", friction)]))
         .unwrap();
-    sim.set_contact_law(law, None).unwrap();
+    sim.world.set_contact_law(law, None).unwrap();
     let (n, r) = (4, RADIUS);
     let d = 2.0 * r - OVERLAP * r;
-    sim.set_cell(Some(PeriodicCell::new_box([n as f64 * d; 3])));
+    sim.world.set_cell(Some(PeriodicCell::new_box([n as f64 * d; 3])));
     for i in 0..n {
         for j in 0..n {
             for k in 0..n {
                 let v = if i % 2 == 0 { 1e-4 } else { -1e-4 };
                 let x = [(i as f64 + 0.5) * d, (j as f64 + 0.5) * d, (k as f64 + 0.5) * d];
-                sim.add_sphere(m, x, r, [v, 0.0, 0.0]).unwrap();
+                sim.world.add_sphere(m, x, r, [v, 0.0, 0.0]).unwrap();
             }
         }
     }
     sim.skin = 0.1 * r;
-    sim.set_dt(1e-6).unwrap();
+    sim.world.set_dt(1e-6).unwrap();
     // One step builds the lists and finds the contacts.
     sim.step().unwrap();
     sim
@@ -65,7 +65,7 @@ fn stable_dt_of_a_cubic_lattice_is_exact_without_friction_and_safe_with_it() {
     // which Gershgorin's bound gives exactly.
     let sim = lattice(0.0);
     let m = sphere_mass();
-    let limit = sim.stable_dt().expect("a packing in contact has a limit");
+    let limit = sim.world.stable_dt().expect("a packing in contact has a limit");
     let expected = (m / KN).sqrt();
     assert!((limit.dt / expected - 1.0).abs() < 1e-9, "{} s, expected {expected} s", limit.dt);
     assert_eq!(limit.contacts, 6);
@@ -78,26 +78,26 @@ fn stable_dt_of_a_cubic_lattice_is_exact_without_friction_and_safe_with_it() {
     let (r, l) = (RADIUS, RADIUS * (1.0 - 0.5 * OVERLAP));
     let shear = 2.0 / ((4.0 * KN + 8.0 * kt) / m).sqrt();
     let turning = 2.0 / (8.0 * kt * l * l / (0.4 * m * r * r)).sqrt();
-    let limit = sim.stable_dt().unwrap().dt;
+    let limit = sim.world.stable_dt().unwrap().dt;
     assert!(limit <= shear.min(turning), "{limit} s above an exact mode's limit ({shear} s, {turning} s)");
     // Without contacts there is no limit.
     let mut sim = DemSim::new();
-    let m = sim.add_material("m", DENSITY).unwrap();
-    sim.add_sphere(m, [0.0; 3], RADIUS, [0.0; 3]).unwrap();
-    assert!(sim.stable_dt().is_none());
+    let m = sim.world.add_material("m", DENSITY).unwrap();
+    sim.world.add_sphere(m, [0.0; 3], RADIUS, [0.0; 3]).unwrap();
+    assert!(sim.world.stable_dt().is_none());
 }
 
 /// The kinetic energy after each of up to `steps` steps at `factor` times the lattice's
 /// stable_dt, the error that stopped the run if one did, and the events it gave.
 fn run_at(sim: &mut DemSim, factor: f64, steps: usize) -> (Vec<f64>, Option<GraniteError>) {
-    let limit = sim.stable_dt().unwrap().dt;
-    sim.set_dt(factor * limit).unwrap();
+    let limit = sim.world.stable_dt().unwrap().dt;
+    sim.world.set_dt(factor * limit).unwrap();
     let mut energy = Vec::with_capacity(steps);
     for _ in 0..steps {
         if let Err(e) = sim.step() {
             return (energy, Some(e));
         }
-        energy.push(sim.diagnostics().kinetic_energy);
+        energy.push(sim.world.diagnostics().kinetic_energy);
     }
     (energy, None)
 }
@@ -115,7 +115,7 @@ fn leapfrog_is_stable_just_below_stable_dt_and_blows_up_just_above() {
     assert!(error.is_none(), "stable below the limit: {error:?}");
     let (first, second) = (largest(&energy[..1500]), largest(&energy[1500..]));
     assert!(second <= 1.05 * first, "energy grew below the limit: peaks {first:e} J, then {second:e} J");
-    assert!(sim.events.is_empty(), "no warning below the limit: {:?}", sim.events);
+    assert!(sim.world.events.is_empty(), "no warning below the limit: {:?}", sim.world.events);
     // Just above, with the stop turned off: that mode's amplitude is multiplied by about -1.5
     // each step. Within 40 steps its energy passes a thousand times that of the first three (the
     // contacts, overlapping by 1 % of a radius, stay closed up to amplitudes 2000 times the
@@ -129,7 +129,7 @@ fn leapfrog_is_stable_just_below_stable_dt_and_blows_up_just_above() {
     if let Some(e) = error {
         assert!(e.to_string().contains("more than the smallest radius"), "{e}");
     }
-    assert!(sim.events.iter().any(|e| e.contains("above the stability bound")), "warned: {:?}", sim.events);
+    assert!(sim.world.events.iter().any(|e| e.contains("above the stability bound")), "warned: {:?}", sim.world.events);
     // By default the first step proves the mode too fast (omega dt = 2.04) and stops the run.
     let mut sim = lattice(0.0);
     match run_at(&mut sim, 1.02, 3000) {
@@ -149,18 +149,18 @@ fn a_lattice_with_friction_and_spins_is_stable_just_below_stable_dt() {
     // energy it conserves, of the order of the stirring's energy (0.8 of it here; at 1.2 times
     // the bound the departure reaches 2e8 of it), and that departure does not grow.
     let mut sim = lattice_with(0.5, 80.0);
-    for i in 0..sim.spheres.len() {
+    for i in 0..sim.world.spheres.len() {
         let u = |k: u64| 2.0 * granite_core::ext::contact::uniform(7, 6 * i as u64 + k) - 1.0;
-        sim.spheres.v[i] = [1e-4 * u(0), 1e-4 * u(1), 1e-4 * u(2)];
-        sim.spheres.w[i] = [1e-2 * u(3), 1e-2 * u(4), 1e-2 * u(5)];
+        sim.world.spheres.v[i] = [1e-4 * u(0), 1e-4 * u(1), 1e-4 * u(2)];
+        sim.world.spheres.w[i] = [1e-2 * u(3), 1e-2 * u(4), 1e-2 * u(5)];
     }
     let total = |sim: &DemSim| {
-        let d = sim.diagnostics();
+        let d = sim.world.diagnostics();
         d.kinetic_energy + d.elastic_energy
     };
-    let limit = sim.stable_dt().unwrap().dt;
-    sim.set_dt(0.98 * limit).unwrap();
-    let (start, stirring) = (total(&sim), sim.diagnostics().kinetic_energy);
+    let limit = sim.world.stable_dt().unwrap().dt;
+    sim.world.set_dt(0.98 * limit).unwrap();
+    let (start, stirring) = (total(&sim), sim.world.diagnostics().kinetic_energy);
     let mut departure = Vec::with_capacity(3000);
     for _ in 0..3000 {
         sim.step().expect("stable below the bound");
@@ -169,7 +169,7 @@ fn a_lattice_with_friction_and_spins_is_stable_just_below_stable_dt() {
     let (first, second) = (largest(&departure[..1500]), largest(&departure[1500..]));
     assert!(first < 10.0 * stirring, "the energy departed by {first:e} J, {stirring:e} J stirred in");
     assert!(second <= 1.05 * first, "the departure grew below the bound: {first:e} J, then {second:e} J");
-    assert!(sim.events.is_empty(), "no warning below the bound: {:?}", sim.events);
+    assert!(sim.world.events.is_empty(), "no warning below the bound: {:?}", sim.world.events);
 }
 
 /// Time step of the shot below, and where its wall stands (the sphere starts at the origin).
@@ -179,15 +179,15 @@ const WALL_X: f64 = 0.06;
 /// A sphere of `RADIUS` shot at a wall, at `radii_per_step` radii per step.
 fn shot_at_a_wall(radii_per_step: f64) -> (DemSim, Result<(), GraniteError>) {
     let mut sim = DemSim::new();
-    let m = sim.add_material("m", DENSITY).unwrap();
+    let m = sim.world.add_material("m", DENSITY).unwrap();
     let law = granite::registry()
         .build_contact_law("linear", &params(&[("kn", 1e5), ("kt_ratio", 0.3), ("friction", 30.0)]))
         .unwrap();
-    sim.set_contact_law(law, None).unwrap();
-    sim.add_wall(Wall::new("wall", WallShape::Plane { normal: [-1.0, 0.0, 0.0] }, [WALL_X, 0.0, 0.0], m));
-    sim.add_sphere(m, [0.0; 3], RADIUS, [radii_per_step * RADIUS / SHOT_DT, 0.0, 0.0]).unwrap();
+    sim.world.set_contact_law(law, None).unwrap();
+    sim.world.add_wall(Wall::new("wall", WallShape::Plane { normal: [-1.0, 0.0, 0.0] }, [WALL_X, 0.0, 0.0], m));
+    sim.world.add_sphere(m, [0.0; 3], RADIUS, [radii_per_step * RADIUS / SHOT_DT, 0.0, 0.0]).unwrap();
     sim.skin = 0.5 * RADIUS;
-    sim.set_dt(SHOT_DT).unwrap();
+    sim.world.set_dt(SHOT_DT).unwrap();
     let run = (0..100).try_for_each(|_| sim.step());
     (sim, run)
 }
@@ -197,7 +197,7 @@ fn a_sphere_too_fast_for_its_time_step_stops_the_run_instead_of_passing_through_
     // Half a radius per step: the contact is seen and the sphere comes back, clear of the wall.
     let (sim, run) = shot_at_a_wall(0.5);
     run.expect("a resolved impact runs on");
-    assert!(sim.spheres.v[0][0] < 0.0 && sim.spheres.x[0][0] < WALL_X - RADIUS, "the sphere bounced back");
+    assert!(sim.world.spheres.v[0][0] < 0.0 && sim.world.spheres.x[0][0] < WALL_X - RADIUS, "the sphere bounced back");
     // Two radii per step: it would skip over the contact; the first step says so.
     let (sim, run) = shot_at_a_wall(2.0);
     match run {
@@ -208,7 +208,7 @@ fn a_sphere_too_fast_for_its_time_step_stops_the_run_instead_of_passing_through_
         }
         other => panic!("expected the run to stop, got {other:?}"),
     }
-    assert!(sim.spheres.x[0][0] < WALL_X, "it never got past the wall");
+    assert!(sim.world.spheres.x[0][0] < WALL_X, "it never got past the wall");
 }
 
 /// Runs a script given as text with one parameter set, quietly, into its own output folder.

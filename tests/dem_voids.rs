@@ -9,12 +9,12 @@ use granite_core::dem::DemSim;
 fn void_ratio_methods_agree_with_a_simple_cubic_packing() {
     let (n, r) = (10, 0.01);
     let mut sim = DemSim::new();
-    let m = sim.add_material("m", 2500.0).unwrap();
+    let m = sim.world.add_material("m", 2500.0).unwrap();
     for i in 0..n {
         for j in 0..n {
             for k in 0..n {
                 let x = [(2 * i + 1) as f64 * r, (2 * j + 1) as f64 * r, (2 * k + 1) as f64 * r];
-                sim.add_sphere(m, x, r, [0.0; 3]).unwrap();
+                sim.world.add_sphere(m, x, r, [0.0; 3]).unwrap();
             }
         }
     }
@@ -43,7 +43,7 @@ fn void_ratio_of_a_simple_cubic_packing_of_potential_particles() {
     let (n, r) = (10, 0.01);
     let ball = PotentialPlanesKind.build_from(&planes_params(&box_planes([0.5 * r; 3]), 0.3 * r, r, 1.0)).unwrap();
     let mut sim = DemSim::new();
-    let m = sim.add_material("m", 2500.0).unwrap();
+    let m = sim.world.add_material("m", 2500.0).unwrap();
     let s = PotentialBody::shape_of(ball.as_ref()).unwrap().sphere_centre;
     for i in 0..n {
         for j in 0..n {

@@ -151,38 +151,38 @@ fn a_sheared_rve_flips_its_cell_on_the_gpu_as_on_the_cpu() {
     // sums differ in their last bits drift apart over thousands of steps, not over these 200.)
     let mut rve = granite::bench::periodic_rve(100, 1e5).unwrap();
     rve.set_sequential(true);
-    rve.damping = 0.0;
-    let rate = 0.6 / (3000.0 * rve.dt);
+    rve.world.damping = 0.0;
+    let rate = 0.6 / (3000.0 * rve.world.dt);
     let mut l = Matrix3::zeros();
     l[(0, 2)] = rate;
-    rve.cell.as_mut().unwrap().velocity_gradient = l;
+    rve.world.cell.as_mut().unwrap().velocity_gradient = l;
     for _ in 0..2400 {
         rve.step().unwrap();
     }
-    assert_eq!(rve.cell.as_ref().unwrap().flips, 0);
+    assert_eq!(rve.world.cell.as_ref().unwrap().flips, 0);
     let steps = 200;
     let mut cpu = rve.clone();
     for _ in 0..steps {
         cpu.step().unwrap();
     }
-    rve.cell.as_mut().unwrap().velocity_gradient = Matrix3::zeros();
+    rve.world.cell.as_mut().unwrap().velocity_gradient = Matrix3::zeros();
     let mut batch = device().open(vec![Rve::as_is(rve)]).unwrap();
     let report = batch.step(&[RveOrder { velocity_gradient: l, full_steps: steps, last_step: 0.0 }]).unwrap().remove(0);
     assert!(report.failure.is_none(), "{:?}", report.failure);
     assert_eq!(report.steps, steps);
     let gpu = batch.get(0).unwrap().into_dem();
-    let (cell_cpu, cell_gpu) = (cpu.cell.as_ref().unwrap(), gpu.cell.as_ref().unwrap());
+    let (cell_cpu, cell_gpu) = (cpu.world.cell.as_ref().unwrap(), gpu.world.cell.as_ref().unwrap());
     assert_eq!(cell_cpu.flips, 1, "a tilt of 0.52 flips the cell once");
     assert_eq!(cell_gpu.flips, cell_cpu.flips);
     assert!((cell_gpu.h - cell_cpu.h).norm() < 1e-12 * cell_cpu.h.norm(), "cells {} and {}", cell_gpu.h, cell_cpu.h);
-    let stress = cpu.love_weber_stress(cpu.cell_volume().unwrap());
+    let stress = cpu.world.love_weber_stress(cpu.world.cell_volume().unwrap());
     let p = (stress[0] + stress[1] + stress[2]).abs() / 3.0;
     for k in 0..6 {
         assert!((report.stress[k] - stress[k]).abs() < 1e-6 * p, "stress {k}: GPU {:?}, CPU {stress:?}", report.stress);
     }
-    assert_eq!(report.contacts, cpu.coordination().contacts);
+    assert_eq!(report.contacts, cpu.world.coordination().contacts);
     // The RVE brought back to the host has the device's stress.
-    let back = gpu.love_weber_stress(gpu.cell_volume().unwrap());
+    let back = gpu.world.love_weber_stress(gpu.world.cell_volume().unwrap());
     for k in 0..6 {
         assert!((back[k] - report.stress[k]).abs() < 1e-9 * p, "the RVE brought back has another stress");
     }
@@ -196,34 +196,34 @@ fn an_rve_flattened_to_a_fraction_of_its_reach_goes_on_with_longer_rows() {
     // and goes on, as the CPU engine does.
     let mut rve = granite::bench::periodic_rve(100, 1e5).unwrap();
     rve.set_sequential(true);
-    rve.damping = 0.0;
+    rve.world.damping = 0.0;
     let steps = 2000;
-    let rate = (60.0f64).ln() / (steps as f64 * rve.dt);
+    let rate = (60.0f64).ln() / (steps as f64 * rve.world.dt);
     let mut l = Matrix3::zeros();
     l[(0, 0)] = rate;
     l[(2, 2)] = -rate;
-    rve.cell.as_mut().unwrap().velocity_gradient = Matrix3::zeros();
-    let reach = 2.0 * rve.spheres.largest_radius() + rve.skin;
+    rve.world.cell.as_mut().unwrap().velocity_gradient = Matrix3::zeros();
+    let reach = 2.0 * rve.world.spheres.largest_radius() + rve.skin;
     let mut cpu = rve.clone();
-    cpu.cell.as_mut().unwrap().velocity_gradient = l;
+    cpu.world.cell.as_mut().unwrap().velocity_gradient = l;
     for _ in 0..steps {
         cpu.step().unwrap();
     }
-    let thickness = cpu.cell.as_ref().unwrap().widths()[2];
+    let thickness = cpu.world.cell.as_ref().unwrap().widths()[2];
     assert!(thickness < 0.1 * reach, "the cell is {thickness:.3e} m thick, reach {reach:.3e} m");
     let mut batch = device().open(vec![Rve::as_is(rve)]).unwrap();
     let report = batch.step(&[RveOrder { velocity_gradient: l, full_steps: steps, last_step: 0.0 }]).unwrap().remove(0);
     assert!(report.failure.is_none(), "{:?}", report.failure);
     assert_eq!(report.steps, steps);
-    let stress = cpu.love_weber_stress(cpu.cell_volume().unwrap());
+    let stress = cpu.world.love_weber_stress(cpu.world.cell_volume().unwrap());
     let p = (stress[0] + stress[1] + stress[2]).abs() / 3.0;
     for k in 0..6 {
         assert!((report.stress[k] - stress[k]).abs() < 1e-6 * p, "stress {k}: GPU {:?}, CPU {stress:?}", report.stress);
     }
-    assert_eq!(report.contacts, cpu.coordination().contacts);
+    assert_eq!(report.contacts, cpu.world.coordination().contacts);
     if exact_adapter() {
         let gpu = batch.get(0).unwrap().into_dem();
-        assert!(gpu.spheres.x == cpu.spheres.x && report.stress == stress, "lavapipe and the CPU differ");
+        assert!(gpu.world.spheres.x == cpu.world.spheres.x && report.stress == stress, "lavapipe and the CPU differ");
     }
 }
 
@@ -240,7 +240,7 @@ fn coupled(rve: &DemSim, device: Option<Arc<dyn RveDevice>>) -> MpmSim {
     let law = reg.build_law_with("dem_rve", &ParamMap::new(), &objects).unwrap();
     let m = sim.add_material("rve", 1600.0, law).unwrap();
     let xs = [[0.3, 0.3, 0.3], [0.7, 0.3, 0.4], [0.4, 0.7, 0.6], [0.6, 0.6, 0.7]];
-    let stress = rve.love_weber_stress(rve.cell_volume().unwrap());
+    let stress = rve.world.love_weber_stress(rve.world.cell_volume().unwrap());
     sim.add_points(m, &xs, &[0.25; 4], [0.0; 3], stress).unwrap();
     sim.scheme = StressScheme::Usl;
     prescribe_node_velocities(&mut sim, |x| [5.0 * x[0], 5.0 * x[1], -10.0 * x[2]]);
@@ -253,8 +253,8 @@ fn an_rve_time_step_above_its_contacts_bound_is_said_once_on_the_gpu_too() {
     // As on the CPU (tests/mpmxdem.rs): a time step a little above the RVE's stable_dt is worth a
     // warning, passed on once by the MPM for all its RVEs.
     let mut rve = granite::bench::periodic_rve(100, 1e5).unwrap();
-    let limit = rve.stable_dt().expect("a compacted RVE has contacts").dt;
-    rve.set_dt(1.05 * limit).unwrap();
+    let limit = rve.world.stable_dt().expect("a compacted RVE has contacts").dt;
+    rve.world.set_dt(1.05 * limit).unwrap();
     let mut sim = coupled(&rve, Some(device()));
     for _ in 0..3 {
         sim.step().unwrap();
@@ -325,14 +325,14 @@ fn a_loose_rve_on_the_gpu_follows_the_cpu_sphere_by_sphere() {
     let mut rve = DemSim::from_json(saved["state"].clone(), &granite::registry()).unwrap();
     rve.set_sequential(true);
     // As the dem_rve law holds its RVEs.
-    rve.cell_control = None;
-    rve.gravity = [0.0; 3];
+    rve.world.cell_control = None;
+    rve.world.gravity = [0.0; 3];
     let mut l = Matrix3::zeros();
     l[(0, 0)] = 0.2;
     l[(2, 2)] = -0.5;
     let mut cpu = rve.clone();
-    cpu.cell.as_mut().unwrap().velocity_gradient = l;
-    let width = cpu.cell.as_ref().unwrap().widths()[0];
+    cpu.world.cell.as_mut().unwrap().velocity_gradient = l;
+    let width = cpu.world.cell.as_ref().unwrap().widths()[0];
     // Workgroups of 256 invocations (what 2000-sphere RVEs get on a GPU) step 100 spheres alike.
     let device = granite::gpu::GpuDevice::with_workgroup(256).unwrap();
     let exact_adapter = exact_adapter();
@@ -344,14 +344,22 @@ fn a_loose_rve_on_the_gpu_follows_the_cpu_sphere_by_sphere() {
             cpu.step().unwrap();
         }
         let gpu = batch.get(0).unwrap().into_dem();
-        let apart =
-            gpu.spheres.x.iter().zip(&cpu.spheres.x).flat_map(|(a, b)| (0..3).map(move |k| (a[k] - b[k]).abs()));
+        let apart = gpu
+            .world
+            .spheres
+            .x
+            .iter()
+            .zip(&cpu.world.spheres.x)
+            .flat_map(|(a, b)| (0..3).map(move |k| (a[k] - b[k]).abs()));
         let apart = apart.fold(0.0, f64::max);
         assert!(apart < 1e-9 * width, "call {call}: spheres {apart:.3e} m apart");
         if exact_adapter {
-            assert!(apart == 0.0 && report.stress == cpu.love_weber_stress(cpu.cell_volume().unwrap()), "call {call}");
+            assert!(
+                apart == 0.0 && report.stress == cpu.world.love_weber_stress(cpu.world.cell_volume().unwrap()),
+                "call {call}"
+            );
         }
-        let stress = cpu.love_weber_stress(cpu.cell_volume().unwrap());
+        let stress = cpu.world.love_weber_stress(cpu.world.cell_volume().unwrap());
         let p = (stress[0] + stress[1] + stress[2]).abs() / 3.0;
         for k in 0..6 {
             assert!(
@@ -360,7 +368,7 @@ fn a_loose_rve_on_the_gpu_follows_the_cpu_sphere_by_sphere() {
                 report.stress
             );
         }
-        assert_eq!(report.contacts, cpu.coordination().contacts, "call {call}");
+        assert_eq!(report.contacts, cpu.world.coordination().contacts, "call {call}");
     }
 }
 

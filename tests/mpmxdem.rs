@@ -28,26 +28,27 @@ fn params(pairs: &[(&str, f64)]) -> Params {
 /// A 4 x 4 x 4 simple cubic RVE of spheres r = 1 mm, rho = 2650, just touching, in a periodic box.
 fn lattice_rve() -> DemSim {
     let mut sim = DemSim::new();
-    let m = sim.add_material("grains", 2650.0).unwrap();
+    let m = sim.world.add_material("grains", 2650.0).unwrap();
     let p: ParamMap = [("kn".to_string(), 1e5)].into_iter().collect();
-    sim.set_contact_law(granite::registry().build_contact_law("linear", &p).unwrap(), None).unwrap();
+    sim.world.set_contact_law(granite::registry().build_contact_law("linear", &p).unwrap(), None).unwrap();
     let (r, n) = (1e-3, 4);
-    sim.set_cell(Some(PeriodicCell::new_box([2.0 * r * n as f64; 3])));
+    sim.world.set_cell(Some(PeriodicCell::new_box([2.0 * r * n as f64; 3])));
     for i in 0..n {
         for j in 0..n {
             for k in 0..n {
-                sim.add_sphere(
-                    m,
-                    [(2 * i + 1) as f64 * r, (2 * j + 1) as f64 * r, (2 * k + 1) as f64 * r],
-                    r,
-                    [0.0; 3],
-                )
-                .unwrap();
+                sim.world
+                    .add_sphere(
+                        m,
+                        [(2 * i + 1) as f64 * r, (2 * j + 1) as f64 * r, (2 * k + 1) as f64 * r],
+                        r,
+                        [0.0; 3],
+                    )
+                    .unwrap();
             }
         }
     }
     sim.skin = 1e-4;
-    sim.set_dt(1e-5).unwrap();
+    sim.world.set_dt(1e-5).unwrap();
     sim
 }
 
@@ -95,8 +96,8 @@ fn fixed_dem_steps_are_a_whole_number_within_the_safeguard() {
 #[test]
 fn zero_increment_returns_the_prepared_stress() {
     let rve = granite::bench::periodic_rve(300, 1e5).unwrap();
-    let volume = rve.cell_volume().unwrap();
-    let before = rve.love_weber_stress(volume);
+    let volume = rve.world.cell_volume().unwrap();
+    let before = rve.world.love_weber_stress(volume);
     let p = (before[0] + before[1] + before[2]) / 3.0;
     assert!(p < -5e4, "the prepared RVE must be compressed, p = {p}");
     let law = DemRve::new(params(&[]), &objects(&rve)).unwrap();
@@ -126,8 +127,8 @@ fn coupled_run(
     let given: ParamMap = [("inertial_number".to_string(), inertial)].into_iter().collect();
     let law = reg.build_law_with("dem_rve", &given, &objects(rve)).unwrap();
     let m = sim.add_material("rve", 1600.0, law).unwrap();
-    let volume = rve.cell_volume().unwrap();
-    sim.add_points(m, &[[0.5; 3]], &[1.0], [0.0; 3], rve.love_weber_stress(volume)).unwrap();
+    let volume = rve.world.cell_volume().unwrap();
+    sim.add_points(m, &[[0.5; 3]], &[1.0], [0.0; 3], rve.world.love_weber_stress(volume)).unwrap();
     sim.scheme = StressScheme::Usl;
     prescribe_node_velocities(&mut sim, |x| [l[0] * x[0], l[1] * x[1], l[2] * x[2]]);
     sim.set_dt(dt).unwrap();
@@ -150,28 +151,28 @@ fn coupled_run(
 fn pure_dem_path(rve: &DemSim, increments: &[[f64; 6]], inertial: f64) -> Vec<(f64, f64)> {
     let mut dem = rve.clone();
     dem.set_sequential(true);
-    let s = &dem.spheres;
+    let s = &dem.world.spheres;
     let mass: f64 = s.mass.iter().sum();
-    let rho = mass / dem.solid_volume();
+    let rho = mass / dem.world.solid_volume();
     let l = 2.0 * s.radius.iter().sum::<f64>() / s.len() as f64;
     let mut out = Vec::new();
     let mut axial = 0.0;
     for de in increments {
         let strain = granite_core::math::strain_matrix(de);
         let max = nalgebra::SymmetricEigen::new(strain).eigenvalues.amax();
-        let cell = dem.cell.as_ref().unwrap();
-        let st = dem.love_weber_stress(cell.volume());
+        let cell = dem.world.cell.as_ref().unwrap();
+        let st = dem.world.love_weber_stress(cell.volume());
         let bottom = cell.h.column(0).cross(&cell.h.column(1)).norm();
         let p = ((st[0] + st[1] + st[2]) / 3.0).abs().max(mass * 9.81 / bottom);
         let t_eps = max / inertial * (rho * l * l / p).sqrt();
-        let n = (t_eps / dem.dt).ceil().max(1.0) as usize;
-        let t = n as f64 * dem.dt;
-        dem.cell.as_mut().unwrap().velocity_gradient = strain / t;
+        let n = (t_eps / dem.world.dt).ceil().max(1.0) as usize;
+        let t = n as f64 * dem.world.dt;
+        dem.world.cell.as_mut().unwrap().velocity_gradient = strain / t;
         for _ in 0..n {
             dem.step().unwrap();
         }
         axial -= de[2];
-        let s = dem.love_weber_stress(dem.cell.as_ref().unwrap().volume());
+        let s = dem.world.love_weber_stress(dem.world.cell.as_ref().unwrap().volume());
         out.push((axial, s[0].max(s[1]) - s[2]));
     }
     out
@@ -257,8 +258,8 @@ fn an_rve_time_step_above_its_contacts_bound_is_said_once_by_the_coupled_run() {
     // (still far below what the RVE's contacts cannot follow at all) is worth a warning, which
     // the MPM passes on once for all its RVEs.
     let mut rve = granite::bench::periodic_rve(150, 1e5).unwrap();
-    let limit = rve.stable_dt().expect("a compacted RVE has contacts").dt;
-    rve.set_dt(1.05 * limit).unwrap();
+    let limit = rve.world.stable_dt().expect("a compacted RVE has contacts").dt;
+    rve.world.set_dt(1.05 * limit).unwrap();
     let (_, sim, _) = coupled_run(&rve, [0.0, 0.0, -0.01], 1e-4, 3, 1e-2);
     let said: Vec<&String> = sim.events.iter().filter(|e| e.contains("above the stability bound")).collect();
     assert_eq!(said.len(), 1, "said once: {:?}", sim.events);

@@ -44,7 +44,7 @@ fn two_cells(given: &[(&str, f64)]) -> MpmSim {
             xs.push([cell + 0.5, y, z]);
         }
     }
-    let stress = rve().love_weber_stress(rve().cell_volume().unwrap());
+    let stress = rve().world.love_weber_stress(rve().world.cell_volume().unwrap());
     sim.add_points(m, &xs, &[0.25; 8], [0.0; 3], stress).unwrap();
     sim.scheme = StressScheme::Usl;
     sim.set_dt(2e-5).unwrap();

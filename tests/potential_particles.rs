@@ -41,7 +41,7 @@ fn particle(
 
 /// Particle `i`'s potential where it is.
 fn placed(sim: &DemSim, i: usize) -> Placed {
-    let k = &sim.kinds;
+    let k = &sim.world.kinds;
     let shape = PotentialBody::shape_of(k.shapes[k.shape[i] as usize].as_ref()).unwrap();
     Placed::new(shape, &Pose { position: k.x[i], rotation: *k.q[i].to_rotation_matrix().matrix() })
 }
@@ -50,18 +50,20 @@ fn placed(sim: &DemSim, i: usize) -> Placed {
 /// scene built by `add` (two bodies on the x axis, 2.2 radii apart, the first moving in +x).
 fn collision(add: impl Fn(&mut DemSim, u16, f64, f64), radius: f64, speed: f64, dt: f64, steps: usize) -> Vec<f64> {
     let mut sim = DemSim::new();
-    let glass = sim.add_material("glass", 2500.0).unwrap();
-    sim.set_contact_law(law("visco_elastic", &[("kn", 1e4), ("kt_ratio", 0.0), ("restitution", 0.7)]), None).unwrap();
+    let glass = sim.world.add_material("glass", 2500.0).unwrap();
+    sim.world
+        .set_contact_law(law("visco_elastic", &[("kn", 1e4), ("kt_ratio", 0.0), ("restitution", 0.7)]), None)
+        .unwrap();
     add(&mut sim, glass, 1.1 * radius, speed);
-    sim.set_dt(dt).unwrap();
+    sim.world.set_dt(dt).unwrap();
     (0..steps)
         .map(|_| {
             sim.step().unwrap();
             // The first body is a sphere where there is one.
-            if sim.kinds.is_empty() || !sim.spheres.is_empty() {
-                sim.spheres.force[0][0]
+            if sim.world.kinds.is_empty() || !sim.world.spheres.is_empty() {
+                sim.world.spheres.force[0][0]
             } else {
-                sim.kinds.force[0][0]
+                sim.world.kinds.force[0][0]
             }
         })
         .collect()
@@ -82,8 +84,8 @@ fn collides_like_two_spheres(add: impl Fn(&mut DemSim, u16, f64, f64, &Arc<dyn B
     let steps = (2.0 * (0.1 * RADIUS) / speed / dt) as usize + 400;
     let spheres = collision(
         |sim, m, half, v| {
-            sim.add_sphere(m, [-half, 0.0, 0.0], RADIUS, [v, 0.0, 0.0]).unwrap();
-            sim.add_sphere(m, [half, 0.0, 0.0], RADIUS, [-v, 0.0, 0.0]).unwrap();
+            sim.world.add_sphere(m, [-half, 0.0, 0.0], RADIUS, [v, 0.0, 0.0]).unwrap();
+            sim.world.add_sphere(m, [half, 0.0, 0.0], RADIUS, [-v, 0.0, 0.0]).unwrap();
         },
         RADIUS,
         speed,
@@ -118,7 +120,7 @@ fn k_one_particles_collide_like_spheres() {
 #[test]
 fn a_sphere_and_a_k_one_particle_collide_like_two_spheres() {
     collides_like_two_spheres(|sim, m, half, v, shape| {
-        sim.add_sphere(m, [-half, 0.0, 0.0], RADIUS, [v, 0.0, 0.0]).unwrap();
+        sim.world.add_sphere(m, [-half, 0.0, 0.0], RADIUS, [v, 0.0, 0.0]).unwrap();
         particle(sim, m, shape, [half, 0.0, 0.0], UnitQuaternion::identity(), [-v, 0.0, 0.0]);
     });
 }
@@ -130,25 +132,26 @@ fn a_cube_rests_on_a_wall_with_its_weight_in_the_spring() {
     let (half, r) = (4e-3, 1e-3);
     let cube = PotentialPlanesKind.build_from(&planes_params(&box_planes([half; 3]), r, 10.0 * half, 0.01)).unwrap();
     let mut sim = DemSim::new();
-    let resin = sim.add_material("resin", 1111.0).unwrap();
+    let resin = sim.world.add_material("resin", 1111.0).unwrap();
     let kn = 1200.0;
-    sim.set_contact_law(
-        law("visco_elastic", &[("kn", kn), ("kt_ratio", 0.2), ("friction", 30.0), ("restitution", 0.5)]),
-        None,
-    )
-    .unwrap();
-    sim.add_wall(Wall::new("floor", WallShape::Plane { normal: [0.0, 0.0, 1.0] }, [0.0; 3], resin));
+    sim.world
+        .set_contact_law(
+            law("visco_elastic", &[("kn", kn), ("kt_ratio", 0.2), ("friction", 30.0), ("restitution", 0.5)]),
+            None,
+        )
+        .unwrap();
+    sim.world.add_wall(Wall::new("floor", WallShape::Plane { normal: [0.0, 0.0, 1.0] }, [0.0; 3], resin));
     // Tilted a little, dropped from 1 mm above the floor.
     let tilt = UnitQuaternion::from_axis_angle(&Vector3::x_axis(), 0.05);
     let height = half + r + 1e-3;
     particle(&mut sim, resin, &cube, [0.0, 0.0, height], tilt, [0.0; 3]);
-    sim.gravity = [0.0, 0.0, -9.81];
-    sim.set_damping(0.3).unwrap();
-    sim.set_dt(0.1 * sim.critical_dt().unwrap()).unwrap();
+    sim.world.gravity = [0.0, 0.0, -9.81];
+    sim.world.set_damping(0.3).unwrap();
+    sim.world.set_dt(0.1 * sim.world.critical_dt().unwrap()).unwrap();
     for _ in 0..40_000 {
         sim.step().unwrap();
     }
-    let p = &sim.kinds;
+    let p = &sim.world.kinds;
     let weight = p.mass[0] * 9.81;
     assert!(
         (p.force[0][2] / weight - 1.0).abs() < 1e-3,
@@ -166,8 +169,8 @@ fn a_cube_rests_on_a_wall_with_its_weight_in_the_spring() {
 /// The energy a box of tumbling tetrahedra carries: kinetic (translation and rotation), gravity
 /// and the springs of the contacts (between particles and with the walls).
 fn energy(sim: &DemSim, kn: f64) -> f64 {
-    let p = &sim.kinds;
-    let g = sim.gravity;
+    let p = &sim.world.kinds;
+    let g = sim.world.gravity;
     let mut e = 0.0;
     for i in 0..p.len() {
         let v = p.v[i];
@@ -184,7 +187,7 @@ fn energy(sim: &DemSim, kn: f64) -> f64 {
                 e += 0.5 * kn * t.overlap * t.overlap;
             }
         }
-        for w in &sim.walls {
+        for w in &sim.world.walls {
             let WallShape::Plane { normal } = w.shape else { unreachable!() };
             if let (_, Some(t)) = detect_plane(a, w.position, normal, None).unwrap() {
                 e += 0.5 * kn * t.overlap * t.overlap;
@@ -207,9 +210,9 @@ fn tetrahedra_in_a_box(threads: usize, k: f64, dt_factor: f64, steps: usize) -> 
             [("r_sphere", r_s), ("r_clump", r_clump), ("k", k)].iter().map(|(n, v)| (n.to_string(), *v)).collect();
         let shape = PotentialTetraKind.build_from(&given).unwrap();
         let mut sim = DemSim::new();
-        let resin = sim.add_material("resin", 1111.0).unwrap();
+        let resin = sim.world.add_material("resin", 1111.0).unwrap();
         let kn = 1200.0;
-        sim.set_contact_law(law("linear", &[("kn", kn)]), None).unwrap();
+        sim.world.set_contact_law(law("linear", &[("kn", kn)]), None).unwrap();
         let side = 0.03;
         for (normal, point) in [
             ([0.0, 0.0, 1.0], [0.0; 3]),
@@ -218,7 +221,7 @@ fn tetrahedra_in_a_box(threads: usize, k: f64, dt_factor: f64, steps: usize) -> 
             ([0.0, 1.0, 0.0], [0.0; 3]),
             ([0.0, -1.0, 0.0], [0.0, side, 0.0]),
         ] {
-            sim.add_wall(Wall::new("wall", WallShape::Plane { normal }, point, resin));
+            sim.world.add_wall(Wall::new("wall", WallShape::Plane { normal }, point, resin));
         }
         let mut k = 0;
         for i in 0..2 {
@@ -227,20 +230,20 @@ fn tetrahedra_in_a_box(threads: usize, k: f64, dt_factor: f64, steps: usize) -> 
                     let x = [0.008 + 0.013 * i as f64, 0.008 + 0.013 * j as f64, 0.008 + 0.012 * l as f64];
                     let q = UnitQuaternion::from_euler_angles(0.3 * k as f64, 0.7 * k as f64, 1.1 * k as f64);
                     let index = particle(&mut sim, resin, &shape, x, q, [0.05 * (k % 3) as f64, -0.03, 0.0]);
-                    sim.kinds.w[index] = [10.0 * (k % 2) as f64, 5.0, -7.0];
+                    sim.world.kinds.w[index] = [10.0 * (k % 2) as f64, 5.0, -7.0];
                     k += 1;
                 }
             }
         }
-        sim.gravity = [0.0, 0.0, -9.81];
-        sim.set_dt(dt_factor * sim.critical_dt().unwrap()).unwrap();
+        sim.world.gravity = [0.0, 0.0, -9.81];
+        sim.world.set_dt(dt_factor * sim.world.critical_dt().unwrap()).unwrap();
         // By default the time of 6000 steps at 0.05 of the critical step.
         let steps = if steps > 0 { steps } else { (6000.0 * 0.05 / dt_factor) as usize };
         let start = energy(&sim, kn);
         let (mut largest_kinetic, mut contacts): (f64, usize) = (0.0, 0);
         for _ in 0..steps {
             sim.step().unwrap();
-            let p = &sim.kinds;
+            let p = &sim.world.kinds;
             let kinetic: f64 = (0..p.len()).map(|i| 0.5 * p.mass[i] * p.v[i].iter().map(|c| c * c).sum::<f64>()).sum();
             largest_kinetic = largest_kinetic.max(kinetic);
             contacts += p.force.iter().filter(|f| f.iter().any(|c| *c != 0.0)).count();
@@ -275,7 +278,7 @@ fn tetrahedra_drift_in_energy_only_by_their_contact_geometry() {
     let drift = |dt_factor: f64| {
         let (sim, start, kinetic, contacts) = tetrahedra_in_a_box(2, 0.65, dt_factor, 0);
         assert!(contacts > 5000, "{contacts} particle-steps in contact");
-        assert!(sim.kinds.w.iter().any(|w| w.iter().any(|c| c.abs() > 1.0)), "the particles turn");
+        assert!(sim.world.kinds.w.iter().any(|w| w.iter().any(|c| c.abs() > 1.0)), "the particles turn");
         (energy(&sim, 1200.0) - start) / kinetic
     };
     let (coarse, fine) = (drift(0.05), drift(0.025));
@@ -292,12 +295,12 @@ fn a_saved_state_with_potential_particles_and_spheres_resumes_bit_for_bit() {
     let registry = granite_plugins::default_registry();
     let build = || {
         let (mut sim, ..) = tetrahedra_in_a_box(1, 0.65, 0.2, 300);
-        let m = sim.kinds.material[0];
+        let m = sim.world.kinds.material[0];
         for k in 0..6 {
             let x = [0.004 + 0.004 * k as f64, 0.025, 0.03];
-            sim.add_sphere(m, x, 1.5e-3, [0.0, -0.05, 0.0]).unwrap();
+            sim.world.add_sphere(m, x, 1.5e-3, [0.0, -0.05, 0.0]).unwrap();
         }
-        sim.set_damping(0.5).unwrap();
+        sim.world.set_damping(0.5).unwrap();
         sim
     };
     let steps = 3000;
@@ -309,24 +312,28 @@ fn a_saved_state_with_potential_particles_and_spheres_resumes_bit_for_bit() {
     for _ in 0..steps {
         first.step().unwrap();
     }
-    assert!(first.kinds.contact_count() >= 5, "the saved state has {} contacts", first.kinds.contact_count());
+    assert!(
+        first.world.kinds.contact_count() >= 5,
+        "the saved state has {} contacts",
+        first.world.kinds.contact_count()
+    );
     let path = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("potential_state.json");
     first.save(&path).unwrap();
     let mut resumed = DemSim::load(&path, &registry).unwrap();
     for _ in 0..steps {
         resumed.step().unwrap();
     }
-    let (a, b) = (&straight.kinds, &resumed.kinds);
+    let (a, b) = (&straight.world.kinds, &resumed.world.kinds);
     assert!(a.x == b.x && a.v == b.v && a.w == b.w && a.q == b.q, "the resumed particles parted from the straight run");
-    assert!(straight.spheres.x == resumed.spheres.x && straight.spheres.v == resumed.spheres.v);
+    assert!(straight.world.spheres.x == resumed.world.spheres.x && straight.world.spheres.v == resumed.world.spheres.v);
 }
 
 #[test]
 fn the_same_motion_on_one_and_two_threads() {
     let (one, ..) = tetrahedra_in_a_box(1, 0.65, 0.2, 0);
     let (two, ..) = tetrahedra_in_a_box(2, 0.65, 0.2, 0);
-    assert_eq!(one.kinds.x, two.kinds.x);
-    assert_eq!(one.kinds.w, two.kinds.w);
+    assert_eq!(one.world.kinds.x, two.world.kinds.x);
+    assert_eq!(one.world.kinds.w, two.world.kinds.w);
 }
 
 /// A script drops a cloud of the thesis's rounded tetrahedra (`potential_tetra`, table 2.2) onto

@@ -47,7 +47,7 @@ impl DemScene {
     pub fn prepared(&self) -> DemSim {
         let mut dem = self.dem.clone();
         if self.auto_skin {
-            let r_min = dem.spheres.smallest_radius();
+            let r_min = dem.world.spheres.smallest_radius();
             if r_min.is_finite() {
                 dem.skin = 0.5 * r_min;
             }
@@ -58,7 +58,7 @@ impl DemScene {
 
 impl Simulation for DemScene {
     fn setup_warnings(&mut self) -> Vec<String> {
-        let bodies = (self.dem.spheres.len(), self.dem.walls.len());
+        let bodies = (self.dem.world.spheres.len(), self.dem.world.walls.len());
         if !self.check_overlaps || self.overlaps_checked_for == Some(bodies) {
             return Vec::new();
         }
@@ -83,7 +83,7 @@ impl Simulation for DemScene {
     }
     fn advance(&mut self) -> Result<()> {
         if self.auto_skin {
-            let r_min = self.dem.spheres.smallest_radius();
+            let r_min = self.dem.world.spheres.smallest_radius();
             if r_min.is_finite() {
                 self.dem.skin = 0.5 * r_min;
             }
@@ -92,16 +92,16 @@ impl Simulation for DemScene {
         self.dem.step()
     }
     fn time(&self) -> f64 {
-        self.dem.time
+        self.dem.world.time
     }
     fn steps(&self) -> u64 {
-        self.dem.step
+        self.dem.world.step
     }
     fn dt(&self) -> f64 {
-        self.dem.dt
+        self.dem.world.dt
     }
     fn series_row(&self) -> (Vec<&'static str>, Vec<f64>) {
-        let d = self.dem.diagnostics();
+        let d = self.dem.world.diagnostics();
         let mut cols = vec![
             "step",
             "time",
@@ -119,8 +119,8 @@ impl Simulation for DemScene {
             "max_height",
         ];
         let mut vals = vec![
-            self.dem.step as f64,
-            self.dem.time,
+            self.dem.world.step as f64,
+            self.dem.world.time,
             d.kinetic_energy,
             d.elastic_energy,
             d.gravitational_energy,
@@ -151,9 +151,9 @@ impl Simulation for DemScene {
             vals.extend(energy.entries()[..8].iter().map(|(_, v)| if measured { *v } else { f64::NAN }));
         }
         if let (Some(volume), Some(e), Some((strain, vol_strain))) =
-            (self.dem.cell_volume(), self.dem.void_ratio(), self.dem.cell_strain())
+            (self.dem.world.cell_volume(), self.dem.world.void_ratio(), self.dem.world.cell_strain())
         {
-            let s = self.dem.love_weber_stress(volume);
+            let s = self.dem.world.love_weber_stress(volume);
             let (p, q) = granite_core::math::p_q(&s);
             cols.extend([
                 "void_ratio",
@@ -176,8 +176,8 @@ impl Simulation for DemScene {
         (cols, vals)
     }
     fn vtk_frame(&self) -> (Vec<Vec3>, Vec<Field>) {
-        let s = &self.dem.spheres;
-        let counts = self.dem.contact_counts();
+        let s = &self.dem.world.spheres;
+        let counts = self.dem.world.contact_counts();
         let fields = vec![
             Field::int("id", s.id.iter().map(|&i| i as i64)),
             Field::float("radius", 1, s.radius.clone()),
@@ -190,18 +190,18 @@ impl Simulation for DemScene {
         (s.x.clone(), fields)
     }
     fn vtk_poly(&self) -> Vec<(&'static str, granite_core::io::vtk::PolyData)> {
-        let mut out = vec![("contacts", self.dem.contacts_picture())];
-        if !self.dem.walls.is_empty() {
-            out.push(("walls", self.dem.walls_picture()));
+        let mut out = vec![("contacts", self.dem.world.contacts_picture())];
+        if !self.dem.world.walls.is_empty() {
+            out.push(("walls", self.dem.world.walls_picture()));
         }
-        if !self.dem.kinds.is_empty() {
-            out.push(("bodies", self.dem.kinds_picture()));
+        if !self.dem.world.kinds.is_empty() {
+            out.push(("bodies", self.dem.world.kinds_picture()));
         }
         out
     }
     fn write_points(&self, path: &Path) -> Result<()> {
-        let s = &self.dem.spheres;
-        let counts = self.dem.contact_counts();
+        let s = &self.dem.world.spheres;
+        let counts = self.dem.world.contact_counts();
         let rows = (0..s.len()).map(|i| {
             let mut row = vec![s.id[i] as f64, s.material[i] as f64];
             row.extend(s.x[i]);
@@ -219,21 +219,21 @@ impl Simulation for DemScene {
     }
     fn snapshot(&self) -> DemSnapshot {
         DemSnapshot {
-            spheres: self.dem.spheres.clone(),
-            bodies: self.dem.kinds.clone(),
-            walls: self.dem.walls.clone(),
-            time: self.dem.time,
-            step: self.dem.step,
+            spheres: self.dem.world.spheres.clone(),
+            bodies: self.dem.world.kinds.clone(),
+            walls: self.dem.world.walls.clone(),
+            time: self.dem.world.time,
+            step: self.dem.world.step,
         }
     }
     fn restore(&mut self, s: DemSnapshot) {
-        self.dem.spheres = s.spheres;
-        self.dem.kinds = s.bodies;
-        self.dem.walls = s.walls;
-        self.dem.time = s.time;
-        self.dem.step = s.step;
-        self.dem.pairs = Default::default();
-        self.dem.wall_pairs = Default::default();
+        self.dem.world.spheres = s.spheres;
+        self.dem.world.kinds = s.bodies;
+        self.dem.world.walls = s.walls;
+        self.dem.world.time = s.time;
+        self.dem.world.step = s.step;
+        self.dem.world.pairs = Default::default();
+        self.dem.world.wall_pairs = Default::default();
         let _ = self.dem.rebuild_candidates();
     }
     fn save_state(&self, path: &std::path::Path, run: &RunContext) -> Result<()> {
@@ -242,11 +242,11 @@ impl Simulation for DemScene {
         granite_core::comm::agree(run.comm.as_ref(), 0, written)
     }
     fn drain_events(&mut self) -> Vec<String> {
-        self.dem.events.drain(..).collect()
+        self.dem.world.events.drain(..).collect()
     }
     fn set_driven(&mut self, target: usize, value: f64) {
         if let Some(&(w, axis)) = self.driven.get(target) {
-            if let Some(wall) = self.dem.walls.get_mut(w) {
+            if let Some(wall) = self.dem.world.walls.get_mut(w) {
                 wall.velocity[axis] = value;
             }
         }

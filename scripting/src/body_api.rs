@@ -85,14 +85,14 @@ pub(super) fn add_with(
     };
     let mut st = s.lock();
     let dem = &mut st.sim.dem;
-    let i = dem.add_body(body).or_rhai()?;
-    Ok(dem.kinds.id[i] as i64)
+    let i = dem.world.add_body(body).or_rhai()?;
+    Ok(dem.world.kinds.id[i] as i64)
 }
 
 /// The index of the body with `id`.
 pub(super) fn index_of(s: &DemHandle, id: i64) -> RhaiResult<usize> {
     let st = s.lock();
-    let k = &st.sim.dem.kinds;
+    let k = &st.sim.dem.world.kinds;
     match k.id.iter().position(|&i| i as i64 == id) {
         Some(i) => Ok(i),
         None => err(format!("no body with id {id} ({} bodies)", k.len())),
@@ -117,7 +117,7 @@ pub(super) fn register(engine: &mut Engine) {
 pub(super) fn state(s: &mut DemHandle, id: i64) -> RhaiResult<Map> {
     let i = index_of(s, id)?;
     let st = s.lock();
-    let k = &st.sim.dem.kinds;
+    let k = &st.sim.dem.world.kinds;
     let array = |v: Vec3| Dynamic::from(v.iter().map(|c| Dynamic::from(*c)).collect::<rhai::Array>());
     let q = k.q[i].scaled_axis();
     let axis = k.q[i] * Vector3::z();
@@ -141,19 +141,19 @@ fn register_motion(engine: &mut Engine) {
     engine.register_fn("body_velocity", |s: &mut DemHandle, id: i64, v: Dynamic| {
         let v = vector(&v, 3, "velocity")?;
         let i = index_of(s, id)?;
-        s.lock().sim.dem.kinds.v[i] = v;
+        s.lock().sim.dem.world.kinds.v[i] = v;
         Ok::<_, Box<rhai::EvalAltResult>>(())
     });
     engine.register_fn("body_spin", |s: &mut DemHandle, id: i64, w: Dynamic| {
         let w = vector(&w, 3, "spin")?;
         let i = index_of(s, id)?;
-        s.lock().sim.dem.kinds.w[i] = w;
+        s.lock().sim.dem.world.kinds.w[i] = w;
         Ok::<_, Box<rhai::EvalAltResult>>(())
     });
     engine.register_fn("body_ids", |s: &mut DemHandle| {
-        s.lock().sim.dem.kinds.id.iter().map(|&i| Dynamic::from(i as i64)).collect::<rhai::Array>()
+        s.lock().sim.dem.world.kinds.id.iter().map(|&i| Dynamic::from(i as i64)).collect::<rhai::Array>()
     });
-    engine.register_get("bodies", |s: &mut DemHandle| s.lock().sim.dem.kinds.len() as i64);
+    engine.register_get("bodies", |s: &mut DemHandle| s.lock().sim.dem.world.kinds.len() as i64);
 }
 
 /// Whether `name` is a registered body kind.
@@ -197,7 +197,7 @@ pub(super) fn add_cloud(
             w: [0.0; 3],
             fixed: false,
         };
-        st.sim.dem.add_body(body).or_rhai()?;
+        st.sim.dem.world.add_body(body).or_rhai()?;
     }
     Ok(centres.len() as i64)
 }

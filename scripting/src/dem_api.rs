@@ -53,9 +53,9 @@ fn body_cloud(
         let st = s.lock();
         let seed = match get(opts, "seed") {
             Some(v) => integer(v, "seed")? as u64,
-            None => st.sim.dem.seed,
+            None => st.sim.dem.world.seed,
         };
-        let (sp, k) = (&st.sim.dem.spheres, &st.sim.dem.kinds);
+        let (sp, k) = (&st.sim.dem.world.spheres, &st.sim.dem.world.kinds);
         let mut existing: Vec<(Vec3, f64)> = sp.x.iter().copied().zip(sp.radius.iter().copied()).collect();
         existing.extend((0..k.len()).map(|i| (k.x[i], k.bounding_radius(i))));
         (seed, existing)
@@ -118,15 +118,18 @@ impl Handle<DemScene> {
         let st = self.lock();
         let d = &st.sim.dem;
         let count = |n: usize, what: &str| format!("{n} {what}{}", if n == 1 { "" } else { "s" });
-        let clumps =
-            if d.clumps.is_empty() { String::new() } else { format!(" in {}", count(d.clumps.len(), "clump")) };
-        let cell = if d.cell.is_some() { ", periodic" } else { "" };
+        let clumps = if d.world.clumps.is_empty() {
+            String::new()
+        } else {
+            format!(" in {}", count(d.world.clumps.len(), "clump"))
+        };
+        let cell = if d.world.cell.is_some() { ", periodic" } else { "" };
         format!(
             "DemSim({}{clumps}, {}{cell}, t = {:.6} s, step {}, {running})",
-            count(d.spheres.len(), "sphere"),
-            count(d.walls.len(), "wall"),
-            d.time,
-            d.step
+            count(d.world.spheres.len(), "sphere"),
+            count(d.world.walls.len(), "wall"),
+            d.world.time,
+            d.world.step
         )
     }
 
@@ -135,7 +138,7 @@ impl Handle<DemScene> {
         api_options(&opts, "", "dem")?;
         let mut dem = DemSim::new();
         if let Some(s) = get(&opts, "seed") {
-            dem.seed = integer(s, "seed")? as u64;
+            dem.world.seed = integer(s, "seed")? as u64;
         }
         let auto_skin = match get(&opts, "skin") {
             Some(s) => {
@@ -156,11 +159,11 @@ impl Handle<DemScene> {
         let density = number(get(&opts, "density").unwrap_or(&Dynamic::UNIT), "density")?;
         let name = match get(&opts, "name") {
             Some(n) => string(n, "name")?,
-            None => format!("material_{}", st.sim.dem.materials.len() + 1),
+            None => format!("material_{}", st.sim.dem.world.materials.len() + 1),
         };
         let elastic = super::convert::elastic_from(&opts, &format!("material \"{name}\""))?;
-        let index = st.sim.dem.add_material(&name, density).or_rhai()?;
-        st.sim.dem.set_material_elastic(index, elastic).or_rhai()?;
+        let index = st.sim.dem.world.add_material(&name, density).or_rhai()?;
+        st.sim.dem.world.set_material_elastic(index, elastic).or_rhai()?;
         Ok(DemMaterialHandle { index, name, sim: self.serial() })
     }
 
@@ -168,14 +171,14 @@ impl Handle<DemScene> {
         let mut st = self.lock();
         let params = param_map(&opts, &[], law)?;
         let law = st.ctx.registry().build_contact_law(law, &params).or_rhai()?;
-        st.sim.dem.set_contact_law(law, pair).or_rhai()
+        st.sim.dem.world.set_contact_law(law, pair).or_rhai()
     }
 
     fn add_generated(&mut self, m: &DemMaterialHandle, spheres: Vec<(Vec3, f64)>) -> RhaiResult<i64> {
         let index = m.index_in(self)?;
         let mut st = self.lock();
         for (x, r) in &spheres {
-            st.sim.dem.add_sphere(index, *x, *r, [0.0; 3]).or_rhai()?;
+            st.sim.dem.world.add_sphere(index, *x, *r, [0.0; 3]).or_rhai()?;
         }
         Ok(spheres.len() as i64)
     }
@@ -183,13 +186,13 @@ impl Handle<DemScene> {
     fn add_wall(&mut self, mat: &DemMaterialHandle, name: String, shape: WallShape, position: Vec3) -> RhaiResult<i64> {
         let wall = Wall::new(&name, shape, position, mat.index_in(self)?);
         let mut st = self.lock();
-        let twin = st.sim.dem.walls.iter().position(|w| w.same_surface(&wall));
-        let index = st.sim.dem.add_wall(wall);
+        let twin = st.sim.dem.world.walls.iter().position(|w| w.same_surface(&wall));
+        let index = st.sim.dem.world.add_wall(wall);
         if let Some(twin) = twin {
             st.ctx.warn(&format!(
                 "wall {index} (\"{name}\") is the same surface as wall {twin} (\"{}\"): a sphere touches both, \
                  with twice the stiffness; add it once",
-                st.sim.dem.walls[twin].name
+                st.sim.dem.world.walls[twin].name
             ));
         }
         Ok(index as i64)
@@ -220,7 +223,7 @@ impl Handle<DemScene> {
     }
 
     fn wall_index(&self, w: i64) -> RhaiResult<usize> {
-        let n = self.lock().sim.dem.walls.len();
+        let n = self.lock().sim.dem.world.walls.len();
         if w < 0 || w as usize >= n {
             return err(format!("wall index {w} out of range 0..{n}"));
         }
@@ -258,7 +261,7 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
             )))
         })?;
         let (dem, read, fallback) = DemSim::load_newest(&path, &*c.registry()).or_rhai()?;
-        c.record_load(&read, dem.step, fallback);
+        c.record_load(&read, dem.world.step, fallback);
         Ok::<_, Box<rhai::EvalAltResult>>(Handle::new(DemScene::new(dem, false), c.clone()))
     });
     engine.register_fn("contact_law", |s: &mut DemHandle, law: &str, opts: Map| s.contact_law(law, None, opts));
@@ -279,9 +282,9 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
         };
         let index = m.index_in(s)?;
         let mut st = s.lock();
-        let i = st.sim.dem.add_sphere(index, x, r, v).or_rhai()?;
+        let i = st.sim.dem.world.add_sphere(index, x, r, v).or_rhai()?;
         if let Some(f) = get(&opts, "fixed") {
-            st.sim.dem.spheres.blocked[i] = if f.is_bool() {
+            st.sim.dem.world.spheres.blocked[i] = if f.is_bool() {
                 if f.as_bool().unwrap_or(false) {
                     dof::ALL
                 } else {
@@ -291,7 +294,7 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
                 granite_core::dem::bodies::parse_dofs(&string(f, "fixed")?).or_rhai()?
             };
         }
-        Ok(st.sim.dem.spheres.id[i] as i64)
+        Ok(st.sim.dem.world.spheres.id[i] as i64)
     }
     engine.register_fn("sphere", sphere);
     engine.register_fn("sphere", |s: &mut DemHandle, m: DemMaterialHandle, x: Dynamic, r: Dynamic| {
@@ -309,9 +312,9 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
             let st = s.lock();
             let seed = match get(&opts, "seed") {
                 Some(v) => integer(v, "seed")? as u64,
-                None => st.sim.dem.seed,
+                None => st.sim.dem.world.seed,
             };
-            let sp = &st.sim.dem.spheres;
+            let sp = &st.sim.dem.world.spheres;
             (seed, sp.x.iter().copied().zip(sp.radius.iter().copied()).collect::<Vec<_>>(), st.ctx.clone())
         };
         let made = cloud(lo, hi, count as usize, &psd, seed, &existing, &|| ctx.interrupted()).or_rhai()?;
@@ -327,7 +330,7 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
             list.push(([v[0], v[1], v[2]], v[3]));
         }
         let index = m.index_in(s)?;
-        s.lock().sim.dem.add_clump(index, &list, [0.0; 3], CLUMP_VOXELS).map(|c| c as i64).or_rhai()
+        s.lock().sim.dem.world.add_clump(index, &list, [0.0; 3], CLUMP_VOXELS).map(|c| c as i64).or_rhai()
     });
     engine.register_fn(
         "tetra_clump",
@@ -340,7 +343,7 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
             )
             .or_rhai()?;
             let index = m.index_in(s)?;
-            s.lock().sim.dem.add_clump(index, &members, [0.0; 3], CLUMP_VOXELS).map(|c| c as i64).or_rhai()
+            s.lock().sim.dem.world.add_clump(index, &members, [0.0; 3], CLUMP_VOXELS).map(|c| c as i64).or_rhai()
         },
     );
     engine.register_fn(
@@ -358,9 +361,9 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
                 let st = s.lock();
                 let seed = match get(&opts, "seed") {
                     Some(v) => integer(v, "seed")? as u64,
-                    None => st.sim.dem.seed,
+                    None => st.sim.dem.world.seed,
                 };
-                let sp = &st.sim.dem.spheres;
+                let sp = &st.sim.dem.world.spheres;
                 let shape = st.ctx.registry().build_shape(&shape_name, &shape_params).or_rhai()?;
                 (seed, sp.x.iter().copied().zip(sp.radius.iter().copied()).collect::<Vec<_>>(), shape)
             };
@@ -371,16 +374,16 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
             let psd = Psd::Uniform { min: bound, max: bound };
             let centres = cloud(lo, hi, count, &psd, seed, &existing, &|| ctx.interrupted()).or_rhai()?;
             let index = m.index_in(s)?;
-            let density = s.lock().sim.dem.materials[index as usize].density;
+            let density = s.lock().sim.dem.world.materials[index as usize].density;
             let props = granite_core::dem::clump::mass_properties(&template, density, CLUMP_VOXELS).or_rhai()?;
             let mut st = s.lock();
             for (k, (c, _)) in centres.iter().enumerate() {
                 let u = [0, 1, 2].map(|j| granite_core::ext::contact::uniform(seed ^ 0xC1u64, (3 * k + j) as u64));
                 let (members, q) = granite_core::dem::clump::place_template(&template, *c, u);
                 if members.len() == 1 {
-                    st.sim.dem.add_sphere(index, members[0].0, members[0].1, [0.0; 3]).or_rhai()?;
+                    st.sim.dem.world.add_sphere(index, members[0].0, members[0].1, [0.0; 3]).or_rhai()?;
                 } else {
-                    st.sim.dem.add_clump_with(index, &members, &props.transformed(&q, *c)).or_rhai()?;
+                    st.sim.dem.world.add_clump_with(index, &members, &props.transformed(&q, *c)).or_rhai()?;
                 }
             }
             Ok::<_, Box<rhai::EvalAltResult>>(count as i64)
@@ -397,7 +400,7 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
         };
         let seed = match get(&opts, "seed") {
             Some(v) => integer(v, "seed")? as u64,
-            None => s.lock().sim.dem.seed,
+            None => s.lock().sim.dem.world.seed,
         };
         let made = lattice(lo, hi, spacing, radius, jitter, seed).or_rhai()?;
         s.add_generated(&m, made)
@@ -457,7 +460,7 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
     engine.register_fn("wall_velocity", |s: &mut DemHandle, w: i64, v: Dynamic| {
         let w = s.wall_index(w)?;
         let v = vector(&v, 3, "velocity")?;
-        s.lock().sim.dem.walls[w].velocity = v;
+        s.lock().sim.dem.world.walls[w].velocity = v;
         Ok::<_, Box<rhai::EvalAltResult>>(())
     });
     engine.register_fn("wall_velocity", |s: &mut DemHandle, w: i64, axis: &str, f: FnPtr| {
@@ -473,38 +476,38 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
     });
     engine.register_fn("wall_force", |s: &mut DemHandle, w: i64| {
         let w = s.wall_index(w)?;
-        let f = s.lock().sim.dem.wall_force(w);
+        let f = s.lock().sim.dem.world.wall_force(w);
         Ok::<_, Box<rhai::EvalAltResult>>(f.iter().map(|&c| Dynamic::from(c)).collect::<Array>())
     });
     engine.register_fn("wall_position", |s: &mut DemHandle, w: i64| {
         let w = s.wall_index(w)?;
-        let p = s.lock().sim.dem.walls[w].position;
+        let p = s.lock().sim.dem.world.walls[w].position;
         Ok::<_, Box<rhai::EvalAltResult>>(p.iter().map(|&c| Dynamic::from(c)).collect::<Array>())
     });
     engine.register_fn("gravity", |s: &mut DemHandle, g: Dynamic| {
-        s.lock().sim.dem.gravity = vector(&g, 3, "gravity")?;
+        s.lock().sim.dem.world.gravity = vector(&g, 3, "gravity")?;
         Ok::<_, Box<rhai::EvalAltResult>>(())
     });
     engine.register_fn("damping", |s: &mut DemHandle, d: Dynamic| {
         let d = number(&d, "damping")?;
-        s.lock().sim.dem.set_damping(d).or_rhai()
+        s.lock().sim.dem.world.set_damping(d).or_rhai()
     });
     engine.register_fn("dt", |s: &mut DemHandle, dt: Dynamic| {
         let dt = number(&dt, "dt")?;
         let mut st = s.lock();
-        st.sim.dem.check_dt(dt).or_rhai()?;
-        st.sim.dem.set_dt(dt).or_rhai()
+        st.sim.dem.world.check_dt(dt).or_rhai()?;
+        st.sim.dem.world.set_dt(dt).or_rhai()
     });
     engine.register_fn("critical_dt", |s: &mut DemHandle| -> RhaiResult<f64> {
         let st = s.lock();
         let dem = &st.sim.dem;
         // No limit means nothing to compute it from: say what is missing (a dt of inf would be
         // refused later with no word of the cause).
-        dem.critical_dt().ok_or(()).or_else(|_| {
-            err(if dem.spheres.is_empty() {
+        dem.world.critical_dt().ok_or(()).or_else(|_| {
+            err(if dem.world.spheres.is_empty() {
                 "critical_dt(): no spheres yet: the limit comes from their masses and their contacts' stiffness"
                     .to_string()
-            } else if dem.laws.is_empty() {
+            } else if dem.world.laws.is_empty() {
                 "critical_dt(): no contact law yet: call sim.contact_law(name, #{ ... }) first".to_string()
             } else {
                 "critical_dt(): the contact laws give the spheres' materials no stiffness (set_contact_law between \
@@ -514,7 +517,7 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
         })
     });
     engine.register_fn("stable_dt", |s: &mut DemHandle| {
-        s.lock().sim.dem.stable_dt().map(|limit| limit.dt).unwrap_or(f64::INFINITY)
+        s.lock().sim.dem.world.stable_dt().map(|limit| limit.dt).unwrap_or(f64::INFINITY)
     });
     engine.register_fn("allow_overlaps", |s: &mut DemHandle, allow: bool| {
         s.lock().sim.check_overlaps = !allow;
@@ -533,17 +536,17 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
         }
         let mut st = s.lock();
         let inside = |x: &Vec3| (0..3).all(|a| x[a] >= lo[a] && x[a] <= hi[a]);
-        let keep: Vec<bool> = st.sim.dem.spheres.x.iter().map(inside).collect();
+        let keep: Vec<bool> = st.sim.dem.world.spheres.x.iter().map(inside).collect();
         let mut lost = keep.iter().filter(|k| !**k).count();
         if lost > 0 {
-            st.sim.dem.remove_spheres(&keep);
+            st.sim.dem.world.remove_spheres(&keep);
         }
         // Bodies of plugin kinds by their centres; fixed ones are container parts and stay.
-        let k = &st.sim.dem.kinds;
+        let k = &st.sim.dem.world.kinds;
         let keep: Vec<bool> = (0..k.len()).map(|i| k.fixed[i] || inside(&k.x[i])).collect();
         let gone = keep.iter().filter(|k| !**k).count();
         if gone > 0 {
-            st.sim.dem.remove_bodies(&keep);
+            st.sim.dem.world.remove_bodies(&keep);
             lost += gone;
         }
         Ok::<_, Box<rhai::EvalAltResult>>(lost as i64)
@@ -553,9 +556,9 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
         if !(v > 0.0) {
             return err("volume must be > 0");
         }
-        Ok(s.lock().sim.dem.love_weber_stress(v).iter().map(|&c| Dynamic::from(c)).collect::<Array>())
+        Ok(s.lock().sim.dem.world.love_weber_stress(v).iter().map(|&c| Dynamic::from(c)).collect::<Array>())
     });
-    engine.register_get("particles", |s: &mut DemHandle| s.lock().sim.dem.spheres.len() as i64);
+    engine.register_get("particles", |s: &mut DemHandle| s.lock().sim.dem.world.spheres.len() as i64);
     engine.register_get("memory_bytes", |s: &mut DemHandle| s.lock().sim.dem.memory_bytes() as i64);
     engine.register_fn("skin", |s: &mut DemHandle, skin: Dynamic| -> RhaiResult<()> {
         let skin = finite(&skin, "skin")?;
@@ -565,7 +568,7 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
         Ok(())
     });
     engine.register_get("skin", |s: &mut DemHandle| s.lock().sim.dem.skin);
-    engine.register_get("clumps", |s: &mut DemHandle| s.lock().sim.dem.clumps.len() as i64);
+    engine.register_get("clumps", |s: &mut DemHandle| s.lock().sim.dem.world.clumps.len() as i64);
     register_cell(engine);
     register_measures(engine);
 }
@@ -591,11 +594,11 @@ fn register_cell(engine: &mut Engine) {
         if size.iter().any(|&l| !(l > 0.0)) {
             return err("periodic cell sizes must be > 0");
         }
-        s.lock().sim.dem.set_cell(Some(PeriodicCell::new_box(size)));
+        s.lock().sim.dem.world.set_cell(Some(PeriodicCell::new_box(size)));
         Ok(())
     });
     fn cell_of(s: &DemHandle) -> RhaiResult<granite_core::dem::cell::PeriodicCell> {
-        s.lock().sim.dem.cell.clone().ok_or_else(|| {
+        s.lock().sim.dem.world.cell.clone().ok_or_else(|| {
             super::convert::to_rhai(GraniteError::Setup(
                 "this simulation has no periodic cell: call periodic([lx, ly, lz]) first".into(),
             ))
@@ -617,8 +620,8 @@ fn register_cell(engine: &mut Engine) {
             }
         }
         let mut st = s.lock();
-        st.sim.dem.cell_control = None;
-        if let Some(c) = st.sim.dem.cell.as_mut() {
+        st.sim.dem.world.cell_control = None;
+        if let Some(c) = st.sim.dem.world.cell.as_mut() {
             c.velocity_gradient = m;
         }
         Ok(())
@@ -661,20 +664,20 @@ fn register_cell(engine: &mut Engine) {
                 _ => return err(format!("cell_control `{k}`: give exactly one of `rate` and `stress`")),
             };
         }
-        s.lock().sim.dem.cell_control = Some(CellControl::new(axes, shear, relax_steps));
+        s.lock().sim.dem.world.cell_control = Some(CellControl::new(axes, shear, relax_steps));
         Ok(())
     });
     engine.register_fn("cell_stress", |s: &mut DemHandle| {
         let cell = cell_of(s)?;
-        Ok::<_, Box<rhai::EvalAltResult>>(voigt_array(&s.lock().sim.dem.love_weber_stress(cell.volume())))
+        Ok::<_, Box<rhai::EvalAltResult>>(voigt_array(&s.lock().sim.dem.world.love_weber_stress(cell.volume())))
     });
     engine.register_fn("stress_reached", |s: &mut DemHandle, tolerance: Dynamic| {
         let cell = cell_of(s)?;
         let tol = number(&tolerance, "tolerance")?;
         let st = s.lock();
-        let stress = st.sim.dem.love_weber_stress(cell.volume());
+        let stress = st.sim.dem.world.love_weber_stress(cell.volume());
         Ok::<_, Box<rhai::EvalAltResult>>(
-            st.sim.dem.cell_control.as_ref().is_some_and(|c| c.stress_reached(&stress, tol)),
+            st.sim.dem.world.cell_control.as_ref().is_some_and(|c| c.stress_reached(&stress, tol)),
         )
     });
     engine.register_fn("cell_size", |s: &mut DemHandle| {
@@ -684,7 +687,7 @@ fn register_cell(engine: &mut Engine) {
     engine.register_fn("cell_volume", |s: &mut DemHandle| Ok::<_, Box<rhai::EvalAltResult>>(cell_of(s)?.volume()));
     engine.register_fn("cell_strain", |s: &mut DemHandle| {
         cell_of(s)?;
-        let (axial, vol) = s.lock().sim.dem.cell_strain().unwrap_or(([0.0; 3], 0.0));
+        let (axial, vol) = s.lock().sim.dem.world.cell_strain().unwrap_or(([0.0; 3], 0.0));
         let mut m = Map::new();
         for (k, v) in ["x", "y", "z"].iter().zip(axial) {
             m.insert((*k).into(), Dynamic::from(v));
@@ -694,12 +697,12 @@ fn register_cell(engine: &mut Engine) {
     });
     engine.register_fn("reset_cell_strain", |s: &mut DemHandle| {
         let cell = cell_of(s)?;
-        s.lock().sim.dem.cell_reference = Some(cell.h);
+        s.lock().sim.dem.world.cell_reference = Some(cell.h);
         Ok::<_, Box<rhai::EvalAltResult>>(())
     });
     engine.register_fn("void_ratio", |s: &mut DemHandle| {
         cell_of(s)?;
-        Ok::<_, Box<rhai::EvalAltResult>>(s.lock().sim.dem.void_ratio().unwrap_or(f64::NAN))
+        Ok::<_, Box<rhai::EvalAltResult>>(s.lock().sim.dem.world.void_ratio().unwrap_or(f64::NAN))
     });
 }
 
@@ -746,8 +749,8 @@ fn register_measures(engine: &mut Engine) {
             let st = s.lock();
             let dem = &st.sim.dem;
             // Spheres (clump members) and the free bodies' monitor points.
-            let mut positions = dem.spheres.x.clone();
-            positions.extend(dem.kinds.monitor_positions());
+            let mut positions = dem.world.spheres.x.clone();
+            positions.extend(dem.world.kinds.monitor_positions());
             positions
         };
         let r = measure(&positions, &heap, d, x_min, x_max).or_rhai()?;
@@ -801,6 +804,6 @@ fn register_measures(engine: &mut Engine) {
         if !(v > 0.0) {
             return err("volume must be > 0");
         }
-        Ok(voigt_array(&s.lock().sim.dem.global_stress_with_gravity(v)))
+        Ok(voigt_array(&s.lock().sim.dem.world.global_stress_with_gravity(v)))
     });
 }

@@ -27,9 +27,9 @@ fn id_of(id: i64) -> RhaiResult<u64> {
 
 /// Everything about one sphere, by index.
 fn body_map(dem: &DemSim, i: usize) -> Map {
-    let s = &dem.spheres;
+    let s = &dem.world.spheres;
     let id = s.id[i];
-    let (external_force, external_torque) = dem.external_load(id);
+    let (external_force, external_torque) = dem.world.external_load(id);
     let mut m = Map::new();
     m.insert("id".into(), Dynamic::from(id as i64));
     m.insert("position".into(), vec3(s.x[i]));
@@ -42,7 +42,7 @@ fn body_map(dem: &DemSim, i: usize) -> Map {
     m.insert("radius".into(), Dynamic::from(s.radius[i]));
     m.insert("mass".into(), Dynamic::from(s.mass[i]));
     m.insert("inertia".into(), Dynamic::from(s.inertia[i]));
-    let material = dem.materials.get(s.material[i] as usize).map_or(String::new(), |m| m.name.clone());
+    let material = dem.world.materials.get(s.material[i] as usize).map_or(String::new(), |m| m.name.clone());
     m.insert("material".into(), Dynamic::from(material));
     let clump = s.clump[i];
     m.insert("clump".into(), if clump == FREE { Dynamic::UNIT } else { Dynamic::from(clump as i64) });
@@ -53,10 +53,10 @@ fn body_map(dem: &DemSim, i: usize) -> Map {
 /// A contact as scripts see it.
 fn contact_map(dem: &DemSim, c: &ContactView) -> Map {
     let mut m = Map::new();
-    m.insert("id1".into(), Dynamic::from(dem.spheres.id[c.sphere] as i64));
+    m.insert("id1".into(), Dynamic::from(dem.world.spheres.id[c.sphere] as i64));
     match c.other {
         Other::Sphere(j) => {
-            m.insert("id2".into(), Dynamic::from(dem.spheres.id[j] as i64));
+            m.insert("id2".into(), Dynamic::from(dem.world.spheres.id[j] as i64));
         }
         Other::Wall(w) => {
             m.insert("wall".into(), Dynamic::from(w as i64));
@@ -71,7 +71,7 @@ fn contact_map(dem: &DemSim, c: &ContactView) -> Map {
     m.insert("force".into(), vec3(c.force));
     m.insert("normal_force".into(), Dynamic::from(c.normal_force));
     m.insert("shear_force".into(), vec3(c.shear_force));
-    if let Some(law) = dem.laws.get(c.law as usize) {
+    if let Some(law) = dem.world.laws.get(c.law as usize) {
         m.insert("law".into(), Dynamic::from(law.name().to_string()));
         let names = law.pair_param_names();
         let mut params = Map::new();
@@ -115,7 +115,7 @@ impl DemHandle {
         let id = id_of(id)?;
         let mut st = self.lock();
         let dem = &mut st.sim.dem;
-        let i = dem.sphere_index_or_err(id).or_rhai()?;
+        let i = dem.world.sphere_index_or_err(id).or_rhai()?;
         f(dem, i)
     }
 
@@ -123,7 +123,7 @@ impl DemHandle {
     fn law_params(&self, pair: Option<(u16, u16)>) -> RhaiResult<(String, ParamMap)> {
         let st = self.lock();
         let dem = &st.sim.dem;
-        let Some(idx) = dem.law_index(pair) else {
+        let Some(idx) = dem.world.law_index(pair) else {
             return err(match pair {
                 Some(_) => {
                     "no contact law for this pair of materials (and no default law): call contact_law(...) first"
@@ -131,7 +131,7 @@ impl DemHandle {
                 None => "no default contact law: call contact_law(\"name\", #{ ... }) first",
             });
         };
-        let law = &dem.laws[idx as usize];
+        let law = &dem.world.laws[idx as usize];
         let params = law.params().iter().filter(|(_, v)| !v.is_nan()).map(|(k, v)| (k.to_string(), v)).collect();
         Ok((law.name().to_string(), params))
     }
@@ -145,7 +145,7 @@ impl DemHandle {
         }
         let mut st = self.lock();
         let law = st.ctx.registry().build_contact_law(&name, &params).or_rhai()?;
-        st.sim.dem.set_contact_law(law, pair).or_rhai()
+        st.sim.dem.world.set_contact_law(law, pair).or_rhai()
     }
 }
 
@@ -183,12 +183,12 @@ fn register_bodies(engine: &mut Engine) {
         };
         s.with_body(id, |dem, i| {
             let edit = sphere_edit(&opts, material)?;
-            dem.edit_sphere(i, &edit).or_rhai()
+            dem.world.edit_sphere(i, &edit).or_rhai()
         })
     });
     fn erase(s: &mut DemHandle, ids: Vec<u64>) -> RhaiResult<i64> {
         let mut st = s.lock();
-        st.sim.dem.erase_spheres(&ids).map(|n| n as i64).or_rhai()
+        st.sim.dem.world.erase_spheres(&ids).map(|n| n as i64).or_rhai()
     }
     engine.register_fn("erase", |s: &mut DemHandle, id: i64| erase(s, vec![id_of(id)?]));
     engine.register_fn("erase", |s: &mut DemHandle, ids: Array| {
@@ -197,21 +197,21 @@ fn register_bodies(engine: &mut Engine) {
     });
     // Bulk arrays, in the order of `ids()`: one call for all spheres instead of one per sphere.
     engine.register_fn("ids", |s: &mut DemHandle| {
-        s.lock().sim.dem.spheres.id.iter().map(|&i| Dynamic::from(i as i64)).collect::<Array>()
+        s.lock().sim.dem.world.spheres.id.iter().map(|&i| Dynamic::from(i as i64)).collect::<Array>()
     });
     fn rows(v: &[Vec3]) -> Array {
         v.iter().map(|x| vec3(*x)).collect()
     }
-    engine.register_fn("positions", |s: &mut DemHandle| rows(&s.lock().sim.dem.spheres.x));
-    engine.register_fn("velocities", |s: &mut DemHandle| rows(&s.lock().sim.dem.spheres.v));
-    engine.register_fn("spins", |s: &mut DemHandle| rows(&s.lock().sim.dem.spheres.w));
-    engine.register_fn("forces", |s: &mut DemHandle| rows(&s.lock().sim.dem.spheres.force));
-    engine.register_fn("torques", |s: &mut DemHandle| rows(&s.lock().sim.dem.spheres.torque));
+    engine.register_fn("positions", |s: &mut DemHandle| rows(&s.lock().sim.dem.world.spheres.x));
+    engine.register_fn("velocities", |s: &mut DemHandle| rows(&s.lock().sim.dem.world.spheres.v));
+    engine.register_fn("spins", |s: &mut DemHandle| rows(&s.lock().sim.dem.world.spheres.w));
+    engine.register_fn("forces", |s: &mut DemHandle| rows(&s.lock().sim.dem.world.spheres.force));
+    engine.register_fn("torques", |s: &mut DemHandle| rows(&s.lock().sim.dem.world.spheres.torque));
     engine.register_fn("radii", |s: &mut DemHandle| {
-        s.lock().sim.dem.spheres.radius.iter().map(|&r| Dynamic::from(r)).collect::<Array>()
+        s.lock().sim.dem.world.spheres.radius.iter().map(|&r| Dynamic::from(r)).collect::<Array>()
     });
     engine.register_fn("contact_counts", |s: &mut DemHandle| {
-        s.lock().sim.dem.contact_counts().iter().map(|&c| Dynamic::from(c as i64)).collect::<Array>()
+        s.lock().sim.dem.world.contact_counts().iter().map(|&c| Dynamic::from(c as i64)).collect::<Array>()
     });
 }
 
@@ -219,29 +219,29 @@ fn register_contacts(engine: &mut Engine) {
     engine.register_fn("contacts", |s: &mut DemHandle| {
         let st = s.lock();
         let dem = &st.sim.dem;
-        dem.touching_contacts().iter().map(|c| Dynamic::from(contact_map(dem, c))).collect::<Array>()
+        dem.world.touching_contacts().iter().map(|c| Dynamic::from(contact_map(dem, c))).collect::<Array>()
     });
     engine.register_fn("contact", |s: &mut DemHandle, id1: i64, id2: i64| {
         let (a, b) = (id_of(id1)?, id_of(id2)?);
         let st = s.lock();
         let dem = &st.sim.dem;
-        let (i, j) = (dem.sphere_index_or_err(a).or_rhai()?, dem.sphere_index_or_err(b).or_rhai()?);
+        let (i, j) = (dem.world.sphere_index_or_err(a).or_rhai()?, dem.world.sphere_index_or_err(b).or_rhai()?);
         Ok::<_, Box<rhai::EvalAltResult>>(
-            dem.contact_between(i, j).map_or(Dynamic::UNIT, |c| Dynamic::from(contact_map(dem, &c))),
+            dem.world.contact_between(i, j).map_or(Dynamic::UNIT, |c| Dynamic::from(contact_map(dem, &c))),
         )
     });
     engine.register_fn("wall_contact", |s: &mut DemHandle, id: i64, wall: i64| {
         let id = id_of(id)?;
         let st = s.lock();
         let dem = &st.sim.dem;
-        let i = dem.sphere_index_or_err(id).or_rhai()?;
-        if wall < 0 || wall as usize >= dem.walls.len() {
-            return err(format!("wall index {wall} out of range 0..{}", dem.walls.len()));
+        let i = dem.world.sphere_index_or_err(id).or_rhai()?;
+        if wall < 0 || wall as usize >= dem.world.walls.len() {
+            return err(format!("wall index {wall} out of range 0..{}", dem.world.walls.len()));
         }
-        Ok(dem.wall_contact_of(i, wall as usize).map_or(Dynamic::UNIT, |c| Dynamic::from(contact_map(dem, &c))))
+        Ok(dem.world.wall_contact_of(i, wall as usize).map_or(Dynamic::UNIT, |c| Dynamic::from(contact_map(dem, &c))))
     });
     engine.register_fn("fabric", |s: &mut DemHandle| {
-        let f = s.lock().sim.dem.fabric_tensor();
+        let f = s.lock().sim.dem.world.fabric_tensor();
         f.iter().map(|row| vec3(*row)).collect::<Array>()
     });
 }
@@ -273,10 +273,10 @@ fn register_live_changes(engine: &mut Engine) {
     engine.register_fn("set_contact_params", |s: &mut DemHandle, changes: Map| s.set_contact_params(None, changes));
     // Every pair of materials that one material is in (walls' materials included).
     engine.register_fn("set_contact_params", |s: &mut DemHandle, m: DemMaterialHandle, changes: Map| {
-        let count = s.lock().sim.dem.materials.len() as u16;
+        let count = s.lock().sim.dem.world.materials.len() as u16;
         for other in 0..count {
             let pair = Some((m.index_in(s)?, other));
-            if s.lock().sim.dem.law_index(pair).is_some() {
+            if s.lock().sim.dem.world.law_index(pair).is_some() {
                 s.set_contact_params(pair, changes.clone())?;
             }
         }
@@ -296,6 +296,6 @@ fn register_live_changes(engine: &mut Engine) {
             return err("set_material: give `young` and `poisson`, or `rigid: true`");
         }
         let index = m.index_in(s)?;
-        s.lock().sim.dem.set_material_elastic(index, elastic).or_rhai()
+        s.lock().sim.dem.world.set_material_elastic(index, elastic).or_rhai()
     });
 }

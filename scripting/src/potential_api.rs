@@ -67,7 +67,7 @@ fn kind_and_params(s: &DemHandle, opts: &Map) -> RhaiResult<(String, ParamMap)> 
 
 /// The index of the potential particle with `id`.
 fn index_of(s: &DemHandle, id: i64) -> RhaiResult<usize> {
-    let holds_potentials = s.lock().sim.dem.kinds.kind.as_ref().is_some_and(|k| k.name == FAMILY);
+    let holds_potentials = s.lock().sim.dem.world.kinds.kind.as_ref().is_some_and(|k| k.name == FAMILY);
     match holds_potentials.then(|| super::body_api::index_of(s, id)) {
         Some(Ok(i)) => Ok(i),
         _ => err(format!("no potential particle with id {id}")),
@@ -82,7 +82,7 @@ pub(super) fn register(engine: &mut Engine) {
     engine.register_fn("potential_velocity", |s: &mut DemHandle, id: i64, v: Dynamic| {
         let v = vector(&v, 3, "velocity")?;
         let i = index_of(s, id)?;
-        s.lock().sim.dem.kinds.v[i] = v;
+        s.lock().sim.dem.world.kinds.v[i] = v;
         Ok::<_, Box<rhai::EvalAltResult>>(())
     });
     engine.register_fn("potential_body", |s: &mut DemHandle, id: i64| {
@@ -91,13 +91,13 @@ pub(super) fn register(engine: &mut Engine) {
     });
     engine.register_fn("potential_ids", |s: &mut DemHandle| {
         let st = s.lock();
-        let k = &st.sim.dem.kinds;
+        let k = &st.sim.dem.world.kinds;
         let ids = k.kind.as_ref().filter(|kind| kind.name == FAMILY).map_or(&[][..], |_| &k.id[..]);
         ids.iter().map(|&i| Dynamic::from(i as i64)).collect::<rhai::Array>()
     });
     engine.register_get("potentials", |s: &mut DemHandle| {
         let st = s.lock();
-        let k = &st.sim.dem.kinds;
+        let k = &st.sim.dem.world.kinds;
         k.kind.as_ref().filter(|kind| kind.name == FAMILY).map_or(0, |_| k.len() as i64)
     });
 }

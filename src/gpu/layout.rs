@@ -205,19 +205,19 @@ impl LawConstants {
         let refuse = |what: &str| {
             Err(GraniteError::Setup(format!("device \"gpu\": the RVE {what}; run it with device \"cpu\"")))
         };
-        if sim.cell.is_none() {
+        if sim.world.cell.is_none() {
             return refuse("has no periodic cell");
         }
-        if !sim.walls.is_empty() || !sim.clumps.is_empty() || !sim.kinds.is_empty() {
+        if !sim.world.walls.is_empty() || !sim.world.clumps.is_empty() || !sim.world.kinds.is_empty() {
             return refuse("holds walls, clumps or bodies of plugin kinds (the device steps spheres only)");
         }
-        if sim.spheres.blocked.iter().any(|&b| b != 0) || !sim.external.is_empty() || sim.energy.is_some() {
+        if sim.world.spheres.blocked.iter().any(|&b| b != 0) || !sim.world.external.is_empty() || sim.energy.is_some() {
             return refuse("has blocked spheres, external loads or an energy tracker");
         }
-        if sim.gravity != [0.0; 3] || sim.cell_control.is_some() {
+        if sim.world.gravity != [0.0; 3] || sim.world.cell_control.is_some() {
             return refuse("has gravity or a cell servo");
         }
-        let [law] = &sim.laws[..] else { return refuse("has several contact laws (the device runs one)") };
+        let [law] = &sim.world.laws[..] else { return refuse("has several contact laws (the device runs one)") };
         let p = law.params();
         if p.is_set("friction_max") {
             return refuse("draws its friction per pair (friction_max)");
@@ -234,7 +234,7 @@ impl LawConstants {
             mu,
             eta_r: 0.0,
             skin: sim.skin,
-            damping: sim.damping,
+            damping: sim.world.damping,
         };
         match law.name() {
             "rolling_resistance" => Ok(LawConstants {
@@ -305,11 +305,11 @@ impl Layout {
         let mut first = vec![0];
         let mut longest = 0;
         for sim in rves {
-            first.push(first.last().copied().unwrap_or(0) + sim.spheres.len());
+            first.push(first.last().copied().unwrap_or(0) + sim.world.spheres.len());
             // Candidates per sphere, both as first and as second sphere.
-            let mut per_sphere = vec![0usize; sim.spheres.len()];
-            for k in 0..sim.pairs.len() {
-                let (a, b) = check_pair(&sim.pairs, k)?;
+            let mut per_sphere = vec![0usize; sim.world.spheres.len()];
+            for k in 0..sim.world.pairs.len() {
+                let (a, b) = check_pair(&sim.world.pairs, k)?;
                 per_sphere[a] += 1;
                 per_sphere[b] += 1;
             }
@@ -371,7 +371,7 @@ impl Layout {
         let mut ints = vec![0i32; self.ints_len];
         for (r, sim) in rves.iter().enumerate() {
             let rec = &mut rve[r * RVE_STRIDE..(r + 1) * RVE_STRIDE];
-            let cell = sim.cell.as_ref().ok_or_else(|| GraniteError::Other("an RVE without a cell".into()))?;
+            let cell = sim.world.cell.as_ref().ok_or_else(|| GraniteError::Other("an RVE without a cell".into()))?;
             let state = sim.verlet_state();
             let h_build = state.h_at_build.unwrap_or(cell.h);
             for a in 0..3 {
@@ -380,15 +380,15 @@ impl Layout {
                     rec[Rec::HBuild as usize + 3 * a + b] = h_build[(a, b)];
                 }
             }
-            let s = &sim.spheres;
-            rec[Rec::Dt as usize] = sim.dt;
+            let s = &sim.world.spheres;
+            rec[Rec::Dt as usize] = sim.world.dt;
             rec[Rec::First as usize] = self.first[r] as f64;
             rec[Rec::Count as usize] = s.len() as f64;
             rec[Rec::Rebuild as usize] = if state.needs_rebuild { 1.0 } else { 0.0 };
             rec[Rec::RMax as usize] = s.largest_radius();
             rec[Rec::RMin as usize] = s.smallest_radius();
-            rec[Rec::Time as usize] = sim.time;
-            rec[Rec::Step as usize] = sim.step as f64;
+            rec[Rec::Time as usize] = sim.world.time;
+            rec[Rec::Step as usize] = sim.world.step as f64;
             rec[Rec::Rebuilds as usize] = state.rebuilds as f64;
             rec[Rec::Flips as usize] = cell.flips as f64;
             for i in 0..s.len() {
@@ -401,7 +401,7 @@ impl Layout {
                 o[13] = s.mass[i];
                 o[14] = s.inertia[i];
             }
-            let list = &sim.pairs;
+            let list = &sim.world.pairs;
             let hs = list.history_stride;
             let mut own = vec![0usize; s.len()];
             let mut incoming: Vec<Vec<usize>> = vec![Vec::new(); s.len()];
@@ -436,21 +436,21 @@ impl Layout {
         for (r, sim) in rves.iter_mut().enumerate() {
             let rec = &records[r * RVE_STRIDE..(r + 1) * RVE_STRIDE];
             let matrix = |at: Rec| Matrix3::from_fn(|a, b| rec[at as usize + 3 * a + b]);
-            let n = sim.spheres.len();
+            let n = sim.world.spheres.len();
             let mut x_at_build = Vec::with_capacity(n);
             for i in 0..n {
                 let o = &sph[(self.first[r] + i) * SPH_STRIDE..][..SPH_STRIDE];
-                sim.spheres.x[i] = [o[0], o[1], o[2]];
-                sim.spheres.v[i] = [o[3], o[4], o[5]];
-                sim.spheres.w[i] = [o[6], o[7], o[8]];
+                sim.world.spheres.x[i] = [o[0], o[1], o[2]];
+                sim.world.spheres.v[i] = [o[3], o[4], o[5]];
+                sim.world.spheres.w[i] = [o[6], o[7], o[8]];
                 x_at_build.push([o[9], o[10], o[11]]);
             }
-            if let Some(cell) = sim.cell.as_mut() {
+            if let Some(cell) = sim.world.cell.as_mut() {
                 cell.h = matrix(Rec::H);
                 cell.flips = rec[Rec::Flips as usize] as u64;
             }
-            sim.time = rec[Rec::Time as usize];
-            sim.step = rec[Rec::Step as usize] as u64;
+            sim.world.time = rec[Rec::Time as usize];
+            sim.world.step = rec[Rec::Step as usize] as u64;
             sim.set_verlet_state(VerletState {
                 x_at_build,
                 h_at_build: Some(matrix(Rec::HBuild)),
@@ -469,8 +469,9 @@ impl Layout {
                 }
             }
             found.sort_by_key(|&(a, b, shift, _)| (a, b, shift));
-            let (ps, hs) = sim.pair_strides();
-            let law = sim.laws.first().cloned().ok_or_else(|| GraniteError::Other("an RVE without a law".into()))?;
+            let (ps, hs) = sim.world.pair_strides();
+            let law =
+                sim.world.laws.first().cloned().ok_or_else(|| GraniteError::Other("an RVE without a law".into()))?;
             let mut list = PairList { param_stride: ps, history_stride: hs, ..Default::default() };
             for (a, b, shift, slot) in found {
                 let f = &pf[slot * PF_STRIDE..][..PF_STRIDE];
@@ -479,7 +480,7 @@ impl Layout {
                 list.shift.push(shift);
                 list.law.push(0);
                 let mut params = vec![0.0; ps];
-                law.init_pair(&sim.info_for(a as usize, b as usize, false), &mut params);
+                law.init_pair(&sim.world.info_for(a as usize, b as usize, false), &mut params);
                 list.params.extend(params);
                 let mut history = vec![0.0; hs];
                 let kept = hs.min(7);
@@ -488,7 +489,7 @@ impl Layout {
                 list.touching.push(f[PF_TOUCH] != 0.0);
                 list.force.push([f[PF_FORCE], f[PF_FORCE + 1], f[PF_FORCE + 2]]);
             }
-            sim.pairs = list;
+            sim.world.pairs = list;
         }
         Ok(())
     }

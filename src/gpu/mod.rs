@@ -333,7 +333,7 @@ impl GpuBatch {
         let pf = make("pf", bytemuck::cast_slice(&data.pf));
         let ph = make("ph", bytemuck::cast_slice(&vec![0.0f64; data.ph_len.max(1)]));
         let ints = make("ints", bytemuck::cast_slice(&data.ints));
-        let spheres = self.shadows.iter().map(|s| s.spheres.len()).max().unwrap_or(0);
+        let spheres = self.shadows.iter().map(|s| s.world.spheres.len()).max().unwrap_or(0);
         let pipeline = self.gpu.pipeline(self.workgroup.unwrap_or_else(|| self.gpu.workgroup_size(spheres)))?;
         let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("rves"),

@@ -6,7 +6,7 @@
 
 pub use crate::dem::particles::ExternalLoad;
 use crate::dem::particles::{dof, FREE};
-use crate::dem::sim::DemSim;
+use crate::dem::sim::DemWorld;
 use crate::error::{GraniteError, Result};
 use crate::math::Vec3;
 
@@ -71,7 +71,7 @@ fn finite3(v: Vec3, name: &str) -> Result<Vec3> {
     }
 }
 
-impl DemSim {
+impl DemWorld {
     /// Index of the sphere with `id` now, or None when no sphere has it (never made, or erased).
     pub fn sphere_index(&self, id: u64) -> Option<usize> {
         self.spheres.index_of(id)

@@ -2,7 +2,7 @@
 //! present positions, forces of the last step, the law and its values for the pair.
 
 use crate::dem::contact_stage::branch;
-use crate::dem::sim::DemSim;
+use crate::dem::sim::DemWorld;
 use crate::math::Vec3;
 
 /// The other body of a contact.
@@ -42,7 +42,7 @@ fn dot(a: Vec3, b: Vec3) -> f64 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
 
-impl DemSim {
+impl DemWorld {
     /// Every contact touching in the last step: sphere pairs in list order, then wall contacts.
     pub fn touching_contacts(&self) -> Vec<ContactView> {
         let mut out = Vec::new();
@@ -138,19 +138,6 @@ impl DemSim {
             Some(g) => self.view(true, k, g.point, g.normal, -g.gap),
             None => self.view(true, k, s.x[i], [0.0; 3], f64::NAN),
         }
-    }
-
-    /// [`DemSim::deep_overlaps`] of the set-up as the first step would see it: candidate lists in
-    /// force are used as they are, missing ones are built now (the step still builds its own, with
-    /// its checks). Empty when the lists cannot be built (the step reports why).
-    pub fn deep_overlaps_before_run(&mut self, fraction: f64, most: usize) -> Vec<(String, f64)> {
-        if self.needs_rebuild {
-            if self.rebuild_candidates().is_err() {
-                return Vec::new();
-            }
-            self.needs_rebuild = true;
-        }
-        self.deep_overlaps(fraction, most)
     }
 
     /// Sphere pairs and sphere-wall pairs whose overlap exceeds `fraction` of the smaller radius

@@ -8,7 +8,7 @@ use crate::dem::contacts::PairList;
 use crate::dem::pairing::{Other, PairBodies};
 use crate::dem::picture::{rigid_picture, RigidBodies};
 use crate::dem::rigid::LawContact;
-use crate::dem::sim::DemSim;
+use crate::dem::sim::DemWorld;
 use crate::dem::walls::WallShape;
 use crate::error::{GraniteError, Result};
 use crate::ext::body::{BodyGeometry, BodyKindFactory, BodyShape, KindBodies};
@@ -174,7 +174,7 @@ impl KindScene {
     }
 }
 
-/// A body of a kind to add ([`DemSim::add_body`]).
+/// A body of a kind to add ([`DemWorld::add_body`]).
 pub struct NewBody<'a> {
     pub kind: &'a dyn BodyKindFactory,
     pub shape: Arc<dyn BodyShape>,
@@ -186,7 +186,7 @@ pub struct NewBody<'a> {
     pub fixed: bool,
 }
 
-impl DemSim {
+impl DemWorld {
     /// Adds a body of a plugin kind; returns its index among the bodies.
     pub fn add_body(&mut self, body: NewBody<'_>) -> Result<usize> {
         let NewBody { kind, shape, material, x, q, v, w, fixed } = body;
@@ -270,11 +270,11 @@ impl DemSim {
         self.needs_rebuild = true;
     }
 
-    /// The Verlet skin of the bodies: the simulation's, or a tenth of the smallest bounding
-    /// radius when none is set.
-    pub(crate) fn kind_skin(&self) -> f64 {
-        if self.skin > 0.0 {
-            return self.skin;
+    /// The Verlet skin of the bodies: the simulation's `skin`, or a tenth of the smallest
+    /// bounding radius when none is set.
+    pub(crate) fn kind_skin(&self, skin: f64) -> f64 {
+        if skin > 0.0 {
+            return skin;
         }
         0.1 * (0..self.kinds.len()).map(|i| self.kinds.bounding_radius(i)).fold(f64::INFINITY, f64::min)
     }
@@ -300,8 +300,8 @@ impl DemSim {
     }
 
     /// Rebuilds the bodies' candidate lists (pairs still present keep their history). Called
-    /// with the spheres' rebuild.
-    pub(crate) fn rebuild_kind_pairs(&mut self) -> Result<()> {
+    /// with the spheres' rebuild, with the simulation's skin.
+    pub(crate) fn rebuild_kind_pairs(&mut self, skin: f64) -> Result<()> {
         if self.kinds.is_empty() {
             return Ok(());
         }
@@ -320,7 +320,7 @@ impl DemSim {
         x.extend_from_slice(&k.x);
         let mut radii = self.spheres.radius.clone();
         radii.extend((0..k.len()).map(|i| k.bounding_radius(i)));
-        let skin = self.kind_skin();
+        let skin = self.kind_skin(skin);
         let found = sphere_pairs(&x, &radii, skin);
         let fixed = &k.fixed;
         let (mut bodies, mut spheres): (Vec<Vec<Candidate>>, Vec<Vec<Candidate>>) = (Vec::new(), Vec::new());

@@ -2,7 +2,7 @@
 //! stress (4.7), global stress with gravity (appendix A, eq. .14).
 
 use crate::dem::contacts::PairList;
-use crate::dem::sim::DemSim;
+use crate::dem::sim::DemWorld;
 use crate::math::{Vec3, Voigt};
 
 /// Pairs summed together in the Love-Weber stress: blocks of a few microseconds of work.
@@ -44,7 +44,7 @@ pub struct Coordination {
     pub floaters: usize,
 }
 
-impl DemSim {
+impl DemWorld {
     /// Overlap of pair `k` of `list` in the current positions (zero when apart).
     fn overlap_of(&self, list: &PairList, k: usize, wall: bool) -> f64 {
         let s = &self.spheres;
@@ -193,7 +193,7 @@ impl DemSim {
     }
 
     /// Contact counts and coordination numbers alone (what an RVE reports after every call),
-    /// without the energies and forces of [`DemSim::diagnostics`].
+    /// without the energies and forces of [`DemWorld::diagnostics`].
     pub fn coordination(&self) -> Coordination {
         let n = self.spheres.len();
         let counts = self.contact_counts();
@@ -217,14 +217,19 @@ impl DemSim {
     /// to 2. Tension positive: a compressed packing has negative diagonal stress.
     pub fn love_weber_stress(&self, volume: f64) -> Voigt {
         // One walk over the pairs for both measures; the stiffness sums cost little beside it.
-        self.stress_and_axis_stiffness(volume).0
+        // In parallel blocks unless called from a worker of the pool already (an RVE's measure
+        // inside a parallel loop over material points): the same sums either way.
+        let parallel =
+            crate::dem::pieces::worth_parallel(self.spheres.len()) && rayon::current_thread_index().is_none();
+        self.stress_and_axis_stiffness(volume, parallel).0
     }
 
-    /// [`DemSim::love_weber_stress`] over `volume` and, in the same pass over the pairs (the stress
+    /// [`DemWorld::love_weber_stress`] over `volume` and, in the same pass over the pairs (the stress
     /// servo needs both every step), the stiffness of the packing along each axis,
     /// `(1/V) sum_c k_n l_a^2`: the stress increment per unit strain of an affine deformation
     /// (normal springs only).
-    pub fn stress_and_axis_stiffness(&self, volume: f64) -> (Voigt, [f64; 3]) {
+    /// In parallel blocks if `parallel`: the same sums either way.
+    pub fn stress_and_axis_stiffness(&self, volume: f64, parallel: bool) -> (Voigt, [f64; 3]) {
         // Summed block by block, and the blocks in order: the same sums whatever the thread
         // count. The servo needs them every step; when the step runs in parallel, so do the
         // blocks, keeping both cores busy instead of leaving one to fall asleep while the other
@@ -237,7 +242,7 @@ impl DemSim {
             (s, k)
         };
         let zero = ([0.0; 9], [0.0; 3]);
-        let (s, k) = if self.in_parallel() {
+        let (s, k) = if parallel {
             crate::par::run_pieces(blocks.collect(), |b| self.pair_sums(b)).into_iter().fold(zero, add)
         } else {
             blocks.map(|b| self.pair_sums(b)).fold(zero, add)

@@ -36,5 +36,5 @@ pub mod walls;
 
 pub use particles::Spheres;
 pub use rve::Rve;
-pub use sim::{DemMaterial, DemSim};
+pub use sim::{DemMaterial, DemSim, DemWorld};
 pub use walls::{Wall, WallShape};

@@ -6,7 +6,7 @@
 
 use crate::dem::broad_phase::Candidate;
 use crate::dem::contacts::PairList;
-use crate::dem::sim::DemSim;
+use crate::dem::sim::DemWorld;
 use crate::error::GraniteError;
 use crate::ext::{ContactLaw, PairInfo};
 use std::sync::Arc;
@@ -30,7 +30,7 @@ pub(crate) enum Other<'a> {
     Of(&'a [u16]),
 }
 
-impl DemSim {
+impl DemWorld {
     /// Values per pair (parameters, history) the pair lists are laid out for: the most any law
     /// keeps (at least one of each), so that pairs of different laws share one list.
     pub fn pair_strides(&self) -> (usize, usize) {

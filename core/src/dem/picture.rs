@@ -2,7 +2,7 @@
 //! network (force chains) as lines.
 
 use crate::dem::inspect::Other;
-use crate::dem::sim::DemSim;
+use crate::dem::sim::DemWorld;
 use crate::dem::walls::WallShape;
 use crate::io::vtk::{Field, PolyData};
 use crate::math::Vec3;
@@ -24,7 +24,7 @@ fn at(p: Vec3, u: Vec3, a: f64, v: Vec3, b: f64) -> Vec3 {
     [0, 1, 2].map(|k| p[k] + a * u[k] + b * v[k])
 }
 
-impl DemSim {
+impl DemWorld {
     /// The walls as polygons: a rectangle, a disk (48-gon) and a cylinder (48 quads) as they are;
     /// an infinite plane as a square around the spheres (their bounding box's diagonal wide, 1 m
     /// without spheres). Cell data: `wall` (index), `force` (the spheres' force on it in the last

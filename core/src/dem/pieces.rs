@@ -138,12 +138,18 @@ impl PieceBounds {
 /// (periodic RVEs, best of 7: 1000 spheres 110 against 98 us a step; 1500: 121 against 148).
 const MIN_SPHERES_IN_PARALLEL: usize = crate::dem::rebuild::MIN_SPHERES_TO_ORDER;
 
+/// Whether `spheres` are enough to share between the threads of the pool this runs in (none
+/// when it runs on one thread).
+pub(crate) fn worth_parallel(spheres: usize) -> bool {
+    spheres >= MIN_SPHERES_IN_PARALLEL && rayon::current_num_threads() > 1
+}
+
 impl DemSim {
     /// Whether this step runs its stages in parallel pieces of consecutive spheres (and their
     /// pairs), rather than on the calling thread (an RVE, one thread, or too few spheres). Both
     /// make the same sums in the same order (see `write_back`).
     pub(crate) fn in_parallel(&self) -> bool {
-        !self.sequential && self.spheres.len() >= MIN_SPHERES_IN_PARALLEL && rayon::current_num_threads() > 1
+        !self.sequential && worth_parallel(self.world.spheres.len())
     }
 }
 

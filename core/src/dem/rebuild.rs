@@ -6,7 +6,7 @@ use crate::dem::broad_phase::{periodic_sphere_pairs, sphere_pairs, wall_pairs, C
 use crate::dem::contacts::{PairList, MAX_HISTORY, MAX_PARAMS};
 use crate::dem::pairing::{Other, PairBodies};
 use crate::dem::particles::FREE;
-use crate::dem::sim::DemSim;
+use crate::dem::sim::{DemSim, DemWorld, ListsBuilt};
 use crate::error::{GraniteError, Result};
 use crate::math::{sub3 as sub, Vec3};
 
@@ -18,11 +18,86 @@ const MAX_IMAGES_ACROSS: f64 = 64.0;
 /// Fewest spheres in a simulation renumbered in space before it first runs.
 pub(crate) const MIN_SPHERES_TO_ORDER: usize = 1024;
 
-impl DemSim {
+/// The candidate lists' rebuild, a stage of the step (and of set-up calls that change the
+/// lists' reach). Reads the world's spheres, clumps, bodies, walls, cell and laws; writes its
+/// pair lists (merged, keeping the history of pairs still present) and, in a periodic cell, the
+/// positions brought back into it; records in `built` what the lists were built from. `spare`
+/// is storage the merge may fill (kept between rebuilds).
+pub(crate) struct Rebuild {
+    /// The Verlet skin.
+    pub(crate) skin: f64,
+    /// Whether the merge may run in parallel pieces (see `DemSim::in_parallel`).
+    pub(crate) parallel: bool,
+}
+
+impl Rebuild {
+    pub(crate) fn run(&self, world: &mut DemWorld, built: &mut ListsBuilt, spare: &mut PairList) -> Result<()> {
+        let (p_stride, h_stride) = world.pair_strides();
+        if p_stride > MAX_PARAMS || h_stride > MAX_HISTORY {
+            return Err(GraniteError::Setup(format!(
+                "a contact law uses more than {MAX_PARAMS} parameters or {MAX_HISTORY} history values per contact"
+            )));
+        }
+        world.wrap_into_cell(self.skin)?;
+        // Renumbering would leave the bodies' pairs with spheres pointing at others.
+        if world.pairs.is_empty() && world.wall_pairs.is_empty() && world.kinds.sphere_pairs.is_empty() {
+            world.order_spheres_in_space(self.skin);
+        }
+        let w = &*world;
+        let s = &w.spheres;
+        let mut candidates = match &w.cell {
+            Some(cell) => periodic_sphere_pairs(&s.x, &s.radius, self.skin, cell),
+            None => sphere_pairs(&s.x, &s.radius, self.skin),
+        };
+        if !w.clumps.is_empty() {
+            // Members of one clump never touch each other.
+            for block in candidates.iter_mut() {
+                block.retain(|&(a, b, _)| {
+                    let ca = s.clump[a as usize];
+                    ca == FREE || ca != s.clump[b as usize]
+                });
+            }
+        }
+        let mut pairs = std::mem::take(&mut world.pairs);
+        let mut wall_list = std::mem::take(&mut world.wall_pairs);
+        let w = &*world;
+        let s = &w.spheres;
+        let strides = (p_stride, h_stride);
+        let mut merge_spheres = || w.merge_pairs(&mut pairs, spare, &candidates, strides, (false, self.parallel));
+        let mut find_and_merge_walls = || {
+            let wall_candidates = wall_pairs(&s.x, &s.radius, &w.walls, self.skin);
+            w.merge_pairs(&mut wall_list, &mut PairList::default(), &wall_candidates, strides, (true, self.parallel))
+        };
+        // Independent: side by side, the wall search and merge (0.3 ms in the 10k deposition)
+        // keep a second worker busy while the sphere pairs' merge starts, and it then takes
+        // pieces of that merge.
+        let (missing_spheres, missing_walls) = if self.parallel {
+            rayon::join(merge_spheres, find_and_merge_walls)
+        } else {
+            (merge_spheres(), find_and_merge_walls())
+        };
+        let missing = missing_walls.or(missing_spheres);
+        world.pairs = pairs;
+        world.wall_pairs = wall_list;
+        if let Some(pair) = missing {
+            return Err(world.missing_law(pair));
+        }
+        built.x = world.spheres.x.clone();
+        built.walls = world.walls.iter().map(|w| w.position).collect();
+        built.h = world.cell.as_ref().map(|c| c.h);
+        built.radius_max = world.spheres.largest_radius();
+        built.radius_min = world.spheres.smallest_radius();
+        world.rebuild_kind_pairs(self.skin)?;
+        world.needs_rebuild = false;
+        Ok(())
+    }
+}
+
+impl DemWorld {
     /// Brings periodic positions back into the cell and fixes the shifts of their pairs.
-    fn wrap_into_cell(&mut self) -> Result<()> {
+    fn wrap_into_cell(&mut self, skin: f64) -> Result<()> {
         let Some(cell) = &self.cell else { return Ok(()) };
-        let reach = 2.0 * self.spheres.largest_radius() + self.skin;
+        let reach = 2.0 * self.spheres.largest_radius() + skin;
         let widths = cell.widths();
         // A thin cell is searched over as many images as the reach spans (see
         // `periodic_sphere_pairs`); one flattened to a sliver of the reach has collapsed.
@@ -72,12 +147,12 @@ impl DemSim {
     /// region of space: its neighbours' data is mostly the piece's own, and stays in that core's
     /// cache. Done only before the first candidate lists exist (no pair to renumber), for systems
     /// large enough to run in several pieces, without clumps. Ids stay with their spheres.
-    fn order_spheres_in_space(&mut self) {
+    fn order_spheres_in_space(&mut self, skin: f64) {
         let n = self.spheres.len();
         if n < MIN_SPHERES_TO_ORDER || !self.clumps.is_empty() {
             return;
         }
-        let reach = (2.0 * self.spheres.largest_radius() + self.skin).max(f64::MIN_POSITIVE);
+        let reach = (2.0 * self.spheres.largest_radius() + skin).max(f64::MIN_POSITIVE);
         // Fractional position in the domain on each axis, and the domain's size.
         let (fraction, size): (Vec<Vec3>, Vec3) = match &self.cell {
             Some(cell) => {
@@ -112,23 +187,25 @@ impl DemSim {
     }
 
     /// Merges `candidates` into `list` (see `PairList::merge`), giving each new pair the law of
-    /// its two materials (the second a wall's if `wall`); returns a pair of materials without a
-    /// contact law, if it met one.
+    /// its two materials (the second a wall's if `wall`), in parallel pieces if `parallel`;
+    /// returns a pair of materials without a contact law, if it met one.
     fn merge_pairs(
         &self,
         list: &mut PairList,
         spare: &mut PairList,
         candidates: &[Vec<Candidate>],
         strides: (usize, usize),
-        wall: bool,
+        (wall, parallel): (bool, bool),
     ) -> Option<(u16, u16)> {
         // Pieces of at most MERGE_PIECE pairs (a periodic search hands over one sorted list).
         let pieces: Vec<&[Candidate]> = candidates.iter().flat_map(|b| b.chunks(MERGE_PIECE)).collect();
         let other = if wall { Other::Walls } else { Other::Same };
-        let body = PairBodies { material: &self.spheres.material, other, parallel: self.in_parallel() };
+        let body = PairBodies { material: &self.spheres.material, other, parallel };
         self.merge_with_laws(list, spare, &pieces, strides, body, |a, b| self.info_for(a, b, wall))
     }
+}
 
+impl DemSim {
     /// A new Verlet skin. Candidate lists already built are rebuilt with it now (a state saved
     /// next holds the new, shorter or longer, lists); otherwise the first step builds them.
     pub fn set_skin(&mut self, skin: f64) -> Result<()> {
@@ -136,7 +213,7 @@ impl DemSim {
             return Err(GraniteError::param("skin", skin, "must be >= 0"));
         }
         self.skin = skin;
-        if self.needs_rebuild {
+        if self.world.needs_rebuild {
             return Ok(());
         }
         self.rebuild_candidates()
@@ -144,67 +221,26 @@ impl DemSim {
 
     /// Rebuilds the candidate pair lists (keeping the history of pairs still present).
     pub fn rebuild_candidates(&mut self) -> Result<()> {
-        let (p_stride, h_stride) = self.pair_strides();
-        if p_stride > MAX_PARAMS || h_stride > MAX_HISTORY {
-            return Err(GraniteError::Setup(format!(
-                "a contact law uses more than {MAX_PARAMS} parameters or {MAX_HISTORY} history values per contact"
-            )));
-        }
-        self.wrap_into_cell()?;
-        // Renumbering would leave the bodies' pairs with spheres pointing at others.
-        if self.pairs.is_empty() && self.wall_pairs.is_empty() && self.kinds.sphere_pairs.is_empty() {
-            self.order_spheres_in_space();
-        }
-        let s = &self.spheres;
-        let mut candidates = match &self.cell {
-            Some(cell) => periodic_sphere_pairs(&s.x, &s.radius, self.skin, cell),
-            None => sphere_pairs(&s.x, &s.radius, self.skin),
-        };
-        if !self.clumps.is_empty() {
-            // Members of one clump never touch each other.
-            for block in candidates.iter_mut() {
-                block.retain(|&(a, b, _)| {
-                    let ca = s.clump[a as usize];
-                    ca == FREE || ca != s.clump[b as usize]
-                });
-            }
-        }
-        let mut pairs = std::mem::take(&mut self.pairs);
+        let stage = Rebuild { skin: self.skin, parallel: self.in_parallel() };
         // An RVE (sequential) rebuilds rarely and is copied into every material point: no spare.
-        let mut spare = if self.sequential { PairList::default() } else { std::mem::take(&mut self.spare_pairs) };
-        let mut wall_list = std::mem::take(&mut self.wall_pairs);
-        let strides = (p_stride, h_stride);
-        let mut merge_spheres = || self.merge_pairs(&mut pairs, &mut spare, &candidates, strides, false);
-        let mut find_and_merge_walls = || {
-            let wall_candidates = wall_pairs(&s.x, &s.radius, &self.walls, self.skin);
-            self.merge_pairs(&mut wall_list, &mut PairList::default(), &wall_candidates, strides, true)
-        };
-        // Independent: side by side, the wall search and merge (0.3 ms in the 10k deposition)
-        // keep a second worker busy while the sphere pairs' merge starts, and it then takes
-        // pieces of that merge.
-        let (missing_spheres, missing_walls) = if self.in_parallel() {
-            rayon::join(merge_spheres, find_and_merge_walls)
-        } else {
-            (merge_spheres(), find_and_merge_walls())
-        };
-        let missing = missing_walls.or(missing_spheres);
-        if let Some(pair) = missing {
-            return Err(self.missing_law(pair));
-        }
-        self.pairs = pairs;
-        if !self.sequential {
-            self.spare_pairs = spare;
-        }
-        self.wall_pairs = wall_list;
-        self.x_at_build = self.spheres.x.clone();
-        self.walls_at_build = self.walls.iter().map(|w| w.position).collect();
-        self.h_at_build = self.cell.as_ref().map(|c| c.h);
-        self.radius_max_at_build = self.spheres.largest_radius();
-        self.radius_min_at_build = self.spheres.smallest_radius();
-        self.rebuild_kind_pairs()?;
-        self.needs_rebuild = false;
+        let mut none = PairList::default();
+        let spare = if self.sequential { &mut none } else { &mut self.spare_pairs };
+        stage.run(&mut self.world, &mut self.built, spare)?;
         self.rebuilds += 1;
         Ok(())
+    }
+
+    /// [`DemWorld::deep_overlaps`] of the set-up as the first step would see it: candidate lists in
+    /// force are used as they are, missing ones are built now (the step still builds its own, with
+    /// its checks). Empty when the lists cannot be built (the step reports why).
+    pub fn deep_overlaps_before_run(&mut self, fraction: f64, most: usize) -> Vec<(String, f64)> {
+        if self.world.needs_rebuild {
+            if self.rebuild_candidates().is_err() {
+                return Vec::new();
+            }
+            self.world.needs_rebuild = true;
+        }
+        self.world.deep_overlaps(fraction, most)
     }
 }
 
@@ -215,7 +251,7 @@ mod tests {
     #[test]
     fn first_build_numbers_spheres_slab_by_slab_along_the_longest_side() {
         let mut sim = DemSim::new();
-        let m = sim.add_material("grains", 1000.0).unwrap();
+        let m = sim.world.add_material("grains", 1000.0).unwrap();
         let (r, spacing) = (0.01, 0.05);
         // 8 x 40 x 4 spheres far apart (no contacts), added from the far end of y backwards.
         let mut placed = Vec::new();
@@ -227,17 +263,17 @@ mod tests {
             }
         }
         for x in &placed {
-            sim.add_sphere(m, *x, r, [0.0; 3]).unwrap();
+            sim.world.add_sphere(m, *x, r, [0.0; 3]).unwrap();
         }
         let before: std::collections::HashMap<u64, Vec3> =
-            sim.spheres.id.iter().copied().zip(sim.spheres.x.iter().copied()).collect();
-        sim.set_dt(1e-6).unwrap();
+            sim.world.spheres.id.iter().copied().zip(sim.world.spheres.x.iter().copied()).collect();
+        sim.world.set_dt(1e-6).unwrap();
         sim.step().unwrap();
-        assert_eq!(sim.spheres.len(), placed.len());
-        for (id, x) in sim.spheres.id.iter().zip(&sim.spheres.x) {
+        assert_eq!(sim.world.spheres.len(), placed.len());
+        for (id, x) in sim.world.spheres.id.iter().zip(&sim.world.spheres.x) {
             assert_eq!(before[id], *x, "sphere {id} lost its position");
         }
-        let y = &sim.spheres.x;
+        let y = &sim.world.spheres.x;
         assert!(y.windows(2).all(|w| w[0][1] <= w[1][1]), "not ordered along y, the longest side");
         assert!(y[0][1] == 0.0 && y[y.len() - 1][1] == 39.0 * spacing);
     }

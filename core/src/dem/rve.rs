@@ -23,17 +23,17 @@ impl Rve {
     /// the calling thread (the points' RVEs are the parallel work). `owner` names who asks, in
     /// errors.
     pub fn prepare(mut sim: DemSim, owner: &str) -> Result<Rve> {
-        if sim.cell.is_none() {
+        if sim.world.cell.is_none() {
             return Err(GraniteError::Setup(format!("{owner}: the `rve` must have a periodic cell")));
         }
-        if sim.spheres.is_empty() || sim.dt <= 0.0 || sim.laws.is_empty() {
+        if sim.world.spheres.is_empty() || sim.world.dt <= 0.0 || sim.world.laws.is_empty() {
             return Err(GraniteError::Setup(format!(
                 "{owner}: the `rve` needs spheres, a contact law and a time step"
             )));
         }
         sim.set_sequential(true);
-        sim.cell_control = None;
-        sim.gravity = [0.0; 3];
+        sim.world.cell_control = None;
+        sim.world.gravity = [0.0; 3];
         Ok(Rve { sim })
     }
 
@@ -60,33 +60,33 @@ impl Rve {
     /// What the steps said (a time step above the contacts' bound) comes back in the response.
     pub fn deform(&mut self, order: &RveOrder) -> Result<RveReport> {
         let sim = &mut self.sim;
-        if let Some(cell) = sim.cell.as_mut() {
+        if let Some(cell) = sim.world.cell.as_mut() {
             cell.velocity_gradient = order.velocity_gradient;
         }
         for _ in 0..order.full_steps {
             sim.step()?;
         }
         if order.last_step > 0.0 {
-            let dt = sim.dt;
-            sim.dt = order.last_step;
+            let dt = sim.world.dt;
+            sim.world.dt = order.last_step;
             let stepped = sim.step();
-            sim.dt = dt;
+            sim.world.dt = dt;
             stepped?;
         }
-        if let Some(cell) = sim.cell.as_mut() {
+        if let Some(cell) = sim.world.cell.as_mut() {
             cell.velocity_gradient = Matrix3::zeros();
         }
         let mut report = self.response();
         report.steps = order.full_steps + u64::from(order.last_step > 0.0);
-        report.events = std::mem::take(&mut self.sim.events);
+        report.events = std::mem::take(&mut self.sim.world.events);
         Ok(report)
     }
 
     /// The sample as it is, as a response of no steps.
     pub fn response(&self) -> RveReport {
         let sim = &self.sim;
-        let d = sim.coordination();
-        let counts = sim.contact_counts();
+        let d = sim.world.coordination();
+        let counts = sim.world.contact_counts();
         RveReport {
             stress: self.stress(),
             cell: self.cell(),
@@ -102,36 +102,36 @@ impl Rve {
 
     /// Love-Weber stress of its contacts over the cell's volume (eq. 4.7, tension positive).
     pub fn stress(&self) -> Voigt {
-        self.sim.love_weber_stress(self.sim.cell_volume().unwrap_or(1.0))
+        self.sim.world.love_weber_stress(self.sim.world.cell_volume().unwrap_or(1.0))
     }
 
     /// The periodic cell's base vectors (columns).
     pub fn cell(&self) -> Matrix3<f64> {
-        self.sim.cell.as_ref().map(|c| c.h).unwrap_or_else(Matrix3::identity)
+        self.sim.world.cell.as_ref().map(|c| c.h).unwrap_or_else(Matrix3::identity)
     }
 
     pub fn sphere_count(&self) -> usize {
-        self.sim.spheres.len()
+        self.sim.world.spheres.len()
     }
 
     /// The DEM time step.
     pub fn dt(&self) -> f64 {
-        self.sim.dt
+        self.sim.world.dt
     }
 
     /// Mass of its spheres (kg).
     pub fn mass(&self) -> f64 {
-        self.sim.spheres.mass.iter().sum()
+        self.sim.world.spheres.mass.iter().sum()
     }
 
     /// Volume of its spheres (m^3).
     pub fn solid_volume(&self) -> f64 {
-        self.sim.solid_volume()
+        self.sim.world.solid_volume()
     }
 
     /// Mean sphere diameter (m).
     pub fn mean_diameter(&self) -> f64 {
-        let s = &self.sim.spheres;
+        let s = &self.sim.world.spheres;
         2.0 * s.radius.iter().sum::<f64>() / s.len() as f64
     }
 
@@ -144,24 +144,24 @@ impl Rve {
     /// it gives, or the error of a time step its contacts cannot follow.
     pub fn check_time_step(&self) -> Result<Vec<String>> {
         let mut sample = self.sim.clone();
-        sample.check_time_step()?;
-        Ok(sample.events)
+        sample.world.check_time_step(sample.stop_on_unstable_dt)?;
+        Ok(sample.world.events)
     }
 
     /// Its spheres for a VTK frame: radius, velocity, contacts, and the mean stress each carries
     /// (its share of the Love-Weber sum, as the thesis's figure 4.6).
     pub fn frame(&self) -> (Vec<Vec3>, Vec<Field>) {
         let sim = &self.sim;
-        let s = &sim.spheres;
-        let counts = sim.contact_counts();
+        let s = &sim.world.spheres;
+        let counts = sim.world.contact_counts();
         let mut particle_p = vec![0.0; s.len()];
-        let p = &sim.pairs;
+        let p = &sim.world.pairs;
         for c in 0..p.len() {
             if !p.touching[c] {
                 continue;
             }
             let (i, j) = (p.a[c] as usize, p.b[c] as usize);
-            let image = sim.cell.as_ref().map(|cell| cell.shift_vector(p.shift[c])).unwrap_or([0.0; 3]);
+            let image = sim.world.cell.as_ref().map(|cell| cell.shift_vector(p.shift[c])).unwrap_or([0.0; 3]);
             let l: Vec<f64> = (0..3).map(|a| s.x[j][a] + image[a] - s.x[i][a]).collect();
             let work = p.force[c][0] * l[0] + p.force[c][1] * l[1] + p.force[c][2] * l[2];
             for k in [i, j] {

@@ -22,8 +22,12 @@ pub struct DemMaterial {
     pub elastic: Option<Elastic>,
 }
 
+/// The DEM world: the bodies, their contacts, the cell, the walls, the materials and laws, the
+/// clock, and what set-up calls changed since the last step (the lists to rebuild, the time step
+/// to check). A step reads and writes it through the stages of [`DemSim`]; everything a user sets
+/// or measures is here.
 #[derive(Clone)]
-pub struct DemSim {
+pub struct DemWorld {
     pub spheres: Spheres,
     pub clumps: Clumps,
     pub walls: Vec<Wall>,
@@ -45,49 +49,93 @@ pub struct DemSim {
     pub dt: f64,
     pub time: f64,
     pub step: u64,
-    /// Verlet skin: extra distance within which pairs are kept as candidates.
-    pub skin: f64,
     pub seed: u64,
-    /// Run every stage on the calling thread (an RVE inside a parallel loop over material points).
-    pub sequential: bool,
+    /// The sphere–sphere and sphere–wall contacts (candidate pairs with their law, parameters
+    /// and history).
     pub pairs: PairList,
     pub wall_pairs: PairList,
+    /// Lasting external loads on single spheres, by id (see `bodies.rs`).
+    pub external: Vec<crate::dem::particles::ExternalLoad>,
+    /// Bodies of a plugin kind (potential particles, capsules, ...), their candidate lists and
+    /// loads for the spheres (see `dem::kinds`).
+    pub kinds: crate::dem::kinds::KindScene,
+    pub events: Vec<String>,
+    pub(crate) next_id: u64,
+    /// Whether a set-up call changed what the candidate lists were built from (bodies added or
+    /// removed, moved by hand, a new cell): the next step rebuilds them.
+    pub(crate) needs_rebuild: bool,
+    pub(crate) time_step_check: TimeStepCheck,
+}
+
+/// Where the check of the time step against the contacts' vibrations stands (see
+/// `stability.rs`); set-up calls that change the stability bound reset it.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct TimeStepCheck {
+    /// Whether the time step was found above the bound since it was last set (said once in
+    /// `events`).
+    pub(crate) warned: bool,
+    /// Step of the last check; None: check after the next contact stage (new simulation, time
+    /// step or damping).
+    pub(crate) last: Option<u64>,
+}
+
+impl TimeStepCheck {
+    /// Whether a step is to check its contacts: the first after a reset, then one that follows
+    /// a rebuild at least `CHECK_EVERY` steps after the last check (the contact network changes
+    /// little between rebuilds).
+    pub(crate) fn due(&self, rebuilt: bool, step: u64) -> bool {
+        match self.last {
+            None => true,
+            Some(at) => rebuilt && step >= at + crate::dem::stability::CHECK_EVERY,
+        }
+    }
+}
+
+/// What the candidate lists were built from: the next step compares the spheres, walls and cell
+/// with it to know whether the lists still hold (see `step.rs`).
+#[derive(Clone, Debug)]
+pub(crate) struct ListsBuilt {
+    /// Sphere and wall positions.
+    pub(crate) x: Vec<Vec3>,
+    pub(crate) walls: Vec<Vec3>,
+    /// Cell matrix.
+    pub(crate) h: Option<nalgebra::Matrix3<f64>>,
+    /// Largest and smallest sphere radii (radii change only through calls that ask for a
+    /// rebuild).
+    pub(crate) radius_max: f64,
+    pub(crate) radius_min: f64,
+}
+
+impl Default for ListsBuilt {
+    fn default() -> Self {
+        ListsBuilt { x: Vec::new(), walls: Vec::new(), h: None, radius_max: 0.0, radius_min: f64::INFINITY }
+    }
+}
+
+/// A DEM simulation: the [`DemWorld`] and the step's pipeline of stages (`step.rs`) with what
+/// they keep between steps (the broad phase's settings and what it last built from, the parallel
+/// pieces, the energy tracker).
+#[derive(Clone)]
+pub struct DemSim {
+    pub world: DemWorld,
+    /// Verlet skin: extra distance within which pairs are kept as candidates.
+    pub skin: f64,
+    /// Run every stage on the calling thread (an RVE inside a parallel loop over material points).
+    pub sequential: bool,
+    /// Whether a time step proved above the contacts' stability limit stops the run (else it is
+    /// only said, once).
+    pub stop_on_unstable_dt: bool,
+    /// Number of candidate-list rebuilds so far.
+    pub rebuilds: u64,
+    /// The energy balance, when tracked (see `energy.rs`).
+    pub energy: Option<crate::dem::energy::EnergyTracker>,
+    pub(crate) built: ListsBuilt,
     /// Storage the next rebuild of `pairs` fills (the previous list's; see `PairList::merge`).
     pub(crate) spare_pairs: PairList,
     /// Where the parallel stages cut the pair lists (found again after a rebuild).
     pub(crate) piece_bounds: crate::dem::pieces::PieceBounds,
     /// What each parallel contact piece leaves for the gather (see `Handover`).
     pub(crate) handovers: crate::dem::contact_stage::Handovers,
-    /// Positions (spheres) and wall positions when the candidate lists were built.
-    pub(crate) x_at_build: Vec<Vec3>,
-    pub(crate) walls_at_build: Vec<Vec3>,
-    /// Cell matrix when the candidate lists were built.
-    pub(crate) h_at_build: Option<nalgebra::Matrix3<f64>>,
-    /// Largest and smallest sphere radii when the candidate lists were built (radii change only
-    /// through calls that ask for a rebuild).
-    pub(crate) radius_max_at_build: f64,
-    pub(crate) radius_min_at_build: f64,
-    pub(crate) needs_rebuild: bool,
-    /// Whether the time step was found above the contacts' stability bound since it was last
-    /// set (said once in `events`).
-    pub(crate) stability_warned: bool,
-    /// Step of the last check of the time step against the contacts' vibrations; None: check
-    /// after the next contact stage (new simulation, time step or damping).
-    pub(crate) last_check: Option<u64>,
-    /// Whether a time step proved above the contacts' stability limit stops the run (else it is
-    /// only said, once).
-    pub stop_on_unstable_dt: bool,
-    /// Number of candidate-list rebuilds so far.
-    pub rebuilds: u64,
-    pub events: Vec<String>,
-    /// Lasting external loads on single spheres, by id (see `bodies.rs`).
-    pub external: Vec<crate::dem::particles::ExternalLoad>,
-    /// The energy balance, when tracked (see `energy.rs`).
-    pub energy: Option<crate::dem::energy::EnergyTracker>,
-    pub(crate) next_id: u64,
-    /// Bodies of a plugin kind (potential particles, capsules, ...), their candidate lists and
-    /// loads for the spheres (see `dem::kinds`).
-    pub kinds: crate::dem::kinds::KindScene,
 }
 
 impl Default for DemSim {
@@ -96,9 +144,32 @@ impl Default for DemSim {
     }
 }
 
+impl Default for DemWorld {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
 impl DemSim {
     pub fn new() -> DemSim {
         DemSim {
+            world: DemWorld::new(),
+            skin: 0.0,
+            sequential: false,
+            stop_on_unstable_dt: true,
+            rebuilds: 0,
+            energy: None,
+            built: ListsBuilt::default(),
+            spare_pairs: PairList::default(),
+            piece_bounds: Default::default(),
+            handovers: Default::default(),
+        }
+    }
+}
+
+impl DemWorld {
+    pub fn new() -> DemWorld {
+        DemWorld {
             spheres: Spheres::default(),
             clumps: Clumps::default(),
             walls: Vec::new(),
@@ -114,29 +185,15 @@ impl DemSim {
             dt: 0.0,
             time: 0.0,
             step: 0,
-            skin: 0.0,
             seed: 0,
-            sequential: false,
             pairs: PairList::default(),
             wall_pairs: PairList::default(),
-            x_at_build: Vec::new(),
-            radius_max_at_build: 0.0,
-            radius_min_at_build: f64::INFINITY,
-            handovers: Default::default(),
-            piece_bounds: Default::default(),
-            walls_at_build: Vec::new(),
-            h_at_build: None,
-            spare_pairs: PairList::default(),
-            needs_rebuild: true,
-            stability_warned: false,
-            last_check: None,
-            stop_on_unstable_dt: true,
-            rebuilds: 0,
-            events: Vec::new(),
             external: Vec::new(),
-            energy: None,
-            next_id: 0,
             kinds: Default::default(),
+            events: Vec::new(),
+            next_id: 0,
+            needs_rebuild: true,
+            time_step_check: TimeStepCheck::default(),
         }
     }
 
@@ -286,28 +343,6 @@ impl DemSim {
         let (cell, h0) = (self.cell.as_ref()?, self.cell_reference.as_ref()?);
         let axial = [0, 1, 2].map(|a| (cell.h.column(a).norm() / h0.column(a).norm()).ln());
         Some((axial, (cell.volume() / h0.determinant().abs()).ln()))
-    }
-
-    /// Approximate memory held by this simulation's arrays, in bytes.
-    pub fn memory_bytes(&self) -> usize {
-        let s = &self.spheres;
-        let per_sphere = std::mem::size_of::<u64>()
-            + 6 * std::mem::size_of::<Vec3>()
-            + 3 * std::mem::size_of::<f64>()
-            + std::mem::size_of::<u16>()
-            + std::mem::size_of::<u8>()
-            + std::mem::size_of::<u32>();
-        let pairs = |p: &PairList| {
-            p.a.capacity() * (2 * 4 + 12 + 2 + 1 + 24) + (p.params.capacity() + p.history.capacity()) * 8
-        };
-        s.x.capacity() * per_sphere
-            + self.x_at_build.capacity() * 24
-            + pairs(&self.pairs)
-            + pairs(&self.spare_pairs)
-            + pairs(&self.wall_pairs)
-            + self.piece_bounds.bytes()
-            + self.handovers.bytes()
-            + self.clumps.len() * 200
     }
 
     /// Volume of solid: free spheres plus the union volume of each clump.
@@ -525,8 +560,7 @@ impl DemSim {
     /// Has the time step checked against the contacts' limit after the next contact stage, and
     /// said again if above it.
     pub(crate) fn recheck_time_step(&mut self) {
-        self.stability_warned = false;
-        self.last_check = None;
+        self.time_step_check = TimeStepCheck::default();
     }
 
     /// Asks each law whether it can make the contacts it may meet: between the materials of the
@@ -571,9 +605,6 @@ impl DemSim {
         if !(0.0..1.0).contains(&self.damping) {
             return Err(GraniteError::param("damping", self.damping, "must be in [0, 1)"));
         }
-        if !(self.skin >= 0.0) {
-            return Err(GraniteError::param("skin", self.skin, "must be >= 0"));
-        }
         Ok(())
     }
 }
@@ -590,22 +621,54 @@ pub struct VerletState {
 }
 
 impl DemSim {
+    /// Approximate memory held by this simulation's arrays, in bytes.
+    pub fn memory_bytes(&self) -> usize {
+        let s = &self.world.spheres;
+        let per_sphere = std::mem::size_of::<u64>()
+            + 6 * std::mem::size_of::<Vec3>()
+            + 3 * std::mem::size_of::<f64>()
+            + std::mem::size_of::<u16>()
+            + std::mem::size_of::<u8>()
+            + std::mem::size_of::<u32>();
+        let pairs = |p: &PairList| {
+            p.a.capacity() * (2 * 4 + 12 + 2 + 1 + 24) + (p.params.capacity() + p.history.capacity()) * 8
+        };
+        s.x.capacity() * per_sphere
+            + self.built.x.capacity() * 24
+            + pairs(&self.world.pairs)
+            + pairs(&self.spare_pairs)
+            + pairs(&self.world.wall_pairs)
+            + self.piece_bounds.bytes()
+            + self.handovers.bytes()
+            + self.world.clumps.len() * 200
+    }
+
+    /// Whether the world can be stepped: a time step within the contacts' stability bound, a
+    /// contact law for every pair of materials that may meet, damping in [0, 1), a skin >= 0.
+    pub fn validate(&self) -> Result<()> {
+        self.world.validate()?;
+        if !(self.skin >= 0.0) {
+            return Err(GraniteError::param("skin", self.skin, "must be >= 0"));
+        }
+        Ok(())
+    }
+
     pub fn verlet_state(&self) -> VerletState {
         VerletState {
-            x_at_build: self.x_at_build.clone(),
-            h_at_build: self.h_at_build,
-            needs_rebuild: self.needs_rebuild || self.x_at_build.len() != self.spheres.len(),
+            x_at_build: self.built.x.clone(),
+            h_at_build: self.built.h,
+            needs_rebuild: self.world.needs_rebuild || self.built.x.len() != self.world.spheres.len(),
             rebuilds: self.rebuilds,
         }
     }
 
     /// Takes back the state of lists built elsewhere (with the spheres' radii as they are).
     pub fn set_verlet_state(&mut self, state: VerletState) {
-        self.needs_rebuild = state.needs_rebuild || state.x_at_build.len() != self.spheres.len();
-        self.x_at_build = state.x_at_build;
-        self.h_at_build = state.h_at_build;
+        self.world.needs_rebuild = state.needs_rebuild || state.x_at_build.len() != self.world.spheres.len();
+        self.built.x = state.x_at_build;
+        self.built.h = state.h_at_build;
         self.rebuilds = state.rebuilds;
-        self.radius_max_at_build = self.spheres.largest_radius();
-        self.radius_min_at_build = self.spheres.smallest_radius();
+        self.built.radius_max = self.world.spheres.largest_radius();
+        self.built.radius_min = self.world.spheres.smallest_radius();
     }
 }

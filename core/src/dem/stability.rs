@@ -7,7 +7,7 @@
 //! body), and leapfrog follows it only while `omega dt <= 2` for its fastest vibration.
 
 use crate::dem::particles::{dof, FREE};
-use crate::dem::sim::DemSim;
+use crate::dem::sim::DemWorld;
 use crate::ext::contact::uniform;
 use nalgebra::{DMatrix, Matrix3, Matrix6, SMatrix, Vector3};
 
@@ -183,7 +183,7 @@ fn growth_per_step(omega_dt: f64) -> f64 {
     (b + (b * b - 4.0).max(0.0).sqrt()) / 2.0
 }
 
-impl DemSim {
+impl DemWorld {
     fn linearise(&self) -> Linearised {
         let s = &self.spheres;
         let n = s.len();
@@ -282,7 +282,7 @@ impl DemSim {
         Some(StableStep { dt: self.dt_of_bound(bound), sphere: self.spheres.id[lin.sphere_of[b]], contacts })
     }
 
-    /// `2 / omega` for `omega^2` = `bound` raised by Cundall damping (see [`DemSim::stable_dt`]).
+    /// `2 / omega` for `omega^2` = `bound` raised by Cundall damping (see [`DemWorld::stable_dt`]).
     fn dt_of_bound(&self, bound: f64) -> f64 {
         2.0 / (bound * (1.0 + self.damping.max(0.0))).sqrt()
     }
@@ -290,12 +290,12 @@ impl DemSim {
     /// After a rebuild or a new time step: a time step above `stable_dt` is said once in
     /// `events`; if Lanczos iteration then proves that the present contacts, undamped, vibrate
     /// faster than leapfrog can follow (`omega dt > 2`), the run stops, since the packing would
-    /// gain energy from nowhere step after step (unless `stop_on_unstable_dt` is off, or there
-    /// are clumps, whose rotational inertia is only bounded here). The proof is for the undamped
-    /// system; Cundall damping lowers the real limit (measured on an RVE), so the stop errs on the
-    /// side of running.
-    pub fn check_time_step(&mut self) -> crate::Result<()> {
-        self.last_check = Some(self.step);
+    /// gain energy from nowhere step after step (unless `stop` is false, or there are clumps,
+    /// whose rotational inertia is only bounded here). The proof is for the undamped system;
+    /// Cundall damping lowers the real limit (measured on an RVE), so the stop errs on the side of
+    /// running.
+    pub fn check_time_step(&mut self, stop: bool) -> crate::Result<()> {
+        self.time_step_check.last = Some(self.step);
         let lin = self.linearise();
         let Some((bound, b, contacts)) = lin.gershgorin() else { return Ok(()) };
         let limit = self.dt_of_bound(bound);
@@ -303,8 +303,8 @@ impl DemSim {
             return Ok(());
         }
         let sphere = self.spheres.id[lin.sphere_of[b]];
-        if !self.stability_warned {
-            self.stability_warned = true;
+        if !self.time_step_check.warned {
+            self.time_step_check.warned = true;
             self.events.push(format!(
                 "step {} (t = {:.6e} s): the time step {:.4e} s is above the stability bound {:.4e} s of the present \
                  contacts (sphere {sphere} with {contacts} contacts; stable_dt()): the packing can gain energy it \
@@ -312,7 +312,7 @@ impl DemSim {
                 self.step, self.time, self.dt, limit
             ));
         }
-        if !self.stop_on_unstable_dt || !self.clumps.mass.is_empty() {
+        if !stop || !self.clumps.mass.is_empty() {
             return Ok(());
         }
         let omega2 = lin.largest_ritz_value();

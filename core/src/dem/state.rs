@@ -94,16 +94,17 @@ pub(crate) struct DemState {
 
 impl DemSim {
     fn to_state(&self) -> DemState {
-        let mut law_of: Vec<((u16, u16), u16)> = self.law_of.iter().map(|(k, v)| (*k, *v)).collect();
+        let mut law_of: Vec<((u16, u16), u16)> = self.world.law_of.iter().map(|(k, v)| (*k, *v)).collect();
         law_of.sort();
         DemState {
             format: FORMAT.into(),
             version: VERSION,
-            spheres: self.spheres.clone(),
-            clumps: self.clumps.clone(),
-            walls: self.walls.clone(),
-            materials: self.materials.clone(),
+            spheres: self.world.spheres.clone(),
+            clumps: self.world.clumps.clone(),
+            walls: self.world.walls.clone(),
+            materials: self.world.materials.clone(),
             laws: self
+                .world
                 .laws
                 .iter()
                 .map(|l| LawRecord {
@@ -112,32 +113,32 @@ impl DemSim {
                 })
                 .collect(),
             law_of,
-            default_law: self.default_law,
-            gravity: self.gravity,
-            cell: self.cell.clone(),
-            cell_control: self.cell_control.clone(),
-            cell_reference: self.cell_reference,
-            damping: self.damping,
-            dt: self.dt,
-            time: self.time,
-            step: self.step,
+            default_law: self.world.default_law,
+            gravity: self.world.gravity,
+            cell: self.world.cell.clone(),
+            cell_control: self.world.cell_control.clone(),
+            cell_reference: self.world.cell_reference,
+            damping: self.world.damping,
+            dt: self.world.dt,
+            time: self.world.time,
+            step: self.world.step,
             skin: self.skin,
-            seed: self.seed,
-            pairs: self.pairs.clone(),
-            wall_pairs: self.wall_pairs.clone(),
-            x_at_build: self.x_at_build.clone(),
-            walls_at_build: self.walls_at_build.clone(),
-            h_at_build: self.h_at_build,
-            needs_rebuild: self.needs_rebuild,
+            seed: self.world.seed,
+            pairs: self.world.pairs.clone(),
+            wall_pairs: self.world.wall_pairs.clone(),
+            x_at_build: self.built.x.clone(),
+            walls_at_build: self.built.walls.clone(),
+            h_at_build: self.built.h,
+            needs_rebuild: self.world.needs_rebuild,
             rebuilds: self.rebuilds,
-            external: self.external.clone(),
+            external: self.world.external.clone(),
             energy: self.energy.clone(),
             bodies: self.bodies_record(),
         }
     }
 
     fn bodies_record(&self) -> Option<BodiesRecord> {
-        let k = &self.kinds;
+        let k = &self.world.kinds;
         let kind = k.kind.as_ref().filter(|_| !k.is_empty())?;
         Some(BodiesRecord {
             kind: kind.name.clone(),
@@ -181,13 +182,14 @@ impl DemSim {
             ("x_at_build", record.x_at_build.len()),
         ];
         crate::loaded::same_length("bodies", "x", n, &lengths).map_err(GraniteError::Other)?;
-        let k = &mut self.kinds;
+        let k = &mut self.world.kinds;
         k.kind = Some(crate::dem::kinds::KindInUse::of(factory.as_ref()));
         for i in 0..n {
             let shape = shapes.get(record.shape[i] as usize).ok_or_else(|| {
                 GraniteError::Other(format!("body {i}: shape {} of {}", record.shape[i], shapes.len()))
             })?;
             let density = self
+                .world
                 .materials
                 .get(record.material[i] as usize)
                 .ok_or_else(|| GraniteError::Other(format!("body {i}: material {}", record.material[i])))?
@@ -222,7 +224,7 @@ impl DemSim {
     pub fn from_json_like(value: serde_json::Value, like: &DemSim) -> Result<DemSim> {
         let st: DemState = serde_json::from_value(value).map_err(|e| GraniteError::Other(format!("DEM state: {e}")))?;
         let laws = |k: usize, record: &LawRecord| -> Result<std::sync::Arc<dyn crate::ext::ContactLaw>> {
-            match like.laws.get(k) {
+            match like.world.laws.get(k) {
                 Some(law) if law.name() == record.name => Ok(law.clone()),
                 _ => Err(GraniteError::Other(format!(
                     "DEM state: contact law {k} is `{}`, not one of the sample it was copied from",
@@ -284,48 +286,48 @@ impl DemSim {
         }
         let mut sim = DemSim::new();
         for (k, law) in st.laws.iter().enumerate() {
-            sim.laws.push(build_law(k, law)?);
+            sim.world.laws.push(build_law(k, law)?);
         }
-        sim.spheres = st.spheres;
-        sim.clumps = st.clumps;
-        sim.walls = st.walls;
-        sim.materials = st.materials;
-        sim.law_of = st.law_of.into_iter().collect();
-        sim.default_law = st.default_law;
-        sim.gravity = st.gravity;
-        sim.cell = st.cell;
-        sim.cell_control = st.cell_control;
-        sim.cell_reference = st.cell_reference;
-        sim.set_damping(st.damping).map_err(|e| GraniteError::Other(format!("{source}: {e}")))?;
-        sim.dt = st.dt;
-        sim.time = st.time;
-        sim.step = st.step;
+        sim.world.spheres = st.spheres;
+        sim.world.clumps = st.clumps;
+        sim.world.walls = st.walls;
+        sim.world.materials = st.materials;
+        sim.world.law_of = st.law_of.into_iter().collect();
+        sim.world.default_law = st.default_law;
+        sim.world.gravity = st.gravity;
+        sim.world.cell = st.cell;
+        sim.world.cell_control = st.cell_control;
+        sim.world.cell_reference = st.cell_reference;
+        sim.world.set_damping(st.damping).map_err(|e| GraniteError::Other(format!("{source}: {e}")))?;
+        sim.world.dt = st.dt;
+        sim.world.time = st.time;
+        sim.world.step = st.step;
         sim.skin = st.skin;
-        sim.seed = st.seed;
-        sim.pairs = st.pairs;
-        sim.wall_pairs = st.wall_pairs;
-        sim.x_at_build = st.x_at_build;
-        sim.walls_at_build = st.walls_at_build;
-        sim.h_at_build = st.h_at_build;
-        sim.radius_max_at_build = sim.spheres.largest_radius();
-        sim.radius_min_at_build = sim.spheres.smallest_radius();
-        sim.needs_rebuild = st.needs_rebuild;
+        sim.world.seed = st.seed;
+        sim.world.pairs = st.pairs;
+        sim.world.wall_pairs = st.wall_pairs;
+        sim.built.x = st.x_at_build;
+        sim.built.walls = st.walls_at_build;
+        sim.built.h = st.h_at_build;
+        sim.built.radius_max = sim.world.spheres.largest_radius();
+        sim.built.radius_min = sim.world.spheres.smallest_radius();
+        sim.world.needs_rebuild = st.needs_rebuild;
         sim.rebuilds = st.rebuilds;
-        sim.external = st.external;
+        sim.world.external = st.external;
         sim.energy = st.energy;
         if let Some(bodies) = st.bodies {
             sim.restore_bodies(bodies, kinds).map_err(|e| GraniteError::Other(format!("{source}: {e}")))?;
         }
-        sim.next_id = sim.spheres.id.iter().chain(&sim.kinds.id).max().map_or(0, |m| m + 1);
+        sim.world.next_id = sim.world.spheres.id.iter().chain(&sim.world.kinds.id).max().map_or(0, |m| m + 1);
         widen_pair_layout(&mut sim);
         check_consistent(&sim).map_err(|e| GraniteError::Other(format!("{source}: not a usable DEM state: {e}")))?;
         // The parallel stages' cuts of the pair lists are found again on the first step, not saved.
         // Reading grows arrays by doubling; copies hold just their contents (a loaded RVE is the
         // template of every material point's copy, so its reported memory should be theirs).
-        sim.spheres = sim.spheres.clone();
-        sim.pairs = sim.pairs.clone();
-        sim.wall_pairs = sim.wall_pairs.clone();
-        sim.x_at_build = sim.x_at_build.clone();
+        sim.world.spheres = sim.world.spheres.clone();
+        sim.world.pairs = sim.world.pairs.clone();
+        sim.world.wall_pairs = sim.world.wall_pairs.clone();
+        sim.built.x = sim.built.x.clone();
         Ok(sim)
     }
 }
@@ -344,8 +346,8 @@ fn from_registry(
 /// keeping their history. Only a list whose arrays and indices hold together is touched; anything
 /// else is left for `check_consistent` to name.
 fn widen_pair_layout(sim: &mut DemSim) {
-    let (ps, hs) = sim.pair_strides();
-    let (spheres, walls, laws) = (sim.spheres.len(), sim.walls.len(), sim.laws.len());
+    let (ps, hs) = sim.world.pair_strides();
+    let (spheres, walls, laws) = (sim.world.spheres.len(), sim.world.walls.len(), sim.world.laws.len());
     let sound = |list: &crate::dem::contacts::PairList, others: usize| {
         let m = list.len();
         [list.b.len(), list.shift.len(), list.law.len(), list.touching.len(), list.force.len()].iter().all(|&l| l == m)
@@ -357,13 +359,13 @@ fn widen_pair_layout(sim: &mut DemSim) {
             && list.law.iter().all(|&l| (l as usize) < laws)
     };
     let narrow = |list: &crate::dem::contacts::PairList| list.param_stride < ps || list.history_stride < hs;
-    if (narrow(&sim.pairs) || narrow(&sim.wall_pairs))
-        && sound(&sim.pairs, spheres)
-        && sound(&sim.wall_pairs, walls)
-        && sim.spheres.material.iter().all(|&m| (m as usize) < sim.materials.len())
+    if (narrow(&sim.world.pairs) || narrow(&sim.world.wall_pairs))
+        && sound(&sim.world.pairs, spheres)
+        && sound(&sim.world.wall_pairs, walls)
+        && sim.world.spheres.material.iter().all(|&m| (m as usize) < sim.world.materials.len())
     {
-        let laws = sim.laws.clone();
-        sim.refresh_pair_laws(&laws);
+        let laws = sim.world.laws.clone();
+        sim.world.refresh_pair_laws(&laws);
     }
 }
 
@@ -372,7 +374,7 @@ fn widen_pair_layout(sim: &mut DemSim) {
 /// one is refused with what is wrong, instead of panicking or running on garbage.
 fn check_consistent(sim: &DemSim) -> std::result::Result<(), String> {
     use crate::loaded::same_length;
-    let s = &sim.spheres;
+    let s = &sim.world.spheres;
     let n = s.len();
     let lengths = [
         ("id", s.id.len()),
@@ -389,10 +391,10 @@ fn check_consistent(sim: &DemSim) -> std::result::Result<(), String> {
     ];
     same_length("spheres", "x", n, &lengths)?;
     crate::loaded::unique_ids("spheres", &s.id)?;
-    crate::loaded::step_and_time(sim.step, sim.time)?;
+    crate::loaded::step_and_time(sim.world.step, sim.world.time)?;
     let finite = |v: &Vec3| v.iter().all(|c| c.is_finite());
     let positive = |x: f64| x.is_finite() && x > 0.0;
-    for (m, material) in sim.materials.iter().enumerate() {
+    for (m, material) in sim.world.materials.iter().enumerate() {
         if !positive(material.density) {
             return Err(format!(
                 "material {m} (\"{}\"): density {} (must be finite and > 0)",
@@ -413,14 +415,14 @@ fn check_consistent(sim: &DemSim) -> std::result::Result<(), String> {
         if !(finite(&s.x[i]) && finite(&s.v[i]) && finite(&s.w[i])) {
             return Err(format!("sphere id {id}: non-finite position or velocity"));
         }
-        if s.material[i] as usize >= sim.materials.len() {
-            return Err(format!("sphere id {id}: material {} of {}", s.material[i], sim.materials.len()));
+        if s.material[i] as usize >= sim.world.materials.len() {
+            return Err(format!("sphere id {id}: material {} of {}", s.material[i], sim.world.materials.len()));
         }
-        if s.clump[i] != crate::dem::particles::FREE && s.clump[i] as usize >= sim.clumps.len() {
-            return Err(format!("sphere id {id}: clump {} of {}", s.clump[i], sim.clumps.len()));
+        if s.clump[i] != crate::dem::particles::FREE && s.clump[i] as usize >= sim.world.clumps.len() {
+            return Err(format!("sphere id {id}: clump {} of {}", s.clump[i], sim.world.clumps.len()));
         }
     }
-    let c = &sim.clumps;
+    let c = &sim.world.clumps;
     let clumps = c.len();
     let lengths = [
         ("v", c.v.len()),
@@ -445,21 +447,23 @@ fn check_consistent(sim: &DemSim) -> std::result::Result<(), String> {
             return Err("a clump has a mass or inertia that is not finite and > 0".into());
         }
     }
-    let laws = sim.laws.len();
-    if sim.default_law.is_some_and(|l| l as usize >= laws) || sim.law_of.values().any(|&l| l as usize >= laws) {
+    let laws = sim.world.laws.len();
+    if sim.world.default_law.is_some_and(|l| l as usize >= laws)
+        || sim.world.law_of.values().any(|&l| l as usize >= laws)
+    {
         return Err(format!("a material pair uses a contact law beyond the {laws} saved"));
     }
-    let nb = sim.kinds.len();
+    let nb = sim.world.kinds.len();
     let mut ids = s.id.clone();
-    ids.extend(&sim.kinds.id);
+    ids.extend(&sim.world.kinds.id);
     crate::loaded::unique_ids("spheres and bodies", &ids)?;
-    let k = &sim.kinds;
-    let walls = sim.walls.len();
+    let k = &sim.world.kinds;
+    let walls = sim.world.walls.len();
     let (of_spheres, of_bodies) =
         (format!("the {n} spheres or {walls} walls"), format!("the {nb} bodies, {n} spheres or {walls} walls"));
     for (name, list, firsts, others, beyond) in [
-        ("pairs", &sim.pairs, n, n, &of_spheres),
-        ("wall pairs", &sim.wall_pairs, n, walls, &of_spheres),
+        ("pairs", &sim.world.pairs, n, n, &of_spheres),
+        ("wall pairs", &sim.world.wall_pairs, n, walls, &of_spheres),
         ("body pairs", &k.pairs, nb, nb, &of_bodies),
         ("body-wall pairs", &k.wall_pairs, nb, walls, &of_bodies),
         ("body-sphere pairs", &k.sphere_pairs, nb, n, &of_bodies),
@@ -483,7 +487,7 @@ fn check_consistent(sim: &DemSim) -> std::result::Result<(), String> {
         if list
             .law
             .iter()
-            .any(|&l| sim.laws[l as usize].param_count() > ps || sim.laws[l as usize].history_count() > hs)
+            .any(|&l| sim.world.laws[l as usize].param_count() > ps || sim.world.laws[l as usize].history_count() > hs)
         {
             return Err(format!("{name}: {ps} parameters and {hs} history values a pair, fewer than a law keeps"));
         }
@@ -502,25 +506,33 @@ fn check_consistent(sim: &DemSim) -> std::result::Result<(), String> {
     // The force sums' order rests on it (see `step::write_back`).
     // A sphere meets its own image in a thin cell (under a positive shift when found, under any
     // after a flip until the next rebuild).
-    let p = &sim.pairs;
+    let p = &sim.world.pairs;
     if let Some(k) = (0..p.len()).find(|&k| p.a[k] < p.b[k] || (p.a[k] == p.b[k] && p.shift[k] == [0; 3])) {
         return Err(format!("pairs: pair {k} has a first sphere below its second, or is a sphere with itself"));
     }
-    same_length("the positions at the last list build", "spheres", n, &[("x_at_build", sim.x_at_build.len())])?;
+    same_length("the positions at the last list build", "spheres", n, &[("x_at_build", sim.built.x.len())])?;
     same_length(
         "the wall positions at the last list build",
         "walls",
-        sim.walls.len(),
-        &[("walls_at_build", sim.walls_at_build.len())],
+        sim.world.walls.len(),
+        &[("walls_at_build", sim.built.walls.len())],
     )?;
-    if let Some(cell) = &sim.cell {
+    if let Some(cell) = &sim.world.cell {
         let det = cell.h.determinant();
         if !(det.is_finite() && det > 0.0) {
             return Err(format!("periodic cell of volume {det} (must be finite and > 0)"));
         }
     }
-    if !(sim.dt.is_finite() && sim.dt >= 0.0 && sim.skin.is_finite() && sim.skin >= 0.0 && sim.time.is_finite()) {
-        return Err(format!("time step {}, skin {}, time {} (finite, the first two >= 0)", sim.dt, sim.skin, sim.time));
+    if !(sim.world.dt.is_finite()
+        && sim.world.dt >= 0.0
+        && sim.skin.is_finite()
+        && sim.skin >= 0.0
+        && sim.world.time.is_finite())
+    {
+        return Err(format!(
+            "time step {}, skin {}, time {} (finite, the first two >= 0)",
+            sim.world.dt, sim.skin, sim.world.time
+        ));
     }
     Ok(())
 }

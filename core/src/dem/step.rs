@@ -8,6 +8,7 @@ use crate::dem::contact_stage::{
     SphereContacts, SphereSurroundings,
 };
 use crate::dem::contacts::PairList;
+use crate::dem::energy::booking::EnergyBooking;
 use crate::dem::kind_stage::{BodyContacts, BodyMotion, SphereReactions, Surroundings};
 use crate::dem::motion::{
     farther, gather_piece, integrate, integrate_clumps, GatherJob, Motion, PieceState, RigidMotion, SphereConstants,
@@ -15,7 +16,7 @@ use crate::dem::motion::{
 use crate::dem::particles::{ExternalLoads, Spheres};
 use crate::dem::pieces::PieceBounds;
 use crate::dem::rows::SharedRows;
-use crate::dem::sim::DemSim;
+use crate::dem::sim::{DemSim, DemWorld};
 use crate::dem::walls::WallMotion;
 use crate::error::{GraniteError, Result};
 use crate::math::Vec3;
@@ -26,69 +27,60 @@ use std::time::Instant;
 impl DemSim {
     /// Advances the simulation by one time step.
     pub fn step(&mut self) -> Result<()> {
-        let rebuilt = self.needs_rebuild;
+        let rebuilt = self.world.needs_rebuild;
         if rebuilt {
             self.rebuild_candidates()?;
         }
-        let servo =
-            self.cell_control.as_ref().is_some_and(|c| c.axes.iter().any(|a| matches!(a, AxisGoal::Stress { .. })));
-        if let (Some(_), Some(cell)) = (&self.cell_control, &self.cell) {
-            let (stress, stiffness) =
-                if servo { self.stress_and_axis_stiffness(cell.volume()) } else { ([0.0; 6], [0.0; 3]) };
-            let dt = self.dt;
-            if let (Some(control), Some(cell)) = (self.cell_control.as_mut(), self.cell.as_mut()) {
-                cell.velocity_gradient = control.velocity_gradient(&stress, stiffness, dt);
-            }
-        }
         let parallel = self.in_parallel();
+        // The stages below see the world and the pipeline's own state apart.
+        let DemSim { world, skin, stop_on_unstable_dt, rebuilds, energy, built, piece_bounds, handovers, .. } = self;
+        let (skin, stop_on_unstable_dt, rebuilds) = (*skin, *stop_on_unstable_dt, *rebuilds);
+        CellServo::run(world, parallel);
         // The contact network changes little between rebuilds: checking it then is enough.
-        let check = match self.last_check {
-            None => true,
-            Some(at) => rebuilt && self.step >= at + crate::dem::stability::CHECK_EVERY,
-        };
+        let check = world.time_step_check.due(rebuilt, world.step);
         // The cell deforms over the step; particles follow its affine field on top of their own
         // motion. The contacts of this step see the cell as it was at its start.
-        let (deformed, affine, strain_since_build) = match (&self.cell, &self.h_at_build) {
+        let (deformed, affine, strain_since_build) = match (&world.cell, &built.h) {
             (Some(cell), Some(h0)) => {
                 let mut next = cell.clone();
-                next.deform(self.dt);
+                next.deform(world.dt);
                 let f = next.h * h0.try_inverse().unwrap_or_else(Matrix3::identity);
                 let growth = (f - Matrix3::identity()).norm();
                 (Some(next), Some((cell.velocity_gradient, f)), growth)
             }
             _ => (None, None, 0.0),
         };
-        let motion = Motion::new(self.gravity, self.damping, self.dt, affine);
-        let tracking = self.energy.is_some();
+        let motion = Motion::new(world.gravity, world.damping, world.dt, affine);
+        let tracking = energy.is_some();
         let mut energy_before = None;
         // Bodies of a plugin kind meet spheres where they all are at the step's start: their
         // reactions join the spheres' loads before the spheres move.
-        let kind_history = (tracking && !self.kinds.is_empty()).then(|| self.kinds.histories());
-        if !self.kinds.is_empty() {
+        let kind_history = (tracking && !world.kinds.is_empty()).then(|| world.kinds.histories());
+        if !world.kinds.is_empty() {
             let around = Surroundings {
-                spheres: &self.spheres,
-                walls: &self.walls,
-                laws: &self.laws,
-                law_history: self.pair_strides().1,
-                dt: self.dt,
-                step: self.step,
-                time: self.time,
+                spheres: &world.spheres,
+                walls: &world.walls,
+                laws: &world.laws,
+                law_history: world.pair_strides().1,
+                dt: world.dt,
+                step: world.step,
+                time: world.time,
             };
-            if let Err(e) = BodyContacts::run(&mut self.kinds, &around) {
-                self.needs_rebuild = true;
+            if let Err(e) = BodyContacts::run(&mut world.kinds, &around) {
+                world.needs_rebuild = true;
                 return Err(e);
             }
         }
-        let sphere_loads = !self.kinds.sphere_loads.is_empty();
-        let mut moved = if parallel && !check && self.external.is_empty() && !tracking && !sphere_loads {
+        let sphere_loads = !world.kinds.sphere_loads.is_empty();
+        let mut moved = if parallel && !check && world.external.is_empty() && !tracking && !sphere_loads {
             let around =
-                SphereSurroundings { walls: &self.walls, laws: &self.laws, dt: self.dt, cell: self.cell.as_ref() };
+                SphereSurroundings { walls: &world.walls, laws: &world.laws, dt: world.dt, cell: world.cell.as_ref() };
             ContactsAndMotion::run(
-                &mut self.spheres,
-                (&mut self.pairs, &mut self.wall_pairs),
-                (&mut self.piece_bounds, &mut self.handovers),
+                &mut world.spheres,
+                (&mut world.pairs, &mut world.wall_pairs),
+                (piece_bounds, handovers),
                 &around,
-                (&self.x_at_build, self.rebuilds),
+                (&built.x, rebuilds),
                 &motion,
             )
         } else {
@@ -98,118 +90,95 @@ impl DemSim {
             // External loads on single spheres and the energy tracker (a console's experiments,
             // not production runs) work between the contact stage and the motion, so they take
             // this path too.
-            let history = tracking.then(|| (self.pairs.history.clone(), self.wall_pairs.history.clone()));
+            let history = tracking.then(|| (world.pairs.history.clone(), world.wall_pairs.history.clone()));
             let around =
-                SphereSurroundings { walls: &self.walls, laws: &self.laws, dt: self.dt, cell: self.cell.as_ref() };
-            SphereContacts::run(&mut self.spheres, (&mut self.pairs, &mut self.wall_pairs), &around);
-            ExternalLoads::run(&mut self.external, &mut self.spheres);
-            SphereReactions::run(&self.kinds, &mut self.spheres);
+                SphereSurroundings { walls: &world.walls, laws: &world.laws, dt: world.dt, cell: world.cell.as_ref() };
+            SphereContacts::run(&mut world.spheres, (&mut world.pairs, &mut world.wall_pairs), &around);
+            ExternalLoads::run(&mut world.external, &mut world.spheres);
+            SphereReactions::run(&world.kinds, &mut world.spheres);
             if check {
-                self.check_time_step()?;
+                world.check_time_step(stop_on_unstable_dt)?;
             }
-            energy_before = history.map(|history| self.energy_before_motion(history, kind_history));
-            integrate(&mut self.spheres, &self.x_at_build, &motion)
+            energy_before = history.map(|history| EnergyBooking::before_motion(&*world, history, kind_history));
+            integrate(&mut world.spheres, &built.x, &motion)
         };
         if deformed.is_some() {
-            self.cell = deformed;
+            world.cell = deformed;
         }
-        if !self.clumps.is_empty() {
+        if !world.clumps.is_empty() {
             let clump_moved = integrate_clumps(
-                &mut self.clumps,
-                &mut self.spheres,
-                &self.x_at_build,
-                self.gravity,
-                self.damping,
-                self.dt,
+                &mut world.clumps,
+                &mut world.spheres,
+                &built.x,
+                world.gravity,
+                world.damping,
+                world.dt,
                 affine,
             );
             moved = farther(moved, clump_moved);
         }
-        let kind_moved = if self.kinds.is_empty() {
+        let kind_moved = if world.kinds.is_empty() {
             0.0
         } else {
-            let motion = RigidMotion { gravity: self.gravity, damping: self.damping, dt: self.dt, affine: None };
-            BodyMotion::run(&mut self.kinds, &motion, (self.step, self.time))?
+            let motion = RigidMotion { gravity: world.gravity, damping: world.damping, dt: world.dt, affine: None };
+            BodyMotion::run(&mut world.kinds, &motion, (world.step, world.time))?
         };
-        let wall_moved = WallMotion::run(&mut self.walls, &self.walls_at_build, self.dt);
+        let wall_moved = WallMotion::run(&mut world.walls, &built.walls, world.dt);
         // The tracker closes the step once everything has moved (clumps and walls too).
-        if let Some(before) = energy_before {
-            self.energy_after_motion(before);
+        if let (Some(before), Some(tracker)) = (energy_before, energy.as_mut()) {
+            EnergyBooking::after_motion(&*world, before, tracker);
         }
-        self.time += self.dt;
-        self.step += 1;
+        world.time += world.dt;
+        world.step += 1;
         // Between two rebuilds every sphere stays within half the skin of where the lists were
         // built (further, and they are rebuilt before the next step). A sphere now further than
         // that plus the smallest radius has moved more than a smallest radius in this one step:
         // contacts can then be missed (it may pass through a wall or another sphere), which no
         // stable run does.
-        if moved > 0.5 * self.skin + self.radius_min_at_build {
-            return Err(self.too_fast());
+        if moved > 0.5 * skin + built.radius_min {
+            return Err(too_fast(world, built.radius_min));
         }
         if !moved.is_finite() {
-            let Some(bad) = (0..self.spheres.len())
-                .find(|&i| !self.spheres.x[i].iter().chain(&self.spheres.v[i]).all(|c| c.is_finite()))
+            let Some(bad) = (0..world.spheres.len())
+                .find(|&i| !world.spheres.x[i].iter().chain(&world.spheres.v[i]).all(|c| c.is_finite()))
             else {
                 // Every value is finite but a distance overflowed: a sphere is absurdly fast.
-                return Err(self.too_fast());
+                return Err(too_fast(world, built.radius_min));
             };
             return Err(GraniteError::Unstable {
-                step: self.step,
-                time: self.time,
+                step: world.step,
+                time: world.time,
                 reason: format!(
                     "non-finite position or velocity of sphere {} (x = {:?}, v = {:?}); the time step may be too large",
-                    self.spheres.id.get(bad).copied().unwrap_or(0),
-                    self.spheres.x.get(bad),
-                    self.spheres.v.get(bad)
+                    world.spheres.id.get(bad).copied().unwrap_or(0),
+                    world.spheres.x.get(bad),
+                    world.spheres.v.get(bad)
                 ),
             });
         }
-        if let Some(cell) = &mut self.cell {
+        if let Some(cell) = &mut world.cell {
             if let Some(m) = cell.flip_if_needed() {
                 // A sphere's pair with its own image (a thin cell) may come out under the
                 // negative shift; the rebuild that follows finds it under the positive one, as a
                 // new contact.
-                for s in self.pairs.shift.iter_mut() {
+                for s in world.pairs.shift.iter_mut() {
                     *s = shift_after_flip(&m, *s);
                 }
-                self.pairs.resort();
-                self.needs_rebuild = true;
+                world.pairs.resort();
+                world.needs_rebuild = true;
             }
         }
-        let affine_growth = strain_since_build * (2.0 * self.radius_max_at_build + self.skin);
-        if 2.0 * moved + affine_growth > self.skin || moved + wall_moved > self.skin {
-            self.needs_rebuild = true;
+        let affine_growth = strain_since_build * (2.0 * built.radius_max + skin);
+        if 2.0 * moved + affine_growth > skin || moved + wall_moved > skin {
+            world.needs_rebuild = true;
         }
-        if !self.kinds.is_empty() {
-            let skin = self.kind_skin();
+        if !world.kinds.is_empty() {
+            let skin = world.kind_skin(skin);
             if 2.0 * kind_moved > skin || kind_moved + wall_moved > skin {
-                self.needs_rebuild = true;
+                world.needs_rebuild = true;
             }
         }
         Ok(())
-    }
-
-    /// The error of a step in which a sphere moved further than the smallest radius, naming the
-    /// fastest sphere.
-    fn too_fast(&self) -> GraniteError {
-        let s = &self.spheres;
-        let speed = |i: usize| s.v[i].iter().map(|c| c * c).sum::<f64>().sqrt();
-        let fastest = (0..s.len()).max_by(|&i, &j| speed(i).total_cmp(&speed(j))).unwrap_or(0);
-        let v = if s.is_empty() { 0.0 } else { speed(fastest) };
-        let critical = self.critical_dt().map(|c| format!(" (critical_dt() = {c:.4e} s)")).unwrap_or_default();
-        GraniteError::Unstable {
-            step: self.step,
-            time: self.time,
-            reason: format!(
-                "sphere {} moves at {v:.4e} m/s, {:.4e} m in one step of {:.4e} s: more than the smallest radius \
-                 {:.4e} m, so contacts would be missed. The forces are too large for this time step: lower dt{critical}, \
-                 or look for spheres placed overlapping or given such a velocity",
-                s.id.get(fastest).copied().unwrap_or(0),
-                v * self.dt,
-                self.dt,
-                self.radius_min_at_build
-            ),
-        }
     }
 
     /// Steps on the calling thread only (an RVE inside a parallel loop over material points),
@@ -221,8 +190,49 @@ impl DemSim {
             self.spare_pairs = PairList::default();
             self.piece_bounds = PieceBounds::default();
             self.handovers = Handovers::default();
-            self.pairs.shrink_to_fit();
-            self.wall_pairs.shrink_to_fit();
+            self.world.pairs.shrink_to_fit();
+            self.world.wall_pairs.shrink_to_fit();
+        }
+    }
+}
+
+/// The error of a step in which a sphere moved further than the smallest radius, naming the
+/// fastest sphere.
+fn too_fast(world: &DemWorld, radius_min: f64) -> GraniteError {
+    let s = &world.spheres;
+    let speed = |i: usize| s.v[i].iter().map(|c| c * c).sum::<f64>().sqrt();
+    let fastest = (0..s.len()).max_by(|&i, &j| speed(i).total_cmp(&speed(j))).unwrap_or(0);
+    let v = if s.is_empty() { 0.0 } else { speed(fastest) };
+    let critical = world.critical_dt().map(|c| format!(" (critical_dt() = {c:.4e} s)")).unwrap_or_default();
+    GraniteError::Unstable {
+        step: world.step,
+        time: world.time,
+        reason: format!(
+            "sphere {} moves at {v:.4e} m/s, {:.4e} m in one step of {:.4e} s: more than the smallest radius \
+             {:.4e} m, so contacts would be missed. The forces are too large for this time step: lower dt{critical}, \
+             or look for spheres placed overlapping or given such a velocity",
+            s.id.get(fastest).copied().unwrap_or(0),
+            v * world.dt,
+            world.dt,
+            radius_min
+        ),
+    }
+}
+
+/// The periodic cell's servo, a stage before the contacts: where a goal of the cell control is a
+/// stress, it reads the stress and axis stiffness of the contacts as they are (in parallel
+/// blocks if `parallel`); the control then writes the cell's velocity gradient for this step.
+struct CellServo;
+
+impl CellServo {
+    fn run(world: &mut DemWorld, parallel: bool) {
+        let (Some(control), Some(cell)) = (&world.cell_control, &world.cell) else { return };
+        let servo = control.axes.iter().any(|a| matches!(a, AxisGoal::Stress { .. }));
+        let (stress, stiffness) =
+            if servo { world.stress_and_axis_stiffness(cell.volume(), parallel) } else { ([0.0; 6], [0.0; 3]) };
+        let dt = world.dt;
+        if let (Some(control), Some(cell)) = (world.cell_control.as_mut(), world.cell.as_mut()) {
+            cell.velocity_gradient = control.velocity_gradient(&stress, stiffness, dt);
         }
     }
 }
@@ -385,24 +395,24 @@ mod tests {
             let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
             pool.install(|| {
                 let mut sim = DemSim::new();
-                let m = sim.add_material("grains", 2650.0).unwrap();
-                sim.set_contact_law(Box::new(SpringAndDrag(Default::default())), None).unwrap();
+                let m = sim.world.add_material("grains", 2650.0).unwrap();
+                sim.world.set_contact_law(Box::new(SpringAndDrag(Default::default())), None).unwrap();
                 let (r, side) = (1e-3, 12);
                 let spacing = 1.9 * r;
                 let width = side as f64 * spacing;
-                sim.set_cell(Some(PeriodicCell::new_box([width; 3])));
+                sim.world.set_cell(Some(PeriodicCell::new_box([width; 3])));
                 let hi = [width - 0.5 * spacing + r; 3];
                 let placed =
                     crate::dem::generate::lattice([0.5 * spacing - r; 3], hi, spacing, 0.93 * r, 0.01 * r, 3).unwrap();
                 for (x, radius) in placed {
-                    sim.add_sphere(m, x, radius, [0.0; 3]).unwrap();
+                    sim.world.add_sphere(m, x, radius, [0.0; 3]).unwrap();
                 }
-                sim.set_dt(0.2 * sim.critical_dt().unwrap()).unwrap();
-                let l = &mut sim.cell.as_mut().unwrap().velocity_gradient;
+                sim.world.set_dt(0.2 * sim.world.critical_dt().unwrap()).unwrap();
+                let l = &mut sim.world.cell.as_mut().unwrap().velocity_gradient;
                 for a in 0..3 {
-                    l[(a, a)] = -0.05 / (200.0 * sim.dt);
+                    l[(a, a)] = -0.05 / (200.0 * sim.world.dt);
                 }
-                l[(0, 2)] = 0.1 / (200.0 * sim.dt);
+                l[(0, 2)] = 0.1 / (200.0 * sim.world.dt);
                 let mut cuts = std::collections::BTreeSet::new();
                 let mut shares_cut_for = std::collections::BTreeSet::new();
                 for step in 0..200 {
@@ -416,7 +426,7 @@ mod tests {
                     shares_cut_for
                         .insert(sim.piece_bounds.shares.iter().map(|s| (s * 100.0).round() as i64).collect::<Vec<_>>());
                 }
-                (sim.spheres.x, sim.spheres.w, sim.pairs.touching_count(), cuts.len(), shares_cut_for)
+                (sim.world.spheres.x, sim.world.spheres.w, sim.world.pairs.touching_count(), cuts.len(), shares_cut_for)
             })
         };
         let one = run(1, &[0.5]);
@@ -436,14 +446,14 @@ mod tests {
         // wall (the skin is 2 mm).
         for near_wall in [false, true] {
             let mut sim = DemSim::new();
-            let sand = sim.add_material("sand", 2650.0).unwrap();
-            let glass = sim.add_material("glass", 2500.0).unwrap();
-            sim.set_contact_law(Box::new(SpringAndDrag(Default::default())), Some((sand, sand))).unwrap();
-            sim.add_sphere(sand, [0.0, 0.0, 0.006], 0.005, [0.0; 3]).unwrap();
+            let sand = sim.world.add_material("sand", 2650.0).unwrap();
+            let glass = sim.world.add_material("glass", 2500.0).unwrap();
+            sim.world.set_contact_law(Box::new(SpringAndDrag(Default::default())), Some((sand, sand))).unwrap();
+            sim.world.add_sphere(sand, [0.0, 0.0, 0.006], 0.005, [0.0; 3]).unwrap();
             if near_wall {
-                sim.add_wall(Wall::new("floor", WallShape::Plane { normal: [0.0, 0.0, 1.0] }, [0.0; 3], glass));
+                sim.world.add_wall(Wall::new("floor", WallShape::Plane { normal: [0.0, 0.0, 1.0] }, [0.0; 3], glass));
             } else {
-                sim.add_sphere(glass, [0.0, 0.0, -0.005], 0.005, [0.0; 3]).unwrap();
+                sim.world.add_sphere(glass, [0.0, 0.0, -0.005], 0.005, [0.0; 3]).unwrap();
             }
             sim.skin = 0.002;
             let Err(GraniteError::Setup(message)) = sim.rebuild_candidates() else {

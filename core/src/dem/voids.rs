@@ -55,7 +55,7 @@ impl Grain {
 /// The grains of a simulation: free spheres, clumps and bodies of plugin kinds (fixed ones, the
 /// container's parts, left out).
 pub fn grains(sim: &DemSim) -> Vec<Grain> {
-    let s = &sim.spheres;
+    let s = &sim.world.spheres;
     let mut out: Vec<Grain> = (0..s.len())
         .filter(|&i| s.clump[i] == FREE)
         .map(|i| Grain {
@@ -64,14 +64,14 @@ pub fn grains(sim: &DemSim) -> Vec<Grain> {
             body: None,
         })
         .collect();
-    for c in 0..sim.clumps.len() {
-        let spheres = sim.clumps.members_of(c).map(|m| {
-            let i = sim.clumps.members[m] as usize;
+    for c in 0..sim.world.clumps.len() {
+        let spheres = sim.world.clumps.members_of(c).map(|m| {
+            let i = sim.world.clumps.members[m] as usize;
             (s.x[i], s.radius[i])
         });
-        out.push(Grain { spheres: spheres.collect(), volume: sim.clumps.volume[c], body: None });
+        out.push(Grain { spheres: spheres.collect(), volume: sim.world.clumps.volume[c], body: None });
     }
-    let k = &sim.kinds;
+    let k = &sim.world.kinds;
     for i in (0..k.len()).filter(|&i| !k.fixed[i]) {
         let shape = k.shapes[k.shape[i] as usize].clone();
         out.push(Grain {

@@ -3,7 +3,7 @@
 
 use super::EnergyTracker;
 use crate::dem::particles::{dof, FREE};
-use crate::dem::sim::DemSim;
+use crate::dem::sim::{DemSim, DemWorld};
 use crate::error::{GraniteError, Result};
 use crate::ext::contact::ContactStep;
 use crate::math::Vec3;
@@ -66,10 +66,10 @@ impl DemSim {
             self.energy = None;
             return Ok(());
         }
-        if self.cell.is_some() {
+        if self.world.cell.is_some() {
             return Err(GraniteError::Setup("energy tracking covers open domains, not periodic cells".into()));
         }
-        if let Some(law) = self.laws.iter().find(|l| !l.tracks_dissipation()) {
+        if let Some(law) = self.world.laws.iter().find(|l| !l.tracks_dissipation()) {
             return Err(GraniteError::Setup(format!(
                 "contact law `{}` does not account for its losses: energy cannot be tracked with it",
                 law.name()
@@ -78,14 +78,21 @@ impl DemSim {
         self.energy = Some(EnergyTracker::default());
         Ok(())
     }
+}
 
+/// The energy booking, a stage of a tracked step: before the motion it reads the world (after the
+/// contact stage) into a [`BeforeMotion`]; once everything has moved it reads the world again and
+/// books the step's exchanges in the tracker.
+pub(crate) struct EnergyBooking;
+
+impl EnergyBooking {
     /// What the tracker keeps of a step before its motion (called after the contact stage).
-    pub(crate) fn energy_before_motion(
-        &self,
+    pub(crate) fn before_motion(
+        world: &DemWorld,
         history: (Vec<f64>, Vec<f64>),
         body_history: Option<[Vec<f64>; 3]>,
     ) -> BeforeMotion {
-        let s = &self.spheres;
+        let s = &world.spheres;
         let rigid = |x: &[Vec3], v: &[Vec3], w: &[Vec3], q: &[nalgebra::UnitQuaternion<f64>], inertia: &[Vec3]| {
             (0..x.len())
                 .map(|c| {
@@ -95,7 +102,7 @@ impl DemSim {
                 })
                 .collect::<Vec<_>>()
         };
-        let (cl, k) = (&self.clumps, &self.kinds);
+        let (cl, k) = (&world.clumps, &world.kinds);
         BeforeMotion {
             x: s.x.clone(),
             v: s.v.clone(),
@@ -109,17 +116,17 @@ impl DemSim {
 
     /// Contact energies of the step, at the positions its forces came from: the elastic energy,
     /// what each contact dissipated, and the work of moving walls.
-    fn contact_energies(&self, b: &BeforeMotion) -> (f64, f64, f64, f64) {
-        let s = &self.spheres;
+    fn contact_energies(world: &DemWorld, b: &BeforeMotion) -> (f64, f64, f64, f64) {
+        let s = &world.spheres;
         let (mut elastic, mut friction, mut viscous, mut walls) = (0.0, 0.0, 0.0, 0.0);
         let mean = |i: usize| {
             ([0, 1, 2].map(|a| 0.5 * (b.v[i][a] + s.v[i][a])), [0, 1, 2].map(|a| 0.5 * (b.w[i][a] + s.w[i][a])))
         };
         let mut add = |law: u16, normal: Vec3, overlap: f64, rel: (Vec3, Vec3, Vec3), k: usize, wall: bool| {
-            let list = if wall { &self.wall_pairs } else { &self.pairs };
+            let list = if wall { &world.wall_pairs } else { &world.pairs };
             let before = if wall { &b.history.1 } else { &b.history.0 };
             let (ps, hs) = (list.param_stride, list.history_stride);
-            let law = &self.laws[law as usize];
+            let law = &world.laws[law as usize];
             let params = &list.params[k * ps..(k + 1) * ps];
             let after = &list.history[k * hs..(k + 1) * hs];
             elastic += law.elastic_energy(overlap, params, after);
@@ -129,7 +136,7 @@ impl DemSim {
                 rel_velocity: rel.0,
                 mean_rel_velocity: rel.1,
                 rel_spin: rel.2,
-                dt: self.dt,
+                dt: world.dt,
                 params,
                 history_before: &before[k * hs..(k + 1) * hs],
                 history_after: after,
@@ -141,12 +148,12 @@ impl DemSim {
         };
         // The geometry the contact stage used (see `sphere_contacts` and `wall_contacts`), with
         // the velocities it used and the step's mean ones.
-        for k in 0..self.pairs.len() {
-            if !self.pairs.touching[k] {
+        for k in 0..world.pairs.len() {
+            if !world.pairs.touching[k] {
                 continue;
             }
-            let (i, j) = (self.pairs.a[k] as usize, self.pairs.b[k] as usize);
-            let (n, overlap, la, lb) = self.pair_geometry(&b.x, k);
+            let (i, j) = (world.pairs.a[k] as usize, world.pairs.b[k] as usize);
+            let (n, overlap, la, lb) = world.pair_geometry(&b.x, k);
             let relative = |vi: Vec3, wi: Vec3, vj: Vec3, wj: Vec3| {
                 let spins = [0, 1, 2].map(|a| la * wi[a] + lb * wj[a]);
                 let c = cross(spins, n);
@@ -155,17 +162,17 @@ impl DemSim {
             let ((vi, wi), (vj, wj)) = (mean(i), mean(j));
             let spin = [0, 1, 2].map(|a| b.w[j][a] - b.w[i][a]);
             let rel = (relative(b.v[i], b.w[i], b.v[j], b.w[j]), relative(vi, wi, vj, wj), spin);
-            add(self.pairs.law[k], n, overlap, rel, k, false);
+            add(world.pairs.law[k], n, overlap, rel, k, false);
         }
-        for k in 0..self.wall_pairs.len() {
-            if !self.wall_pairs.touching[k] {
+        for k in 0..world.wall_pairs.len() {
+            if !world.wall_pairs.touching[k] {
                 continue;
             }
-            let (i, w) = (self.wall_pairs.a[k] as usize, self.wall_pairs.b[k] as usize);
-            let wall = &self.walls[w];
+            let (i, w) = (world.wall_pairs.a[k] as usize, world.wall_pairs.b[k] as usize);
+            let wall = &world.walls[w];
             // The wall as it was at the contact stage (it has moved since by v dt): the same
             // geometry as the sphere moved on by v dt against the wall where it is now.
-            let shift = wall.velocity.map(|c| c * self.dt);
+            let shift = wall.velocity.map(|c| c * world.dt);
             let ahead = [0, 1, 2].map(|a| b.x[i][a] + shift[a]);
             let Some(geo) = wall.contact(ahead, s.radius[i], 0.0) else { continue };
             let arm = [0, 1, 2].map(|a| geo.point[a] - ahead[a]);
@@ -176,7 +183,7 @@ impl DemSim {
             let (vm, wm) = mean(i);
             let spin = b.w[i].map(|c| -c);
             add(
-                self.wall_pairs.law[k],
+                world.wall_pairs.law[k],
                 geo.normal,
                 -geo.gap,
                 (relative(b.v[i], b.w[i]), relative(vm, wm), spin),
@@ -184,17 +191,17 @@ impl DemSim {
                 true,
             );
             // A moving wall works on the sphere through the contact.
-            walls += dot(self.wall_pairs.force[k], wall.velocity) * self.dt;
+            walls += dot(world.wall_pairs.force[k], wall.velocity) * world.dt;
         }
-        let (e, f, v, w) = self.body_contact_energies(b);
+        let (e, f, v, w) = Self::body_contact_energies(world, b);
         (elastic + e, friction + f, viscous + v, walls + w)
     }
 
     /// The contact energies of the bodies of a plugin kind (with one another, walls and
     /// spheres), from the contacts their step found: elastic energy, losses, and the work of
     /// moving walls on them.
-    fn body_contact_energies(&self, b: &BeforeMotion) -> (f64, f64, f64, f64) {
-        let (k, s) = (&self.kinds, &self.spheres);
+    fn body_contact_energies(world: &DemWorld, b: &BeforeMotion) -> (f64, f64, f64, f64) {
+        let (k, s) = (&world.kinds, &world.spheres);
         let (mut elastic, mut friction, mut viscous, mut walls) = (0.0, 0.0, 0.0, 0.0);
         // A body's or a sphere's velocity at `point` over the step: the mean of before and after.
         let mean_at = |(x, v0, w0): (Vec3, Vec3, Vec3), (v1, w1): (Vec3, Vec3), point: Vec3| {
@@ -215,11 +222,11 @@ impl DemSim {
                 let (i, j) = (list.a[slot] as usize, list.b[slot] as usize);
                 let second = match n {
                     0 => body(j, point),
-                    1 => self.walls[j].velocity,
+                    1 => world.walls[j].velocity,
                     _ => mean_at((b.x[j], b.v[j], b.w[j]), (s.v[j], s.w[j]), point),
                 };
                 let first = body(i, point);
-                let law = &self.laws[list.law[slot] as usize];
+                let law = &world.laws[list.law[slot] as usize];
                 let params = &list.params[slot * ps..(slot + 1) * ps];
                 let after = &list.history[slot * hs..(slot + 1) * hs];
                 elastic += law.elastic_energy(c.overlap, params, after);
@@ -230,7 +237,7 @@ impl DemSim {
                     rel_velocity: c.rel_velocity,
                     mean_rel_velocity: [0, 1, 2].map(|a| second[a] - first[a]),
                     rel_spin: c.rel_spin,
-                    dt: self.dt,
+                    dt: world.dt,
                     params,
                     history_before,
                     history_after: after,
@@ -240,7 +247,7 @@ impl DemSim {
                 friction += f;
                 viscous += v;
                 if n == 1 {
-                    walls += dot(list.force[slot], self.walls[j].velocity) * self.dt;
+                    walls += dot(list.force[slot], world.walls[j].velocity) * world.dt;
                 }
             }
         }
@@ -248,11 +255,11 @@ impl DemSim {
     }
 
     /// Closes a tracked step after the motion.
-    pub(crate) fn energy_after_motion(&mut self, before: BeforeMotion) {
-        let (elastic, friction, viscous, walls) = self.contact_energies(&before);
-        let dt = self.dt;
-        let g = self.gravity;
-        let s = &self.spheres;
+    pub(crate) fn after_motion(world: &DemWorld, before: BeforeMotion, tracker: &mut EnergyTracker) {
+        let (elastic, friction, viscous, walls) = Self::contact_energies(world, &before);
+        let dt = world.dt;
+        let g = world.gravity;
+        let s = &world.spheres;
         let (mut kinetic, mut gravitational, mut damping, mut boundary) = (0.0, 0.0, 0.0, walls);
         for i in 0..s.len() {
             if s.clump[i] != FREE {
@@ -280,14 +287,14 @@ impl DemSim {
             }
         }
         // Clumps: their members' motion is the clump's.
-        let cl = &self.clumps;
+        let cl = &world.clumps;
         for (c, &was) in before.clumps.iter().enumerate() {
             let e = rigid_energies(was, (cl.mass[c], cl.v[c], cl.w[c]), (cl.force[c], cl.torque[c]), g, dt);
             (kinetic, gravitational, damping) = (kinetic + e[0], gravitational + e[1], damping + e[2]);
         }
         // Bodies of a plugin kind: the free ones as clumps; a fixed one, moved at its own
         // velocity and spin, works on what it touches against the loads they put on it.
-        let k = &self.kinds;
+        let k = &world.kinds;
         for (i, &was) in before.bodies.iter().enumerate() {
             if k.fixed[i] {
                 boundary -= (dot(k.force[i], was.1) + dot(k.torque[i], was.2)) * dt;
@@ -297,14 +304,15 @@ impl DemSim {
             (kinetic, gravitational, damping) = (kinetic + e[0], gravitational + e[1], damping + e[2]);
         }
         // External loads are in the spheres' forces: their work, over the step's mean velocities.
-        for load in &self.external {
-            if let Some(i) = self.load_index(load) {
+        for load in &world.external {
+            if let Some(i) = world.load_index(load) {
                 let mean = |old: Vec3, new: Vec3| [0, 1, 2].map(|a| 0.5 * (old[a] + new[a]));
                 boundary += dot(load.force, mean(before.v[i], s.v[i])) * dt;
                 boundary += dot(load.torque, mean(before.w[i], s.w[i])) * dt;
             }
         }
-        if let Some(e) = self.energy.as_mut() {
+        {
+            let e = tracker;
             e.kinetic = kinetic;
             e.gravitational = gravitational;
             e.elastic = elastic;

@@ -19,7 +19,7 @@
 //!
 //! `kinetic + gravitational + elastic + friction + viscous + damping - boundary` stays constant.
 
-mod booking;
+pub(crate) mod booking;
 
 /// What the tracker holds: the accumulated exchanges and the last step's energies.
 #[derive(Debug, Clone, Default, serde::Serialize, serde::Deserialize)]

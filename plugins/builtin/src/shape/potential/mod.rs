@@ -111,7 +111,7 @@ pub fn add(sim: &mut granite_core::dem::DemSim, p: NewPotential) -> Result<usize
         other => return Err(GraniteError::Setup(format!("a {other} shape is not a potential particle"))),
     };
     let NewPotential { shape, material, x, q, v, w, fixed } = p;
-    sim.add_body(granite_core::dem::kinds::NewBody { kind, shape, material, x, q, v, w, fixed })
+    sim.world.add_body(granite_core::dem::kinds::NewBody { kind, shape, material, x, q, v, w, fixed })
 }
 
 fn body(kind: &'static str, params: ParamMap, shape: PotentialShape) -> Arc<dyn BodyShape> {
