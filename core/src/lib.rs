@@ -49,6 +49,7 @@ pub mod memory;
 pub mod mpm;
 pub mod par;
 pub mod params;
+pub mod region;
 pub mod registry;
 pub mod simd;
 

@@ -1,7 +1,9 @@
-//! Output files of the output contract: `series.csv`, `summary.json`, `vtk/`.
+//! Files: the output contract (`series.csv`, `summary.json`, `vtk/`) and the meshes read as input
+//! (`gmsh`).
 
 pub mod checkpoint_file;
 pub mod durable;
+pub mod gmsh;
 pub mod series;
 pub mod vtk;
 
