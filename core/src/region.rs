@@ -77,10 +77,11 @@ impl Simplices {
         if corners.is_empty() {
             return Err(GraniteError::Setup(format!("physical group \"{}\" holds no element", group.name)));
         }
-        Ok(Simplices::new(dim, corners))
+        Ok(Simplices::from_corners(dim, corners))
     }
 
-    fn new(dim: usize, corners: Vec<[Vec3; 4]>) -> Simplices {
+    /// Simplices of dimension `dim` from their corners (the first `dim + 1` of each).
+    pub fn from_corners(dim: usize, corners: Vec<[Vec3; 4]>) -> Simplices {
         let n = dim + 1;
         let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
         let mut size = 0.0;
@@ -91,7 +92,9 @@ impl Simplices {
                     hi[a] = hi[a].max(p[a]);
                 }
             }
-            size += (0..3).map(|a| c[..n].iter().map(|p| p[a]).fold(f64::NEG_INFINITY, f64::max) - c[0][a]).fold(0.0, f64::max);
+            size += (0..3)
+                .map(|a| c[..n].iter().map(|p| p[a]).fold(f64::NEG_INFINITY, f64::max) - c[0][a])
+                .fold(0.0, f64::max);
         }
         // Bins about the mean simplex size, at most ~4 simplices' worth of bins per simplex.
         let span = (0..3).map(|a| hi[a] - lo[a]).fold(0.0, f64::max);
@@ -150,7 +153,9 @@ impl Simplices {
                     for xb in rx.0..=rx.1 {
                         let b = (z * self.bins[1] + y) * self.bins[0] + xb;
                         found.extend(
-                            self.members[self.start[b] as usize..self.start[b + 1] as usize].iter().map(|&s| s as usize),
+                            self.members[self.start[b] as usize..self.start[b + 1] as usize]
+                                .iter()
+                                .map(|&s| s as usize),
                         );
                     }
                 }
@@ -295,9 +300,12 @@ mod tests {
 
     fn unit_square_as_two_triangles() -> Simplices {
         let z = [0.0; 3];
-        Simplices::new(
+        Simplices::from_corners(
             2,
-            vec![[[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], z], [[0.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0], z]],
+            vec![
+                [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], z],
+                [[0.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0], z],
+            ],
         )
     }
 
@@ -338,7 +346,7 @@ mod tests {
             .iter()
             .map(|s| [corners[s[0]], corners[s[1]], corners[s[2]], corners[s[3]]])
             .collect();
-        let cube = Simplices::new(3, tets);
+        let cube = Simplices::from_corners(3, tets);
         assert!((cube.measure() - 1.0).abs() < 1e-15);
         assert!(cube.contains([0.5, 0.5, 0.5]) && cube.contains([0.1, 0.9, 0.2]));
         assert!(!cube.contains([0.5, 0.5, 1.1]));

@@ -8,7 +8,7 @@
 #[derive(Debug, Clone, Copy)]
 pub struct ApiDoc {
     /// What it is called on: `""` (a global function), `"sim"` (both simulations), `"MpmSim"`,
-    /// `"DemSim"`, `"Material"` (an MPM material), `"DemMaterial"`, or a Rhai type (`"array"`,
+    /// `"DemSim"`, `"Material"` (an MPM material), `"DemMaterial"`, `"Mesh"` (a gmsh mesh), or a Rhai type (`"array"`,
     /// `"string"`, `"blob"`) for the few of Rhai's own functions granite replaces.
     pub on: &'static str,
     pub name: &'static str,
@@ -47,6 +47,7 @@ pub static API: &[ApiDoc] = &[
     f("", "mpm_load", &["mpm_load(path)"], NONE, "an MPM simulation from a checkpoint written by `sim.save` (path from the working directory)"),
     f("", "dem", &["dem()", "dem(#{ seed, skin })"], &["seed", "skin"], "a new DEM simulation; the Verlet skin defaults to half the smallest radius"),
     f("", "element_test", &["element_test(law, #{ ...law parameters }, #{ stress, strain, hold, steps })"], &["stress", "strain", "hold", "steps"], "drives a law on one point without a mesh: from `stress`, the `strain` increment [xx, yy, zz, xy, yz, xz] in `steps` equal parts, the components of `hold` (#{ xx: -1e5 }) kept at those stresses; returns #{ stress, strain, p, q, state } per step"),
+    f("", "load_mesh", &["load_mesh(path)"], NONE, "a gmsh mesh (MSH 4.1 or 2.2, ASCII or binary) with its physical groups, for `fill_mesh`, `fix`, `friction` and `traction` (path from the working directory or the script's folder)"),
     f("", "dem_load", &["dem_load(path)"], NONE, "a DEM simulation from a state written by `sim.save` (path from the working directory)"),
     // Rhai's functions that allocate what they are asked in one call, checked first against the
     // memory the process can take.
@@ -84,6 +85,7 @@ pub static API: &[ApiDoc] = &[
     f("MpmSim", "set_material", &["sim.set_material(material, #{ ...law parameters })"], NONE, "new values of some law parameters from the next step on; points keep stress and state"),
     f("MpmSim", "memory_per_point", &["sim.memory_per_point(material)"], NONE, "bytes a point of this material holds (its law's object included)"),
     f("MpmSim", "fill_box", &["sim.fill_box(material, lower, upper)", "sim.fill_box(material, lower, upper, #{ per_cell, layout, velocity, stress })"], FILL, "material points in every cell of a box"),
+    f("MpmSim", "fill_mesh", &["sim.fill_mesh(material, mesh, group)", "sim.fill_mesh(material, mesh, group, #{ per_cell, layout, velocity, stress })"], FILL, "material points in every cell of the background grid whose points lie in the surfaces (2D) or volumes (3D) of a physical group of a gmsh mesh; returns the count"),
     f("MpmSim", "fill_region", &["sim.fill_region(material, |x| bool, #{ per_cell, layout, velocity, stress })"], FILL, "material points where a function of the position is true"),
     f("MpmSim", "add_points", &["sim.add_points(material, [[x, y], ...], volume)"], NONE, "explicit material points"),
     f("MpmSim", "initial_stress", &["sim.initial_stress([sxx, syy, szz, sxy, syz, sxz])"], NONE, "a uniform stress on every point (tension positive)"),
@@ -94,9 +96,9 @@ pub static API: &[ApiDoc] = &[
     f("MpmSim", "velocity_update", &["sim.velocity_update(name)", "sim.velocity_update(name, #{ flip_ratio })", "sim.velocity_update(\"ASFLIP\", #{ alpha, beta_min, beta_max })"], &["flip_ratio", "alpha", "beta_min", "beta_max"], "PIC, FLIP, NFLIP, FLIPX, NFLIPX, APIC or ASFLIP (Fei et al. 2021); `granite plugins` lists their parameters"),
     f("MpmSim", "mesh", &["sim.mesh(#{ origin, cell, cells })"], MESH, "replaces the mesh; points stay, boundary conditions are cleared"),
     f("MpmSim", "on_leave", &["sim.on_leave(\"delete\" | \"stop\")"], NONE, "what happens to points leaving the mesh"),
-    f("MpmSim", "fix", &["sim.fix(selector, axis)", "sim.fix(selector, axis, value)"], NONE, "zero (or prescribed: number, [[t, v], ...] table or |t| function) velocity of nodes along an axis"),
-    f("MpmSim", "friction", &["sim.friction(face, mu)"], NONE, "Coulomb friction on a mesh face"),
-    f("MpmSim", "traction", &["sim.traction(face, [tx, ty])", "sim.traction(face, t, factor)"], NONE, "a uniform traction (Pa) on a mesh face"),
+    f("MpmSim", "fix", &["sim.fix(selector, axis)", "sim.fix(selector, axis, value)", "sim.fix(mesh, group, axis)", "sim.fix(mesh, group, axis, value)"], NONE, "zero (or prescribed: number, [[t, v], ...] table or |t| function) velocity of nodes along an axis: those of a face (\"x-\", ...), those a closure |x| selects, or those within half a cell of a curve (2D) or surface (3D) group of a gmsh mesh"),
+    f("MpmSim", "friction", &["sim.friction(face, mu)", "sim.friction(mesh, group, mu)"], NONE, "Coulomb friction on a face of the grid, or on the nodes within half a cell of a straight curve or plane surface group of a gmsh mesh normal to a grid axis (outward: away from the grid's middle)"),
+    f("MpmSim", "traction", &["sim.traction(face, [tx, ty])", "sim.traction(face, t, factor)", "sim.traction(mesh, group, t)", "sim.traction(mesh, group, t, factor)"], NONE, "a uniform traction (Pa) on a face of the grid or on a curve (2D) or surface (3D) group of a gmsh mesh, as the nodal forces of eq. 3.22 (integrated exactly with the grid's shape functions)"),
     f("MpmSim", "nodal_force", &["sim.nodal_force(selector, [fx, fy])", "sim.nodal_force(selector, f, factor)"], NONE, "the same force on each selected node"),
     f("MpmSim", "track_runout", &["sim.track_runout(width0, height0)"], NONE, "runout columns in the series from now (thesis 5.6-5.9)"),
     f("MpmSim", "points", &["sim.points"], NONE, "number of material points"),
@@ -109,6 +111,8 @@ pub static API: &[ApiDoc] = &[
     f("MpmSim", "balance_every", &["sim.balance_every(n)"], NONE, "steps between two balances of the RVEs over MPI processes by their measured cost (default 50; 0: never)"),
     f("MpmSim", "write_point_object", &["sim.write_point_object(i, file)"], NONE, "a VTU of point i's own object (the RVE of dem_rve)"),
     f("Material", "name", &["material.name"], NONE, "the material's name"),
+    f("Mesh", "groups", &["mesh.groups()"], NONE, "the mesh's physical groups: #{ name, dim, elements } each"),
+    f("Mesh", "measure", &["mesh.measure(group)"], NONE, "length, area or volume of a physical group"),
     // DEM: set-up.
     f("DemSim", "material", &["sim.material(#{ name, density, young, poisson, rigid })"], &["name", "density", "young", "poisson", "rigid"], "a DEM material; `young` and `poisson` (or `rigid: true`) serve laws that combine two materials"),
     f("DemSim", "set_material", &["sim.set_material(material, #{ young, poisson, rigid })"], &["young", "poisson", "rigid"], "new moduli of a material, reaching existing contacts at the next step"),
@@ -279,6 +283,7 @@ pub fn markdown() -> String {
         ("sim", "Both simulations"),
         ("MpmSim", "MPM simulations (`mpm(...)`)"),
         ("Material", "MPM materials"),
+        ("Mesh", "gmsh meshes (`load_mesh(...)`)"),
         ("DemSim", "DEM simulations (`dem(...)`)"),
         ("DemMaterial", "DEM materials"),
         ("array", "Rhai's arrays"),
@@ -420,7 +425,7 @@ mod completion_tests {
         assert!(found.contains(&"wall_plane".to_string()) && found.contains(&"wall_velocity".to_string()));
         // fill_box is an MpmSim method, not a DemSim one.
         assert!(complete("sim.fill", 8, &vars()).1.is_empty());
-        assert_eq!(complete("mpm_sim.fill", 12, &vars()).1, vec!["fill_box", "fill_region"]);
+        assert_eq!(complete("mpm_sim.fill", 12, &vars()).1, vec!["fill_box", "fill_mesh", "fill_region"]);
     }
 
     #[test]

@@ -16,6 +16,7 @@ mod dem_console;
 pub mod driver;
 mod element;
 mod limits;
+mod mesh_api;
 mod mpm_api;
 mod output;
 pub mod plot;
@@ -66,6 +67,9 @@ pub struct RunOptions {
     /// Set by a signal handler to the number of a signal asking the run to stop (SIGINT, SIGTERM):
     /// a run stops cleanly at its next step and the script ends `interrupted`.
     pub stop_signal: Option<&'static std::sync::atomic::AtomicI32>,
+    /// The folder of the script file (set by `run_script`): files the script reads (meshes) are
+    /// also looked for there.
+    pub script_dir: Option<PathBuf>,
 }
 
 impl ScriptContext {
@@ -102,9 +106,9 @@ impl ScriptContext {
         self.options.comm.as_ref().filter(|c| c.size() > 1)
     }
 
-    /// A file a script reads (`mpm_load`, `dem_load`): a relative path from the working
-    /// directory, else from the output folder or one of its simulation folders (where
-    /// `sim.save` wrote it).
+    /// A file a script reads (`mpm_load`, `dem_load`, `load_mesh`): a relative path from the
+    /// working directory, else from the script's folder, the output folder or one of its
+    /// simulation folders (where `sim.save` wrote it).
     pub(crate) fn input_path(&self, file: &str) -> std::result::Result<PathBuf, String> {
         // A checkpoint whose newest file was lost still has the one before (`io::durable`).
         let exists = |p: &Path| p.is_file() || granite_core::io::durable::previous_path(p).is_file();
@@ -113,7 +117,8 @@ impl ScriptContext {
             return Ok(given.to_path_buf());
         }
         let out = &self.options.out_dir;
-        let mut looked = vec![out.join(file)];
+        let mut looked: Vec<PathBuf> = self.options.script_dir.iter().map(|d| d.join(file)).collect();
+        looked.push(out.join(file));
         if let Ok(entries) = std::fs::read_dir(out) {
             let mut sims: Vec<PathBuf> = entries
                 .flatten()
@@ -125,8 +130,9 @@ impl ScriptContext {
         }
         looked.iter().find(|p| exists(p)).cloned().ok_or_else(|| {
             format!(
-                "no file `{file}` in the working directory ({}) nor in the output folder {} or its simulation folders",
+                "no file `{file}` in the working directory ({}){} nor in the output folder {} or its simulation folders",
                 std::env::current_dir().map(|d| d.display().to_string()).unwrap_or_default(),
+                self.options.script_dir.as_ref().map(|d| format!(", the script's folder ({})", d.display())).unwrap_or_default(),
                 out.display()
             )
         })
@@ -498,6 +504,7 @@ fn build_engine(ctx: &Arc<ScriptContext>) -> Engine {
     potential_api::register(&mut engine);
     body_api::register(&mut engine);
     element::register(&mut engine, ctx);
+    mesh_api::register(&mut engine, ctx);
     script_law::register(&mut engine, ctx);
     engine
 }
@@ -562,7 +569,8 @@ fn line_comment(line: &str) -> Option<&str> {
 pub fn run_script(path: &Path, registry: Registry, options: RunOptions) -> Result<RunReport> {
     let source = std::fs::read_to_string(path).map_err(|e| GraniteError::io(path, e))?;
     let name = path.file_name().map(|n| n.to_string_lossy().to_string()).unwrap_or_default();
-    run_source(&name, &source, registry, options)
+    let script_dir = Some(path.parent().map(Path::to_path_buf).unwrap_or_default());
+    run_source(&name, &source, registry, RunOptions { script_dir, ..options })
 }
 
 /// Runs script text; `name` is used in error messages.

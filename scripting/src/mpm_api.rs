@@ -156,9 +156,11 @@ pub(super) fn law_inputs(
     Ok((param_map(&numbers, &skip, law)?, objects))
 }
 
-enum Region {
+pub(super) enum Region {
     Box(Vec3, Vec3),
     Closure(FnPtr),
+    /// Inside the surfaces (2D) or volumes (3D) of a mesh group.
+    Mesh(granite_core::region::Simplices),
 }
 
 impl Handle<MpmScene> {
@@ -273,7 +275,7 @@ impl Handle<MpmScene> {
         Ok(Region::Box(lo, hi))
     }
 
-    fn fill(
+    pub(super) fn fill(
         &mut self,
         ctx: Option<&NativeCallContext>,
         mat: &MaterialHandle,
@@ -307,6 +309,7 @@ impl Handle<MpmScene> {
         let mut script_error = None;
         let (xs, vols) = cell_points(&mesh, layout, per_dir as usize, |x| match &region {
             Region::Box(lo, hi) => Ok((0..dim).all(|a| x[a] >= lo[a] && x[a] <= hi[a])),
+            Region::Mesh(group) => Ok(group.contains(x)),
             Region::Closure(f) => {
                 let ctx = ctx.expect("closure regions are called with a context");
                 match f.call_within_context::<bool>(ctx, (position_array(x, dim),)) {
@@ -354,6 +357,11 @@ impl Handle<MpmScene> {
 
     fn fix(&mut self, ctx: &NativeCallContext, selector: Dynamic, axis: &str, value: Dynamic) -> RhaiResult<()> {
         let nodes = self.select_nodes(ctx, &selector)?;
+        self.fix_nodes(nodes, axis, value)
+    }
+
+    /// Fixes the velocity of `nodes` along `axis` to `value` (a number, a table, a function of t).
+    pub(super) fn fix_nodes(&mut self, nodes: Vec<u32>, axis: &str, value: Dynamic) -> RhaiResult<()> {
         let (f, driver) = time_function(&value, "velocity")?;
         let mut st = self.lock();
         let axis = axis_index(axis, st.sim.mpm.dim())?;
@@ -380,7 +388,7 @@ impl Handle<MpmScene> {
         Ok(())
     }
 
-    fn add_force(&mut self, nodes: Vec<u32>, force: Vec<Vec3>, factor: Dynamic) -> RhaiResult<()> {
+    pub(super) fn add_force(&mut self, nodes: Vec<u32>, force: Vec<Vec3>, factor: Dynamic) -> RhaiResult<()> {
         let (f, driver) = time_function(&factor, "factor")?;
         let mut st = self.lock();
         st.sim.mpm.boundary.forces.push(NodalForce { nodes, force, factor: f });

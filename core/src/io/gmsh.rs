@@ -493,8 +493,7 @@ impl<'a> Reader<'a> {
             let groups: Vec<u32> = physical.iter().map(|&t| self.add_group(dim, t.abs(), None)).collect();
             for _ in 0..n {
                 self.size()?;
-                let nodes =
-                    (0..count).map(|_| self.size().and_then(|t| self.node(t))).collect::<Parsed<Vec<u32>>>()?;
+                let nodes = (0..count).map(|_| self.size().and_then(|t| self.node(t))).collect::<Parsed<Vec<u32>>>()?;
                 self.mesh.elements.push(Element { shape, nodes, groups: groups.clone() });
             }
         }
@@ -579,7 +578,12 @@ mod tests {
         let embankment = [(3.0, 2.0), (7.0, 2.0), (5.5, 3.5), (4.5, 3.5)];
         let slope = 2.0 * (1.5f64 * 1.5 + 1.5 * 1.5).sqrt() + 1.0;
         let first = mesh("embankment_v41_ascii.msh");
-        for name in ["embankment_v41_ascii.msh", "embankment_v41_binary.msh", "embankment_v22_ascii.msh", "embankment_v22_binary.msh"] {
+        for name in [
+            "embankment_v41_ascii.msh",
+            "embankment_v41_binary.msh",
+            "embankment_v22_ascii.msh",
+            "embankment_v22_binary.msh",
+        ] {
             let m = mesh(name);
             let names: Vec<(&str, u8)> = m.groups.iter().map(|g| (g.name.as_str(), g.dim)).collect();
             assert_eq!(
@@ -592,7 +596,13 @@ mod tests {
             // ASCII files carry 16 significant digits: positions up to 10 m agree to 1e-14 m.
             let sorted = |m: &GmshMesh| {
                 let mut x = m.nodes.clone();
-                x.sort_by(|a, b| a.iter().zip(b).map(|(p, q)| p.total_cmp(q)).find(|o| o.is_ne()).unwrap_or(std::cmp::Ordering::Equal));
+                x.sort_by(|a, b| {
+                    a.iter()
+                        .zip(b)
+                        .map(|(p, q)| p.total_cmp(q))
+                        .find(|o| o.is_ne())
+                        .unwrap_or(std::cmp::Ordering::Equal)
+                });
                 x
             };
             for (p, q) in sorted(&m).iter().zip(sorted(&first)) {
@@ -633,7 +643,9 @@ mod tests {
 
     #[test]
     fn damaged_files_and_unknown_groups_are_refused_with_a_reason() {
-        let text = std::fs::read(Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/meshes/embankment_v41_ascii.msh")).unwrap();
+        let text =
+            std::fs::read(Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/meshes/embankment_v41_ascii.msh"))
+                .unwrap();
         let cut = GmshMesh::parse(&text[..text.len() / 2]).unwrap_err();
         assert!(cut.contains("ends") || cut.contains("has no"), "{cut}");
         let v3 = GmshMesh::parse(b"$MeshFormat\n3.0 0 8\n$EndMeshFormat\n").unwrap_err();

@@ -1,0 +1,164 @@
+//! gmsh meshes in scripts: `load_mesh(path)`, `mesh.groups()`, and the MPM calls that take a
+//! mesh group: `sim.fill_mesh`, `sim.fix`, `sim.friction`, `sim.traction` (see docs/mpm.md,
+//! "Geometry from gmsh").
+
+use super::convert::{err, number, vector, OrRhai, RhaiResult};
+use super::mpm_api::{MaterialHandle, Region, SimHandle};
+use super::ScriptContext;
+use granite_core::error::GraniteError;
+use granite_core::io::gmsh::GmshMesh;
+use granite_core::mpm::boundary::{nodes_near, traction_on_simplices, FrictionConstraint};
+use granite_core::region::Simplices;
+use rhai::{Array, Dynamic, Engine, Map};
+use std::sync::Arc;
+
+/// A mesh read by `load_mesh`, shared by the calls that use it.
+#[derive(Clone)]
+pub struct MeshHandle {
+    pub file: String,
+    pub mesh: Arc<GmshMesh>,
+}
+
+impl MeshHandle {
+    /// The simplices of `group`, checked to be of dimension `want` (given in words for the
+    /// error) in a simulation of dimension `space`.
+    fn group(&self, name: &str, space: usize, want: usize, call: &str) -> RhaiResult<Simplices> {
+        let g = self.mesh.group(name).or_rhai()?;
+        let dim = self.mesh.groups[g].dim as usize;
+        if dim != want {
+            let what = |d: usize| match d {
+                0 => "points",
+                1 => "curves",
+                2 => "surfaces",
+                _ => "volumes",
+            };
+            return err(format!(
+                "sim.{call}(mesh, \"{name}\", ...): group \"{name}\" of {} holds {} ({dim}D); a {space}D simulation takes {} here",
+                self.file,
+                what(dim),
+                what(want)
+            ));
+        }
+        Simplices::of_group(&self.mesh, g, space).or_rhai()
+    }
+
+    fn describe(&self) -> String {
+        format!(
+            "Mesh(\"{}\", {} nodes, {} elements, {} groups)",
+            self.file,
+            self.mesh.nodes.len(),
+            self.mesh.elements.len(),
+            self.mesh.groups.len()
+        )
+    }
+}
+
+/// The grid nodes of a curve (2D) or surface (3D) group: those within half the smallest cell.
+fn boundary_nodes(s: &SimHandle, mesh: &MeshHandle, group: &str, call: &str) -> RhaiResult<(Vec<u32>, Simplices)> {
+    let grid = s.lock().sim.mpm.mesh.clone();
+    let simplices = mesh.group(group, grid.dim, grid.dim - 1, call)?;
+    let nodes = nodes_near(&grid, &simplices, 0.5 * grid.min_cell());
+    if nodes.is_empty() {
+        return err(format!(
+            "sim.{call}(mesh, \"{group}\", ...): no grid node lies within half a cell of the group: does it lie inside the background mesh?"
+        ));
+    }
+    Ok((nodes, simplices))
+}
+
+fn fill_mesh(s: &mut SimHandle, m: &MaterialHandle, mesh: &MeshHandle, group: &str, opts: Map) -> RhaiResult<i64> {
+    let dim = s.lock().sim.mpm.dim();
+    let simplices = mesh.group(group, dim, dim, "fill_mesh")?;
+    s.fill(None, m, Region::Mesh(simplices), opts)
+}
+
+fn friction(s: &mut SimHandle, mesh: &MeshHandle, group: &str, mu: Dynamic) -> RhaiResult<()> {
+    let mu = number(&mu, "mu")?;
+    if !(mu >= 0.0 && mu.is_finite()) {
+        return err(format!("friction coefficient `mu` must be finite and >= 0, got {mu}"));
+    }
+    let (nodes, simplices) = boundary_nodes(s, mesh, group, "friction")?;
+    let normal = simplices.mean_normal();
+    let Some(axis) = (0..3).find(|&a| normal[a].abs() > 1.0 - 1e-9) else {
+        return err(format!(
+            "sim.friction(mesh, \"{group}\", mu): the group is not a straight boundary along a grid axis (mean normal {normal:?}); \
+             friction acts on boundaries normal to x, y or z"
+        ));
+    };
+    let mut st = s.lock();
+    let grid = &st.sim.mpm.mesh;
+    // Outward: from the grid's middle towards the group.
+    let middle = 0.5 * (grid.origin[axis] + grid.upper()[axis]);
+    let at = nodes.iter().map(|&n| grid.node_position(n as usize)[axis]).sum::<f64>() / nodes.len() as f64;
+    let sign = if at < middle { -1.0 } else { 1.0 };
+    st.sim.mpm.boundary.friction.push(FrictionConstraint { nodes, axis, sign, mu });
+    Ok(())
+}
+
+fn traction(s: &mut SimHandle, mesh: &MeshHandle, group: &str, t: Dynamic, factor: Dynamic) -> RhaiResult<()> {
+    let (nodes, forces) = {
+        let st = s.lock();
+        let grid = &st.sim.mpm.mesh;
+        let simplices = mesh.group(group, grid.dim, grid.dim - 1, "traction")?;
+        traction_on_simplices(grid, &simplices, vector(&t, grid.dim, "traction")?).or_rhai()?
+    };
+    s.add_force(nodes, forces, factor)
+}
+
+pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
+    engine.register_type_with_name::<MeshHandle>("Mesh");
+    engine.register_fn("to_string", |m: &mut MeshHandle| m.describe());
+    engine.register_fn("to_debug", |m: &mut MeshHandle| m.describe());
+    let c = ctx.clone();
+    engine.register_fn("load_mesh", move |file: &str| -> RhaiResult<MeshHandle> {
+        let path = c
+            .input_path(file)
+            .map_err(|why| super::convert::to_rhai(GraniteError::Setup(format!("load_mesh: {why}"))))?;
+        let mesh = GmshMesh::read(&path).or_rhai()?;
+        Ok(MeshHandle { file: file.to_string(), mesh: Arc::new(mesh) })
+    });
+    engine.register_fn("groups", |m: &mut MeshHandle| -> Array {
+        m.mesh
+            .groups
+            .iter()
+            .enumerate()
+            .map(|(g, group)| {
+                let mut map = Map::new();
+                map.insert("name".into(), Dynamic::from(group.name.clone()));
+                map.insert("dim".into(), Dynamic::from(group.dim as i64));
+                map.insert("elements".into(), Dynamic::from(m.mesh.elements_of(g).count() as i64));
+                Dynamic::from(map)
+            })
+            .collect()
+    });
+    engine.register_fn("measure", |m: &mut MeshHandle, group: &str| -> RhaiResult<f64> {
+        let g = m.mesh.group(group).or_rhai()?;
+        Ok(Simplices::of_group(&m.mesh, g, 3).or_rhai()?.measure())
+    });
+    engine.register_fn(
+        "fill_mesh",
+        |s: &mut SimHandle, m: MaterialHandle, mesh: MeshHandle, group: &str, opts: Map| {
+            fill_mesh(s, &m, &mesh, group, opts)
+        },
+    );
+    engine.register_fn("fill_mesh", |s: &mut SimHandle, m: MaterialHandle, mesh: MeshHandle, group: &str| {
+        fill_mesh(s, &m, &mesh, group, Map::new())
+    });
+    engine.register_fn("fix", |s: &mut SimHandle, mesh: MeshHandle, group: &str, axis: &str, v: Dynamic| {
+        let (nodes, _) = boundary_nodes(s, &mesh, group, "fix")?;
+        s.fix_nodes(nodes, axis, v)
+    });
+    engine.register_fn("fix", |s: &mut SimHandle, mesh: MeshHandle, group: &str, axis: &str| {
+        let (nodes, _) = boundary_nodes(s, &mesh, group, "fix")?;
+        s.fix_nodes(nodes, axis, Dynamic::from(0.0))
+    });
+    engine.register_fn("friction", |s: &mut SimHandle, mesh: MeshHandle, group: &str, mu: Dynamic| {
+        friction(s, &mesh, group, mu)
+    });
+    engine.register_fn("traction", |s: &mut SimHandle, mesh: MeshHandle, group: &str, t: Dynamic| {
+        traction(s, &mesh, group, t, Dynamic::from(1.0))
+    });
+    engine.register_fn("traction", |s: &mut SimHandle, mesh: MeshHandle, group: &str, t: Dynamic, f: Dynamic| {
+        traction(s, &mesh, group, t, f)
+    });
+}
