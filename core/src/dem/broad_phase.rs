@@ -311,7 +311,93 @@ fn periodic_pairs(x: &[Vec3], radius: &[f64], (skin, cell): (f64, &PeriodicCell)
     })
 }
 
-/// Candidate sphere-wall pairs `(sphere, wall)` within `skin`, sorted by sphere then wall.
+/// Fewest triangles of wall meshes found through a grid rather than one by one.
+const TRIANGLES_IN_A_GRID: usize = 16;
+
+/// The triangles of wall meshes binned on a grid of cubes by their bounds grown by `reach`: a
+/// sphere's candidates are those of the cube its centre lies in.
+struct TriangleGrid {
+    lo: Vec3,
+    cube: f64,
+    counts: [usize; 3],
+    start: Vec<u32>,
+    walls: Vec<u32>,
+}
+
+impl TriangleGrid {
+    fn new(walls: &[Wall], triangles: &[usize], reach: f64) -> TriangleGrid {
+        let bounds: Vec<(Vec3, Vec3)> = triangles
+            .iter()
+            .map(|&w| {
+                let wall = &walls[w];
+                let WallShape::Triangle { b, c, .. } = &wall.shape else { unreachable!("triangles only") };
+                let p = wall.position;
+                let corners = [p, [0, 1, 2].map(|k| p[k] + b[k]), [0, 1, 2].map(|k| p[k] + c[k])];
+                let lo = [0, 1, 2].map(|k| corners.iter().map(|v| v[k]).fold(f64::INFINITY, f64::min) - reach);
+                let hi = [0, 1, 2].map(|k| corners.iter().map(|v| v[k]).fold(f64::NEG_INFINITY, f64::max) + reach);
+                (lo, hi)
+            })
+            .collect();
+        let lo = [0, 1, 2].map(|k| bounds.iter().map(|b| b.0[k]).fold(f64::INFINITY, f64::min));
+        let hi = [0, 1, 2].map(|k| bounds.iter().map(|b| b.1[k]).fold(f64::NEG_INFINITY, f64::max));
+        // Cubes about as wide as a grown triangle, and not more of them than ~8 per triangle.
+        let mean = bounds.iter().map(|(a, b)| (0..3).map(|k| b[k] - a[k]).fold(0.0, f64::max)).sum::<f64>()
+            / bounds.len() as f64;
+        let mut cube = mean.max(f64::MIN_POSITIVE);
+        let counts_of = |cube: f64| [0, 1, 2].map(|k| (((hi[k] - lo[k]) / cube) as usize + 1).min(1 << 20));
+        while counts_of(cube).iter().product::<usize>() > 8 * bounds.len() + 64 {
+            cube *= 1.5;
+        }
+        let counts = counts_of(cube);
+        let index = |x: f64, k: usize| (((x - lo[k]) / cube) as usize).min(counts[k] - 1);
+        let mut lists: Vec<Vec<u32>> = vec![Vec::new(); counts.iter().product()];
+        for (&w, (a, b)) in triangles.iter().zip(&bounds) {
+            for z in index(a[2], 2)..=index(b[2], 2) {
+                for y in index(a[1], 1)..=index(b[1], 1) {
+                    for x in index(a[0], 0)..=index(b[0], 0) {
+                        lists[(z * counts[1] + y) * counts[0] + x].push(w as u32);
+                    }
+                }
+            }
+        }
+        let mut start = vec![0u32];
+        let mut all = Vec::new();
+        for l in lists {
+            all.extend(l);
+            start.push(all.len() as u32);
+        }
+        TriangleGrid { lo, cube, counts, start, walls: all }
+    }
+
+    /// The triangles that may lie within `reach` of `x`.
+    fn near(&self, x: Vec3) -> &[u32] {
+        let mut ijk = [0usize; 3];
+        for k in 0..3 {
+            let t = (x[k] - self.lo[k]) / self.cube;
+            if !(t >= 0.0 && t < self.counts[k] as f64) {
+                return &[];
+            }
+            ijk[k] = t as usize;
+        }
+        let c = (ijk[2] * self.counts[1] + ijk[1]) * self.counts[0] + ijk[0];
+        &self.walls[self.start[c] as usize..self.start[c + 1] as usize]
+    }
+}
+
+/// Whether a sphere centred at `p` comes within `reach` of a triangle wall: by distance alone. A
+/// triangle that leaves a shared edge or corner to a neighbour is still a candidate near it: the
+/// sphere may move onto its face before the next rebuild.
+fn triangle_near(w: &Wall, p: Vec3, reach: f64) -> bool {
+    let WallShape::Triangle { b, c, .. } = &w.shape else { return false };
+    let x = w.position;
+    let d = [p[0] - x[0], p[1] - x[1], p[2] - x[2]];
+    let (q, _) = crate::dem::mesh_walls::closest_on_triangle(d, [0.0; 3], *b, *c);
+    let e = [d[0] - q[0], d[1] - q[1], d[2] - q[2]];
+    dot3(e, e) <= reach * reach
+}
+
+/// Candidate sphere-wall pairs `(sphere, wall)` within `skin`, sorted by sphere then wall. The
+/// triangles of wall meshes are looked up on a grid when there are many.
 pub fn wall_pairs(x: &[Vec3], radius: &[f64], walls: &[Wall], skin: f64) -> Blocks {
     if walls.is_empty() {
         return Vec::new();
@@ -327,15 +413,29 @@ pub fn wall_pairs(x: &[Vec3], radius: &[f64], walls: &[Wall], skin: f64) -> Bloc
             _ => None,
         })
         .collect();
+    let triangles: Vec<usize> =
+        (0..walls.len()).filter(|&w| matches!(walls[w].shape, WallShape::Triangle { .. })).collect();
+    let reach = radius.iter().copied().fold(0.0, f64::max) + skin;
+    let grid = (triangles.len() >= TRIANGLES_IN_A_GRID).then(|| TriangleGrid::new(walls, &triangles, reach));
     candidates_by_particle(x.len(), |i, found| {
         let (p, r) = (x[i], radius[i]);
         for (k, (w, plane)) in walls.iter().zip(&planes).enumerate() {
             let near = match plane {
                 Some((normal, at)) => !(dot3([p[0] - at[0], p[1] - at[1], p[2] - at[2]], *normal) - r > skin),
+                None if matches!(w.shape, WallShape::Triangle { .. }) => {
+                    grid.is_none() && triangle_near(w, p, r + skin)
+                }
                 None => w.contact(p, r, skin).is_some(),
             };
             if near {
                 found.push((i as u32, k as u32, [0; 3]));
+            }
+        }
+        if let Some(grid) = &grid {
+            for &k in grid.near(p) {
+                if triangle_near(&walls[k as usize], p, r + skin) {
+                    found.push((i as u32, k, [0; 3]));
+                }
             }
         }
     })
@@ -377,6 +477,37 @@ mod tests {
         }
         assert!(!brute.is_empty());
         assert_eq!(fast, brute);
+    }
+
+    #[test]
+    fn triangles_found_on_the_grid_are_those_within_reach() {
+        // A wavy surface of 2 x 20 x 20 triangles over [0, 1]^2, spheres scattered about it.
+        let n = 20;
+        let height = |i: usize, j: usize| 0.05 * ((i as f64 * 0.7).sin() + (j as f64 * 0.4).cos());
+        let at = |i: usize, j: usize| [i as f64 / n as f64, j as f64 / n as f64, height(i, j)];
+        let mut triangles = Vec::new();
+        for i in 0..n {
+            for j in 0..n {
+                triangles.push([at(i, j), at(i + 1, j), at(i + 1, j + 1)]);
+                triangles.push([at(i, j), at(i + 1, j + 1), at(i, j + 1)]);
+            }
+        }
+        let walls = crate::dem::mesh_walls::mesh_walls(&triangles, "wavy", 0).unwrap();
+        let mut u = uniform(7);
+        let x: Vec<Vec3> = (0..2000).map(|_| [1.2 * u() - 0.1, 1.2 * u() - 0.1, 0.3 * u() - 0.15]).collect();
+        let r: Vec<f64> = (0..x.len()).map(|_| 0.01 + 0.02 * u()).collect();
+        let skin = 0.005;
+        let found = wall_pairs(&x, &r, &walls, skin).concat();
+        let mut expected = Vec::new();
+        for i in 0..x.len() {
+            for (k, w) in walls.iter().enumerate() {
+                if triangle_near(w, x[i], r[i] + skin) {
+                    expected.push((i as u32, k as u32, [0; 3]));
+                }
+            }
+        }
+        assert!(expected.len() > 500, "{} pairs", expected.len());
+        assert_eq!(found, expected);
     }
 
     #[test]

@@ -17,6 +17,7 @@ pub mod inspect;
 pub mod kind_stage;
 pub mod kinds;
 pub mod measures;
+pub mod mesh_walls;
 mod motion;
 mod pairing;
 pub mod particles;

@@ -40,6 +40,7 @@ impl DemWorld {
         };
         let centre = if self.spheres.is_empty() { [0.0; 3] } else { [0, 1, 2].map(|a| 0.5 * (lo[a] + hi[a])) };
         let (mut index, mut force, mut velocity) = (Vec::new(), Vec::new(), Vec::new());
+        let forces = self.wall_forces();
         for (w, wall) in self.walls.iter().enumerate() {
             let x = wall.position;
             let mut add = |p: &mut PolyData, corners: Vec<Vec3>| {
@@ -47,7 +48,7 @@ impl DemWorld {
                 p.polygons.push((first..first + corners.len() as u32).collect());
                 p.points.extend(corners);
                 index.push(w as i64);
-                force.extend(self.wall_force(w));
+                force.extend(forces[w]);
                 velocity.extend(wall.velocity);
             };
             match &wall.shape {
@@ -58,6 +59,9 @@ impl DemWorld {
                     let c = [0, 1, 2].map(|k| centre[k] - d * normal[k]);
                     let h = 0.5 * size;
                     add(&mut p, vec![at(c, u, -h, v, -h), at(c, u, h, v, -h), at(c, u, h, v, h), at(c, u, -h, v, h)]);
+                }
+                WallShape::Triangle { b, c, .. } => {
+                    add(&mut p, vec![x, [0, 1, 2].map(|k| x[k] + b[k]), [0, 1, 2].map(|k| x[k] + c[k])]);
                 }
                 WallShape::Rect { u, v, half } => {
                     let (a, b) = (half[0], half[1]);

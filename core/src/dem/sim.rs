@@ -498,6 +498,19 @@ impl DemWorld {
         })
     }
 
+    /// [`DemWorld::wall_force`] of every wall, in one pass over the pairs.
+    pub fn wall_forces(&self) -> Vec<Vec3> {
+        let mut forces = vec![[0.0; 3]; self.walls.len()];
+        for pairs in [&self.wall_pairs, self.kinds.lists()[1].0] {
+            for (&b, f) in pairs.b.iter().zip(&pairs.force) {
+                if let Some(sum) = forces.get_mut(b as usize) {
+                    *sum = add3(*sum, scale3(*f, -1.0));
+                }
+            }
+        }
+        forces
+    }
+
     /// Largest stable time step estimate: `min sqrt(m / k_n)` over one-contact oscillators of
     /// each sphere (and each free body of a plugin kind) with a copy of itself and with each wall
     /// (multiply by ~0.2-0.3 for packings).

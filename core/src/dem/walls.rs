@@ -14,6 +14,10 @@ pub enum WallShape {
     /// Cylindrical shell (both sides, rims included): axis through `position` along unit `axis`,
     /// from 0 to `length`.
     Cylinder { axis: Vec3, radius: f64, length: f64 },
+    /// Triangle of a wall mesh (both sides, edges and corners included) with corners
+    /// `position`, `position + b`, `position + c`, and the triangles around it, which decide
+    /// who counts a shared edge or corner (see `mesh_walls`).
+    Triangle { b: Vec3, c: Vec3, ring: crate::dem::mesh_walls::FacetRing },
 }
 
 #[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
@@ -117,6 +121,8 @@ impl Wall {
         let p = self.position;
         match &self.shape {
             WallShape::Plane { .. } => None,
+            WallShape::Triangle { b, c, ring } => crate::dem::mesh_walls::facet_contact_point(d, *b, *c, ring)
+                .map(|q| [p[0] + q[0], p[1] + q[1], p[2] + q[2]]),
             WallShape::Rect { u, v, half } => {
                 let su = dot3(d, *u).clamp(-half[0], half[0]);
                 let sv = dot3(d, *v).clamp(-half[1], half[1]);

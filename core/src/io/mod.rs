@@ -1,10 +1,11 @@
 //! Files: the output contract (`series.csv`, `summary.json`, `vtk/`) and the meshes read as input
-//! (`gmsh`).
+//! (`gmsh`, `stl`).
 
 pub mod checkpoint_file;
 pub mod durable;
 pub mod gmsh;
 pub mod series;
+pub mod stl;
 pub mod vtk;
 
 pub use series::SeriesWriter;
