@@ -13,8 +13,9 @@ use std::path::Path;
 /// A DEM simulation as a run driver steps it.
 pub struct DemScene {
     pub dem: DemSim,
-    /// Wall velocity components set from outside the engine once per step: (wall, axis).
-    pub driven: Vec<(usize, usize)>,
+    /// Wall velocity components set from outside the engine once per step: (walls, axis), the
+    /// walls moving as one (the triangles of a wall mesh).
+    pub driven: Vec<(Vec<usize>, usize)>,
     /// The skin was left to its default (half the smallest radius, as YADE).
     pub auto_skin: bool,
     /// Deep overlaps are looked for before a run while this holds (`sim.allow_overlaps(true)`
@@ -245,9 +246,11 @@ impl Simulation for DemScene {
         self.dem.world.events.drain(..).collect()
     }
     fn set_driven(&mut self, target: usize, value: f64) {
-        if let Some(&(w, axis)) = self.driven.get(target) {
-            if let Some(wall) = self.dem.world.walls.get_mut(w) {
-                wall.velocity[axis] = value;
+        if let Some((walls, axis)) = self.driven.get(target) {
+            for &w in walls {
+                if let Some(wall) = self.dem.world.walls.get_mut(w) {
+                    wall.velocity[*axis] = value;
+                }
             }
         }
     }

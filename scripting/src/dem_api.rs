@@ -229,6 +229,59 @@ impl Handle<DemScene> {
         }
         Ok(w as usize)
     }
+
+    /// The walls a script names: an index, or an array of indices (what `wall_mesh` and
+    /// `box_walls` return).
+    fn walls_of(&self, w: &Dynamic) -> RhaiResult<Vec<usize>> {
+        if let Ok(i) = w.as_int() {
+            return Ok(vec![self.wall_index(i)?]);
+        }
+        let Some(list) = w.clone().try_cast::<Array>() else {
+            return err(format!("a wall is an index or an array of indices, got {}", w.type_name()));
+        };
+        if list.is_empty() {
+            return err("an empty array of walls");
+        }
+        list.iter()
+            .map(|d| match d.as_int() {
+                Ok(i) => self.wall_index(i),
+                Err(_) => {
+                    err(format!("a wall is an index or an array of indices, got an array holding {}", d.type_name()))
+                }
+            })
+            .collect()
+    }
+
+    /// The triangles of an STL file, a gmsh file's surface group or a loaded mesh's, as walls.
+    fn wall_mesh(&mut self, m: &DemMaterialHandle, source: Dynamic, opts: Map) -> RhaiResult<Array> {
+        api_options(&opts, "DemSim", "wall_mesh")?;
+        let group = get(&opts, "group").map(|g| super::convert::string(g, "group")).transpose()?;
+        let script = self.lock().ctx.clone();
+        let (name, triangles) = super::mesh_api::surface_triangles(&script, source, group.as_deref())?;
+        let scale = match get(&opts, "scale") {
+            Some(d) => finite(d, "scale")?,
+            None => 1.0,
+        };
+        if !(scale > 0.0) {
+            return err(format!("`scale` of wall_mesh must be > 0, got {scale}"));
+        }
+        let translate = get(&opts, "translate").map(|d| vector(d, 3, "translate")).transpose()?.unwrap_or([0.0; 3]);
+        let rotate = get(&opts, "rotate").map(|d| vector(d, 3, "rotate")).transpose()?.unwrap_or([0.0; 3]);
+        let rotation = nalgebra::Rotation3::new(nalgebra::Vector3::from(rotate));
+        let place = |v: Vec3| {
+            let r = rotation * nalgebra::Vector3::new(scale * v[0], scale * v[1], scale * v[2]);
+            [r[0] + translate[0], r[1] + translate[1], r[2] + translate[2]]
+        };
+        let placed: Vec<[Vec3; 3]> = triangles.iter().map(|t| t.map(place)).collect();
+        let material = m.index_in(self)?;
+        let walls = granite_core::dem::mesh_walls::mesh_walls(&placed, &name, material).or_rhai()?;
+        let mut st = self.lock();
+        let first = st.sim.dem.world.walls.len();
+        for w in walls {
+            st.sim.dem.world.add_wall(w);
+        }
+        Ok((first..st.sim.dem.world.walls.len()).map(|i| Dynamic::from(i as i64)).collect())
+    }
 }
 
 pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
@@ -457,32 +510,49 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
     engine.register_fn("box_walls", |s: &mut DemHandle, m: DemMaterialHandle, lo: Dynamic, hi: Dynamic| {
         s.box_walls(&m, &lo, &hi, false)
     });
-    engine.register_fn("wall_velocity", |s: &mut DemHandle, w: i64, v: Dynamic| {
-        let w = s.wall_index(w)?;
+    // A wall is an index, or an array of them moving as one (the triangles of `wall_mesh`).
+    engine.register_fn("wall_velocity", |s: &mut DemHandle, w: Dynamic, v: Dynamic| {
+        let walls = s.walls_of(&w)?;
         let v = vector(&v, 3, "velocity")?;
-        s.lock().sim.dem.world.walls[w].velocity = v;
+        let mut st = s.lock();
+        for w in walls {
+            st.sim.dem.world.walls[w].velocity = v;
+        }
         Ok::<_, Box<rhai::EvalAltResult>>(())
     });
-    engine.register_fn("wall_velocity", |s: &mut DemHandle, w: i64, axis: &str, f: FnPtr| {
-        let w = s.wall_index(w)?;
+    engine.register_fn("wall_velocity", |s: &mut DemHandle, w: Dynamic, axis: &str, f: FnPtr| {
+        let walls = s.walls_of(&w)?;
         let axis = super::convert::axis_index(axis, 3)?;
         let target = {
             let mut st = s.lock();
-            st.sim.driven.push((w, axis));
+            st.sim.driven.push((walls, axis));
             st.sim.driven.len() - 1
         };
         s.drive(target, f);
         Ok::<_, Box<rhai::EvalAltResult>>(())
     });
-    engine.register_fn("wall_force", |s: &mut DemHandle, w: i64| {
-        let w = s.wall_index(w)?;
-        let f = s.lock().sim.dem.world.wall_force(w);
+    engine.register_fn("wall_force", |s: &mut DemHandle, w: Dynamic| {
+        let walls = s.walls_of(&w)?;
+        let forces = s.lock().sim.dem.world.wall_forces();
+        let f = walls.iter().fold([0.0; 3], |sum, &w| [0, 1, 2].map(|k| sum[k] + forces[w][k]));
         Ok::<_, Box<rhai::EvalAltResult>>(f.iter().map(|&c| Dynamic::from(c)).collect::<Array>())
     });
-    engine.register_fn("wall_position", |s: &mut DemHandle, w: i64| {
-        let w = s.wall_index(w)?;
-        let p = s.lock().sim.dem.world.walls[w].position;
+    engine.register_fn("wall_torque", |s: &mut DemHandle, w: Dynamic, about: Dynamic| {
+        let walls = s.walls_of(&w)?;
+        let about = vector(&about, 3, "point")?;
+        let t = s.lock().sim.dem.world.wall_torque(&walls, about);
+        Ok::<_, Box<rhai::EvalAltResult>>(t.iter().map(|&c| Dynamic::from(c)).collect::<Array>())
+    });
+    engine.register_fn("wall_position", |s: &mut DemHandle, w: Dynamic| {
+        let walls = s.walls_of(&w)?;
+        let p = s.lock().sim.dem.world.walls[walls[0]].position;
         Ok::<_, Box<rhai::EvalAltResult>>(p.iter().map(|&c| Dynamic::from(c)).collect::<Array>())
+    });
+    engine.register_fn("wall_mesh", |s: &mut DemHandle, m: DemMaterialHandle, source: Dynamic, opts: Map| {
+        s.wall_mesh(&m, source, opts)
+    });
+    engine.register_fn("wall_mesh", |s: &mut DemHandle, m: DemMaterialHandle, source: Dynamic| {
+        s.wall_mesh(&m, source, Map::new())
     });
     engine.register_fn("gravity", |s: &mut DemHandle, g: Dynamic| {
         s.lock().sim.dem.world.gravity = vector(&g, 3, "gravity")?;

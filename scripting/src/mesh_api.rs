@@ -53,6 +53,43 @@ impl MeshHandle {
     }
 }
 
+/// The triangles of a surface for `wall_mesh`, and a name for its walls: an STL file, or the
+/// surface `group` of a gmsh file or of a loaded mesh.
+pub(super) fn surface_triangles(
+    script: &ScriptContext,
+    source: Dynamic,
+    group: Option<&str>,
+) -> RhaiResult<(String, Vec<[granite_core::math::Vec3; 3]>)> {
+    let from_group = |mesh: &GmshMesh, file: &str| -> RhaiResult<(String, Vec<[granite_core::math::Vec3; 3]>)> {
+        let Some(group) = group else {
+            return err(format!("wall_mesh: a gmsh mesh ({file}) needs the surface group: #{{ group: \"...\" }}"));
+        };
+        let handle = MeshHandle { file: file.to_string(), mesh: Arc::new(mesh.clone()) };
+        let simplices = handle.group(group, 3, 2, "wall_mesh")?;
+        Ok((group.to_string(), simplices.corners.iter().map(|c| [c[0], c[1], c[2]]).collect()))
+    };
+    if let Some(m) = source.clone().try_cast::<MeshHandle>() {
+        return from_group(&m.mesh, &m.file);
+    }
+    let Ok(file) = source.clone().into_string() else {
+        return err(format!(
+            "wall_mesh takes an STL or gmsh file name or a mesh from load_mesh, got {}",
+            source.type_name()
+        ));
+    };
+    let path = script
+        .input_path(&file)
+        .map_err(|why| super::convert::to_rhai(GraniteError::Setup(format!("wall_mesh: {why}"))))?;
+    let stem = path.file_stem().map(|s| s.to_string_lossy().to_string()).unwrap_or_default();
+    if file.to_ascii_lowercase().ends_with(".msh") {
+        return from_group(&GmshMesh::read(&path).or_rhai()?, &file);
+    }
+    if group.is_some() {
+        return err(format!("wall_mesh: `group` names a surface of a gmsh mesh; {file} is read as STL"));
+    }
+    Ok((stem, granite_core::io::stl::read_stl(&path).or_rhai()?))
+}
+
 /// The grid nodes of a curve (2D) or surface (3D) group: those within half the smallest cell.
 fn boundary_nodes(s: &SimHandle, mesh: &MeshHandle, group: &str, call: &str) -> RhaiResult<(Vec<u32>, Simplices)> {
     let grid = s.lock().sim.mpm.mesh.clone();

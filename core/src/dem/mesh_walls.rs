@@ -183,12 +183,13 @@ pub fn mesh_walls(triangles: &[[Vec3; 3]], name: &str, material: u16) -> Result<
             let other = faces[g as usize];
             let has = |v: u32| other.contains(&v);
             let [pa, pb, pc] = [has(ids[0]), has(ids[1]), has(ids[2])];
-            let mask = u8::from(pa && pb) * feature::EDGE_AB
-                | u8::from(pb && pc) * feature::EDGE_BC
-                | u8::from(pc && pa) * feature::EDGE_CA
-                | u8::from(pa) * feature::CORNER_A
-                | u8::from(pb) * feature::CORNER_B
-                | u8::from(pc) * feature::CORNER_C;
+            let bit = |on: bool, feature: u8| if on { feature } else { 0 };
+            let mask = bit(pa && pb, feature::EDGE_AB)
+                | bit(pb && pc, feature::EDGE_BC)
+                | bit(pc && pa, feature::EDGE_CA)
+                | bit(pa, feature::CORNER_A)
+                | bit(pb, feature::CORNER_B)
+                | bit(pc, feature::CORNER_C);
             for (bit, o) in owner.iter_mut().enumerate() {
                 if mask & (1 << bit) != 0 {
                     *o = (*o).min(g);

@@ -511,6 +511,36 @@ impl DemWorld {
         forces
     }
 
+    /// The torque about `about` of the forces the spheres and bodies exerted on `walls` in the
+    /// last step, each at its contact point (found again where the spheres are now).
+    pub fn wall_torque(&self, walls: &[usize], about: Vec3) -> Vec3 {
+        let mut on = vec![false; self.walls.len()];
+        for &w in walls {
+            if let Some(flag) = on.get_mut(w) {
+                *flag = true;
+            }
+        }
+        let mut torque = [0.0; 3];
+        let mut add = |point: Vec3, f: Vec3| {
+            let arm = crate::math::sub3(point, about);
+            torque = add3(torque, crate::math::cross3(arm, scale3(f, -1.0)));
+        };
+        let p = &self.wall_pairs;
+        for k in (0..p.len()).filter(|&k| p.touching[k] && on[p.b[k] as usize]) {
+            let (i, w) = (p.a[k] as usize, p.b[k] as usize);
+            if let Some(c) = self.walls[w].contact(self.spheres.x[i], self.spheres.radius[i], f64::INFINITY) {
+                add(c.point, p.force[k]);
+            }
+        }
+        let (list, touches) = self.kinds.lists()[1];
+        for &(c, point) in touches {
+            if on[list.b[c.slot] as usize] {
+                add(point, list.force[c.slot]);
+            }
+        }
+        torque
+    }
+
     /// Largest stable time step estimate: `min sqrt(m / k_n)` over one-contact oscillators of
     /// each sphere (and each free body of a plugin kind) with a copy of itself and with each wall
     /// (multiply by ~0.2-0.3 for packings).

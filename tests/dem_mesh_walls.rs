@@ -1,0 +1,173 @@
+//! Walls of triangles from STL files and gmsh surfaces (`sim.wall_mesh`): a sphere on them moves
+//! as on the plane they lie in, a seam between two triangles is one contact, a shaken closed box
+//! of triangles holds its spheres.
+
+mod common;
+use common::*;
+use std::fmt::Write;
+
+type Triangle = [[f64; 3]; 3];
+
+fn write_stl(path: &std::path::Path, triangles: &[Triangle]) {
+    let mut s = String::from("solid test\n");
+    for t in triangles {
+        s.push_str("facet normal 0 0 0\nouter loop\n");
+        for v in t {
+            // Rust prints the shortest text that reads back to the same number.
+            writeln!(s, "vertex {:?} {:?} {:?}", v[0], v[1], v[2]).unwrap();
+        }
+        s.push_str("endloop\nendfacet\n");
+    }
+    s.push_str("endsolid test\n");
+    std::fs::create_dir_all(path.parent().unwrap()).unwrap();
+    std::fs::write(path, s).unwrap();
+}
+
+fn summary(out: &std::path::Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap()
+}
+
+#[test]
+fn a_sphere_rolls_down_two_triangles_across_their_seam_as_down_their_plane() {
+    // An incline at 20 degrees: two triangles sharing the seam y = 0 along the slope, which
+    // the sphere rolls down on. Over a seam it must feel one contact, exactly the plane's.
+    let theta = 20f64.to_radians();
+    let t = [theta.cos(), 0.0, theta.sin()];
+    let n = [-theta.sin(), 0.0, theta.cos()];
+    let at = |s: f64, y: f64| [s * t[0], y, s * t[2]];
+    let stl = root().join("target/test-out/mesh_wall_inputs/incline.stl");
+    write_stl(&stl, &[[at(-1.0, 0.0), at(1.0, 0.0), at(1.0, 0.5)], [at(-1.0, 0.0), at(-1.0, -0.5), at(1.0, 0.0)]]);
+    let r = 0.01;
+    let start = [0, 1, 2].map(|k| 0.5 * t[k] + 0.999 * r * n[k]);
+    let source = format!(
+        r#"
+        fn roll(mesh, stl, start, n) {{
+            let sim = dem(#{{ seed: 1 }});
+            let steel = sim.material(#{{ name: "steel", density: 7800.0 }});
+            sim.contact_law("linear", #{{ kn: 1e5, kt_ratio: 0.5, friction: 30.0 }});
+            if mesh {{ sim.wall_mesh(steel, stl); }} else {{ sim.wall_plane(steel, [0.0, 0.0, 0.0], n); }}
+            sim.sphere(steel, start, {r});
+            sim.gravity([0.0, 0.0, -9.81]);
+            sim.dt(0.1 * sim.critical_dt());
+            let most = 0;
+            for k in 0..40 {{
+                sim.run_steps(100);
+                most = max(most, sim.contacts().len());
+            }}
+            #{{ x: sim.positions()[0], most: most, time: sim.time }}
+        }}
+        let plane = roll(false, "{stl}", {start:?}, {n:?});
+        let mesh = roll(true, "{stl}", {start:?}, {n:?});
+        summary("plane_x", plane.x[0]);
+        summary("plane_y", plane.x[1]);
+        summary("plane_z", plane.x[2]);
+        summary("mesh_x", mesh.x[0]);
+        summary("mesh_y", mesh.x[1]);
+        summary("mesh_z", mesh.x[2]);
+        summary("most_contacts", mesh.most);
+        summary("time", plane.time);
+        "#,
+        stl = stl.display()
+    );
+    let s = summary(&run_text("mesh_wall_incline", &source));
+    let get = |k: &str| s[k].as_f64().unwrap();
+    for axis in ["x", "y", "z"] {
+        let (p, m) = (get(&format!("plane_{axis}")), get(&format!("mesh_{axis}")));
+        assert!((p - m).abs() < 1e-9, "{axis}: plane {p}, mesh {m}");
+    }
+    assert_eq!(s["most_contacts"].as_i64(), Some(1), "over the seam: one contact");
+    // It did roll down: a rolling solid sphere accelerates at 5/7 g sin(theta) along the slope.
+    let travelled = 0.5 - (get("plane_x") * t[0] + get("plane_z") * t[2]);
+    let expected = 0.5 * 5.0 / 7.0 * 9.81 * theta.sin() * get("time").powi(2);
+    assert!((travelled - expected).abs() < 0.02 * expected, "{travelled} m down the slope, rolling gives {expected}");
+}
+
+/// The 12 triangles of the cube [lo, hi]^3.
+fn cube(lo: f64, hi: f64) -> Vec<Triangle> {
+    let v = |i: usize| {
+        [if i & 1 == 0 { lo } else { hi }, if i & 2 == 0 { lo } else { hi }, if i & 4 == 0 { lo } else { hi }]
+    };
+    let faces = [[0, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4], [1, 5, 7, 3]];
+    faces.iter().flat_map(|f| [[v(f[0]), v(f[1]), v(f[2])], [v(f[0]), v(f[2]), v(f[3])]]).collect()
+}
+
+#[test]
+fn a_shaken_closed_box_of_triangles_holds_its_spheres() {
+    let stl = root().join("target/test-out/mesh_wall_inputs/box.stl");
+    let (side, amplitude, frequency) = (0.1, 0.01, 10.0);
+    write_stl(&stl, &cube(0.0, side));
+    let source = format!(
+        r#"
+        let sim = dem(#{{ seed: 3 }});
+        let glass = sim.material(#{{ name: "glass", density: 2500.0 }});
+        sim.contact_law("visco_elastic", #{{ kn: 2e4, kt_ratio: 0.3, friction: 25.0, restitution: 0.7 }});
+        let box = sim.wall_mesh(glass, "{stl}");
+        sim.cloud(glass, [0.005, 0.005, 0.005], [0.095, 0.095, 0.095], #{{ count: 300, radius: [0.003, 0.004] }});
+        sim.gravity([0.0, 0.0, -9.81]);
+        sim.dt(0.2 * sim.critical_dt());
+        let w = 2.0 * PI() * {frequency};
+        sim.wall_velocity(box, "z", |t| {amplitude} * w * cos(w * t));
+        sim.wall_velocity(box, "x", |t| 0.5 * {amplitude} * w * cos(w * t));
+        sim.run_until(0.3);
+        summary("walls", box.len());
+        summary("spheres", sim.positions().len());
+        let shift = sim.wall_position(box);
+        let lo = [1e9, 1e9, 1e9];
+        let hi = [-1e9, -1e9, -1e9];
+        for x in sim.positions() {{
+            for k in 0..3 {{
+                lo[k] = min(lo[k], x[k] - shift[k]);
+                hi[k] = max(hi[k], x[k] - shift[k]);
+            }}
+        }}
+        summary("lo", lo);
+        summary("hi", hi);
+        summary("force", sim.wall_force(box));
+        "#,
+        stl = stl.display()
+    );
+    let s = summary(&run_text("mesh_wall_box", &source));
+    assert_eq!(s["walls"].as_i64(), Some(12));
+    assert_eq!(s["spheres"].as_i64(), Some(300), "spheres were lost");
+    // Every centre within the box (relative to its first corner, which moved with it), at
+    // least most of a radius from the faces.
+    let (lo, hi) = (s["lo"].as_array().unwrap(), s["hi"].as_array().unwrap());
+    for k in 0..3 {
+        let (l, h) = (lo[k].as_f64().unwrap(), hi[k].as_f64().unwrap());
+        assert!(l > 0.0 && h < side, "axis {k}: centres from {l} to {h}, outside [0, {side}]");
+    }
+}
+
+#[test]
+fn a_wall_mesh_from_a_gmsh_surface_is_refused_without_its_group_and_placed_with_one() {
+    let file = root().join("tests/meshes/wedge_block.msh").display().to_string();
+    let setup = r#"let sim = dem(); let m = sim.material(#{ name: "steel", density: 7800.0 });"#;
+    let e = run_text_err("mesh_wall_no_group", &format!("{setup}\nsim.wall_mesh(m, \"{file}\");"));
+    assert!(e.contains("group") && e.contains("line 2"), "{e}");
+    let e =
+        run_text_err("mesh_wall_volume", &format!("{setup}\nsim.wall_mesh(m, \"{file}\", #{{ group: \"block\" }});"));
+    assert!(e.contains("volumes") && e.contains("surfaces"), "{e}");
+    // The base of the wedge (a unit square in z = 0), raised by 1 and doubled in size: a sphere
+    // set down on it comes to rest there.
+    let out = run_text(
+        "mesh_wall_gmsh",
+        &format!(
+            r#"{setup}
+            let bottom = sim.wall_mesh(m, "{file}", #{{ group: "bottom", scale: 2.0, translate: [0.0, 0.0, 1.0] }});
+            sim.contact_law("linear", #{{ kn: 1e5, kt_ratio: 0.5, friction: 30.0 }});
+            sim.sphere(m, [1.5, 1.5, 1.0594], 0.06);
+            sim.gravity([0.0, 0.0, -9.81]);
+            sim.damping(0.3);
+            sim.dt(0.1 * sim.critical_dt());
+            sim.run_steps(4000);
+            summary("force", sim.wall_force(bottom));
+            summary("weight", 7800.0 * 4.0 / 3.0 * PI() * 0.06 * 0.06 * 0.06 * 9.81);
+            "#
+        ),
+    );
+    let s = summary(&out);
+    let fz = s["force"][2].as_f64().unwrap();
+    let weight = s["weight"].as_f64().unwrap();
+    // At rest the surface carries the sphere's weight.
+    assert!((-fz - weight).abs() < 1e-3 * weight, "the base carries {fz} N of {weight} N");
+}
