@@ -171,3 +171,63 @@ fn a_wall_mesh_from_a_gmsh_surface_is_refused_without_its_group_and_placed_with_
     // At rest the surface carries the sphere's weight.
     assert!((-fz - weight).abs() < 1e-3 * weight, "the base carries {fz} N of {weight} N");
 }
+
+#[test]
+fn a_ball_rolling_on_a_turntable_of_triangles_circles_at_two_sevenths_of_its_rate() {
+    // A solid ball rolling without slip on a table turning at Omega moves on a circle, fixed in
+    // the lab, at 2/7 Omega (I / (I + m r^2) of it, I = 2/5 m r^2). The table: a square of two
+    // triangles spinning about the vertical through its centre.
+    let stl = root().join("target/test-out/mesh_wall_inputs/table.stl");
+    let (omega, rho, r) = (2.0, 0.3, 0.01);
+    // The orbit: radius 7/2 rho about a point 5/2 rho from the centre; the table holds it.
+    let h = 1.2 * 6.0 * rho;
+    write_stl(&stl, &[[[-h, -h, 0.0], [h, -h, 0.0], [h, h, 0.0]], [[-h, -h, 0.0], [h, h, 0.0], [-h, h, 0.0]]]);
+    let source = format!(
+        r#"
+        let sim = dem(#{{ seed: 1 }});
+        let steel = sim.material(#{{ name: "steel", density: 7800.0 }});
+        sim.contact_law("linear", #{{ kn: 1e5, kt_ratio: 1.0, friction: 45.0 }});
+        let table = sim.wall_mesh(steel, "{stl}");
+        sim.wall_spin(table, [0.0, 0.0, {omega}], [0.0, 0.0, 0.0]);
+        let m = 7800.0 * 4.0 / 3.0 * PI() * {r} * {r} * {r};
+        // On the table, carried at its surface's velocity, not spinning: no slip at the start.
+        let id = sim.sphere(steel, [{rho}, 0.0, {r} - m * 9.81 / 1e5], {r}, #{{ velocity: [0.0, {omega} * {rho}, 0.0] }});
+        sim.gravity([0.0, 0.0, -9.81]);
+        sim.dt(0.05 * sim.critical_dt());
+        let t = [];
+        let vx = [];
+        let vy = [];
+        for k in 0..100 {{
+            sim.run_until(0.05 * (k + 1));
+            let v = sim.body(id).velocity;
+            t.push(sim.time);
+            vx.push(v[0]);
+            vy.push(v[1]);
+        }}
+        summary("t", t);
+        summary("vx", vx);
+        summary("vy", vy);
+        "#,
+        stl = stl.display()
+    );
+    let s = summary(&run_text("mesh_wall_turntable", &source));
+    let series = |k: &str| s[k].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect::<Vec<_>>();
+    let (t, vx, vy) = (series("t"), series("vx"), series("vy"));
+    // The velocity turns with the ball's orbit: unwrap its angle and fit the rate.
+    let mut angle = vec![vy[0].atan2(vx[0])];
+    for k in 1..t.len() {
+        let a = vy[k].atan2(vx[k]);
+        let last = angle[k - 1];
+        let turns = ((last - a) / std::f64::consts::TAU).round();
+        angle.push(a + turns * std::f64::consts::TAU);
+    }
+    let (n, st, sa) = (t.len() as f64, t.iter().sum::<f64>(), angle.iter().sum::<f64>());
+    let stt: f64 = t.iter().map(|x| x * x).sum();
+    let sta: f64 = t.iter().zip(&angle).map(|(x, a)| x * a).sum();
+    let rate = (n * sta - st * sa) / (n * stt - st * st);
+    let expected = 2.0 / 7.0 * omega;
+    assert!((rate - expected).abs() < 0.01 * expected, "the ball circles at {rate} rad/s, rolling gives {expected}");
+    // And its speed stays that of the start (no slip, no loss).
+    let speed = |k: usize| vx[k].hypot(vy[k]);
+    assert!((speed(t.len() - 1) - omega * rho).abs() < 0.01 * omega * rho, "speed {}", speed(t.len() - 1));
+}

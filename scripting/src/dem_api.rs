@@ -531,6 +531,28 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
         s.drive(target, f);
         Ok::<_, Box<rhai::EvalAltResult>>(())
     });
+    engine.register_fn("wall_spin", |s: &mut DemHandle, w: Dynamic, spin: Dynamic, pivot: Dynamic| {
+        let walls = s.walls_of(&w)?;
+        let spin = vector(&spin, 3, "spin")?;
+        let pivot = vector(&pivot, 3, "pivot")?;
+        let mut st = s.lock();
+        let world = &mut st.sim.dem.world;
+        if let Some(&k) = walls.iter().find(|&&k| !matches!(world.walls[k].shape, WallShape::Triangle { .. })) {
+            return err(format!(
+                "wall_spin: wall {k} (\"{}\") is not a triangle of a wall mesh: walls made by wall_mesh spin, the others translate",
+                world.walls[k].name
+            ));
+        }
+        if spin != [0.0; 3] && st.sim.dem.energy.is_some() {
+            return err("wall_spin: energy tracking covers walls that translate: turn it off first (track_energy(false))");
+        }
+        let world = &mut st.sim.dem.world;
+        for k in walls {
+            world.walls[k].spin = spin;
+            world.walls[k].pivot = pivot;
+        }
+        Ok::<_, Box<rhai::EvalAltResult>>(())
+    });
     engine.register_fn("wall_force", |s: &mut DemHandle, w: Dynamic| {
         let walls = s.walls_of(&w)?;
         let forces = s.lock().sim.dem.world.wall_forces();

@@ -685,7 +685,7 @@ pub(super) fn wall_contacts(
             s.law[e] = c.law[k];
             s.normal[e] = geo.normal;
             s.overlap[e] = overlap;
-            s.rel_velocity[e] = sub(wall.velocity, va);
+            s.rel_velocity[e] = sub(wall.point_velocity(geo.point), va);
             if sp.rotation {
                 s.rel_spin[e] = [-sp.w[i][0], -sp.w[i][1], -sp.w[i][2]];
             }

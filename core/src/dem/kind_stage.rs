@@ -170,7 +170,7 @@ impl BodyContacts {
             let first = at(k.v[i], k.w[i], k.x[i]);
             let (second, spin) = match side {
                 Side::Bodies => (at(k.v[j], k.w[j], k.x[j]), k.w[j]),
-                Side::Walls => (around.walls[j].velocity, [0.0; 3]),
+                Side::Walls => (around.walls[j].point_velocity(touch.point), around.walls[j].spin),
                 Side::Spheres => {
                     let s = &around.spheres;
                     (at(s.v[j], s.w[j], s.x[j]), s.w[j])

@@ -84,6 +84,7 @@ impl Rebuild {
         }
         built.x = world.spheres.x.clone();
         built.walls = world.walls.iter().map(|w| w.position).collect();
+        built.wall_turns = vec![0.0; world.walls.len()];
         built.h = world.cell.as_ref().map(|c| c.h);
         built.radius_max = world.spheres.largest_radius();
         built.radius_min = world.spheres.smallest_radius();

@@ -104,11 +104,20 @@ pub(crate) struct ListsBuilt {
     /// rebuild).
     pub(crate) radius_max: f64,
     pub(crate) radius_min: f64,
+    /// The angle each wall has turned since (rad).
+    pub(crate) wall_turns: Vec<f64>,
 }
 
 impl Default for ListsBuilt {
     fn default() -> Self {
-        ListsBuilt { x: Vec::new(), walls: Vec::new(), h: None, radius_max: 0.0, radius_min: f64::INFINITY }
+        ListsBuilt {
+            x: Vec::new(),
+            walls: Vec::new(),
+            h: None,
+            radius_max: 0.0,
+            radius_min: f64::INFINITY,
+            wall_turns: Vec::new(),
+        }
     }
 }
 

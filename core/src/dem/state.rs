@@ -311,7 +311,9 @@ impl DemSim {
         sim.built.h = st.h_at_build;
         sim.built.radius_max = sim.world.spheres.largest_radius();
         sim.built.radius_min = sim.world.spheres.smallest_radius();
-        sim.world.needs_rebuild = st.needs_rebuild;
+        // The angle a spinning wall turned since the lists were built is not saved: they are
+        // built again.
+        sim.world.needs_rebuild = st.needs_rebuild || sim.world.walls.iter().any(|w| w.spin != [0.0; 3]);
         sim.rebuilds = st.rebuilds;
         sim.world.external = st.external;
         sim.energy = st.energy;

@@ -123,7 +123,7 @@ impl DemSim {
             let motion = RigidMotion { gravity: world.gravity, damping: world.damping, dt: world.dt, affine: None };
             BodyMotion::run(&mut world.kinds, &motion, (world.step, world.time))?
         };
-        let wall_moved = WallMotion::run(&mut world.walls, &built.walls, world.dt);
+        let wall_moved = WallMotion::run(&mut world.walls, (&built.walls, &mut built.wall_turns), world.dt);
         // The tracker closes the step once everything has moved (clumps and walls too).
         if let (Some(before), Some(tracker)) = (energy_before, energy.as_mut()) {
             EnergyBooking::after_motion(&*world, before, tracker);

@@ -27,22 +27,52 @@ pub struct Wall {
     pub position: Vec3,
     pub velocity: Vec3,
     pub material: u16,
+    /// Angular velocity (rad/s) about `pivot` (a triangle of a wall mesh; zero for the others).
+    #[serde(default)]
+    pub spin: Vec3,
+    /// The point the wall turns about; it moves with the wall's velocity.
+    #[serde(default)]
+    pub pivot: Vec3,
 }
 
-/// The walls' motion: each wall moves by its velocity over the step. Reads the time step and
-/// where the walls were when the lists were built; writes their positions. Returns the largest
-/// distance a wall moved since the lists were built.
+/// The walls' motion: each wall moves by its velocity over the step, and a spinning triangle
+/// turns about its pivot by `spin dt`. Reads the time step and where the walls were when the
+/// lists were built; writes their positions and shapes, and the angle each has turned since.
+/// Returns the largest distance a point of a wall moved since the lists were built (a bound:
+/// its reference point's displacement plus the angle turned times its reach from that point).
 pub(crate) struct WallMotion;
 
 impl WallMotion {
-    pub(crate) fn run(walls: &mut [Wall], at_build: &[Vec3], dt: f64) -> f64 {
+    pub(crate) fn run(walls: &mut [Wall], (at_build, turned): (&[Vec3], &mut Vec<f64>), dt: f64) -> f64 {
+        turned.resize(walls.len(), 0.0);
         let mut moved: f64 = 0.0;
-        for (w, at) in walls.iter_mut().zip(at_build) {
+        for ((w, at), turn) in walls.iter_mut().zip(at_build).zip(turned.iter_mut()) {
             for a in 0..3 {
                 w.position[a] += w.velocity[a] * dt;
+                w.pivot[a] += w.velocity[a] * dt;
+            }
+            let mut reach = 0.0;
+            if w.spin != [0.0; 3] {
+                let rotation = nalgebra::Rotation3::new(nalgebra::Vector3::from(w.spin) * dt);
+                let turn_vec = |v: &mut Vec3| {
+                    let r = rotation * nalgebra::Vector3::from(*v);
+                    *v = [r[0], r[1], r[2]];
+                };
+                let mut arm = [0, 1, 2].map(|a| w.position[a] - w.pivot[a]);
+                turn_vec(&mut arm);
+                w.position = [0, 1, 2].map(|a| w.pivot[a] + arm[a]);
+                if let WallShape::Triangle { b, c, ring } = &mut w.shape {
+                    turn_vec(b);
+                    turn_vec(c);
+                    for (corners, _) in ring.others.iter_mut() {
+                        corners.iter_mut().for_each(turn_vec);
+                    }
+                    reach = dot3(*b, *b).max(dot3(*c, *c)).sqrt();
+                }
+                *turn += dot3(w.spin, w.spin).sqrt() * dt;
             }
             let d = [0, 1, 2].map(|a| w.position[a] - at[a]);
-            moved = moved.max((d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt());
+            moved = moved.max((d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt() + *turn * reach);
         }
         moved
     }
@@ -75,7 +105,22 @@ pub struct WallContact {
 impl Wall {
     /// A wall at rest.
     pub fn new(name: &str, shape: WallShape, position: Vec3, material: u16) -> Wall {
-        Wall { name: name.to_string(), shape, position, velocity: [0.0; 3], material }
+        Wall { name: name.to_string(), shape, position, velocity: [0.0; 3], material, spin: [0.0; 3], pivot: position }
+    }
+
+    /// The velocity of the wall's surface at `point`: its velocity, and its spin about the pivot.
+    #[inline(always)]
+    pub fn point_velocity(&self, point: Vec3) -> Vec3 {
+        if self.spin == [0.0; 3] {
+            return self.velocity;
+        }
+        let arm = [point[0] - self.pivot[0], point[1] - self.pivot[1], point[2] - self.pivot[2]];
+        let w = self.spin;
+        [
+            self.velocity[0] + w[1] * arm[2] - w[2] * arm[1],
+            self.velocity[1] + w[2] * arm[0] - w[0] * arm[2],
+            self.velocity[2] + w[0] * arm[1] - w[1] * arm[0],
+        ]
     }
 
     /// Geometry against a sphere, or None when the sphere is out of the wall's reach
@@ -168,6 +213,8 @@ mod tests {
             position: [0.0; 3],
             velocity: [0.0; 3],
             material: 0,
+            spin: [0.0; 3],
+            pivot: [0.0; 3],
         };
         let c = floor.contact([1.0, 2.0, 0.09], 0.1, 0.0).unwrap();
         assert!((c.gap + 0.01).abs() < 1e-15 && c.normal == [0.0, 0.0, -1.0]);

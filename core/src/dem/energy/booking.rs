@@ -69,6 +69,12 @@ impl DemSim {
         if self.world.cell.is_some() {
             return Err(GraniteError::Setup("energy tracking covers open domains, not periodic cells".into()));
         }
+        if let Some(w) = self.world.walls.iter().find(|w| w.spin != [0.0; 3]) {
+            return Err(GraniteError::Setup(format!(
+                "energy tracking covers walls that translate; wall \"{}\" spins",
+                w.name
+            )));
+        }
         if let Some(law) = self.world.laws.iter().find(|l| !l.tracks_dissipation()) {
             return Err(GraniteError::Setup(format!(
                 "contact law `{}` does not account for its losses: energy cannot be tracked with it",
