@@ -37,6 +37,7 @@ macro_rules! out {
     }};
 }
 
+pub mod box_bins;
 pub mod comm;
 pub mod dem;
 pub mod element_test;

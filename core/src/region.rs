@@ -5,33 +5,17 @@
 //! higher-order elements are read by their corners. A grid of bins over the group finds the
 //! simplices near a point, so a query costs the few simplices of its bin.
 
+use crate::box_bins::BoxBins;
 use crate::error::{GraniteError, Result};
 use crate::io::gmsh::{ElementShape, GmshMesh};
-use crate::math::Vec3;
+use crate::math::{cross3 as cross, dot3 as dot, norm3 as norm, scale3 as scale, sub3 as sub, Vec3};
 
 /// Simplices of one dimension: segments (1), triangles (2) or tetrahedra (3), as corner lists.
 #[derive(Debug, Clone)]
 pub struct Simplices {
     pub dim: usize,
     pub corners: Vec<[Vec3; 4]>,
-    lo: Vec3,
-    bin: f64,
-    bins: [usize; 3],
-    /// Simplices overlapping each bin (CSR).
-    start: Vec<u32>,
-    members: Vec<u32>,
-}
-
-fn sub(a: Vec3, b: Vec3) -> Vec3 {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-
-fn dot(a: Vec3, b: Vec3) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-
-fn cross(a: Vec3, b: Vec3) -> Vec3 {
-    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+    bins: BoxBins,
 }
 
 /// The simplices an element splits into, as corner index lists.
@@ -83,87 +67,20 @@ impl Simplices {
     /// Simplices of dimension `dim` from their corners (the first `dim + 1` of each).
     pub fn from_corners(dim: usize, corners: Vec<[Vec3; 4]>) -> Simplices {
         let n = dim + 1;
-        let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
-        let mut size = 0.0;
-        for c in &corners {
-            for p in &c[..n] {
-                for a in 0..3 {
-                    lo[a] = lo[a].min(p[a]);
-                    hi[a] = hi[a].max(p[a]);
-                }
-            }
-            size += (0..3)
-                .map(|a| c[..n].iter().map(|p| p[a]).fold(f64::NEG_INFINITY, f64::max) - c[0][a])
-                .fold(0.0, f64::max);
-        }
-        // Bins about the mean simplex size, at most ~4 simplices' worth of bins per simplex.
-        let span = (0..3).map(|a| hi[a] - lo[a]).fold(0.0, f64::max);
-        let mean = (size / corners.len() as f64).max(span * 1e-6).max(f64::MIN_POSITIVE);
-        let mut bin = mean;
-        let count = |bin: f64| [0, 1, 2].map(|a| (((hi[a] - lo[a]) / bin) as usize + 1).max(1));
-        while count(bin).iter().product::<usize>() > 4 * corners.len() + 64 {
-            bin *= 1.5;
-        }
-        let bins = count(bin);
-        let index = |p: Vec3| [0, 1, 2].map(|a| (((p[a] - lo[a]) / bin) as usize).min(bins[a] - 1));
-        let mut lists: Vec<Vec<u32>> = vec![Vec::new(); bins.iter().product()];
-        for (s, c) in corners.iter().enumerate() {
-            let (mut a, mut b) = ([usize::MAX; 3], [0; 3]);
-            for p in &c[..n] {
-                let i = index(*p);
-                for k in 0..3 {
-                    a[k] = a[k].min(i[k]);
-                    b[k] = b[k].max(i[k]);
-                }
-            }
-            for z in a[2]..=b[2] {
-                for y in a[1]..=b[1] {
-                    for x in a[0]..=b[0] {
-                        lists[(z * bins[1] + y) * bins[0] + x].push(s as u32);
-                    }
-                }
-            }
-        }
-        let mut start = vec![0u32];
-        let mut members = Vec::new();
-        for l in lists {
-            members.extend(l);
-            start.push(members.len() as u32);
-        }
-        Simplices { dim, corners, lo, bin, bins, start, members }
+        let boxes: Vec<(Vec3, Vec3)> = corners
+            .iter()
+            .map(|c| {
+                let lo = [0, 1, 2].map(|k| c[..n].iter().map(|p| p[k]).fold(f64::INFINITY, f64::min));
+                let hi = [0, 1, 2].map(|k| c[..n].iter().map(|p| p[k]).fold(f64::NEG_INFINITY, f64::max));
+                (lo, hi)
+            })
+            .collect();
+        Simplices { dim, bins: BoxBins::new(&boxes), corners }
     }
 
-    /// The simplices whose bins lie within `reach` of `x`.
+    /// The simplices whose boxes lie within `reach` of `x`.
     fn near(&self, x: Vec3, reach: f64) -> impl Iterator<Item = usize> + '_ {
-        let range = |a: usize| {
-            let lo = ((x[a] - reach - self.lo[a]) / self.bin).floor();
-            let hi = ((x[a] + reach - self.lo[a]) / self.bin).floor();
-            let top = self.bins[a] as f64 - 1.0;
-            if hi < 0.0 || lo > top {
-                None
-            } else {
-                Some((lo.max(0.0) as usize, hi.min(top) as usize))
-            }
-        };
-        let ranges = [range(0), range(1), range(2)];
-        let mut found: Vec<usize> = Vec::new();
-        if let [Some(rx), Some(ry), Some(rz)] = ranges {
-            for z in rz.0..=rz.1 {
-                for y in ry.0..=ry.1 {
-                    for xb in rx.0..=rx.1 {
-                        let b = (z * self.bins[1] + y) * self.bins[0] + xb;
-                        found.extend(
-                            self.members[self.start[b] as usize..self.start[b + 1] as usize]
-                                .iter()
-                                .map(|&s| s as usize),
-                        );
-                    }
-                }
-            }
-        }
-        found.sort_unstable();
-        found.dedup();
-        found.into_iter()
+        self.bins.near(x, reach).into_iter().map(|s| s as usize)
     }
 
     /// Whether `x` lies in a triangle (2D group) or a tetrahedron (3D group), its boundary
@@ -234,14 +151,6 @@ impl Simplices {
             sum
         }
     }
-}
-
-fn norm(a: Vec3) -> f64 {
-    dot(a, a).sqrt()
-}
-
-fn scale(a: Vec3, s: f64) -> Vec3 {
-    [a[0] * s, a[1] * s, a[2] * s]
 }
 
 /// Barycentric weights of `x` (its x and y) in the triangle `c[0..3]` (in the plane z = 0).

@@ -314,74 +314,22 @@ fn periodic_pairs(x: &[Vec3], radius: &[f64], (skin, cell): (f64, &PeriodicCell)
 /// Fewest triangles of wall meshes found through a grid rather than one by one.
 const TRIANGLES_IN_A_GRID: usize = 16;
 
-/// The triangles of wall meshes binned on a grid of cubes by their bounds grown by `reach`: a
-/// sphere's candidates are those of the cube its centre lies in.
-struct TriangleGrid {
-    lo: Vec3,
-    cube: f64,
-    counts: [usize; 3],
-    start: Vec<u32>,
-    walls: Vec<u32>,
-}
-
-impl TriangleGrid {
-    fn new(walls: &[Wall], triangles: &[usize], reach: f64) -> TriangleGrid {
-        let bounds: Vec<(Vec3, Vec3)> = triangles
-            .iter()
-            .map(|&w| {
-                let wall = &walls[w];
-                let WallShape::Triangle { b, c, .. } = &wall.shape else { unreachable!("triangles only") };
-                let p = wall.position;
-                let corners = [p, [0, 1, 2].map(|k| p[k] + b[k]), [0, 1, 2].map(|k| p[k] + c[k])];
-                let lo = [0, 1, 2].map(|k| corners.iter().map(|v| v[k]).fold(f64::INFINITY, f64::min) - reach);
-                let hi = [0, 1, 2].map(|k| corners.iter().map(|v| v[k]).fold(f64::NEG_INFINITY, f64::max) + reach);
-                (lo, hi)
-            })
-            .collect();
-        let lo = [0, 1, 2].map(|k| bounds.iter().map(|b| b.0[k]).fold(f64::INFINITY, f64::min));
-        let hi = [0, 1, 2].map(|k| bounds.iter().map(|b| b.1[k]).fold(f64::NEG_INFINITY, f64::max));
-        // Cubes about as wide as a grown triangle, and not more of them than ~8 per triangle.
-        let mean = bounds.iter().map(|(a, b)| (0..3).map(|k| b[k] - a[k]).fold(0.0, f64::max)).sum::<f64>()
-            / bounds.len() as f64;
-        let mut cube = mean.max(f64::MIN_POSITIVE);
-        let counts_of = |cube: f64| [0, 1, 2].map(|k| (((hi[k] - lo[k]) / cube) as usize + 1).min(1 << 20));
-        while counts_of(cube).iter().product::<usize>() > 8 * bounds.len() + 64 {
-            cube *= 1.5;
-        }
-        let counts = counts_of(cube);
-        let index = |x: f64, k: usize| (((x - lo[k]) / cube) as usize).min(counts[k] - 1);
-        let mut lists: Vec<Vec<u32>> = vec![Vec::new(); counts.iter().product()];
-        for (&w, (a, b)) in triangles.iter().zip(&bounds) {
-            for z in index(a[2], 2)..=index(b[2], 2) {
-                for y in index(a[1], 1)..=index(b[1], 1) {
-                    for x in index(a[0], 0)..=index(b[0], 0) {
-                        lists[(z * counts[1] + y) * counts[0] + x].push(w as u32);
-                    }
-                }
-            }
-        }
-        let mut start = vec![0u32];
-        let mut all = Vec::new();
-        for l in lists {
-            all.extend(l);
-            start.push(all.len() as u32);
-        }
-        TriangleGrid { lo, cube, counts, start, walls: all }
-    }
-
-    /// The triangles that may lie within `reach` of `x`.
-    fn near(&self, x: Vec3) -> &[u32] {
-        let mut ijk = [0usize; 3];
-        for k in 0..3 {
-            let t = (x[k] - self.lo[k]) / self.cube;
-            if !(t >= 0.0 && t < self.counts[k] as f64) {
-                return &[];
-            }
-            ijk[k] = t as usize;
-        }
-        let c = (ijk[2] * self.counts[1] + ijk[1]) * self.counts[0] + ijk[0];
-        &self.walls[self.start[c] as usize..self.start[c + 1] as usize]
-    }
+/// The triangles of wall meshes binned by their bounds grown by `reach`: a sphere's candidates
+/// are those of the cube its centre lies in.
+fn triangle_bins(walls: &[Wall], triangles: &[usize], reach: f64) -> crate::box_bins::BoxBins {
+    let boxes: Vec<(Vec3, Vec3)> = triangles
+        .iter()
+        .map(|&w| {
+            let wall = &walls[w];
+            let WallShape::Triangle { b, c, .. } = &wall.shape else { unreachable!("triangles only") };
+            let p = wall.position;
+            let corners = [p, [0, 1, 2].map(|k| p[k] + b[k]), [0, 1, 2].map(|k| p[k] + c[k])];
+            let lo = [0, 1, 2].map(|k| corners.iter().map(|v| v[k]).fold(f64::INFINITY, f64::min) - reach);
+            let hi = [0, 1, 2].map(|k| corners.iter().map(|v| v[k]).fold(f64::NEG_INFINITY, f64::max) + reach);
+            (lo, hi)
+        })
+        .collect();
+    crate::box_bins::BoxBins::new(&boxes)
 }
 
 /// Whether a sphere centred at `p` comes within `reach` of a triangle wall: by distance alone. A
@@ -416,7 +364,7 @@ pub fn wall_pairs(x: &[Vec3], radius: &[f64], walls: &[Wall], skin: f64) -> Bloc
     let triangles: Vec<usize> =
         (0..walls.len()).filter(|&w| matches!(walls[w].shape, WallShape::Triangle { .. })).collect();
     let reach = radius.iter().copied().fold(0.0, f64::max) + skin;
-    let grid = (triangles.len() >= TRIANGLES_IN_A_GRID).then(|| TriangleGrid::new(walls, &triangles, reach));
+    let grid = (triangles.len() >= TRIANGLES_IN_A_GRID).then(|| triangle_bins(walls, &triangles, reach));
     candidates_by_particle(x.len(), |i, found| {
         let (p, r) = (x[i], radius[i]);
         for (k, (w, plane)) in walls.iter().zip(&planes).enumerate() {
@@ -432,9 +380,10 @@ pub fn wall_pairs(x: &[Vec3], radius: &[f64], walls: &[Wall], skin: f64) -> Bloc
             }
         }
         if let Some(grid) = &grid {
-            for &k in grid.near(p) {
-                if triangle_near(&walls[k as usize], p, r + skin) {
-                    found.push((i as u32, k, [0; 3]));
+            for &t in grid.at(p) {
+                let k = triangles[t as usize];
+                if triangle_near(&walls[k], p, r + skin) {
+                    found.push((i as u32, k as u32, [0; 3]));
                 }
             }
         }

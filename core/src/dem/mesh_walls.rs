@@ -14,7 +14,7 @@
 
 use crate::dem::walls::{Wall, WallShape};
 use crate::error::{GraniteError, Result};
-use crate::math::Vec3;
+use crate::math::{cross3 as cross, dot3 as dot, sub3 as sub, Vec3};
 use std::collections::HashMap;
 
 /// The features of a triangle `(a, b, c)`, as bits: edges `ab`, `bc`, `ca`, corners `a`, `b`, `c`.
@@ -35,20 +35,8 @@ pub struct FacetRing {
     pub owns: u8,
 }
 
-fn sub(a: Vec3, b: Vec3) -> Vec3 {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-
-fn dot(a: Vec3, b: Vec3) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-
 fn along(a: Vec3, d: Vec3, t: f64) -> Vec3 {
     [a[0] + t * d[0], a[1] + t * d[1], a[2] + t * d[2]]
-}
-
-fn cross(a: Vec3, b: Vec3) -> Vec3 {
-    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
 }
 
 /// The point of triangle `(a, b, c)` closest to `p`, and the feature it lies on (0: inside the
