@@ -86,8 +86,9 @@ impl Simplices {
     /// Whether `x` lies in a triangle (2D group) or a tetrahedron (3D group), its boundary
     /// included to a relative `1e-12`.
     pub fn contains(&self, x: Vec3) -> bool {
-        self.near(x, 0.0).any(|s| {
-            let c = &self.corners[s];
+        // The simplices whose boxes hold `x` are all listed in its cube.
+        self.bins.at(x).iter().any(|&s| {
+            let c = &self.corners[s as usize];
             match self.dim {
                 2 => barycentric_triangle(x, c).iter().all(|&w| w >= -1e-12),
                 3 => barycentric_tetrahedron(x, c).iter().all(|&w| w >= -1e-12),

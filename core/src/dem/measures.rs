@@ -217,10 +217,9 @@ impl DemWorld {
     /// to 2. Tension positive: a compressed packing has negative diagonal stress.
     pub fn love_weber_stress(&self, volume: f64) -> Voigt {
         // One walk over the pairs for both measures; the stiffness sums cost little beside it.
-        // In parallel blocks unless called from a worker of the pool already (an RVE's measure
-        // inside a parallel loop over material points): the same sums either way.
-        let parallel =
-            crate::dem::pieces::worth_parallel(self.spheres.len()) && rayon::current_thread_index().is_none();
+        // In parallel blocks when the spheres are enough to share: the same sums either way. (An
+        // RVE inside a parallel loop over material points sums on its own thread: `Rve::stress`.)
+        let parallel = crate::dem::pieces::worth_parallel(self.spheres.len());
         self.stress_and_axis_stiffness(volume, parallel).0
     }
 

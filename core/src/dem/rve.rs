@@ -102,7 +102,8 @@ impl Rve {
 
     /// Love-Weber stress of its contacts over the cell's volume (eq. 4.7, tension positive).
     pub fn stress(&self) -> Voigt {
-        self.sim.world.love_weber_stress(self.sim.world.cell_volume().unwrap_or(1.0))
+        let volume = self.sim.world.cell_volume().unwrap_or(1.0);
+        self.sim.world.stress_and_axis_stiffness(volume, self.sim.in_parallel()).0
     }
 
     /// The periodic cell's base vectors (columns).
