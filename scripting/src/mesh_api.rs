@@ -60,16 +60,18 @@ pub(super) fn surface_triangles(
     source: Dynamic,
     group: Option<&str>,
 ) -> RhaiResult<(String, Vec<[granite_core::math::Vec3; 3]>)> {
-    let from_group = |mesh: &GmshMesh, file: &str| -> RhaiResult<(String, Vec<[granite_core::math::Vec3; 3]>)> {
+    let from_group = |handle: &MeshHandle| -> RhaiResult<(String, Vec<[granite_core::math::Vec3; 3]>)> {
         let Some(group) = group else {
-            return err(format!("wall_mesh: a gmsh mesh ({file}) needs the surface group: #{{ group: \"...\" }}"));
+            return err(format!(
+                "wall_mesh: a gmsh mesh ({}) needs the surface group: #{{ group: \"...\" }}",
+                handle.file
+            ));
         };
-        let handle = MeshHandle { file: file.to_string(), mesh: Arc::new(mesh.clone()) };
         let simplices = handle.group(group, 3, 2, "wall_mesh")?;
         Ok((group.to_string(), simplices.corners.iter().map(|c| [c[0], c[1], c[2]]).collect()))
     };
     if let Some(m) = source.clone().try_cast::<MeshHandle>() {
-        return from_group(&m.mesh, &m.file);
+        return from_group(&m);
     }
     let Ok(file) = source.clone().into_string() else {
         return err(format!(
@@ -82,7 +84,7 @@ pub(super) fn surface_triangles(
         .map_err(|why| super::convert::to_rhai(GraniteError::Setup(format!("wall_mesh: {why}"))))?;
     let stem = path.file_stem().map(|s| s.to_string_lossy().to_string()).unwrap_or_default();
     if file.to_ascii_lowercase().ends_with(".msh") {
-        return from_group(&GmshMesh::read(&path).or_rhai()?, &file);
+        return from_group(&MeshHandle { file: file.clone(), mesh: Arc::new(GmshMesh::read(&path).or_rhai()?) });
     }
     if group.is_some() {
         return err(format!("wall_mesh: `group` names a surface of a gmsh mesh; {file} is read as STL"));
