@@ -236,29 +236,12 @@ fn a_saved_state_with_capsules_resumes_bit_for_bit() {
         s.sim.world.set_dt(dt).unwrap();
         s
     };
-    let steps = 2000;
-    let mut straight = build();
-    for _ in 0..2 * steps {
-        straight.sim.step().unwrap();
-    }
-    let mut first = build();
-    for _ in 0..steps {
-        first.sim.step().unwrap();
-    }
-    let k = &first.sim.world.kinds;
-    assert!(k.contact_count() >= 10, "the saved state has {} contacts", k.contact_count());
-    let path = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("capsules_state.json");
-    first.sim.save(&path).unwrap();
-    let mut resumed = DemSim::load(&path, &first.registry).unwrap();
-    for _ in 0..steps {
-        resumed.step().unwrap();
-    }
-    let (a, b) = (&straight.sim.world.kinds, &resumed.world.kinds);
+    let (straight, written, resumed) = common::straight_and_resumed(|| build().sim, 2000, "capsules_state");
+    let contacts = written.world.kinds.contact_count();
+    assert!(contacts >= 10, "the saved state has {contacts} contacts");
+    let (a, b) = (&straight.world.kinds, &resumed.world.kinds);
     assert!(a.x == b.x && a.v == b.v && a.w == b.w && a.q == b.q, "the resumed bodies parted from the straight run");
-    assert!(
-        straight.sim.world.spheres.x == resumed.world.spheres.x
-            && straight.sim.world.spheres.v == resumed.world.spheres.v
-    );
+    assert!(straight.world.spheres.x == resumed.world.spheres.x && straight.world.spheres.v == resumed.world.spheres.v);
     assert_eq!(a.contact_count(), b.contact_count());
 }
 

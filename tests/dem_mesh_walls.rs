@@ -263,22 +263,9 @@ fn a_saved_state_with_a_moving_box_of_triangles_resumes_bit_for_bit() {
         sim.world.set_dt(dt).unwrap();
         sim
     };
-    let steps = 1500;
-    let mut straight = build();
-    for _ in 0..2 * steps {
-        straight.step().unwrap();
-    }
-    let mut first = build();
-    for _ in 0..steps {
-        first.step().unwrap();
-    }
-    assert!(first.world.wall_pairs.touching_count() >= 5, "{} wall contacts", first.world.wall_pairs.touching_count());
-    let path = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("mesh_walls_state.json");
-    first.save(&path).unwrap();
-    let mut resumed = granite_core::dem::DemSim::load(&path, &registry).unwrap();
-    for _ in 0..steps {
-        resumed.step().unwrap();
-    }
+    let (straight, written, resumed) = straight_and_resumed(build, 1500, "mesh_walls_state");
+    let touching = written.world.wall_pairs.touching_count();
+    assert!(touching >= 5, "the saved state has {touching} wall contacts");
     let (a, b) = (&straight.world, &resumed.world);
     assert!(a.spheres.x == b.spheres.x && a.spheres.v == b.spheres.v && a.spheres.w == b.spheres.w);
     assert_eq!(a.wall_pairs.history, b.wall_pairs.history);

@@ -292,7 +292,6 @@ fn tetrahedra_drift_in_energy_only_by_their_contact_geometry() {
 /// as the straight one.
 #[test]
 fn a_saved_state_with_potential_particles_and_spheres_resumes_bit_for_bit() {
-    let registry = granite_plugins::default_registry();
     let build = || {
         let (mut sim, ..) = tetrahedra_in_a_box(1, 0.65, 0.2, 300);
         let m = sim.world.kinds.material[0];
@@ -303,26 +302,9 @@ fn a_saved_state_with_potential_particles_and_spheres_resumes_bit_for_bit() {
         sim.world.set_damping(0.5).unwrap();
         sim
     };
-    let steps = 3000;
-    let mut straight = build();
-    for _ in 0..2 * steps {
-        straight.step().unwrap();
-    }
-    let mut first = build();
-    for _ in 0..steps {
-        first.step().unwrap();
-    }
-    assert!(
-        first.world.kinds.contact_count() >= 5,
-        "the saved state has {} contacts",
-        first.world.kinds.contact_count()
-    );
-    let path = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("potential_state.json");
-    first.save(&path).unwrap();
-    let mut resumed = DemSim::load(&path, &registry).unwrap();
-    for _ in 0..steps {
-        resumed.step().unwrap();
-    }
+    let (straight, written, resumed) = common::straight_and_resumed(build, 3000, "potential_state");
+    let contacts = written.world.kinds.contact_count();
+    assert!(contacts >= 5, "the saved state has {contacts} contacts");
     let (a, b) = (&straight.world.kinds, &resumed.world.kinds);
     assert!(a.x == b.x && a.v == b.v && a.w == b.w && a.q == b.q, "the resumed particles parted from the straight run");
     assert!(straight.world.spheres.x == resumed.world.spheres.x && straight.world.spheres.v == resumed.world.spheres.v);

@@ -144,3 +144,28 @@ pub fn prescribe_node_velocities(sim: &mut granite_core::mpm::MpmSim, field: imp
         }
     }
 }
+
+/// A DEM run straight and the same run saved half way and resumed from its file: `build()`
+/// stepped `2 steps` times; `build()` stepped `steps` times (returned to check what the file
+/// holds), saved as `name.json`, loaded and stepped `steps` more. (straight, written, resumed)
+pub fn straight_and_resumed(
+    build: impl Fn() -> granite_core::dem::DemSim,
+    steps: usize,
+    name: &str,
+) -> (granite_core::dem::DemSim, granite_core::dem::DemSim, granite_core::dem::DemSim) {
+    let mut straight = build();
+    for _ in 0..2 * steps {
+        straight.step().unwrap();
+    }
+    let mut written = build();
+    for _ in 0..steps {
+        written.step().unwrap();
+    }
+    let path = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("{name}.json"));
+    written.save(&path).unwrap();
+    let mut resumed = granite_core::dem::DemSim::load(&path, &granite::registry()).unwrap();
+    for _ in 0..steps {
+        resumed.step().unwrap();
+    }
+    (straight, written, resumed)
+}
