@@ -2,7 +2,7 @@
 //! whatever the engine.
 
 use granite_core::error::Result;
-use granite_core::io::vtk::{Encoding, Field, PolyData};
+use granite_core::io::vtk::{Field, PolyData, VtkFormat};
 use granite_core::io::{SeriesWriter, VtkWriter};
 use granite_core::math::Vec3;
 use std::path::PathBuf;
@@ -16,8 +16,11 @@ pub struct Output {
     vtk: Option<VtkWriter>,
     /// Poly-data series beside the points (DEM walls, contact network), by name.
     poly: Vec<(String, VtkWriter)>,
-    /// How VTK arrays are written (binary unless the script asks for ASCII).
-    pub vtk_encoding: Encoding,
+    /// Every frame in one file, when the script asks for VTKHDF.
+    #[cfg(feature = "vtkhdf")]
+    hdf: Option<granite_core::io::vtkhdf::VtkHdfWriter>,
+    /// Where frames go: XML files (binary arrays unless the script asks for ASCII) or VTKHDF.
+    pub vtk_format: VtkFormat,
     /// Steps between series rows / VTK frames; None = chosen per run call.
     pub series_every: Option<u64>,
     pub vtk_every: Option<u64>,
@@ -36,7 +39,9 @@ impl Output {
             series: None,
             vtk: None,
             poly: Vec::new(),
-            vtk_encoding: Encoding::default(),
+            #[cfg(feature = "vtkhdf")]
+            hdf: None,
+            vtk_format: VtkFormat::default(),
             series_every: None,
             vtk_every: None,
             last_series_step: None,
@@ -112,8 +117,8 @@ impl Output {
         }
     }
 
-    /// One frame: the points, and each poly-data series (`vtk/<prefix><name>_N.vtp`, its own
-    /// `.pvd`) at the same time.
+    /// One frame: the points, and each poly-data series (`vtk/<name>_N.vtp`, its own `.pvd`) at
+    /// the same time; or all of them as blocks of one frame of `vtk/run.vtkhdf`.
     pub fn write_vtk(
         &mut self,
         step: u64,
@@ -130,11 +135,19 @@ impl Output {
             return Ok(());
         }
         let dir = self.dir.join("vtk");
+        let encoding = match self.vtk_format {
+            VtkFormat::Xml(encoding) => encoding,
+            VtkFormat::VtkHdf => {
+                self.write_vtkhdf(&dir, time, positions, fields, poly)?;
+                self.last_vtk_step = Some(step);
+                return Ok(());
+            }
+        };
         if self.vtk.is_none() {
             self.vtk = Some(self.vtk_series(&dir, "points")?);
         }
         if let Some(w) = self.vtk.as_mut() {
-            w.encoding = self.vtk_encoding;
+            w.encoding = encoding;
             w.write_frame(time, positions, fields)?;
         }
         for (name, data) in poly {
@@ -147,11 +160,54 @@ impl Output {
                 }
             };
             let writer = &mut self.poly[k].1;
-            writer.encoding = self.vtk_encoding;
+            writer.encoding = encoding;
             writer.write_poly_frame(time, data)?;
         }
         self.last_vtk_step = Some(step);
         Ok(())
+    }
+}
+
+impl Output {
+    /// A frame of `vtk/run.vtkhdf`: the points as block `points`, each poly-data picture as a
+    /// block of its name. A resumed simulation continues the file after its frames before the
+    /// resumed time.
+    #[cfg(feature = "vtkhdf")]
+    fn write_vtkhdf(
+        &mut self,
+        dir: &std::path::Path,
+        time: f64,
+        positions: &[Vec3],
+        fields: &[Field],
+        poly: &[(&str, PolyData)],
+    ) -> Result<()> {
+        use granite_core::io::vtkhdf::{BlockFrame, VtkHdfWriter};
+        if self.hdf.is_none() {
+            let path = dir.join("run.vtkhdf");
+            self.hdf = Some(match self.resumes_at {
+                Some((_, resumed)) => VtkHdfWriter::resume(&path, resumed)?,
+                None => VtkHdfWriter::create(&path)?,
+            });
+        }
+        let mut blocks = vec![("points", BlockFrame::points(positions, fields))];
+        blocks.extend(poly.iter().map(|(name, data)| (*name, BlockFrame::poly(data))));
+        match self.hdf.as_mut() {
+            Some(writer) => writer.write_frame(time, &blocks),
+            None => Ok(()),
+        }
+    }
+
+    /// Without the `vtkhdf` feature the format cannot be chosen (`VtkFormat::parse` refuses it).
+    #[cfg(not(feature = "vtkhdf"))]
+    fn write_vtkhdf(
+        &mut self,
+        _dir: &std::path::Path,
+        _time: f64,
+        _positions: &[Vec3],
+        _fields: &[Field],
+        _poly: &[(&str, PolyData)],
+    ) -> Result<()> {
+        Err(granite_core::error::GraniteError::Other("this granite was built without `--features vtkhdf`".into()))
     }
 }
 

@@ -71,7 +71,7 @@ pub static API: &[ApiDoc] = &[
     f("sim", "write_points", &["sim.write_points(file)"], NONE, "a CSV of every point or sphere in the output folder"),
     f("sim", "write_series", &["sim.write_series()"], NONE, "a series.csv row now"),
     f("sim", "write_vtk", &["sim.write_vtk()"], NONE, "a VTK frame now (DEM: spheres, walls and contact network)"),
-    f("sim", "vtk_format", &["sim.vtk_format(\"binary\" | \"ascii\")"], NONE, "how VTK arrays are written: zlib-compressed appended binary (default) or text"),
+    f("sim", "vtk_format", &["sim.vtk_format(\"binary\" | \"ascii\" | \"vtkhdf\")"], NONE, "where VTK frames go: one XML file a frame with zlib-compressed binary (default) or text arrays, or every frame in one vtk/run.vtkhdf (a build with --features vtkhdf)"),
     f("sim", "time", &["sim.time"], NONE, "simulated time, s"),
     f("sim", "dt", &["sim.dt(seconds)", "sim.dt"], NONE, "sets the time step; as a property, reads it"),
     f("sim", "critical_dt", &["sim.critical_dt()"], NONE, "the stability limit of the time step (MPM: P-wave cell crossing; DEM: sqrt(m/k_n) of one contact)"),

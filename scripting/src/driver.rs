@@ -545,8 +545,8 @@ pub fn register_common<S: Simulation>(engine: &mut Engine) {
         Ok(())
     });
     engine.register_fn("vtk_format", |s: &mut Handle<S>, format: &str| {
-        let encoding = granite_core::io::vtk::Encoding::parse(format).or_rhai()?;
-        s.lock().output.vtk_encoding = encoding;
+        let chosen = granite_core::io::vtk::VtkFormat::parse(format).or_rhai()?;
+        s.lock().output.vtk_format = chosen;
         Ok::<_, Box<rhai::EvalAltResult>>(())
     });
     engine.register_get("time", |s: &mut Handle<S>| s.lock().sim.time());

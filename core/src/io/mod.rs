@@ -7,6 +7,8 @@ pub mod gmsh;
 pub mod series;
 pub mod stl;
 pub mod vtk;
+#[cfg(feature = "vtkhdf")]
+pub mod vtkhdf;
 
 pub use series::SeriesWriter;
 pub use vtk::VtkWriter;

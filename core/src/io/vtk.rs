@@ -65,6 +65,37 @@ impl Encoding {
     }
 }
 
+/// Where a run's frames go: one XML file a frame (`vtk/points_N.vtu` and `.pvd` indices), or one
+/// VTKHDF file holding them all (`vtk/run.vtkhdf`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum VtkFormat {
+    Xml(Encoding),
+    VtkHdf,
+}
+
+impl Default for VtkFormat {
+    fn default() -> Self {
+        VtkFormat::Xml(Encoding::default())
+    }
+}
+
+impl VtkFormat {
+    pub fn parse(name: &str) -> Result<VtkFormat> {
+        const ALLOWED: &str = "\"binary\", \"ascii\" or \"vtkhdf\"";
+        match name {
+            "vtkhdf" if cfg!(feature = "vtkhdf") => Ok(VtkFormat::VtkHdf),
+            "vtkhdf" => Err(GraniteError::param(
+                "vtk format",
+                "\"vtkhdf\"",
+                "\"binary\" or \"ascii\" in this build: VTKHDF needs granite built with `--features vtkhdf` \
+                 (and the HDF5 library: `apt-get install libhdf5-dev`)",
+            )),
+            "binary" | "ascii" => Encoding::parse(name).map(VtkFormat::Xml),
+            other => Err(GraniteError::param("vtk format", format!("\"{other}\""), ALLOWED)),
+        }
+    }
+}
+
 /// A frame series: numbered files and their `.pvd` index.
 pub struct VtkWriter {
     dir: PathBuf,
