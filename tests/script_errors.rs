@@ -417,3 +417,12 @@ fn a_bad_potential_particle_names_what_is_wrong_and_the_line() {
     );
     assert!(e.contains("line 4") && e.contains("potential") && e.contains("capsule"), "{e}");
 }
+
+/// A build without the `vtkhdf` feature refuses the format where the script asks for it, saying
+/// how to get it.
+#[cfg(not(feature = "vtkhdf"))]
+#[test]
+fn vtkhdf_in_a_build_without_it_says_how_to_build_it() {
+    let e = run_err("no_vtkhdf", &format!("{HEAD}sim.vtk_format(\"vtkhdf\");"), &[]);
+    assert!(e.contains("line 2") && e.contains("--features vtkhdf") && e.contains("libhdf5-dev"), "{e}");
+}

@@ -32,8 +32,8 @@ const VERSION: [i64; 2] = [2, 1];
 const VTK_VERTEX: u8 = 1;
 const VTK_LINE: u8 = 3;
 const VTK_POLYGON: u8 = 7;
-/// Rows per chunk of the appended arrays: large enough for compression, small enough that a
-/// frame of a few points does not grow the file by much.
+/// Rows per chunk of the appended arrays: few writes a frame, and a frame of a few points does
+/// not grow the file by much.
 const CHUNK_ROWS: usize = 4096;
 /// Rows per chunk of the per-frame counts and offsets.
 const STEP_CHUNK_ROWS: usize = 64;
@@ -170,10 +170,32 @@ impl VtkHdfWriter {
         }
         indexed.sort();
         let blocks: Vec<String> = indexed.into_iter().map(|(_, name)| name).collect();
-        let times = match blocks.first() {
-            Some(first) => root.dataset(&format!("{first}/Steps/Values")).and_then(|d| d.read_raw()).map_err(&err)?,
-            None => Vec::new(),
-        };
+        // A run stopped while it wrote a frame may have left part of it: the file goes on from
+        // the last frame that every block holds whole.
+        let mut times: Option<Vec<f64>> = None;
+        for name in &blocks {
+            let block = root.group(name).map_err(&err)?;
+            let whole = whole_frames(&block).map_err(&err)?;
+            let values: Vec<f64> = block.dataset("Steps/Values").and_then(|d| d.read_raw()).map_err(&err)?;
+            let values = &values[..whole];
+            times = Some(match times {
+                None => values.to_vec(),
+                Some(t) => {
+                    let n = t.len().min(values.len());
+                    if t[..n] != values[..n] {
+                        return Err(GraniteError::Other(format!(
+                            "{}: block `{name}` has other frame times than the first block",
+                            path.display()
+                        )));
+                    }
+                    t[..n].to_vec()
+                }
+            });
+        }
+        let times = times.unwrap_or_default();
+        for name in &blocks {
+            truncate_block(&root.group(name).map_err(&err)?, times.len()).map_err(&err)?;
+        }
         Ok(VtkHdfWriter { file, path: path.to_path_buf(), times, blocks })
     }
 
@@ -246,23 +268,16 @@ fn write_version_and_type(group: &Group, kind: &str) -> hdf5::Result<()> {
     }
 }
 
-/// A dataset of rows of `columns` values (1: a plain list), empty and growable.
+/// A dataset of rows of `columns` values (1: a plain list), empty and growable. Uncompressed:
+/// appending a frame rewrites the chunk that holds the end of the frame before, and a compressed
+/// chunk is rewritten whole, so a run killed during that write lost frames it had written
+/// (`inflate() failed` on resume); a plain chunk is rewritten with the same bytes where it holds
+/// earlier frames.
 fn growable<T: H5Type>(group: &Group, name: &str, columns: usize, chunk_rows: usize) -> hdf5::Result<Dataset> {
-    let compress = chunk_rows == CHUNK_ROWS;
     if columns == 1 {
-        let builder = group.new_dataset::<T>().shape(0..).chunk(chunk_rows);
-        if compress {
-            builder.shuffle().deflate(4).create(name)
-        } else {
-            builder.create(name)
-        }
+        group.new_dataset::<T>().shape(0..).chunk(chunk_rows).create(name)
     } else {
-        let builder = group.new_dataset::<T>().shape((0.., columns)).chunk((chunk_rows, columns));
-        if compress {
-            builder.shuffle().deflate(4).create(name)
-        } else {
-            builder.create(name)
-        }
+        group.new_dataset::<T>().shape((0.., columns)).chunk((chunk_rows, columns)).create(name)
     }
 }
 
@@ -409,6 +424,45 @@ fn shrink(dataset: &Dataset, rows: usize) -> hdf5::Result<()> {
         Some(&columns) => dataset.resize((rows, columns)),
         None => dataset.resize(rows),
     }
+}
+
+/// How many frames a block holds whole: listed in every row list of `Steps` and in the counts, and
+/// with all their rows in the arrays.
+fn whole_frames(block: &Group) -> hdf5::Result<usize> {
+    let steps = block.group("Steps")?;
+    let mut frames = usize::MAX;
+    for list in STEP_LISTS {
+        frames = frames.min(rows(&steps.dataset(list)?));
+    }
+    let mut counts = Vec::new();
+    for count in COUNTS {
+        let values = block.dataset(count)?.read_raw::<i64>()?;
+        frames = frames.min(values.len());
+        counts.push(values);
+    }
+    let data_rows = |group: &str| -> hdf5::Result<usize> {
+        let group = block.group(group)?;
+        let mut least = usize::MAX;
+        for name in group.member_names()? {
+            least = least.min(rows(&group.dataset(&name)?));
+        }
+        Ok(least)
+    };
+    let (point_data, cell_data) = (data_rows("PointData")?, data_rows("CellData")?);
+    let held = |frames: usize| -> hdf5::Result<bool> {
+        let sum = |k: usize| counts[k][..frames].iter().sum::<i64>() as usize;
+        let (points, cells, ids) = (sum(0), sum(1), sum(2));
+        Ok(rows(&block.dataset("Points")?) >= points
+            && rows(&block.dataset("Types")?) >= cells
+            && rows(&block.dataset("Offsets")?) >= cells + frames
+            && rows(&block.dataset("Connectivity")?) >= ids
+            && point_data >= points
+            && cell_data >= cells)
+    };
+    while frames > 0 && !held(frames)? {
+        frames -= 1;
+    }
+    Ok(frames)
 }
 
 /// Keeps the first `keep` frames of a block.
@@ -580,6 +634,33 @@ mod tests {
         write(&mut writer, 2.0, 3);
         drop(writer);
         assert_eq!(datasets(&straight), datasets(&resumed));
+    }
+
+    #[test]
+    fn a_frame_cut_short_by_a_kill_is_dropped_on_resume() {
+        let (x, f, w) = frame(4, 0);
+        let blocks = [("points", BlockFrame::points(&x, &f)), ("walls", BlockFrame::poly(&w))];
+        let whole = dir().join("whole.vtkhdf");
+        let mut writer = VtkHdfWriter::create(&whole).unwrap();
+        writer.write_frame(0.0, &blocks).unwrap();
+        writer.write_frame(1.0, &blocks).unwrap();
+        drop(writer);
+        let cut = dir().join("cut.vtkhdf");
+        std::fs::copy(&whole, &cut).unwrap();
+        // A third frame stopped part way: the points block has its time, count and points, the
+        // walls block nothing yet.
+        {
+            let file = File::open_rw(&cut).unwrap();
+            let points = file.group("VTKHDF/points").unwrap();
+            append(&points.dataset("Steps/Values").unwrap(), &[2.0], 1).unwrap();
+            append(&points.dataset("NumberOfPoints").unwrap(), &[4i64], 1).unwrap();
+            let flat: Vec<f64> = x.iter().flatten().copied().collect();
+            append(&points.dataset("Points").unwrap(), &flat, 3).unwrap();
+        }
+        let writer = VtkHdfWriter::resume(&cut, 5.0).unwrap();
+        assert_eq!(writer.frames(), 2);
+        drop(writer);
+        assert_eq!(datasets(&whole), datasets(&cut));
     }
 
     #[test]
