@@ -82,7 +82,7 @@ pub static API: &[ApiDoc] = &[
     // MPM.
     f("MpmSim", "material", &["sim.material(law, #{ density, name, ...law parameters })"], &["density", "name"], "a material of a registered law (`granite plugins` lists them and their parameters)"),
     f("MpmSim", "script_material", &["sim.script_material(name, |stress, dstrain, state| ..., #{ density, state })"], &["density", "state"], "a material whose law is a script function"),
-    f("MpmSim", "set_material", &["sim.set_material(material, #{ ...law parameters })"], NONE, "new values of some law parameters from the next step on; points keep stress and state"),
+    f("MpmSim", "set_material", &["sim.set_material(material, #{ ...law parameters })", "sim.set_material(\"name\", #{ ...law parameters })"], NONE, "new values of some law parameters from the next step on; points keep stress and state (a material by its handle or, in a simulation loaded with mpm_load, by its name)"),
     f("MpmSim", "memory_per_point", &["sim.memory_per_point(material)"], NONE, "bytes a point of this material holds (its law's object included)"),
     f("MpmSim", "fill_box", &["sim.fill_box(material, lower, upper)", "sim.fill_box(material, lower, upper, #{ per_cell, layout, velocity, stress })"], FILL, "material points in every cell of a box"),
     f("MpmSim", "fill_mesh", &["sim.fill_mesh(material, mesh, group)", "sim.fill_mesh(material, mesh, group, #{ per_cell, layout, velocity, stress })"], FILL, "material points in every cell of the background grid whose points lie in the surfaces (2D) or volumes (3D) of a physical group of a gmsh mesh; returns the count"),
@@ -92,6 +92,7 @@ pub static API: &[ApiDoc] = &[
     f("MpmSim", "geostatic_stress", &["sim.geostatic_stress(surface, k0)"], NONE, "vertical stress -rho g (surface - height), horizontal k0 times it"),
     f("MpmSim", "scheme", &["sim.scheme(\"USF\" | \"USL\" | \"MUSL\")"], NONE, "stress update scheme"),
     f("MpmSim", "shape_functions", &["sim.shape_functions(name)", "sim.shape_functions(\"gimp\", #{ point_size })"], &["point_size"], "\"linear\" (default), \"gimp\" (uGIMP; point_size in m, default from the points' mean volume), \"bspline2\" or \"bspline3\" (B-splines, open at the mesh edges)"),
+    f("MpmSim", "volumetric_strain", &["sim.volumetric_strain(\"point\" | \"cell\")"], NONE, "where the volumetric part of a point's strain increment comes from: its own velocity gradient (default) or the centre of its cell (B-bar, linear shape functions: against volumetric locking in plastic flow without dilatancy)"),
     f("MpmSim", "stress_rate", &["sim.stress_rate(\"plain\" | \"jaumann\")"], NONE, "the stress rate the laws integrate: plain increments (the thesis, default) or Jaumann (the stress turned with the point's spin first)"),
     f("MpmSim", "velocity_update", &["sim.velocity_update(name)", "sim.velocity_update(name, #{ flip_ratio })", "sim.velocity_update(\"ASFLIP\", #{ alpha, beta_min, beta_max })"], &["flip_ratio", "alpha", "beta_min", "beta_max"], "PIC, FLIP, NFLIP, FLIPX, NFLIPX, APIC or ASFLIP (Fei et al. 2021); `granite plugins` lists their parameters"),
     f("MpmSim", "mesh", &["sim.mesh(#{ origin, cell, cells })"], MESH, "replaces the mesh; points stay, boundary conditions are cleared"),

@@ -10,7 +10,9 @@ use granite_core::error::GraniteError;
 use granite_core::math::{Vec3, Voigt};
 use granite_core::mpm::boundary::{Face, FrictionConstraint, NodalForce, TimeFunction, VelocityConstraint};
 use granite_core::mpm::fill::{cell_points, Layout};
-use granite_core::mpm::{Boundary, Mesh, MpmSim, OutOfMeshPolicy, ShapeFunctions, StressRate, StressScheme};
+use granite_core::mpm::{
+    Boundary, Mesh, MpmSim, OutOfMeshPolicy, ShapeFunctions, StressRate, StressScheme, VolumetricStrain,
+};
 use granite_core::registry::ParamMap;
 use granite_run::{Driven, MpmScene, Runout, Simulation};
 use rhai::{Array, Dynamic, Engine, FnPtr, Map, NativeCallContext};
@@ -466,6 +468,19 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
 
     engine.register_fn("material", |s: &mut SimHandle, law: &str, opts: Map| s.material(law, opts));
     engine.register_fn("set_material", |s: &mut SimHandle, m: MaterialHandle, opts: Map| s.set_material(&m, opts));
+    // By name: the materials of a simulation loaded from a checkpoint have no handles in the script.
+    engine.register_fn("set_material", |s: &mut SimHandle, name: &str, opts: Map| {
+        let found = s.lock().sim.mpm.materials.iter().position(|m| m.name == name);
+        let Some(index) = found else {
+            let names: Vec<String> = s.lock().sim.mpm.materials.iter().map(|m| format!("\"{}\"", m.name)).collect();
+            return err(format!(
+                "set_material(\"{name}\", ...): no material of that name; there are {}",
+                names.join(", ")
+            ));
+        };
+        let handle = MaterialHandle::new(index, name.to_string(), s.serial());
+        s.set_material(&handle, opts)
+    });
     engine.register_fn("memory_per_point", |s: &mut SimHandle, m: MaterialHandle| -> RhaiResult<i64> {
         let index = m.index_in(s)?;
         let st = s.lock();
@@ -576,6 +591,19 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
     engine.register_fn("stress_rate", |s: &mut SimHandle, name: &str| {
         s.lock().sim.mpm.stress_rate = StressRate::parse(name).or_rhai()?;
         Ok::<_, Box<rhai::EvalAltResult>>(())
+    });
+    engine.register_fn("volumetric_strain", |s: &mut SimHandle, name: &str| {
+        let chosen = VolumetricStrain::parse(name).or_rhai()?;
+        let mut st = s.lock();
+        if chosen == VolumetricStrain::CellCentre && st.sim.mpm.shape != ShapeFunctions::Linear {
+            return err(format!(
+                "volumetric_strain(\"cell\") takes the volumetric strain at the centre of a cell of linear shape \
+                 functions; this simulation uses {:?} (sim.shape_functions(\"linear\") first)",
+                st.sim.mpm.shape
+            ));
+        }
+        st.sim.mpm.volumetric_strain = chosen;
+        Ok(())
     });
     fn set_update(s: &mut SimHandle, name: &str, opts: Map) -> RhaiResult<()> {
         let mut st = s.lock();

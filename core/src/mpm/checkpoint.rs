@@ -6,7 +6,7 @@ use crate::math::Vec3;
 use crate::mpm::boundary::{Boundary, TimeFunction};
 use crate::mpm::mesh::Mesh;
 use crate::mpm::points::Points;
-use crate::mpm::sim::{Material, MpmSim, OutOfMeshPolicy, ShapeFunctions, StressRate, StressScheme};
+use crate::mpm::sim::{Material, MpmSim, OutOfMeshPolicy, ShapeFunctions, StressRate, StressScheme, VolumetricStrain};
 use crate::registry::{ParamMap, Registry};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
@@ -44,6 +44,8 @@ struct MpmState {
     scheme: StressScheme,
     #[serde(default)]
     stress_rate: StressRate,
+    #[serde(default)]
+    volumetric_strain: VolumetricStrain,
     #[serde(default)]
     shape: ShapeFunctions,
     velocity_update: String,
@@ -104,6 +106,7 @@ impl MpmSim {
             damping: self.damping,
             scheme: self.scheme,
             stress_rate: self.stress_rate,
+            volumetric_strain: self.volumetric_strain,
             shape: self.shape,
             velocity_update: self.velocity_update.name().to_string(),
             velocity_update_params: self.velocity_update.params(),
@@ -179,6 +182,7 @@ impl MpmSim {
         sim.damping = st.damping;
         sim.scheme = st.scheme;
         sim.stress_rate = st.stress_rate;
+        sim.volumetric_strain = st.volumetric_strain;
         sim.shape = st.shape;
         sim.dt = st.dt;
         sim.time = st.time;

@@ -16,4 +16,4 @@ pub use boundary::{Boundary, Face, TimeFunction};
 pub use diagnostics::Diagnostics;
 pub use mesh::Mesh;
 pub use points::Points;
-pub use sim::{Material, MpmSim, OutOfMeshPolicy, ShapeFunctions, StressRate, StressScheme};
+pub use sim::{Material, MpmSim, OutOfMeshPolicy, ShapeFunctions, StressRate, StressScheme, VolumetricStrain};

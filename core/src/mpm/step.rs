@@ -12,7 +12,7 @@ use crate::mpm::shape::{
     first_plane, node_offsets, Basis, CubicBspline, Gimp, Linear, QuadraticBspline, ShapeFunction, Tensor, Weights,
     MAX_NODES,
 };
-use crate::mpm::sim::{Material, MpmSim, OutOfMeshPolicy, ShapeFunctions, StressRate, StressScheme};
+use crate::mpm::sim::{Material, MpmSim, OutOfMeshPolicy, ShapeFunctions, StressRate, StressScheme, VolumetricStrain};
 use rayon::prelude::*;
 
 /// Points handled per task (and per velocity-update call).
@@ -67,18 +67,27 @@ impl MpmSim {
         let (slabs, bc, g) = (&self.slabs, &self.boundary, self.gravity);
         let strategy = self.velocity_update.as_ref();
         let turn = self.stress_rate == StressRate::Jaumann;
+        let centre_volume = self.volumetric_strain == VolumetricStrain::CellCentre;
+        if centre_volume && !S::Basis::VOLUME_AT_CELL_CENTRE {
+            return Err(GraniteError::param(
+                "volumetric_strain",
+                "\"cell\"",
+                "\"cell\" with linear shape functions only (these are not); \"point\" with any",
+            ));
+        }
+        let kin = Kinematics { turn, centre_volume };
         match self.scheme {
             StressScheme::Usl => {
                 p2g::<S>(grid, &at, slabs, pts, g, affine, Maps::MassMomentumForce);
                 grid_velocity(grid, bc, self.time);
                 grid_update(grid, bc, self.damping, dt, self.time);
-                g2p::<S>(pts, grid, &at, strategy, dt, Some(turn));
+                g2p::<S>(pts, grid, &at, strategy, dt, Some(kin));
                 stress_update(pts, &mut self.materials)?;
             }
             StressScheme::Usf => {
                 p2g::<S>(grid, &at, slabs, pts, g, affine, Maps::MassMomentum);
                 grid_velocity(grid, bc, self.time);
-                strain_update::<S>(pts, &grid.velocity, &at, dt, turn);
+                strain_update::<S>(pts, &grid.velocity, &at, dt, kin);
                 stress_update(pts, &mut self.materials)?;
                 p2g::<S>(grid, &at, slabs, pts, g, affine, Maps::Force);
                 grid_update(grid, bc, self.damping, dt, self.time);
@@ -92,7 +101,7 @@ impl MpmSim {
                 // Remap the updated point momentum (positions as at the start of the step).
                 p2g::<S>(grid, &at, slabs, pts, g, affine, Maps::Momentum);
                 grid_velocity(grid, bc, t_next);
-                strain_update::<S>(pts, &grid.velocity, &at, dt, turn);
+                strain_update::<S>(pts, &grid.velocity, &at, dt, kin);
                 stress_update(pts, &mut self.materials)?;
             }
         }
@@ -447,11 +456,21 @@ fn affine_from_moments<S: ShapeFunction>(vel: &[Vec3], base: usize, off: &[usize
     c
 }
 
+/// How a velocity gradient becomes a strain increment: the stress turned with the spin first
+/// (Jaumann), the volumetric part from the cell's centre (B-bar).
+#[derive(Clone, Copy)]
+struct Kinematics {
+    turn: bool,
+    centre_volume: bool,
+}
+
 /// Strain increment (3.36-3.38) and volume update (3.39-3.40) of one point from a nodal velocity;
-/// with `turn`, the stress is turned by the point's spin (the Jaumann rate) before the law adds to it.
+/// with `kin.turn`, the stress is turned by the point's spin (the Jaumann rate) before the law
+/// adds to it.
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
 fn apply_strain<S: ShapeFunction>(
+    kin: Kinematics,
     l: &Mat3,
     vel: &[Vec3],
     base: usize,
@@ -466,17 +485,25 @@ fn apply_strain<S: ShapeFunction>(
     if let Some(stress) = turn {
         rotate_by_spin(stress, l, dt);
     }
-    let rate = strain_rate_from_gradient(l);
-    for c in 0..6 {
-        dstrain[c] = rate[c] * dt;
-        strain[c] += dstrain[c];
-    }
+    let mut rate = strain_rate_from_gradient(l);
     let divergence = if S::Basis::VOLUME_AT_CELL_CENTRE {
         let lc = velocity_gradient::<S>(vel, base, off, dn_centre);
         lc[0] + lc[4] + lc[8]
     } else {
         l[0] + l[4] + l[8]
     };
+    if kin.centre_volume {
+        // The point's own volumetric rate replaced by the centre's, shared by the normal rates of
+        // the mesh's axes (plane strain keeps its zero out-of-plane rate).
+        let shift = (divergence - (l[0] + l[4] + l[8])) / S::DIM as f64;
+        for r in rate.iter_mut().take(S::DIM) {
+            *r += shift;
+        }
+    }
+    for c in 0..6 {
+        dstrain[c] = rate[c] * dt;
+        strain[c] += dstrain[c];
+    }
     *volume *= 1.0 + dt * divergence;
 }
 
@@ -490,7 +517,7 @@ fn centre_gradients<S: ShapeFunction>(mesh: &Mesh) -> [Vec3; MAX_NODES] {
 }
 
 /// Strain and volume update from a nodal velocity field (USF: V^i, MUSL: remapped velocity).
-fn strain_update<S: ShapeFunction>(pts: &mut Points, vel: &[Vec3], at: &Placement, dt: f64, turn: bool) {
+fn strain_update<S: ShapeFunction>(pts: &mut Points, vel: &[Vec3], at: &Placement, dt: f64, kin: Kinematics) {
     let off = node_offsets::<S>(at.mesh);
     let dn0 = centre_gradients::<S>(at.mesh);
     (
@@ -507,8 +534,8 @@ fn strain_update<S: ShapeFunction>(pts: &mut Points, vel: &[Vec3], at: &Placemen
             for p in 0..de.len() {
                 let base = at.weights::<S>(j * CHUNK + p, &mut w);
                 let lg = velocity_gradient::<S>(vel, base, &off, &w.dn);
-                let turned = turn.then_some(&mut stress[p]);
-                apply_strain::<S>(&lg, vel, base, &off, &dn0, dt, &mut de[p], &mut e[p], &mut vol[p], turned);
+                let turned = kin.turn.then_some(&mut stress[p]);
+                apply_strain::<S>(kin, &lg, vel, base, &off, &dn0, dt, &mut de[p], &mut e[p], &mut vol[p], turned);
             }
         });
 }
@@ -521,10 +548,10 @@ fn g2p<S: ShapeFunction>(
     at: &Placement,
     strategy: &dyn VelocityUpdate,
     dt: f64,
-    strain: Option<bool>,
+    strain: Option<Kinematics>,
 ) {
     let with_strain = strain.is_some();
-    let turn = strain == Some(true);
+    let kin = strain.unwrap_or(Kinematics { turn: false, centre_volume: false });
     let off = node_offsets::<S>(at.mesh);
     let dn0 = centre_gradients::<S>(at.mesh);
     let affine = strategy.affine();
@@ -570,8 +597,20 @@ fn g2p<S: ShapeFunction>(
                         c[p] = lg;
                     }
                     if with_strain {
-                        let turned = turn.then_some(&mut stress[p]);
-                        apply_strain::<S>(&lg, vel, base, &off, &dn0, dt, &mut de[p], &mut e[p], &mut vol[p], turned);
+                        let turned = kin.turn.then_some(&mut stress[p]);
+                        apply_strain::<S>(
+                            kin,
+                            &lg,
+                            vel,
+                            base,
+                            &off,
+                            &dn0,
+                            dt,
+                            &mut de[p],
+                            &mut e[p],
+                            &mut vol[p],
+                            turned,
+                        );
                     }
                 }
             }
