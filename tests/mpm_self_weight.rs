@@ -5,10 +5,21 @@ use common::*;
 
 #[test]
 fn settled_column_stress_matches_overburden() {
-    let report = run("mpm/self_weight_column.rhai", "self_weight", &[], 2).unwrap();
-    assert!(summary_f64(&report, "final_kinetic_energy") < 1e-6, "the column has not settled");
+    check_overburden(&run("mpm/self_weight_column.rhai", "self_weight", &[], 2).unwrap());
+}
+
+/// The same with the volumetric strain of each cell's centre (B-bar): the points of a cell share
+/// its volumetric strain, and the column carries its weight as before.
+#[test]
+fn settled_column_with_cell_volumetric_strain_matches_overburden() {
+    let sets = [("volumetric_strain", "cell")];
+    check_overburden(&run("mpm/self_weight_column.rhai", "self_weight_bbar", &sets, 2).unwrap());
+}
+
+fn check_overburden(report: &granite_script::RunReport) {
+    assert!(summary_f64(report, "final_kinetic_energy") < 1e-6, "the column has not settled");
     let (rho, height, cell) =
-        (summary_f64(&report, "density"), summary_f64(&report, "height"), summary_f64(&report, "cell_size"));
+        (summary_f64(report, "density"), summary_f64(report, "height"), summary_f64(report, "cell_size"));
     let g = 9.81;
     let (h, rows) = read_csv(&report.out_dir.join("points.csv"));
     let (y, syy) = (column(&h, "y"), column(&h, "syy"));
