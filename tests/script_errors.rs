@@ -426,3 +426,34 @@ fn vtkhdf_in_a_build_without_it_says_how_to_build_it() {
     let e = run_err("no_vtkhdf", &format!("{HEAD}sim.vtk_format(\"vtkhdf\");"), &[]);
     assert!(e.contains("line 2") && e.contains("--features vtkhdf") && e.contains("libhdf5-dev"), "{e}");
 }
+
+/// The cell's volumetric strain is for linear shape functions: asked with others it is refused at
+/// the line, and shape functions changed afterwards stop the run naming the choice.
+#[test]
+fn cell_volumetric_strain_needs_linear_shape_functions() {
+    let body = "let m = sim.material(\"linear_elastic\", #{ density: 1e3, young: 1e6, poisson: 0.3 });\n\
+                sim.fill_box(m, [0.0, 0.0], [0.2, 0.2], #{ per_cell: 2 });\n";
+    let e = run_err(
+        "bbar_gimp",
+        &format!("{HEAD}{body}sim.shape_functions(\"gimp\");\nsim.volumetric_strain(\"cell\");"),
+        &[],
+    );
+    assert!(e.contains("line 5") && e.contains("volumetric_strain") && e.contains("linear"), "{e}");
+    let e = run_err(
+        "bbar_then_gimp",
+        &format!("{HEAD}{body}sim.volumetric_strain(\"cell\");\nsim.shape_functions(\"gimp\");\nsim.dt(1e-4);\nsim.run_steps(2);"),
+        &[],
+    );
+    assert!(e.contains("volumetric_strain") && e.contains("linear shape functions only"), "{e}");
+    let e = run_err("bbar_name", &format!("{HEAD}sim.volumetric_strain(\"centre\");"), &[]);
+    assert!(e.contains("line 2") && e.contains("\"point\" or \"cell\""), "{e}");
+}
+
+/// A material changed by a name the simulation does not have is refused with the names it has.
+#[test]
+fn set_material_by_an_unknown_name_lists_the_materials() {
+    let body =
+        "let m = sim.material(\"linear_elastic\", #{ name: \"clay\", density: 1e3, young: 1e6, poisson: 0.3 });\n";
+    let e = run_err("set_by_name", &format!("{HEAD}{body}sim.set_material(\"sand\", #{{ young: 2e6 }});"), &[]);
+    assert!(e.contains("line 3") && e.contains("\"sand\"") && e.contains("\"clay\""), "{e}");
+}
