@@ -1,4 +1,4 @@
-//! VTKHDF output: one HDF5 file holding every frame of a run, read natively by ParaView (5.12 and
+//! VTKHDF output: one HDF5 file holding every frame of a run, read natively by ParaView (5.13 and
 //! later) and by VTK's `vtkHDFReader`.
 //!
 //! The file is a temporal `PartitionedDataSetCollection` (VTKHDF 2.1): each picture of a frame
