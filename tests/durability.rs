@@ -36,16 +36,8 @@ fn block(cells: usize, extra: &str) -> String {
         .replace("EXTRA", extra)
 }
 
-/// Runs `source` in this process into `out` (the same folder every time: runs that resume one
-/// another) with `--set` values `pairs`.
 fn run_in(out: &Path, source: &str, pairs: &[(&str, &str)]) -> granite_script::RunReport {
-    let options = granite_script::RunOptions {
-        out_dir: out.to_path_buf(),
-        overrides: common::sets(pairs),
-        quiet: true,
-        ..Default::default()
-    };
-    granite_script::run_source("block.rhai", source, granite::registry(), options).unwrap()
+    common::run_source_in(out, "block.rhai", source, pairs)
 }
 
 fn write_script(dir: &Path, source: &str) -> PathBuf {
@@ -92,22 +84,7 @@ fn a_run_killed_while_checkpointing_always_leaves_a_loadable_checkpoint_and_its_
         lcg = lcg.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1_442_695_040_888_963_407);
         let delay = Duration::from_micros((lcg >> 33) % 300_000);
         let _ = std::fs::remove_dir_all(&out);
-        let mut child = granite()
-            .args(["run", "--quiet", "--threads", "1", "--out"])
-            .arg(&out)
-            .arg(&script)
-            .stdout(Stdio::null())
-            .stderr(Stdio::null())
-            .spawn()
-            .unwrap();
-        let started = Instant::now();
-        while !ck.exists() {
-            assert!(started.elapsed() < Duration::from_secs(60), "trial {trial}: no first checkpoint");
-            std::thread::sleep(Duration::from_millis(1));
-        }
-        std::thread::sleep(delay);
-        child.kill().unwrap();
-        child.wait().unwrap();
+        common::kill_after_first_checkpoint(&script, &out, &ck, delay, trial);
         // The newest checkpoint is never a cut one: it is replaced whole or not at all.
         let sim = MpmSim::load(&ck, &registry)
             .unwrap_or_else(|e| panic!("trial {trial} (killed after {delay:?}): ck.json: {e}"));

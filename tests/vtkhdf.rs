@@ -10,15 +10,8 @@ mod common;
 use std::path::Path;
 use std::process::Command;
 
-/// Runs `source` into `out` with `--set` values `pairs`.
 fn run_in(out: &Path, source: &str, pairs: &[(&str, &str)]) -> granite_script::RunReport {
-    let options = granite_script::RunOptions {
-        out_dir: out.to_path_buf(),
-        overrides: common::sets(pairs),
-        quiet: true,
-        ..Default::default()
-    };
-    granite_script::run_source("scene.rhai", source, granite::registry(), options).unwrap()
+    common::run_source_in(out, "scene.rhai", source, pairs)
 }
 
 /// What tests/vtkhdf/compare_frames.py found: frames, pictures, arrays and values compared,
@@ -110,36 +103,46 @@ fn mpm_frames_with_tensors_and_state_variables_equal_the_xml_frames() {
     assert!(values >= points * (2 + 3 + 6 + 6 + 4) * frames, "{values} values");
 }
 
-/// A block settling, stopped at step 300 with a checkpoint at step 200 and resumed to step 400:
-/// the file holds the frames of steps 0 to 400 once each, as a run straight to step 400 writes
-/// them.
-const MPM_BLOCK: &str = r#"
+/// A block settling under gravity, loaded from its checkpoint `ck.json` when `resume` is set; its
+/// frames into VTKHDF every `EVERY` steps, a checkpoint every `CHECKPOINT`.
+const BLOCK: &str = r#"
 let resume = param("resume", false);
-let steps = param("steps", 400);
+let steps = param("steps", 100000);
 let sim = if resume {
     mpm_load("ck.json")
 } else {
-    let s = mpm(#{ dim: 2, origin: [0.0, 0.0], cell: 0.05, cells: [8, 8] });
-    let soil = s.material("linear_elastic", #{ density: 1800.0, young: 1e6, poisson: 0.3 });
-    s.fill_box(soil, [0.0, 0.0], [0.2, 0.2], #{ per_cell: 2 });
+    let s = mpm(#{ dim: 2, origin: [0.0, 0.0], cell: 0.05, cells: [CELLS, CELLS] });
+    let soil = s.material("mohr_coulomb", #{ density: 1800.0, young: 1e6, poisson: 0.3, friction: 30.0 });
+    s.fill_box(soil, [0.0, 0.0], [SIDE, SIDE], #{ per_cell: 2 });
     s.fix("x-", "x"); s.fix("y-", "y");
     s.gravity([0.0, -9.81]);
     s.dt(1e-4);
     s
 };
 sim.vtk_format("vtkhdf");
-sim.vtk_every(100);
-if !resume { sim.checkpoint_every(200, "ck.json"); }
+sim.vtk_every(EVERY);
+if !resume { sim.checkpoint_every(CHECKPOINT, "ck.json"); }
 sim.run_steps(steps);
 "#;
 
+fn block(cells: usize, every: u64, checkpoint: u64) -> String {
+    BLOCK
+        .replace("CELLS", &cells.to_string())
+        .replace("SIDE", &format!("{:.2}", cells as f64 * 0.05 * 5.0 / 6.0))
+        .replace("EVERY", &every.to_string())
+        .replace("CHECKPOINT", &checkpoint.to_string())
+}
+
+/// Stopped at step 300 with a checkpoint at step 200 and resumed to step 400: the file holds the
+/// frames of steps 0 to 400 once each, as a run straight to step 400 writes them.
 #[test]
 fn a_resumed_run_continues_the_vtkhdf_file_of_the_run_it_resumes() {
+    let source = block(8, 100, 200);
     let straight = common::out_dir("vtkhdf_straight");
-    run_in(&straight, MPM_BLOCK, &[]);
+    run_in(&straight, &source, &[("steps", "400")]);
     let resumed = common::out_dir("vtkhdf_resumed");
-    run_in(&resumed, MPM_BLOCK, &[("steps", "300")]);
-    run_in(&resumed, MPM_BLOCK, &[("resume", "true"), ("steps", "200")]);
+    run_in(&resumed, &source, &[("steps", "300")]);
+    run_in(&resumed, &source, &[("resume", "true"), ("steps", "200")]);
     let [frames, ..] = compare(&straight.join("vtk/run.vtkhdf"), &resumed.join("vtk/run.vtkhdf"));
     assert_eq!(frames, 5, "steps 0, 100, 200, 300, 400");
 }
@@ -158,58 +161,24 @@ fn an_unknown_format_is_refused_naming_the_allowed_ones() {
 #[cfg(unix)]
 #[test]
 fn a_run_killed_while_writing_frames_resumes_its_file_whole() {
-    const BLOCK: &str = r#"
-let resume = param("resume", false);
-let steps = param("steps", 100000);
-let sim = if resume {
-    mpm_load("ck.json")
-} else {
-    let s = mpm(#{ dim: 2, origin: [0.0, 0.0], cell: 0.05, cells: [24, 24] });
-    let soil = s.material("mohr_coulomb", #{ density: 1800.0, young: 1e6, poisson: 0.3, friction: 30.0 });
-    s.fill_box(soil, [0.0, 0.0], [1.0, 1.0], #{ per_cell: 2 });
-    s.fix("x-", "x"); s.fix("y-", "y");
-    s.gravity([0.0, -9.81]);
-    s.dt(1e-4);
-    s
-};
-sim.vtk_format("vtkhdf");
-sim.vtk_every(1);
-if !resume { sim.checkpoint_every(10, "ck.json"); }
-sim.run_steps(steps);
-"#;
-    use std::time::{Duration, Instant};
     let base = common::out_dir("vtkhdf_kill");
     std::fs::create_dir_all(&base).unwrap();
+    let source = block(24, 1, 10);
     let script = base.join("block.rhai");
-    std::fs::write(&script, BLOCK).unwrap();
+    std::fs::write(&script, &source).unwrap();
     let (killed, straight) = (base.join("killed"), base.join("straight"));
     let ck = killed.join("ck.json");
     let mut lcg: u64 = 0x2545_f491_4f6c_dd1d;
     for trial in 0..6 {
         lcg = lcg.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1_442_695_040_888_963_407);
-        let delay = Duration::from_micros((lcg >> 33) % 300_000);
+        let delay = std::time::Duration::from_micros((lcg >> 33) % 300_000);
         let _ = std::fs::remove_dir_all(&killed);
-        let mut child = Command::new(env!("CARGO_BIN_EXE_granite"))
-            .args(["run", "--quiet", "--threads", "1", "--out"])
-            .arg(&killed)
-            .arg(&script)
-            .stdout(std::process::Stdio::null())
-            .stderr(std::process::Stdio::null())
-            .spawn()
-            .unwrap();
-        let started = Instant::now();
-        while !ck.exists() {
-            assert!(started.elapsed() < Duration::from_secs(60), "trial {trial}: no first checkpoint");
-            std::thread::sleep(Duration::from_millis(1));
-        }
-        std::thread::sleep(delay);
-        child.kill().unwrap();
-        child.wait().unwrap();
+        common::kill_after_first_checkpoint(&script, &killed, &ck, delay, trial);
         let resumed_from = granite_core::mpm::MpmSim::load_newest(&ck, &granite::registry()).unwrap().0.step;
-        run_in(&killed, BLOCK, &[("resume", "true"), ("steps", "5")]);
+        run_in(&killed, &source, &[("resume", "true"), ("steps", "5")]);
         let _ = std::fs::remove_dir_all(&straight);
         let end = (resumed_from + 5).to_string();
-        run_in(&straight, BLOCK, &[("steps", end.as_str())]);
+        run_in(&straight, &source, &[("steps", end.as_str())]);
         let [frames, ..] = compare(&straight.join("vtk/run.vtkhdf"), &killed.join("vtk/run.vtkhdf"));
         assert_eq!(frames as u64, resumed_from + 6, "trial {trial}, killed {delay:?} after the first checkpoint");
     }

@@ -169,3 +169,40 @@ pub fn straight_and_resumed(
     }
     (straight, written, resumed)
 }
+
+/// `granite run --quiet --threads 1 --out OUT SCRIPT` killed (SIGKILL) `delay` after its first
+/// checkpoint `ck` appeared: a run stopped at a moment it did not choose.
+#[cfg(unix)]
+#[allow(dead_code)]
+pub fn kill_after_first_checkpoint(script: &Path, out: &Path, ck: &Path, delay: std::time::Duration, trial: usize) {
+    use std::time::{Duration, Instant};
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_granite"))
+        .args(["run", "--quiet", "--threads", "1", "--out"])
+        .arg(out)
+        .arg(script)
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let started = Instant::now();
+    while !ck.exists() {
+        assert!(started.elapsed() < Duration::from_secs(60), "trial {trial}: no first checkpoint");
+        std::thread::sleep(Duration::from_millis(1));
+    }
+    std::thread::sleep(delay);
+    child.kill().unwrap();
+    child.wait().unwrap();
+}
+
+/// Runs `source` (as `name`) in this process into `out`, kept as it is (runs that resume one
+/// another share it), with `--set` values `pairs`.
+#[allow(dead_code)]
+pub fn run_source_in(out: &Path, name: &str, source: &str, pairs: &[(&str, &str)]) -> granite_script::RunReport {
+    let options = granite_script::RunOptions {
+        out_dir: out.to_path_buf(),
+        overrides: sets(pairs),
+        quiet: true,
+        ..Default::default()
+    };
+    granite_script::run_source(name, source, granite::registry(), options).unwrap()
+}

@@ -127,6 +127,7 @@ impl VtkHdfWriter {
         }
         let err = h5(path);
         let file = File::create(path).map_err(&err)?;
+        close_on_exec(&file);
         let root = ordered_group(&file, "VTKHDF").map_err(&err)?;
         write_version_and_type(&root, "PartitionedDataSetCollection").map_err(&err)?;
         ordered_group(&root, "Assembly").map_err(&err)?;
@@ -135,68 +136,49 @@ impl VtkHdfWriter {
     }
 
     /// The file at `path` continued by a run resumed at `time`: its frames before that time are
-    /// kept, the later ones dropped (the resumed run writes them again). A missing file starts a
-    /// new one; one that cannot be read as a series of this writer (cut short by a crash, say) is
-    /// moved aside to `<path>.damaged` and a new one started.
+    /// kept, the later ones dropped (the resumed run writes them again). They are copied into a
+    /// new file that replaces the old one: a run killed while it wrote a frame can leave HDF5's
+    /// indexes in the old file in a state that misplaces later writes (measured: a resumed run
+    /// appending in place wrote its first frame wrong after about one kill in a hundred), while
+    /// what it had written whole reads back. A missing file starts a new one; one that cannot be
+    /// read as a series of this writer is moved aside to `<path>.damaged` and a new one started.
     pub fn resume(path: &Path, time: f64) -> Result<VtkHdfWriter> {
         if !path.exists() {
             return Self::create(path);
         }
-        match Self::open(path) {
-            Ok(mut writer) => {
-                writer.drop_frames_from(time)?;
-                Ok(writer)
+        let read = File::open(path).and_then(|old| whole_series(&old).map(|(blocks, times)| (old, blocks, times)));
+        let (old, blocks, times) = match read {
+            Ok(found) => found,
+            // Open in another program: the file is whole, and must not be set aside.
+            Err(e) if e.to_string().contains("lock") => {
+                return Err(GraniteError::Other(format!(
+                    "{}: the file is open in another program (ParaView?); close it there and resume again ({e})",
+                    path.display()
+                )))
             }
             Err(_) => {
                 let aside = path.with_extension("vtkhdf.damaged");
                 std::fs::rename(path, &aside).map_err(|e| GraniteError::io(path, e))?;
-                Self::create(path)
+                return Self::create(path);
             }
+        };
+        let keep = times.iter().take_while(|&&t| t < time).count();
+        let fresh = path.with_extension("vtkhdf.partial");
+        let mut writer = Self::create(&fresh)?;
+        let err = h5(&fresh);
+        let root = writer.file.group("VTKHDF").map_err(&err)?;
+        let old_root = old.group("VTKHDF").map_err(h5(path))?;
+        for (index, name) in blocks.iter().enumerate() {
+            let from = old_root.group(name).map_err(h5(path))?;
+            copy_block(&from, &root, name, index as i64, keep).map_err(&err)?;
         }
-    }
-
-    fn open(path: &Path) -> Result<VtkHdfWriter> {
-        let err = h5(path);
-        let file = File::open_rw(path).map_err(&err)?;
-        let root = file.group("VTKHDF").map_err(&err)?;
-        let mut indexed = Vec::new();
-        for name in root.member_names().map_err(&err)? {
-            if name == "Assembly" {
-                continue;
-            }
-            let block = root.group(&name).map_err(&err)?;
-            let index: i64 = block.attr("Index").and_then(|a| a.read_scalar()).map_err(&err)?;
-            indexed.push((index, name));
-        }
-        indexed.sort();
-        let blocks: Vec<String> = indexed.into_iter().map(|(_, name)| name).collect();
-        // A run stopped while it wrote a frame may have left part of it: the file goes on from
-        // the last frame that every block holds whole.
-        let mut times: Option<Vec<f64>> = None;
-        for name in &blocks {
-            let block = root.group(name).map_err(&err)?;
-            let whole = whole_frames(&block).map_err(&err)?;
-            let values: Vec<f64> = block.dataset("Steps/Values").and_then(|d| d.read_raw()).map_err(&err)?;
-            let values = &values[..whole];
-            times = Some(match times {
-                None => values.to_vec(),
-                Some(t) => {
-                    let n = t.len().min(values.len());
-                    if t[..n] != values[..n] {
-                        return Err(GraniteError::Other(format!(
-                            "{}: block `{name}` has other frame times than the first block",
-                            path.display()
-                        )));
-                    }
-                    t[..n].to_vec()
-                }
-            });
-        }
-        let times = times.unwrap_or_default();
-        for name in &blocks {
-            truncate_block(&root.group(name).map_err(&err)?, times.len()).map_err(&err)?;
-        }
-        Ok(VtkHdfWriter { file, path: path.to_path_buf(), times, blocks })
+        writer.file.flush().map_err(&err)?;
+        drop(old);
+        std::fs::rename(&fresh, path).map_err(|e| GraniteError::io(path, e))?;
+        writer.path = path.to_path_buf();
+        writer.blocks = blocks;
+        writer.times = times[..keep].to_vec();
+        Ok(writer)
     }
 
     pub fn path(&self) -> &Path {
@@ -245,6 +227,132 @@ impl VtkHdfWriter {
         self.times.truncate(keep);
         self.file.flush().map_err(&err)
     }
+}
+
+/// The blocks of a file (in their `Index` order) and the times of the frames that every block
+/// holds whole: a run stopped while it wrote a frame may have left part of it.
+fn whole_series(file: &File) -> hdf5::Result<(Vec<String>, Vec<f64>)> {
+    let root = file.group("VTKHDF")?;
+    let mut indexed = Vec::new();
+    for name in root.member_names()? {
+        if name != "Assembly" {
+            let index: i64 = root.group(&name)?.attr("Index")?.read_scalar()?;
+            indexed.push((index, name));
+        }
+    }
+    indexed.sort();
+    let blocks: Vec<String> = indexed.into_iter().map(|(_, name)| name).collect();
+    let mut times: Option<Vec<f64>> = None;
+    for name in &blocks {
+        let block = root.group(name)?;
+        let whole = whole_frames(&block)?;
+        let values: Vec<f64> = block.dataset("Steps/Values")?.read_raw()?;
+        let values = &values[..whole];
+        times = Some(match times {
+            None => values.to_vec(),
+            Some(t) => {
+                let n = t.len().min(values.len());
+                if t[..n] != values[..n] {
+                    return Err(hdf5::Error::from(format!(
+                        "block `{name}` has other frame times than the first block"
+                    )));
+                }
+                t[..n].to_vec()
+            }
+        });
+    }
+    Ok((blocks, times.unwrap_or_default()))
+}
+
+/// The rows a block's first `keep` frames take in each of its arrays, by the array's path.
+fn kept_rows(block: &Group, keep: usize) -> hdf5::Result<Vec<(String, usize)>> {
+    let kept = |count: &str| -> hdf5::Result<usize> {
+        Ok(block.dataset(count)?.read_raw::<i64>()?.iter().take(keep).sum::<i64>() as usize)
+    };
+    let [point_rows, cell_rows, id_rows] = [kept(COUNTS[0])?, kept(COUNTS[1])?, kept(COUNTS[2])?];
+    let mut rows: Vec<(String, usize)> = vec![
+        ("Points".into(), point_rows),
+        ("Types".into(), cell_rows),
+        ("Offsets".into(), cell_rows + keep),
+        ("Connectivity".into(), id_rows),
+    ];
+    rows.extend(COUNTS.iter().map(|c| (c.to_string(), keep)));
+    rows.extend(STEP_LISTS.iter().map(|l| (format!("Steps/{l}"), keep)));
+    for (group, n) in [("PointData", point_rows), ("CellData", cell_rows)] {
+        for name in block.group(group)?.member_names()? {
+            rows.push((format!("{group}/{name}"), n));
+        }
+    }
+    Ok(rows)
+}
+
+/// A new block `name` under `root` holding the first `keep` frames of block `from`.
+fn copy_block(from: &Group, root: &Group, name: &str, index: i64, keep: usize) -> hdf5::Result<()> {
+    let block = create_block(root, name, index)?;
+    for (path, rows) in kept_rows(from, keep)? {
+        let source = from.dataset(&path)?;
+        let columns = source.shape().get(1).copied().unwrap_or(1);
+        let target = match block.dataset(&path) {
+            Ok(d) => d,
+            Err(_) => {
+                let (group, array) = path.split_once('/').unwrap_or(("", path.as_str()));
+                let group = block.group(group)?;
+                if source.dtype()?.is::<i64>() {
+                    growable::<i64>(&group, array, columns, CHUNK_ROWS)?
+                } else {
+                    growable::<f64>(&group, array, columns, CHUNK_ROWS)?
+                }
+            }
+        };
+        if rows == 0 {
+            continue;
+        }
+        if source.dtype()?.is::<f64>() {
+            copy_rows::<f64>(&source, &target, rows, columns)?;
+        } else if source.dtype()?.is::<u8>() {
+            copy_rows::<u8>(&source, &target, rows, columns)?;
+        } else {
+            copy_rows::<i64>(&source, &target, rows, columns)?;
+        }
+    }
+    block.group("Steps")?.attr("NSteps")?.write_scalar(&(keep as i64))
+}
+
+/// Appends the first `rows` rows of `source` to `target`.
+fn copy_rows<T: H5Type + Clone>(source: &Dataset, target: &Dataset, rows: usize, columns: usize) -> hdf5::Result<()> {
+    let values: Vec<T> = if source.ndim() == 1 {
+        source.read_slice_1d::<T, _>(0..rows)?.to_vec()
+    } else {
+        source.read_slice_2d::<T, _>((0..rows, 0..columns))?.iter().cloned().collect()
+    };
+    append(target, &values, columns)
+}
+
+/// Keeps the file's descriptor out of programs this process starts. HDF5 locks the files it
+/// writes (flock) and opens them without close-on-exec: a child started while a file is open
+/// (a test running a reader, a batch starting a run) would inherit the lock and keep it after this
+/// process closed the file, and a reader opening the finished file, or this process opening it
+/// again to resume, would find it locked.
+fn close_on_exec(file: &File) {
+    #[cfg(unix)]
+    {
+        let id = file.id();
+        let mut handle: *mut std::ffi::c_void = std::ptr::null_mut();
+        // SAFETY: HDF5 calls go through hdf5-metno's global lock, as its own do; with the default
+        // (sec2) driver the handle is a pointer to the file's descriptor, an int.
+        let found = hdf5::sync::sync(|| unsafe {
+            hdf5_sys::h5f::H5Fget_vfd_handle(id, hdf5_sys::h5p::H5P_DEFAULT, &mut handle)
+        });
+        if found >= 0 && !handle.is_null() {
+            // SAFETY: `handle` points to the descriptor's int (above); fcntl only sets its flag.
+            unsafe {
+                let fd = *(handle as *const std::ffi::c_int);
+                libc::fcntl(fd, libc::F_SETFD, libc::FD_CLOEXEC);
+            }
+        }
+    }
+    #[cfg(not(unix))]
+    let _ = file;
 }
 
 /// A group whose links keep their creation order (the reader lists blocks in that order).
@@ -467,32 +575,10 @@ fn whole_frames(block: &Group) -> hdf5::Result<usize> {
 
 /// Keeps the first `keep` frames of a block.
 fn truncate_block(block: &Group, keep: usize) -> hdf5::Result<()> {
-    let kept = |count: &str| -> hdf5::Result<usize> {
-        Ok(block.dataset(count)?.read_raw::<i64>()?.iter().take(keep).sum::<i64>() as usize)
-    };
-    let [point_rows, cell_rows, id_rows] = [kept(COUNTS[0])?, kept(COUNTS[1])?, kept(COUNTS[2])?];
-    for (dataset, rows) in [
-        ("Points", point_rows),
-        ("Types", cell_rows),
-        ("Offsets", cell_rows + keep),
-        ("Connectivity", id_rows),
-        (COUNTS[0], keep),
-        (COUNTS[1], keep),
-        (COUNTS[2], keep),
-    ] {
-        shrink(&block.dataset(dataset)?, rows)?;
+    for (path, rows) in kept_rows(block, keep)? {
+        shrink(&block.dataset(&path)?, rows)?;
     }
-    for (group, rows) in [("PointData", point_rows), ("CellData", cell_rows)] {
-        let group = block.group(group)?;
-        for name in group.member_names()? {
-            shrink(&group.dataset(&name)?, rows)?;
-        }
-    }
-    let steps = block.group("Steps")?;
-    for list in STEP_LISTS {
-        shrink(&steps.dataset(list)?, keep)?;
-    }
-    steps.attr("NSteps")?.write_scalar(&(keep as i64))
+    block.group("Steps")?.attr("NSteps")?.write_scalar(&(keep as i64))
 }
 
 #[cfg(test)]
@@ -661,6 +747,27 @@ mod tests {
         assert_eq!(writer.frames(), 2);
         drop(writer);
         assert_eq!(datasets(&whole), datasets(&cut));
+    }
+
+    /// Programs this process starts do not inherit the open file (nor HDF5's lock on it).
+    #[cfg(target_os = "linux")]
+    #[test]
+    fn the_open_file_is_closed_on_exec() {
+        let path = dir().join("cloexec.vtkhdf");
+        let writer = VtkHdfWriter::create(&path).unwrap();
+        let target = std::fs::canonicalize(&path).unwrap();
+        let mut descriptors = 0;
+        for entry in std::fs::read_dir("/proc/self/fd").unwrap().flatten() {
+            if std::fs::read_link(entry.path()).is_ok_and(|p| p == target) {
+                let fd: i32 = entry.file_name().to_string_lossy().parse().unwrap();
+                // SAFETY: reads the flags of a descriptor this process holds.
+                let flags = unsafe { libc::fcntl(fd, libc::F_GETFD) };
+                assert!(flags & libc::FD_CLOEXEC != 0, "descriptor {fd} of the file is inherited by children");
+                descriptors += 1;
+            }
+        }
+        assert!(descriptors >= 1);
+        drop(writer);
     }
 
     #[test]
