@@ -103,34 +103,13 @@ fn mpm_frames_with_tensors_and_state_variables_equal_the_xml_frames() {
     assert!(values >= points * (2 + 3 + 6 + 6 + 4) * frames, "{values} values");
 }
 
-/// A block settling under gravity, loaded from its checkpoint `ck.json` when `resume` is set; its
-/// frames into VTKHDF every `EVERY` steps, a checkpoint every `CHECKPOINT`.
-const BLOCK: &str = r#"
-let resume = param("resume", false);
-let steps = param("steps", 100000);
-let sim = if resume {
-    mpm_load("ck.json")
-} else {
-    let s = mpm(#{ dim: 2, origin: [0.0, 0.0], cell: 0.05, cells: [CELLS, CELLS] });
-    let soil = s.material("mohr_coulomb", #{ density: 1800.0, young: 1e6, poisson: 0.3, friction: 30.0 });
-    s.fill_box(soil, [0.0, 0.0], [SIDE, SIDE], #{ per_cell: 2 });
-    s.fix("x-", "x"); s.fix("y-", "y");
-    s.gravity([0.0, -9.81]);
-    s.dt(1e-4);
-    s
-};
-sim.vtk_format("vtkhdf");
-sim.vtk_every(EVERY);
-if !resume { sim.checkpoint_every(CHECKPOINT, "ck.json"); }
-sim.run_steps(steps);
-"#;
-
+/// A block settling under gravity (tests/common), its frames into VTKHDF every `every` steps, a
+/// checkpoint every `checkpoint`.
 fn block(cells: usize, every: u64, checkpoint: u64) -> String {
-    BLOCK
-        .replace("CELLS", &cells.to_string())
-        .replace("SIDE", &format!("{:.2}", cells as f64 * 0.05 * 5.0 / 6.0))
-        .replace("EVERY", &every.to_string())
-        .replace("CHECKPOINT", &checkpoint.to_string())
+    let outputs = format!(
+        "sim.vtk_format(\"vtkhdf\");\nsim.vtk_every({every});\nif !resume {{ sim.checkpoint_every({checkpoint}, \"ck.json\"); }}"
+    );
+    common::settling_block(cells, &outputs)
 }
 
 /// Stopped at step 300 with a checkpoint at step 200 and resumed to step 400: the file holds the
@@ -163,7 +142,7 @@ fn an_unknown_format_is_refused_naming_the_allowed_ones() {
 fn a_run_killed_while_writing_frames_resumes_its_file_whole() {
     let base = common::out_dir("vtkhdf_kill");
     std::fs::create_dir_all(&base).unwrap();
-    let source = block(24, 1, 10);
+    let source = block(40, 1, 10);
     let script = base.join("block.rhai");
     std::fs::write(&script, &source).unwrap();
     let (killed, straight) = (base.join("killed"), base.join("straight"));

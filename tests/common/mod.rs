@@ -206,3 +206,32 @@ pub fn run_source_in(out: &Path, name: &str, source: &str, pairs: &[(&str, &str)
     };
     granite_script::run_source(name, source, granite::registry(), options).unwrap()
 }
+
+/// A small MPM block settling under gravity (`cells` cells a side, half of them filled), loaded
+/// from its checkpoint `ck.json` when `--set resume=true`; `extra` is the test's outputs.
+#[allow(dead_code)]
+pub fn settling_block(cells: usize, extra: &str) -> String {
+    SETTLING_BLOCK
+        .replace("CELLS", &cells.to_string())
+        .replace("SIDE", &format!("{:.2}", cells as f64 * 0.05 / 2.0))
+        .replace("EXTRA", extra)
+}
+
+const SETTLING_BLOCK: &str = r#"
+let resume = param("resume", false);
+let steps = param("steps", 100000);
+let sim = if resume {
+    mpm_load("ck.json")
+} else {
+    let s = mpm(#{ dim: 2, origin: [0.0, 0.0], cell: 0.05, cells: [CELLS, CELLS] });
+    let soil = s.material("linear_elastic", #{ density: 1800.0, young: 1e6, poisson: 0.3 });
+    s.fill_box(soil, [0.0, 0.0], [SIDE, SIDE], #{ per_cell: 2 });
+    s.fix("x-", "x"); s.fix("y-", "y");
+    s.gravity([0.0, -9.81]);
+    s.dt(1e-4);
+    s
+};
+EXTRA
+sim.run_steps(steps);
+summary("end_step", sim.step);
+"#;
