@@ -156,29 +156,39 @@ impl VtkHdfWriter {
                     path.display()
                 )))
             }
-            Err(_) => {
-                let aside = path.with_extension("vtkhdf.damaged");
-                std::fs::rename(path, &aside).map_err(|e| GraniteError::io(path, e))?;
-                return Self::create(path);
-            }
+            Err(_) => return Self::set_aside(path),
         };
         let keep = times.iter().take_while(|&&t| t < time).count();
         let fresh = path.with_extension("vtkhdf.partial");
         let mut writer = Self::create(&fresh)?;
-        let err = h5(&fresh);
-        let root = writer.file.group("VTKHDF").map_err(&err)?;
-        let old_root = old.group("VTKHDF").map_err(h5(path))?;
-        for (index, name) in blocks.iter().enumerate() {
-            let from = old_root.group(name).map_err(h5(path))?;
-            copy_block(&from, &root, name, index as i64, keep).map_err(&err)?;
+        let copy = |writer: &VtkHdfWriter| -> hdf5::Result<()> {
+            let root = writer.file.group("VTKHDF")?;
+            let old_root = old.group("VTKHDF")?;
+            for (index, name) in blocks.iter().enumerate() {
+                copy_block(&old_root.group(name)?, &root, name, index as i64, keep)?;
+            }
+            writer.file.flush()
+        };
+        if copy(&writer).is_err() {
+            // Frames listed whole whose rows cannot be read: the old file is damaged after all.
+            drop(writer);
+            let _ = std::fs::remove_file(&fresh);
+            return Self::set_aside(path);
         }
-        writer.file.flush().map_err(&err)?;
         drop(old);
         std::fs::rename(&fresh, path).map_err(|e| GraniteError::io(path, e))?;
         writer.path = path.to_path_buf();
         writer.blocks = blocks;
         writer.times = times[..keep].to_vec();
         Ok(writer)
+    }
+
+    /// Moves a file that cannot be continued to `<path>.damaged` (what it holds may still be read
+    /// there) and starts a new one.
+    fn set_aside(path: &Path) -> Result<VtkHdfWriter> {
+        let aside = path.with_extension("vtkhdf.damaged");
+        std::fs::rename(path, &aside).map_err(|e| GraniteError::io(path, e))?;
+        Self::create(path)
     }
 
     pub fn path(&self) -> &Path {
