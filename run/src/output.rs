@@ -171,8 +171,7 @@ impl Output {
 impl Output {
     /// A frame of `vtk/run.vtkhdf`: the points as block `points`, each poly-data picture as a
     /// block of its name. A resumed simulation continues the file after its frames before the
-    /// resumed time.
-    #[cfg(feature = "vtkhdf")]
+    /// resumed time. (Without the `vtkhdf` feature `VtkFormat::parse` refuses the format.)
     fn write_vtkhdf(
         &mut self,
         dir: &std::path::Path,
@@ -181,33 +180,28 @@ impl Output {
         fields: &[Field],
         poly: &[(&str, PolyData)],
     ) -> Result<()> {
-        use granite_core::io::vtkhdf::{BlockFrame, VtkHdfWriter};
-        if self.hdf.is_none() {
-            let path = dir.join("run.vtkhdf");
-            self.hdf = Some(match self.resumes_at {
-                Some((_, resumed)) => VtkHdfWriter::resume(&path, resumed)?,
-                None => VtkHdfWriter::create(&path)?,
-            });
+        #[cfg(feature = "vtkhdf")]
+        {
+            use granite_core::io::vtkhdf::{BlockFrame, VtkHdfWriter};
+            let writer = match &mut self.hdf {
+                Some(writer) => writer,
+                None => {
+                    let path = dir.join("run.vtkhdf");
+                    self.hdf.insert(match self.resumes_at {
+                        Some((_, resumed)) => VtkHdfWriter::resume(&path, resumed)?,
+                        None => VtkHdfWriter::create(&path)?,
+                    })
+                }
+            };
+            let mut blocks = vec![("points", BlockFrame::points(positions, fields))];
+            blocks.extend(poly.iter().map(|(name, data)| (*name, BlockFrame::poly(data))));
+            writer.write_frame(time, &blocks)
         }
-        let mut blocks = vec![("points", BlockFrame::points(positions, fields))];
-        blocks.extend(poly.iter().map(|(name, data)| (*name, BlockFrame::poly(data))));
-        match self.hdf.as_mut() {
-            Some(writer) => writer.write_frame(time, &blocks),
-            None => Ok(()),
+        #[cfg(not(feature = "vtkhdf"))]
+        {
+            let _ = (dir, time, positions, fields, poly);
+            Err(granite_core::error::GraniteError::Other("this granite was built without `--features vtkhdf`".into()))
         }
-    }
-
-    /// Without the `vtkhdf` feature the format cannot be chosen (`VtkFormat::parse` refuses it).
-    #[cfg(not(feature = "vtkhdf"))]
-    fn write_vtkhdf(
-        &mut self,
-        _dir: &std::path::Path,
-        _time: f64,
-        _positions: &[Vec3],
-        _fields: &[Field],
-        _poly: &[(&str, PolyData)],
-    ) -> Result<()> {
-        Err(granite_core::error::GraniteError::Other("this granite was built without `--features vtkhdf`".into()))
     }
 }
 

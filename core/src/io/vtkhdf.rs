@@ -191,10 +191,6 @@ impl VtkHdfWriter {
         Self::create(path)
     }
 
-    pub fn path(&self) -> &Path {
-        &self.path
-    }
-
     pub fn frames(&self) -> usize {
         self.times.len()
     }
@@ -547,36 +543,15 @@ fn shrink(dataset: &Dataset, rows: usize) -> hdf5::Result<()> {
 /// How many frames a block holds whole: listed in every row list of `Steps` and in the counts, and
 /// with all their rows in the arrays.
 fn whole_frames(block: &Group) -> hdf5::Result<usize> {
-    let steps = block.group("Steps")?;
-    let mut frames = usize::MAX;
-    for list in STEP_LISTS {
-        frames = frames.min(rows(&steps.dataset(list)?));
-    }
-    let mut counts = Vec::new();
-    for count in COUNTS {
-        let values = block.dataset(count)?.read_raw::<i64>()?;
-        frames = frames.min(values.len());
-        counts.push(values);
-    }
-    let data_rows = |group: &str| -> hdf5::Result<usize> {
-        let group = block.group(group)?;
-        let mut least = usize::MAX;
-        for name in group.member_names()? {
-            least = least.min(rows(&group.dataset(&name)?));
-        }
-        Ok(least)
-    };
-    let (point_data, cell_data) = (data_rows("PointData")?, data_rows("CellData")?);
     let held = |frames: usize| -> hdf5::Result<bool> {
-        let sum = |k: usize| counts[k][..frames].iter().sum::<i64>() as usize;
-        let (points, cells, ids) = (sum(0), sum(1), sum(2));
-        Ok(rows(&block.dataset("Points")?) >= points
-            && rows(&block.dataset("Types")?) >= cells
-            && rows(&block.dataset("Offsets")?) >= cells + frames
-            && rows(&block.dataset("Connectivity")?) >= ids
-            && point_data >= points
-            && cell_data >= cells)
+        for (path, needed) in kept_rows(block, frames)? {
+            if rows(&block.dataset(&path)?) < needed {
+                return Ok(false);
+            }
+        }
+        Ok(true)
     };
+    let mut frames = rows(&block.dataset("Steps/Values")?);
     while frames > 0 && !held(frames)? {
         frames -= 1;
     }
