@@ -788,7 +788,17 @@ pub fn resin_heap(shape: &str, count: usize, settle: usize) -> Result<granite_co
             (Grain::Body(kind, body), _) => {
                 let shape = body.clone();
                 let v = [0.0; 3];
-                let new = NewBody { kind: kind.as_ref(), shape, material: resin, x: c, q, v, w: v, fixed: false };
+                let new = NewBody {
+                    kind: kind.as_ref(),
+                    meetings: &[],
+                    shape,
+                    material: resin,
+                    x: c,
+                    q,
+                    v,
+                    w: v,
+                    fixed: false,
+                };
                 sim.world.add_body(new)?
             }
             (Grain::Clump(_), Some(props)) => sim.world.add_clump_with(resin, &members, &props.transformed(&q, c))?,

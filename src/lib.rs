@@ -255,6 +255,11 @@ pub fn plugin_listing(libraries: &[PathBuf]) -> Result<String> {
             specs(&mut out, f.param_specs());
         }
     }
+    out.push_str("contacts between body families (bodies of both kinds in one simulation meet):\n");
+    for g in reg.body_pair_geometries() {
+        let [a, b] = g.families();
+        let _ = writeln!(out, "  {}: {a} with {b}: {}", g.name(), g.description());
+    }
     out.push_str("velocity updates (sim.velocity_update(NAME, #{ PARAMS })):\n");
     for name in reg.velocity_update_names() {
         if let Ok(f) = reg.velocity_update_factory(&name) {

@@ -40,8 +40,9 @@ impl Scene {
 
     fn add(&mut self, shape: &Arc<dyn BodyShape>, x: Vec3, q: UnitQuaternion<f64>, v: Vec3, w: Vec3) -> usize {
         let kind = self.registry.body_kind("capsule").unwrap().clone();
-        let body =
-            NewBody { kind: kind.as_ref(), shape: shape.clone(), material: self.material, x, q, v, w, fixed: false };
+        let meetings = self.registry.body_pair_geometries();
+        let (material, shape) = (self.material, shape.clone());
+        let body = NewBody { kind: kind.as_ref(), meetings: &meetings, shape, material, x, q, v, w, fixed: false };
         self.sim.world.add_body(body).unwrap()
     }
 }
@@ -195,6 +196,23 @@ fn capsules_and_spheres_settled_in_a_box_rest_their_weight_on_the_walls() {
     assert!(common::summary_f64(&report, "kinetic_energy") < 1e-6);
     assert!((carried / weight - 1.0).abs() < 5e-3, "the walls carry {carried} N of a weight of {weight} N");
     assert!(report.out_dir.join("vtk/bodies.pvd").exists());
+}
+
+/// The same box with rounded boxes (potential particles) poured in first: the capsules settle on
+/// and between them (contacts of the two families, `capsule_potential`), and the walls carry the
+/// weight of all of it.
+#[test]
+fn capsules_settled_on_rounded_boxes_rest_their_weight_on_the_walls() {
+    let sets = [("blocks", "8"), ("capsules", "10"), ("spheres", "30"), ("duration", "2"), ("half_width", "0.05")];
+    let report = common::run("dem/capsules_in_a_box.rhai", "capsules_on_blocks", &sets, 2).unwrap();
+    let (weight, carried) = (common::summary_f64(&report, "weight"), common::summary_f64(&report, "walls_carry"));
+    assert_eq!(common::summary_f64(&report, "bodies"), 18.0);
+    let meetings = common::summary_f64(&report, "capsule_block_contacts");
+    assert!(meetings >= 5.0, "capsules rest on the blocks: {meetings} capsule-block contacts");
+    // Nearly at rest (below 1e-5 J of about 0.7 J released by the fall): the walls' reactions
+    // balance the weight.
+    assert!(common::summary_f64(&report, "kinetic_energy") < 1e-5);
+    assert!((carried / weight - 1.0).abs() < 5e-3, "the walls carry {carried} N of a weight of {weight} N");
 }
 
 /// `granite plugins` lists the capsule kind with its parameters.

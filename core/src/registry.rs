@@ -23,6 +23,7 @@ pub struct Registry {
     contact_laws: IndexMap<String, Arc<dyn ContactLawFactory>>,
     shapes: IndexMap<String, Arc<dyn ShapeModelFactory>>,
     body_kinds: IndexMap<String, Arc<dyn crate::ext::BodyKindFactory>>,
+    body_pair_geometries: IndexMap<String, Arc<dyn crate::ext::BodyPairGeometry>>,
     rve_devices: IndexMap<String, Arc<dyn crate::ext::RveDevice>>,
 }
 
@@ -109,6 +110,16 @@ impl Registry {
         self.body_kinds.insert(factory.name().to_string(), factory);
     }
 
+    /// Adds the contact geometry of bodies of two families (`BodyPairGeometry::families`).
+    pub fn add_body_pair_geometry(&mut self, geometry: Arc<dyn crate::ext::BodyPairGeometry>) {
+        self.body_pair_geometries.insert(geometry.name(), geometry);
+    }
+
+    /// The geometries of pairs of body families, in the order they were added.
+    pub fn body_pair_geometries(&self) -> Vec<Arc<dyn crate::ext::BodyPairGeometry>> {
+        self.body_pair_geometries.values().cloned().collect()
+    }
+
     pub fn body_kind_names(&self) -> Vec<String> {
         self.body_kinds.keys().cloned().collect()
     }
@@ -184,5 +195,8 @@ impl crate::ext::contact::ContactLawSource for Registry {
     }
     fn body_kind(&self, name: &str) -> Result<Arc<dyn crate::ext::BodyKindFactory>> {
         Registry::body_kind(self, name).cloned()
+    }
+    fn body_pair_geometries(&self) -> Vec<Arc<dyn crate::ext::BodyPairGeometry>> {
+        Registry::body_pair_geometries(self)
     }
 }

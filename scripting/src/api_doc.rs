@@ -137,6 +137,7 @@ pub static API: &[ApiDoc] = &[
     f("DemSim", "body_state", &["sim.body_state(id)"], NONE, "a body: #{ id, kind (its family), position, rotation (vector, rad), axis, velocity, spin, force, torque (last step's contacts), mass, volume, fixed }"),
     f("DemSim", "body_velocity", &["sim.body_velocity(id, [vx, vy, vz])"], NONE, "sets a body's velocity (a fixed one keeps it: a moving container part)"),
     f("DemSim", "body_spin", &["sim.body_spin(id, [wx, wy, wz])"], NONE, "sets a body's angular velocity, rad/s (a fixed one keeps it: a turning blade)"),
+    f("DemSim", "body_contacts", &["sim.body_contacts(id)"], NONE, "a body's touching contacts (last step): #{ with: \"body\" | \"wall\" | \"sphere\", id (the other body's or sphere's id, the wall's index), kind (the other body's kind, the wall's name, \"sphere\"), force (on this body) }"),
     f("DemSim", "body_ids", &["sim.body_ids()"], NONE, "the ids of the bodies of plugin kinds, in their order"),
     f("DemSim", "bodies", &["sim.bodies"], NONE, "the number of bodies of plugin kinds"),
     f("DemSim", "wall_plane", &["sim.wall_plane(material, point, normal)"], NONE, "an infinite plane wall; returns its index"),

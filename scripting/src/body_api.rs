@@ -73,8 +73,10 @@ pub(super) fn add_with(
         Some(d) => d.as_bool().or_else(|_| err("`fixed` is true or false"))?,
         None => false,
     };
+    let meetings = registry.body_pair_geometries();
     let body = NewBody {
         kind: factory.as_ref(),
+        meetings: &meetings,
         shape,
         material: m.index_in(s)?,
         x: centre,
@@ -123,7 +125,7 @@ pub(super) fn state(s: &mut DemHandle, id: i64) -> RhaiResult<Map> {
     let axis = k.q[i] * Vector3::z();
     let mut map = Map::new();
     map.insert("id".into(), Dynamic::from(k.id[i] as i64));
-    map.insert("kind".into(), Dynamic::from(k.kind.as_ref().map(|k| k.name.clone()).unwrap_or_default()));
+    map.insert("kind".into(), Dynamic::from(k.family_name(i).to_string()));
     map.insert("position".into(), array(k.x[i]));
     map.insert("rotation".into(), array([q[0], q[1], q[2]]));
     map.insert("axis".into(), array([axis[0], axis[1], axis[2]]));
@@ -154,6 +156,31 @@ fn register_motion(engine: &mut Engine) {
         s.lock().sim.dem.world.kinds.id.iter().map(|&i| Dynamic::from(i as i64)).collect::<rhai::Array>()
     });
     engine.register_get("bodies", |s: &mut DemHandle| s.lock().sim.dem.world.kinds.len() as i64);
+    engine.register_fn("body_contacts", |s: &mut DemHandle, id: i64| contacts(s, id));
+}
+
+/// A body's touching contacts as maps: what it touches and the force it takes.
+fn contacts(s: &mut DemHandle, id: i64) -> RhaiResult<rhai::Array> {
+    use granite_core::dem::kinds::Touched;
+    let i = index_of(s, id)?;
+    let st = s.lock();
+    let world = &st.sim.dem.world;
+    let k = &world.kinds;
+    let array = |v: Vec3| Dynamic::from(v.iter().map(|c| Dynamic::from(*c)).collect::<rhai::Array>());
+    let list = k.contacts_of(i).into_iter().map(|(touched, force)| {
+        let mut map = Map::new();
+        let (with, other, kind) = match touched {
+            Touched::Body(j) => ("body", k.id[j] as i64, k.kind_name(j).to_string()),
+            Touched::Wall(w) => ("wall", w as i64, world.walls[w].name.clone()),
+            Touched::Sphere(j) => ("sphere", world.spheres.id[j] as i64, "sphere".to_string()),
+        };
+        map.insert("with".into(), Dynamic::from(with.to_string()));
+        map.insert("id".into(), Dynamic::from(other));
+        map.insert("kind".into(), Dynamic::from(kind));
+        map.insert("force".into(), array(force));
+        Dynamic::from(map)
+    });
+    Ok(list.collect())
 }
 
 /// Whether `name` is a registered body kind.
@@ -183,12 +210,14 @@ pub(super) fn add_cloud(
     let factory = registry.body_kind(kind).or_rhai()?;
     let shape = registry.build_body_shape(kind, &given).or_rhai()?;
     let material = m.index_in(s)?;
+    let meetings = registry.body_pair_geometries();
     let mut st = s.lock();
     for (k, c) in centres.iter().enumerate() {
         let u = [0, 1, 2].map(|j| granite_core::ext::contact::uniform(seed ^ 0xC1u64, (3 * k + j) as u64));
         let (_, q) = granite_core::dem::clump::place_template(&[], *c, u);
         let body = NewBody {
             kind: factory.as_ref(),
+            meetings: &meetings,
             shape: shape.clone(),
             material,
             x: *c,

@@ -67,9 +67,8 @@ fn kind_and_params(s: &DemHandle, opts: &Map) -> RhaiResult<(String, ParamMap)> 
 
 /// The index of the potential particle with `id`.
 fn index_of(s: &DemHandle, id: i64) -> RhaiResult<usize> {
-    let holds_potentials = s.lock().sim.dem.world.kinds.kind.as_ref().is_some_and(|k| k.name == FAMILY);
-    match holds_potentials.then(|| super::body_api::index_of(s, id)) {
-        Some(Ok(i)) => Ok(i),
+    match super::body_api::index_of(s, id) {
+        Ok(i) if s.lock().sim.dem.world.kinds.family_name(i) == FAMILY => Ok(i),
         _ => err(format!("no potential particle with id {id}")),
     }
 }
@@ -92,12 +91,12 @@ pub(super) fn register(engine: &mut Engine) {
     engine.register_fn("potential_ids", |s: &mut DemHandle| {
         let st = s.lock();
         let k = &st.sim.dem.world.kinds;
-        let ids = k.kind.as_ref().filter(|kind| kind.name == FAMILY).map_or(&[][..], |_| &k.id[..]);
-        ids.iter().map(|&i| Dynamic::from(i as i64)).collect::<rhai::Array>()
+        let ids = (0..k.len()).filter(|&i| k.family_name(i) == FAMILY).map(|i| k.id[i]);
+        ids.map(|i| Dynamic::from(i as i64)).collect::<rhai::Array>()
     });
     engine.register_get("potentials", |s: &mut DemHandle| {
         let st = s.lock();
         let k = &st.sim.dem.world.kinds;
-        k.kind.as_ref().filter(|kind| kind.name == FAMILY).map_or(0, |_| k.len() as i64)
+        (0..k.len()).filter(|&i| k.family_name(i) == FAMILY).count() as i64
     });
 }

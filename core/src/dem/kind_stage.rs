@@ -10,7 +10,7 @@ use crate::dem::particles::Spheres;
 use crate::dem::rigid::{laws_in_pair_order, move_rigid_bodies, LawContact, RigidSet};
 use crate::dem::walls::{Wall, WallShape};
 use crate::error::{GraniteError, Result};
-use crate::ext::body::{Ball, PairFailure, PlacedBodies, Plane, WarmStarts};
+use crate::ext::body::{Ball, BodyPairGeometry, PairFailure, PlacedBodies, Plane, Touch, WarmStarts};
 use crate::ext::ContactLaw;
 use crate::math::{add3, cross3, sub3, Vec3};
 use std::sync::Arc;
@@ -39,6 +39,114 @@ struct Found {
     point: Vec3,
 }
 
+/// What settles the touches of a step's pairs: each family's placed bodies and the geometries of
+/// the pairs of families.
+struct Geometries<'a> {
+    bodies: &'a KindScene,
+    placed: &'a [Box<dyn PlacedBodies + 'a>],
+    meetings: &'a [Arc<dyn BodyPairGeometry>],
+}
+
+/// The pairs one geometry settles: the family of their first body, and of their second where it
+/// is a body ([`NO_FAMILY`] for walls and spheres).
+type Group = (u16, u16);
+
+const NO_FAMILY: u16 = u16::MAX;
+
+/// A list's warm starts: its history, values a pair, where the geometry's start and how many.
+type WarmRows<'h> = (&'h mut [f64], usize, usize, usize);
+
+impl Geometries<'_> {
+    /// Fills `out` for a list whose pairs fall in `groups`: one call on the whole list when one
+    /// geometry settles them all (one family: the list is handed over as it is); otherwise one
+    /// call per group, in the order the groups first appear, each on its pairs in list order with
+    /// their warm starts copied out and back. A failure names its pair in the whole list.
+    fn detect<T: Copy>(
+        &self,
+        groups: &[Group],
+        pairs: &[T],
+        (history, stride, own, warm): WarmRows<'_>,
+        out: &mut [Option<Touch>],
+        call: impl Fn(&Self, Group, &[T], WarmStarts<'_>, &mut [Option<Touch>]) -> std::result::Result<(), PairFailure>,
+    ) -> std::result::Result<(), PairFailure> {
+        let Some(&first) = groups.first() else { return Ok(()) };
+        if groups.iter().all(|&g| g == first) {
+            return call(self, first, pairs, WarmStarts::new(history, stride, own, warm), out);
+        }
+        let mut order: Vec<Group> = Vec::new();
+        for &g in groups {
+            if !order.contains(&g) {
+                order.push(g);
+            }
+        }
+        for group in order {
+            let slots: Vec<usize> = (0..groups.len()).filter(|&k| groups[k] == group).collect();
+            let chosen: Vec<T> = slots.iter().map(|&k| pairs[k]).collect();
+            let mut starts: Vec<f64> =
+                slots.iter().flat_map(|&k| &history[k * stride + own..k * stride + own + warm]).copied().collect();
+            let mut found = vec![None; slots.len()];
+            call(self, group, &chosen, WarmStarts::new(&mut starts, warm, 0, warm), &mut found)
+                .map_err(|f| PairFailure { pair: slots[f.pair], reason: f.reason })?;
+            for (n, &k) in slots.iter().enumerate() {
+                out[k] = found[n];
+                history[k * stride + own..k * stride + own + warm].copy_from_slice(&starts[n * warm..(n + 1) * warm]);
+            }
+        }
+        Ok(())
+    }
+
+    /// Bodies with bodies: their family's geometry, or the geometry of their two families (its
+    /// normals turned where it takes them the other way round).
+    fn bodies(
+        &self,
+        (fa, fb): Group,
+        pairs: &[(u32, u32)],
+        warm: WarmStarts<'_>,
+        out: &mut [Option<Touch>],
+    ) -> std::result::Result<(), PairFailure> {
+        if fa == fb {
+            return self.placed[fa as usize].pairs(pairs, warm, out);
+        }
+        let k = self.bodies;
+        let (na, nb) = (k.families[fa as usize].name.as_str(), k.families[fb as usize].name.as_str());
+        for m in self.meetings {
+            match m.families() {
+                [a, b] if a == na && b == nb => return m.pairs(k.view(fa), k.view(fb), pairs, warm, out),
+                [a, b] if a == nb && b == na => {
+                    let turned: Vec<(u32, u32)> = pairs.iter().map(|&(i, j)| (j, i)).collect();
+                    m.pairs(k.view(fb), k.view(fa), &turned, warm, out)?;
+                    for t in out.iter_mut().flatten() {
+                        t.normal = t.normal.map(|c| -c);
+                    }
+                    return Ok(());
+                }
+                _ => {}
+            }
+        }
+        Err(PairFailure { pair: 0, reason: format!("no geometry registered for {na} and {nb} bodies") })
+    }
+
+    fn planes(
+        &self,
+        (fa, _): Group,
+        pairs: &[(u32, Plane)],
+        warm: WarmStarts<'_>,
+        out: &mut [Option<Touch>],
+    ) -> std::result::Result<(), PairFailure> {
+        self.placed[fa as usize].planes(pairs, warm, out)
+    }
+
+    fn spheres(
+        &self,
+        (fa, _): Group,
+        pairs: &[(u32, Ball)],
+        warm: WarmStarts<'_>,
+        out: &mut [Option<Touch>],
+    ) -> std::result::Result<(), PairFailure> {
+        self.placed[fa as usize].spheres(pairs, warm, out)
+    }
+}
+
 /// What the second body of a list's pairs is.
 #[derive(Clone, Copy)]
 enum Side {
@@ -52,8 +160,11 @@ impl BodyContacts {
         bodies.force.iter_mut().for_each(|f| *f = [0.0; 3]);
         bodies.torque.iter_mut().for_each(|t| *t = [0.0; 3]);
         bodies.sphere_loads.clear();
-        let Some(kind) = bodies.kind.clone() else { return Ok(()) };
-        let own = around.law_history;
+        if bodies.families.is_empty() {
+            return Ok(());
+        }
+        let (families, meetings) = (bodies.families.clone(), bodies.meetings.clone());
+        let (own, warm) = (around.law_history, bodies.warm_values());
         let started = std::time::Instant::now();
         let mut lists = [
             std::mem::take(&mut bodies.pairs),
@@ -63,9 +174,12 @@ impl BodyContacts {
         let sides = [Side::Bodies, Side::Walls, Side::Spheres];
         let mut found = Vec::with_capacity(3);
         {
-            let placed = kind.geometry.place(bodies.view())?;
+            let placed = (0..families.len())
+                .map(|f| families[f].geometry.place(bodies.view(f as u16)))
+                .collect::<Result<Vec<_>>>()?;
+            let geometries = Geometries { bodies, placed: &placed, meetings: &meetings };
             for (list, &side) in lists.iter_mut().zip(&sides) {
-                found.push(Self::touching(bodies, around, list, placed.as_ref(), side, (own, kind.warm))?);
+                found.push(Self::touching(&geometries, around, list, side, (own, warm))?);
             }
         }
         let detected = std::time::Instant::now();
@@ -91,21 +205,25 @@ impl BodyContacts {
     /// apart start their law's history again at their next touch. `(own, warm)`: the law's
     /// history values a pair, and the geometry's after them.
     fn touching(
-        bodies: &KindScene,
+        geometries: &Geometries<'_>,
         around: &Surroundings<'_>,
         list: &mut PairList,
-        placed: &dyn PlacedBodies,
         side: Side,
         (own, warm): (usize, usize),
     ) -> Result<Vec<Found>> {
-        let k = bodies;
+        let k = geometries.bodies;
+        let bodies = k;
         let mut out = vec![None; list.len()];
         let hs = list.history_stride;
-        let starts = WarmStarts::new(&mut list.history, hs, own, warm);
+        let fam = &k.family;
+        let groups: Vec<Group> = match side {
+            Side::Bodies => list.a.iter().zip(&list.b).map(|(&a, &b)| (fam[a as usize], fam[b as usize])).collect(),
+            _ => list.a.iter().map(|&a| (fam[a as usize], NO_FAMILY)).collect(),
+        };
         let done = match side {
             Side::Bodies => {
                 let pairs: Vec<(u32, u32)> = list.a.iter().copied().zip(list.b.iter().copied()).collect();
-                placed.pairs(&pairs, starts, &mut out)
+                geometries.detect(&groups, &pairs, (&mut list.history, hs, own, warm), &mut out, Geometries::bodies)
             }
             Side::Walls => {
                 let pairs: Vec<(u32, Plane)> = list
@@ -121,7 +239,7 @@ impl BodyContacts {
                         (a, Plane { point: wall.position, normal })
                     })
                     .collect();
-                placed.planes(&pairs, starts, &mut out)
+                geometries.detect(&groups, &pairs, (&mut list.history, hs, own, warm), &mut out, Geometries::planes)
             }
             Side::Spheres => {
                 let s = &around.spheres;
@@ -131,7 +249,7 @@ impl BodyContacts {
                     .zip(&list.b)
                     .map(|(&a, &b)| (a, Ball { centre: s.x[b as usize], radius: s.radius[b as usize] }))
                     .collect();
-                placed.spheres(&pairs, starts, &mut out)
+                geometries.detect(&groups, &pairs, (&mut list.history, hs, own, warm), &mut out, Geometries::spheres)
             }
         };
         if let Err(PairFailure { pair, reason }) = done {
@@ -160,7 +278,7 @@ impl BodyContacts {
                     time: around.time,
                     reason: format!(
                         "the {} geometry gave a non-finite contact for body {}; the time step may be too large",
-                        k.kind.as_ref().map(|k| k.name.as_str()).unwrap_or(""),
+                        k.kind_name(list.a[slot] as usize),
                         k.id[list.a[slot] as usize]
                     ),
                 });
@@ -197,10 +315,12 @@ impl BodyContacts {
         reason: &str,
     ) -> String {
         let k = bodies;
-        let kind = k.kind.as_ref().map(|k| k.name.as_str()).unwrap_or("");
         let (i, j) = (list.a[pair] as usize, list.b[pair] as usize);
-        let id = k.id[i];
+        let (kind, id) = (k.kind_name(i), k.id[i]);
         match side {
+            Side::Bodies if k.kind_name(j) != kind => {
+                format!("{kind} body {id} and {} body {}: {reason}", k.kind_name(j), k.id[j])
+            }
             Side::Bodies => format!("{kind} bodies {id} and {}: {reason}", k.id[j]),
             Side::Walls => format!("{kind} body {id} and wall \"{}\": {reason}", around.walls[j].name),
             Side::Spheres => format!("{kind} body {id} and sphere {}: {reason}", around.spheres.id[j]),
@@ -278,7 +398,7 @@ impl BodyMotion {
             time,
             reason: format!(
                 "non-finite position or velocity of {} body {} (x = {:?}, v = {:?}); the time step may be too large",
-                k.kind.as_ref().map(|k| k.name.as_str()).unwrap_or(""),
+                k.kind_name(i),
                 k.id[i],
                 k.x[i],
                 k.v[i]

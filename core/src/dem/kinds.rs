@@ -1,7 +1,8 @@
 //! Bodies of plugin kinds (`ext::body`: capsules, potential particles, ...) in a DEM simulation:
 //! their storage and set-up, and their candidate lists (with one another, plane walls and
-//! spheres, from their bounding spheres), rebuilt with the spheres'. Their part of a step is
-//! `kind_stage.rs`.
+//! spheres, from their bounding spheres), rebuilt with the spheres'. Bodies of several families
+//! meet where a plugin registers the geometry of their pair (`BodyPairGeometry`). Their part of a
+//! step is `kind_stage.rs`.
 
 use crate::dem::broad_phase::{sphere_pairs, wall_pairs, Candidate};
 use crate::dem::contacts::PairList;
@@ -11,15 +12,15 @@ use crate::dem::rigid::LawContact;
 use crate::dem::sim::DemWorld;
 use crate::dem::walls::WallShape;
 use crate::error::{GraniteError, Result};
-use crate::ext::body::{BodyGeometry, BodyKindFactory, BodyShape, KindBodies};
+use crate::ext::body::{BodyGeometry, BodyKindFactory, BodyPairGeometry, BodyShape, KindBodies};
 use crate::ext::PairInfo;
 use crate::io::vtk::PolyData;
 use crate::math::Vec3;
 use nalgebra::UnitQuaternion;
 use std::sync::Arc;
 
-/// The geometry family a simulation's bodies are of: its name, geometry, shape values per body
-/// and warm-start values per pair.
+/// A geometry family a simulation's bodies are of: its name, geometry, shape values per body and
+/// warm-start values per pair.
 #[derive(Clone)]
 pub struct KindInUse {
     pub name: String,
@@ -43,12 +44,18 @@ impl KindInUse {
 /// The bodies of plugin kinds, their candidate lists and what a step leaves for the spheres.
 #[derive(Clone, Default)]
 pub struct KindScene {
-    /// None until the first body.
-    pub kind: Option<KindInUse>,
+    /// The families of the bodies, in the order they joined (none before the first body).
+    pub families: Vec<KindInUse>,
+    /// The geometries of the pairs of families present, found when the second of each joined.
+    pub meetings: Vec<Arc<dyn BodyPairGeometry>>,
+    /// Each body's family (an index into `families`).
+    pub family: Vec<u16>,
     pub shapes: Vec<Arc<dyn BodyShape>>,
     pub shape: Vec<u32>,
-    /// Each body's shape values ([`BodyShape::values`]), `stride` a body.
+    /// Each body's shape values ([`BodyShape::values`]), `stride` a body: the most any family
+    /// gives, each body's own first and zeros after them.
     pub values: Vec<f64>,
+    pub stride: usize,
     pub id: Vec<u64>,
     pub material: Vec<u16>,
     /// Centre of mass, velocity, angular velocity (world frame), orientation (body to world).
@@ -97,14 +104,123 @@ impl KindScene {
         [(&self.pairs, &self.touches[0]), (&self.wall_pairs, &self.touches[1]), (&self.sphere_pairs, &self.touches[2])]
     }
 
+    /// The pairs of bodies touching one another, `(i, j)`.
+    pub fn touching_body_pairs(&self) -> impl Iterator<Item = (usize, usize)> + '_ {
+        let p = &self.pairs;
+        (0..p.len()).filter(|&k| p.touching[k]).map(|k| (p.a[k] as usize, p.b[k] as usize))
+    }
+
+    /// The touching contacts of body `i`: what it touches, and the force it takes from it (the
+    /// last step's), in list order: bodies, walls, spheres.
+    pub fn contacts_of(&self, i: usize) -> Vec<(Touched, Vec3)> {
+        let mut out = Vec::new();
+        let p = &self.pairs;
+        for k in (0..p.len()).filter(|&k| p.touching[k]) {
+            let (a, b, f) = (p.a[k] as usize, p.b[k] as usize, p.force[k]);
+            if a == i {
+                out.push((Touched::Body(b), f));
+            } else if b == i {
+                out.push((Touched::Body(a), f.map(|c| -c)));
+            }
+        }
+        for (list, side) in
+            [(&self.wall_pairs, Touched::Wall as fn(usize) -> Touched), (&self.sphere_pairs, Touched::Sphere)]
+        {
+            for k in (0..list.len()).filter(|&k| list.touching[k] && list.a[k] as usize == i) {
+                out.push((side(list.b[k] as usize), list.force[k]));
+            }
+        }
+        out
+    }
+
     /// Touching contacts of the bodies (with one another, walls and spheres).
     pub fn contact_count(&self) -> usize {
         self.pairs.touching_count() + self.wall_pairs.touching_count() + self.sphere_pairs.touching_count()
     }
 
-    pub(crate) fn view(&self) -> KindBodies<'_> {
-        let stride = self.kind.as_ref().map(|k| k.stride).unwrap_or(0);
-        KindBodies { x: &self.x, q: &self.q, values: &self.values, stride, shape: &self.shape, shapes: &self.shapes }
+    /// The bodies as family `own`'s geometry reads them.
+    pub(crate) fn view(&self, own: u16) -> KindBodies<'_> {
+        KindBodies {
+            x: &self.x,
+            q: &self.q,
+            values: &self.values,
+            stride: self.stride,
+            shape: &self.shape,
+            shapes: &self.shapes,
+            family: &self.family,
+            own,
+        }
+    }
+
+    /// The family of body `i` by name.
+    pub fn family_name(&self, i: usize) -> &str {
+        &self.families[self.family[i] as usize].name
+    }
+
+    /// The kind of body `i` by name.
+    pub fn kind_name(&self, i: usize) -> &str {
+        self.shapes[self.shape[i] as usize].kind()
+    }
+
+    /// Values a pair of the lists keeps for its geometry: the most any family or pair of
+    /// families present keeps.
+    pub(crate) fn warm_values(&self) -> usize {
+        let meetings = self.meetings.iter().map(|m| m.warm_values());
+        self.families.iter().map(|f| f.warm).chain(meetings).max().unwrap_or(0)
+    }
+
+    /// Starts afresh when no body is left: the next body's family may be any.
+    fn forget_families(&mut self) {
+        self.families.clear();
+        self.meetings.clear();
+        self.shapes.clear();
+        self.values.clear();
+        self.stride = 0;
+    }
+
+    /// The family of `kind`, joining it to the scene if it is new: refused when some family
+    /// present has no registered geometry with it among `meetings`.
+    pub(crate) fn join_family(
+        &mut self,
+        kind: &dyn BodyKindFactory,
+        meetings: &[Arc<dyn BodyPairGeometry>],
+    ) -> Result<u16> {
+        let name = kind.family();
+        if let Some(f) = self.families.iter().position(|f| f.name == name) {
+            return Ok(f as u16);
+        }
+        let mut found = Vec::new();
+        for present in &self.families {
+            let meeting = meetings.iter().find(|m| {
+                let [a, b] = m.families();
+                (a == present.name && b == name) || (a == name && b == present.name)
+            });
+            match meeting {
+                Some(m) => found.push(m.clone()),
+                None => {
+                    let known: Vec<String> = meetings.iter().map(|m| m.name()).collect();
+                    return Err(GraniteError::Setup(format!(
+                        "{} bodies cannot join {} bodies: no plugin registers the geometry of their contacts \
+                         (pairs of families known: {})",
+                        kind.name(),
+                        present.name,
+                        if known.is_empty() { "none".to_string() } else { known.join(", ") }
+                    )));
+                }
+            }
+        }
+        let new = KindInUse::of(kind);
+        if new.stride > self.stride {
+            let (old, n) = (self.stride, self.len());
+            let mut values = vec![0.0; n * new.stride];
+            for i in 0..n {
+                values[i * new.stride..i * new.stride + old].copy_from_slice(&self.values[i * old..(i + 1) * old]);
+            }
+            (self.values, self.stride) = (values, new.stride);
+        }
+        self.families.push(new);
+        self.meetings.extend(found);
+        Ok(self.families.len() as u16 - 1)
     }
 
     /// The world positions of the monitor points ([`BodyShape::monitor_points`]) of the free
@@ -124,7 +240,8 @@ impl KindScene {
     /// their history.
     pub(crate) fn retain(&mut self, keep: &[bool]) {
         use crate::mpm::points::{retain_by as kept, retain_strided};
-        retain_strided(&mut self.values, self.kind.as_ref().map_or(0, |k| k.stride), keep);
+        retain_strided(&mut self.values, self.stride, keep);
+        kept(&mut self.family, keep);
         kept(&mut self.shape, keep);
         kept(&mut self.id, keep);
         kept(&mut self.material, keep);
@@ -142,6 +259,9 @@ impl KindScene {
         self.wall_pairs.retain_spheres(keep, false);
         self.sphere_pairs.retain_spheres(keep, false);
         self.touches = Default::default();
+        if self.is_empty() {
+            self.forget_families();
+        }
     }
 
     /// Mass for a contact's effective mass: infinite for a fixed body.
@@ -174,9 +294,20 @@ impl KindScene {
     }
 }
 
+/// What a body touches ([`KindScene::contacts_of`]): a body, a wall or a sphere, by index.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Touched {
+    Body(usize),
+    Wall(usize),
+    Sphere(usize),
+}
+
 /// A body of a kind to add ([`DemWorld::add_body`]).
 pub struct NewBody<'a> {
     pub kind: &'a dyn BodyKindFactory,
+    /// The geometries of pairs of families the registry knows: where the body's family is new
+    /// to a scene holding others, those of its pairs with them.
+    pub meetings: &'a [Arc<dyn BodyPairGeometry>],
     pub shape: Arc<dyn BodyShape>,
     pub material: u16,
     pub x: Vec3,
@@ -189,22 +320,12 @@ pub struct NewBody<'a> {
 impl DemWorld {
     /// Adds a body of a plugin kind; returns its index among the bodies.
     pub fn add_body(&mut self, body: NewBody<'_>) -> Result<usize> {
-        let NewBody { kind, shape, material, x, q, v, w, fixed } = body;
+        let NewBody { kind, meetings, shape, material, x, q, v, w, fixed } = body;
         if self.cell.is_some() {
             return Err(GraniteError::Setup(format!(
                 "{} bodies run in open domains, not in a periodic cell",
                 kind.name()
             )));
-        }
-        if let Some(used) = self.kinds.kind.as_ref().filter(|_| !self.kinds.is_empty()) {
-            if used.name != kind.family() {
-                return Err(GraniteError::Setup(format!(
-                    "this simulation holds {} bodies: bodies of one plugin family meet spheres, walls and one another, \
-                     not {} bodies",
-                    used.name,
-                    kind.name()
-                )));
-            }
         }
         let density = self
             .materials
@@ -236,9 +357,10 @@ impl DemWorld {
             )));
         }
         let k = &mut self.kinds;
-        if k.kind.is_none() || k.is_empty() {
-            k.kind = Some(KindInUse::of(kind));
+        if k.is_empty() {
+            k.forget_families();
         }
+        let family = k.join_family(kind, meetings)?;
         let index = match k.shapes.iter().position(|s| Arc::ptr_eq(s, &shape)) {
             Some(i) => i,
             None => {
@@ -247,7 +369,10 @@ impl DemWorld {
             }
         };
         k.shape.push(index as u32);
+        k.family.push(family);
+        let padding = k.stride - values.len();
         k.values.extend(values);
+        k.values.extend(std::iter::repeat_n(0.0, padding));
         k.id.push(self.next_id);
         k.material.push(material);
         k.x.push(x);
@@ -306,7 +431,7 @@ impl DemWorld {
             return Ok(());
         }
         if let Some(w) = self.walls.iter().find(|w| !matches!(w.shape, WallShape::Plane { .. })) {
-            let name = self.kinds.kind.as_ref().map(|k| k.name.clone()).unwrap_or_default();
+            let name = self.kinds.families.iter().map(|f| f.name.as_str()).collect::<Vec<_>>().join(" and ");
             return Err(GraniteError::Setup(format!(
                 "wall \"{}\": {name} bodies meet plane walls (wall_plane, box_walls), spheres and one another",
                 w.name
@@ -374,7 +499,7 @@ impl DemWorld {
     /// Values per pair of the bodies' lists: the laws' then the geometry's warm starts.
     pub(crate) fn kind_strides(&self) -> (usize, usize) {
         let (p, h) = self.pair_strides();
-        (p, h + self.kinds.kind.as_ref().map_or(0, |k| k.warm))
+        (p, h + self.kinds.warm_values())
     }
 
     /// The bodies' surfaces, with id, material, fixed, velocity and force per triangle.

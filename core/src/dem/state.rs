@@ -15,15 +15,16 @@ use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
 const FORMAT: &str = "granite-dem-state";
+/// 6: bodies of several families (their families and each body's).
 /// 5: bodies of plugin kinds (capsules, ...).
 /// 4: a stress-controlled cell keeps its servo's integral part.
 /// 3: the file is an envelope (`io::checkpoint_file`: writer, CRC-32) around the state of 2.
 /// 2: a pair of spheres is stored under its larger index (`a > b`); 1 stored it under the smaller.
 /// Bump it whenever `DemState` changes, and read the older ones through an upgrade path.
-const VERSION: u32 = 5;
-/// The oldest version read: 2, whose state is 5's less what was added since: external loads and
+const VERSION: u32 = 6;
+/// The oldest version read: 2, whose state is 6's less what was added since: external loads and
 /// the energy tracker (none), the servo's integral part (zero: the servo learns it again within a
-/// few of its relaxation times), bodies of plugin kinds (none).
+/// few of its relaxation times), bodies of plugin kinds (none), their families (one).
 const OLDEST: u32 = 2;
 
 /// A contact law by registry name and parameters (rebuilt from the registry on load).
@@ -33,11 +34,19 @@ struct LawRecord {
     params: ParamMap,
 }
 
-/// Bodies of a plugin kind: the family by name, each shape by its kind and the parameters it
-/// was built from (mass properties are computed again from them and the materials' densities).
+/// Bodies of plugin kinds: the families by a kind of each, each shape by its kind and the
+/// parameters it was built from (mass properties are computed again from them and the
+/// materials' densities), each body's family.
 #[derive(Serialize, Deserialize)]
 struct BodiesRecord {
+    /// A kind of the first family.
     kind: String,
+    /// A kind of each family, in the order they joined (absent in states of one family).
+    #[serde(default)]
+    families: Vec<String>,
+    /// Each body's family (absent in states of one family: all of `kind`'s).
+    #[serde(default)]
+    family: Vec<u16>,
     shapes: Vec<ParamMap>,
     /// Each shape's kind (absent in states of one kind per family: `kind` then).
     #[serde(default)]
@@ -139,9 +148,17 @@ impl DemSim {
 
     fn bodies_record(&self) -> Option<BodiesRecord> {
         let k = &self.world.kinds;
-        let kind = k.kind.as_ref().filter(|_| !k.is_empty())?;
+        if k.is_empty() {
+            return None;
+        }
+        // A kind of each family: that of its first body's shape.
+        let families: Vec<String> = (0..k.families.len())
+            .map(|f| k.family.iter().position(|&g| g as usize == f).map_or("", |i| k.kind_name(i)).to_string())
+            .collect();
         Some(BodiesRecord {
-            kind: kind.name.clone(),
+            kind: families[0].clone(),
+            families,
+            family: k.family.clone(),
             shapes: k.shapes.iter().map(|s| s.params()).collect(),
             shape_kinds: k.shapes.iter().map(|s| s.kind().to_string()).collect(),
             shape: k.shape.clone(),
@@ -166,7 +183,7 @@ impl DemSim {
         };
         // A state of one kind per family names the family's kind for every shape.
         let kind_of = |s: usize| record.shape_kinds.get(s).unwrap_or(&record.kind);
-        let factory = registry.body_kind(kind_of(0))?;
+        let families = if record.families.is_empty() { vec![record.kind.clone()] } else { record.families.clone() };
         let shapes = (0..record.shapes.len())
             .map(|s| registry.body_kind(kind_of(s))?.build_from(&record.shapes[s]))
             .collect::<Result<Vec<_>>>()?;
@@ -180,10 +197,18 @@ impl DemSim {
             ("q", record.q.len()),
             ("fixed", record.fixed.len()),
             ("x_at_build", record.x_at_build.len()),
+            ("family", if record.family.is_empty() { n } else { record.family.len() }),
         ];
         crate::loaded::same_length("bodies", "x", n, &lengths).map_err(GraniteError::Other)?;
         let k = &mut self.world.kinds;
-        k.kind = Some(crate::dem::kinds::KindInUse::of(factory.as_ref()));
+        let meetings = registry.body_pair_geometries();
+        for name in &families {
+            k.join_family(registry.body_kind(name)?.as_ref(), &meetings)?;
+        }
+        k.family = if record.family.is_empty() { vec![0; n] } else { record.family };
+        if let Some(&f) = k.family.iter().find(|&&f| f as usize >= families.len()) {
+            return Err(GraniteError::Other(format!("bodies: family {f} of {}", families.len())));
+        }
         for i in 0..n {
             let shape = shapes.get(record.shape[i] as usize).ok_or_else(|| {
                 GraniteError::Other(format!("body {i}: shape {} of {}", record.shape[i], shapes.len()))
@@ -194,7 +219,12 @@ impl DemSim {
                 .get(record.material[i] as usize)
                 .ok_or_else(|| GraniteError::Other(format!("body {i}: material {}", record.material[i])))?
                 .density;
-            k.values.extend(shape.values());
+            let values = shape.values();
+            let padding = k.stride.checked_sub(values.len()).ok_or_else(|| {
+                GraniteError::Other(format!("body {i}: a {} shape gives more values than its family", shape.kind()))
+            })?;
+            k.values.extend(values);
+            k.values.extend(std::iter::repeat_n(0.0, padding));
             k.mass.push(density * shape.volume());
             k.inertia.push(shape.inertia_per_density().map(|c| density * c));
         }

@@ -76,9 +76,11 @@ pub trait BodyKindFactory: Send + Sync {
     fn geometry(&self) -> Arc<dyn BodyGeometry>;
 }
 
-/// Bodies of one kind as their geometry reads them, at the start of a step: centres of mass,
-/// orientations (body frame to world), each body's shape values (`stride` a body), and each
-/// body's shape among the distinct `shapes`.
+/// The bodies of a simulation as a family's geometry reads them, at the start of a step: centres
+/// of mass, orientations (body frame to world), each body's shape values (`stride` a body: the
+/// most any family in the scene gives, a family's own first), each body's shape among the
+/// distinct `shapes`, and each body's family. A geometry is handed pairs of its `own` family's
+/// bodies only; where several families meet, the arrays hold the others' bodies too.
 #[derive(Clone, Copy)]
 pub struct KindBodies<'a> {
     pub x: &'a [Vec3],
@@ -87,12 +89,24 @@ pub struct KindBodies<'a> {
     pub stride: usize,
     pub shape: &'a [u32],
     pub shapes: &'a [Arc<dyn BodyShape>],
+    pub family: &'a [u16],
+    pub own: u16,
 }
 
 impl KindBodies<'_> {
     /// The shape values of body `i`.
     pub fn values_of(&self, i: usize) -> &[f64] {
         &self.values[i * self.stride..(i + 1) * self.stride]
+    }
+
+    /// Whether body `i` is of this view's own family.
+    pub fn owns(&self, i: usize) -> bool {
+        self.family[i] == self.own
+    }
+
+    /// The shape of body `i`.
+    pub fn shape_of(&self, i: usize) -> &dyn BodyShape {
+        self.shapes[self.shape[i] as usize].as_ref()
     }
 }
 
@@ -163,6 +177,37 @@ impl<'a> WarmStarts<'a> {
 pub struct PairFailure {
     pub pair: usize,
     pub reason: String,
+}
+
+/// The contact geometry of bodies of two families (a capsule and a potential particle), which a
+/// plugin knowing both registers (`Registry::add_body_pair_geometry`): the geometry of a pair of
+/// shapes, as YADE's `Ig2` functors, called once per pair list.
+pub trait BodyPairGeometry: Send + Sync {
+    /// The two families, in the order of the pairs' bodies.
+    fn families(&self) -> [&str; 2];
+    /// Its name in listings: the families joined, `capsule_potential`.
+    fn name(&self) -> String {
+        let [a, b] = self.families();
+        format!("{a}_{b}")
+    }
+    fn description(&self) -> &str {
+        ""
+    }
+    /// Values each pair keeps for the geometry from one step to the next ([`WarmStarts`]).
+    fn warm_values(&self) -> usize {
+        0
+    }
+    /// Pairs `(i, j)`, `i` of the first family (`first.own`), `j` of the second; the normal points
+    /// from `i` to `j`. Fills `out` (as long as the list) with a touch, or None where the two are
+    /// apart.
+    fn pairs(
+        &self,
+        first: KindBodies<'_>,
+        second: KindBodies<'_>,
+        pairs: &[(u32, u32)],
+        warm: WarmStarts<'_>,
+        out: &mut [Option<Touch>],
+    ) -> std::result::Result<(), PairFailure>;
 }
 
 /// The contact geometry of a body kind: the bodies placed once a step, then the pair lists.

@@ -264,6 +264,10 @@ pub trait ContactLawSource {
     fn body_kind(&self, name: &str) -> crate::error::Result<std::sync::Arc<dyn crate::ext::BodyKindFactory>> {
         Err(crate::GraniteError::Setup(format!("no body kind \"{name}\" here")))
     }
+    /// The geometries of pairs of body families (a saved state holding bodies of two families).
+    fn body_pair_geometries(&self) -> Vec<std::sync::Arc<dyn crate::ext::BodyPairGeometry>> {
+        Vec::new()
+    }
     /// The RVE device of this name (a checkpoint of RVEs that ran on one).
     fn rve_device(&self, name: &str) -> crate::error::Result<std::sync::Arc<dyn crate::ext::RveDevice>> {
         Err(crate::GraniteError::Setup(format!("no RVE device \"{name}\" here")))

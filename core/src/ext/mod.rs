@@ -10,7 +10,7 @@ pub mod rve;
 pub mod shape;
 pub mod velocity_update;
 
-pub use body::{BodyGeometry, BodyKindFactory, BodyShape, PlacedBodies};
+pub use body::{BodyGeometry, BodyKindFactory, BodyPairGeometry, BodyShape, PlacedBodies};
 pub use constitutive::{ConstitutiveLaw, ConstitutiveLawFactory, LawBatch, PointObjects};
 pub use contact::{ContactBatch, ContactLaw, ContactLawFactory, PairInfo};
 pub use rve::{RveBatch, RveDevice, RveOrder, RveReport};

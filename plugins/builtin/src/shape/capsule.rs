@@ -154,8 +154,8 @@ struct PlacedCapsules<'a> {
     bodies: KindBodies<'a>,
 }
 
-/// The segment of body `i`: its ends and radius, in the world frame.
-fn segment(bodies: &KindBodies<'_>, i: usize) -> (Vec3, Vec3, f64) {
+/// The segment of capsule `i`: its ends and radius, in the world frame.
+pub(crate) fn segment(bodies: &KindBodies<'_>, i: usize) -> (Vec3, Vec3, f64) {
     let v = bodies.values_of(i);
     let (r, half) = (v[0], v[1]);
     let axis = bodies.q[i] * nalgebra::Vector3::z();
@@ -164,15 +164,15 @@ fn segment(bodies: &KindBodies<'_>, i: usize) -> (Vec3, Vec3, f64) {
     (end(-1.0), end(1.0), r)
 }
 
-fn sub(a: Vec3, b: Vec3) -> Vec3 {
+pub(crate) fn sub(a: Vec3, b: Vec3) -> Vec3 {
     [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
 }
 
-fn dot(a: Vec3, b: Vec3) -> f64 {
+pub(crate) fn dot(a: Vec3, b: Vec3) -> f64 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
 
-fn along(a: Vec3, d: Vec3, t: f64) -> Vec3 {
+pub(crate) fn along(a: Vec3, d: Vec3, t: f64) -> Vec3 {
     [a[0] + t * d[0], a[1] + t * d[1], a[2] + t * d[2]]
 }
 
@@ -181,7 +181,7 @@ fn cross(a: Vec3, b: Vec3) -> Vec3 {
 }
 
 /// The point of segment `[a, b]` nearest `p`.
-fn nearest_on(a: Vec3, b: Vec3, p: Vec3) -> Vec3 {
+pub(crate) fn nearest_on(a: Vec3, b: Vec3, p: Vec3) -> Vec3 {
     let d = sub(b, a);
     let dd = dot(d, d);
     let t = if dd > 0.0 { (dot(sub(p, a), d) / dd).clamp(0.0, 1.0) } else { 0.0 };

@@ -1,16 +1,18 @@
 //! Grain shapes: a sphere, the 4-sphere tetrahedral clump of the JGS round robin (thesis 2.2.1,
 //! table 2.3); and two body kinds of their own: potential particles (`potential/`: the rounded
 //! tetrahedron fitted to that clump, thesis 2.2.2.2, table 2.2, rounded boxes, the thesis's
-//! container parts, and planes of the user's own) and capsules (`capsule.rs`).
+//! container parts, and planes of the user's own) and capsules (`capsule.rs`), which meet one
+//! another (`capsule_potential.rs`).
 
 use granite_core::dem::clump::tetrahedral_members;
-use granite_core::ext::{ShapeModel, ShapeModelFactory};
+use granite_core::ext::{BodyPairGeometry, ShapeModel, ShapeModelFactory};
 use granite_core::math::Vec3;
 use granite_core::params::{ParamSpec, Params};
 use granite_core::{Registry, Result};
 use std::sync::Arc;
 
 pub mod capsule;
+pub mod capsule_potential;
 pub mod potential;
 
 pub fn register(registry: &mut Registry) {
@@ -20,6 +22,14 @@ pub fn register(registry: &mut Registry) {
     registry.add_body_kind(Arc::new(potential::PotentialTetraKind));
     registry.add_body_kind(Arc::new(potential::PotentialBoxKind));
     registry.add_body_kind(Arc::new(potential::PotentialPlanesKind));
+    for geometry in body_pair_geometries() {
+        registry.add_body_pair_geometry(geometry);
+    }
+}
+
+/// The geometries of pairs of the body families above: capsules with potential particles.
+pub fn body_pair_geometries() -> Vec<Arc<dyn BodyPairGeometry>> {
+    vec![Arc::new(capsule_potential::CapsulePotential)]
 }
 
 struct Shape {

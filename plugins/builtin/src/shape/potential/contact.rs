@@ -174,8 +174,19 @@ impl std::fmt::Display for NoConvergence {
 }
 
 /// The contact between `a` and `b`, from `start` (the previous solution) or, without one, from a
-/// guess on the line between their centres.
+/// guess on the line between their centres. A pair proven apart is left there, its solution short
+/// of the optimum.
 pub fn detect(a: &Placed, b: &Placed, start: Option<Solution>) -> Result<Detection, NoConvergence> {
+    solve::<false>(a, b, start)
+}
+
+/// [`detect`] solved to the optimum also for a pair apart: what a search over the problem's value
+/// or its solution reads (a capsule's sphere sliding along its axis, `capsule_potential`).
+pub fn detect_settled(a: &Placed, b: &Placed, start: Option<Solution>) -> Result<Detection, NoConvergence> {
+    solve::<true>(a, b, start)
+}
+
+fn solve<const SETTLED: bool>(a: &Placed, b: &Placed, start: Option<Solution>) -> Result<Detection, NoConvergence> {
     let Solution { point, lambda, depths } = start.unwrap_or_else(|| first_guess(a, b));
     let mut x = Vector3::new(point[0], point[1], point[2]);
     let mut lambda = lambda.clamp(0.0, 1.0);
@@ -183,7 +194,7 @@ pub fn detect(a: &Placed, b: &Placed, start: Option<Solution>) -> Result<Detecti
     let mut steps = 0;
     loop {
         let bound = state.gap_bound(a, b, lambda);
-        if bound <= VALUE_TOLERANCE || state.apart(a, b, lambda) {
+        if bound <= VALUE_TOLERANCE || (!SETTLED && state.apart(a, b, lambda)) {
             break;
         }
         if steps == MAX_STEPS {

@@ -111,7 +111,9 @@ pub fn add(sim: &mut granite_core::dem::DemSim, p: NewPotential) -> Result<usize
         other => return Err(GraniteError::Setup(format!("a {other} shape is not a potential particle"))),
     };
     let NewPotential { shape, material, x, q, v, w, fixed } = p;
-    sim.world.add_body(granite_core::dem::kinds::NewBody { kind, shape, material, x, q, v, w, fixed })
+    let meetings = super::body_pair_geometries();
+    let new = granite_core::dem::kinds::NewBody { kind, meetings: &meetings, shape, material, x, q, v, w, fixed };
+    sim.world.add_body(new)
 }
 
 fn body(kind: &'static str, params: ParamMap, shape: PotentialShape) -> Arc<dyn BodyShape> {
@@ -321,14 +323,14 @@ impl BodyGeometry for PotentialGeometry {
     }
 
     fn place<'a>(&'a self, bodies: KindBodies<'a>) -> Result<Box<dyn PlacedBodies + 'a>> {
-        let shapes = bodies
-            .shapes
-            .iter()
-            .map(|s| {
-                PotentialBody::shape_of(s.as_ref())
-                    .ok_or_else(|| GraniteError::Other(format!("a {} shape among potential particles", s.kind())))
-            })
-            .collect::<Result<Vec<&PotentialShape>>>()?;
+        // Where other families meet these, their shapes are among the scene's: only the shapes
+        // of this family's bodies are read.
+        let shapes: Vec<Option<&PotentialShape>> =
+            bodies.shapes.iter().map(|s| PotentialBody::shape_of(s.as_ref())).collect();
+        if let Some(i) = (0..bodies.x.len()).find(|&i| bodies.owns(i) && shapes[bodies.shape[i] as usize].is_none()) {
+            let kind = bodies.shape_of(i).kind();
+            return Err(GraniteError::Other(format!("a {kind} shape among potential particles")));
+        }
         let mut placed = match self.kept.try_lock() {
             Ok(kept) => Storage::Kept(kept),
             Err(_) => Storage::Own(Vec::new()),
@@ -336,8 +338,10 @@ impl BodyGeometry for PotentialGeometry {
         let all = placed.get_mut();
         all.resize_with(bodies.x.len(), Placed::default);
         all.par_iter_mut().enumerate().for_each(|(i, p)| {
-            let pose = Pose { position: bodies.x[i], rotation: *bodies.q[i].to_rotation_matrix().matrix() };
-            p.place(shapes[bodies.shape[i] as usize], &pose);
+            if let Some(shape) = shapes[bodies.shape[i] as usize].filter(|_| bodies.owns(i)) {
+                let pose = Pose { position: bodies.x[i], rotation: *bodies.q[i].to_rotation_matrix().matrix() };
+                p.place(shape, &pose);
+            }
         });
         Ok(Box::new(PlacedPotentials { placed }))
     }
@@ -348,33 +352,33 @@ struct PlacedPotentials<'a> {
     placed: Storage<'a>,
 }
 
-impl PlacedPotentials<'_> {
-    /// Solves each pair of a list from its warm start, in parallel; the first pair (in list
-    /// order) that would not solve fails the list.
-    fn solve<T: Sync>(
-        pairs: &[T],
-        mut warm: WarmStarts<'_>,
-        out: &mut [Option<Touch>],
-        one: impl Fn(&T, &mut [f64]) -> std::result::Result<Option<Touch>, String> + Sync,
-    ) -> std::result::Result<(), PairFailure> {
-        let failed: Vec<Option<String>> = warm
-            .par_per_pair()
-            .zip(pairs.par_iter())
-            .zip(out.par_iter_mut())
-            .map(|((w, pair), slot)| match one(pair, w) {
-                Ok(touch) => {
-                    *slot = touch;
-                    None
-                }
-                Err(reason) => Some(reason),
-            })
-            .collect();
-        match failed.into_iter().enumerate().find_map(|(pair, f)| f.map(|reason| (pair, reason))) {
-            Some((pair, reason)) => Err(PairFailure { pair, reason }),
-            None => Ok(()),
-        }
+/// Solves each pair of a list from its warm start, in parallel; the first pair (in list order)
+/// that would not solve fails the list.
+pub(crate) fn solve_pairs<T: Sync>(
+    pairs: &[T],
+    mut warm: WarmStarts<'_>,
+    out: &mut [Option<Touch>],
+    one: impl Fn(&T, &mut [f64]) -> std::result::Result<Option<Touch>, String> + Sync,
+) -> std::result::Result<(), PairFailure> {
+    let failed: Vec<Option<String>> = warm
+        .par_per_pair()
+        .zip(pairs.par_iter())
+        .zip(out.par_iter_mut())
+        .map(|((w, pair), slot)| match one(pair, w) {
+            Ok(touch) => {
+                *slot = touch;
+                None
+            }
+            Err(reason) => Some(reason),
+        })
+        .collect();
+    match failed.into_iter().enumerate().find_map(|(pair, f)| f.map(|reason| (pair, reason))) {
+        Some((pair, reason)) => Err(PairFailure { pair, reason }),
+        None => Ok(()),
     }
+}
 
+impl PlacedPotentials<'_> {
     /// The contact of particle `a` with `b` (a particle or a sphere), from the warm start in `w`.
     fn meet(a: &Placed, b: &Placed, w: &mut [f64]) -> std::result::Result<Option<Touch>, String> {
         // Bounding spheres apart: no solve (the warm start waits for the next touch).
@@ -404,7 +408,7 @@ impl PlacedBodies for PlacedPotentials<'_> {
         out: &mut [Option<Touch>],
     ) -> std::result::Result<(), PairFailure> {
         let placed = self.placed.get();
-        Self::solve(pairs, warm, out, |&(i, j), w| Self::meet(&placed[i as usize], &placed[j as usize], w))
+        solve_pairs(pairs, warm, out, |&(i, j), w| Self::meet(&placed[i as usize], &placed[j as usize], w))
     }
 
     fn planes(
@@ -414,7 +418,7 @@ impl PlacedBodies for PlacedPotentials<'_> {
         out: &mut [Option<Touch>],
     ) -> std::result::Result<(), PairFailure> {
         let placed = self.placed.get();
-        Self::solve(pairs, warm, out, |&(i, plane), w| {
+        solve_pairs(pairs, warm, out, |&(i, plane), w| {
             let a = &placed[i as usize];
             let normal = plane.normal;
             // Clear of the plane by more than the bounding radius: no solve.
@@ -437,7 +441,7 @@ impl PlacedBodies for PlacedPotentials<'_> {
         out: &mut [Option<Touch>],
     ) -> std::result::Result<(), PairFailure> {
         let placed = self.placed.get();
-        Self::solve(pairs, warm, out, |&(i, ball), w| {
+        solve_pairs(pairs, warm, out, |&(i, ball), w| {
             Self::meet(&placed[i as usize], &Placed::sphere(ball.centre, ball.radius), w)
         })
     }
