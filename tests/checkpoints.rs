@@ -98,13 +98,17 @@ fn a_checkpoint_says_which_granite_wrote_it_and_a_newer_format_is_refused() {
 /// and an MPM checkpoint of version 1, written before checkpoints carried a checksum; a DEM state
 /// of version 3 (a periodic cell whose stress servo had no integral part yet, saved
 /// mid-compaction) and an MPM checkpoint of version 2 (before shape functions and stress rates),
-/// both written by granite 5416ea0.
+/// both written by granite 5416ea0; a DEM state of version 5 (bodies of one family, before a
+/// scene could hold several), written by granite 46b9482.
 #[test]
 fn checkpoints_of_every_released_format_load_and_run() {
     // Each file, how to load it, and what summary.json must then say.
     let cases = [
         ("dem_state_v2.json", "dem_load", "particles", "\"particles\": 3", "\"steps\": 100"),
         ("dem_state_v3.json", "dem_load", "particles", "\"particles\": 60", "\"step\": 3100"),
+        // Written at step 37613 by granite 46b9482: five capsules (one body family) and eight
+        // spheres settled in a box.
+        ("dem_state_v5.json", "dem_load", "bodies", "\"bodies\": 5", "\"step\": 37713"),
         // Written at step 50 with 4 points (2 x 2 cells, one point each).
         ("mpm_checkpoint_v1.json", "mpm_load", "points", "\"points\": 4", "\"step\": 150"),
         // Written at step 50 with 16 points (2 x 2 cells, four points each).
