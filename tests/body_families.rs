@@ -73,7 +73,7 @@ fn along(axis: [f64; 3]) -> UnitQuaternion<f64> {
 #[test]
 fn a_capsule_meets_a_k_one_particle_as_it_meets_a_sphere() {
     let (r, length, ball, kn) = (0.01, 0.06, 0.008, 1e5);
-    let axis = [1.0, 0.4, -0.3];
+    let axis: Vec3 = [1.0, 0.4, -0.3];
     let norm = axis[0] * axis[0] + axis[1] * axis[1] + axis[2] * axis[2];
     let u = axis.map(|c| c / norm.sqrt());
     // Centres of the ball: beside the axis at a tenth of its length, beside its end, beyond its
