@@ -201,9 +201,10 @@ impl BodyContacts {
         Ok(())
     }
 
-    /// The touching pairs of a list, from one call of the placed bodies' geometry; pairs found
-    /// apart start their law's history again at their next touch. `(own, warm)`: the law's
-    /// history values a pair, and the geometry's after them.
+    /// The touching pairs of a list, from one call of each geometry on its share of it (the
+    /// whole list for a scene of one family); pairs found apart start their law's history again at
+    /// their next touch. `(own, warm)`: the law's history values a pair, and the geometry's after
+    /// them.
     fn touching(
         geometries: &Geometries<'_>,
         around: &Surroundings<'_>,
@@ -211,8 +212,7 @@ impl BodyContacts {
         side: Side,
         (own, warm): (usize, usize),
     ) -> Result<Vec<Found>> {
-        let k = geometries.bodies;
-        let bodies = k;
+        let (k, bodies) = (geometries.bodies, geometries.bodies);
         let mut out = vec![None; list.len()];
         let hs = list.history_stride;
         let fam = &k.family;
