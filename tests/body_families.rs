@@ -6,66 +6,12 @@
 
 mod common;
 
+use common::bodies::{along, scene};
 use granite_core::dem::kinds::NewBody;
 use granite_core::dem::walls::{Wall, WallShape};
 use granite_core::dem::DemSim;
-use granite_core::ext::BodyShape;
 use granite_core::math::Vec3;
-use granite_core::registry::{ParamMap, Registry};
-use granite_plugins::shape::potential::planes_params;
-use granite_plugins::shape::potential::shape::box_planes;
 use nalgebra::{UnitQuaternion, Vector3};
-use std::sync::Arc;
-
-fn params(pairs: &[(&str, f64)]) -> ParamMap {
-    pairs.iter().map(|(k, v)| (k.to_string(), *v)).collect()
-}
-
-struct Scene {
-    registry: Registry,
-    sim: DemSim,
-    material: u16,
-}
-
-/// A scene with one material of `density` and the linear law of `law` parameters.
-fn scene(density: f64, law: &[(&str, f64)]) -> Scene {
-    let registry = granite_plugins::default_registry();
-    let mut sim = DemSim::new();
-    let material = sim.world.add_material("grains", density).unwrap();
-    sim.world.set_contact_law(registry.build_contact_law("linear", &params(law)).unwrap(), None).unwrap();
-    Scene { registry, sim, material }
-}
-
-impl Scene {
-    fn capsule(&self, radius: f64, length: f64) -> Arc<dyn BodyShape> {
-        self.registry.build_body_shape("capsule", &params(&[("radius", radius), ("length", length)])).unwrap()
-    }
-
-    /// A rounded box of half sides `half`, rounding `r`, shadow sphere `big_r` and weight `k`
-    /// (`k = 1`: a sphere of radius `big_r`).
-    fn rounded_box(&self, half: [f64; 3], r: f64, big_r: f64, k: f64) -> Arc<dyn BodyShape> {
-        let kind = self.registry.body_kind("potential").unwrap();
-        kind.build_from(&planes_params(&box_planes(half), r, big_r, k)).unwrap()
-    }
-
-    fn add_as(&mut self, shape: &Arc<dyn BodyShape>, x: Vec3, q: UnitQuaternion<f64>, motion: [Vec3; 2], fixed: bool) {
-        let kind = self.registry.body_kind(shape.kind()).unwrap().clone();
-        let meetings = self.registry.body_pair_geometries();
-        let [v, w] = motion;
-        let (material, shape) = (self.material, shape.clone());
-        let body = NewBody { kind: kind.as_ref(), meetings: &meetings, shape, material, x, q, v, w, fixed };
-        self.sim.world.add_body(body).unwrap();
-    }
-
-    fn add(&mut self, shape: &Arc<dyn BodyShape>, x: Vec3, q: UnitQuaternion<f64>) {
-        self.add_as(shape, x, q, [[0.0; 3]; 2], false);
-    }
-}
-
-/// The rotation taking the body's z axis to `axis`.
-fn along(axis: [f64; 3]) -> UnitQuaternion<f64> {
-    UnitQuaternion::rotation_between(&Vector3::z(), &Vector3::from(axis)).unwrap()
-}
 
 /// A `k = 1` potential particle is a sphere of radius `R`: a capsule meets it as it meets a sphere
 /// there, with the same force and the same torques, wherever along its axis the two touch (its

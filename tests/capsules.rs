@@ -5,52 +5,11 @@
 
 mod common;
 
-use granite_core::dem::kinds::NewBody;
+use common::bodies::{along, scene};
 use granite_core::dem::walls::{Wall, WallShape};
 use granite_core::dem::DemSim;
-use granite_core::ext::BodyShape;
 use granite_core::math::Vec3;
-use granite_core::registry::{ParamMap, Registry};
-use nalgebra::{UnitQuaternion, Vector3};
-use std::sync::Arc;
-
-fn params(pairs: &[(&str, f64)]) -> ParamMap {
-    pairs.iter().map(|(k, v)| (k.to_string(), *v)).collect()
-}
-
-struct Scene {
-    registry: Registry,
-    sim: DemSim,
-    material: u16,
-}
-
-/// A scene with one material of `density` and the linear law of `law` parameters.
-fn scene(density: f64, law: &[(&str, f64)]) -> Scene {
-    let registry = granite_plugins::default_registry();
-    let mut sim = DemSim::new();
-    let material = sim.world.add_material("grains", density).unwrap();
-    sim.world.set_contact_law(registry.build_contact_law("linear", &params(law)).unwrap(), None).unwrap();
-    Scene { registry, sim, material }
-}
-
-impl Scene {
-    fn capsule(&self, radius: f64, length: f64) -> Arc<dyn BodyShape> {
-        self.registry.build_body_shape("capsule", &params(&[("radius", radius), ("length", length)])).unwrap()
-    }
-
-    fn add(&mut self, shape: &Arc<dyn BodyShape>, x: Vec3, q: UnitQuaternion<f64>, v: Vec3, w: Vec3) -> usize {
-        let kind = self.registry.body_kind("capsule").unwrap().clone();
-        let meetings = self.registry.body_pair_geometries();
-        let (material, shape) = (self.material, shape.clone());
-        let body = NewBody { kind: kind.as_ref(), meetings: &meetings, shape, material, x, q, v, w, fixed: false };
-        self.sim.world.add_body(body).unwrap()
-    }
-}
-
-/// The rotation taking the body's z axis to `axis`.
-fn along(axis: [f64; 3]) -> UnitQuaternion<f64> {
-    UnitQuaternion::rotation_between(&Vector3::z(), &Vector3::from(axis)).unwrap()
-}
+use nalgebra::UnitQuaternion;
 
 #[test]
 fn crossed_capsules_and_a_capsule_and_a_sphere_overlap_and_push_as_the_law_says() {
@@ -58,8 +17,8 @@ fn crossed_capsules_and_a_capsule_and_a_sphere_overlap_and_push_as_the_law_says(
     let mut s = scene(2500.0, &[("kn", kn)]);
     let shape = s.capsule(r, 0.1);
     // Along x at the origin, and along y above it, their axes 2r - overlap apart.
-    s.add(&shape, [0.0; 3], along([1.0, 0.0, 0.0]), [0.0; 3], [0.0; 3]);
-    s.add(&shape, [0.03, 0.02, 2.0 * r - overlap], along([0.0, 1.0, 0.0]), [0.0; 3], [0.0; 3]);
+    s.add_moving(&shape, [0.0; 3], along([1.0, 0.0, 0.0]), [0.0; 3], [0.0; 3]);
+    s.add_moving(&shape, [0.03, 0.02, 2.0 * r - overlap], along([0.0, 1.0, 0.0]), [0.0; 3], [0.0; 3]);
     // A sphere resting on the first capsule's side, further along x.
     let ball = 0.005;
     s.sim.world.add_sphere(s.material, [-0.04, 0.0, -(r + ball - overlap)], ball, [0.0; 3]).unwrap();
@@ -105,7 +64,7 @@ fn a_capsule_rolls_down_an_incline_without_slip_at_the_rate_of_its_own_inertia()
     let mass = 2500.0 * shape.volume();
     let i_axis = 2500.0 * shape.inertia_per_density()[2];
     let rest = r - mass * g * theta.cos() / kn;
-    s.add(&shape, normal.map(|c| c * rest), UnitQuaternion::identity(), [0.0; 3], [0.0; 3]);
+    s.add_moving(&shape, normal.map(|c| c * rest), UnitQuaternion::identity(), [0.0; 3], [0.0; 3]);
     let dt = 0.05 * s.sim.world.critical_dt().unwrap();
     s.sim.world.set_dt(dt).unwrap();
     let duration = 0.3;
@@ -154,7 +113,7 @@ fn capsules_bouncing_in_a_frictionless_elastic_box_keep_their_energy() {
                 let axis = [1.0 + f, 2.0 - 0.3 * f, 0.5 * f - 1.0];
                 let v = [0.3 * (f - 3.5), 0.2 * (2.0 - f), 0.25 * (f * f / 10.0 - 1.0)];
                 let w = [3.0 - f, 0.5 * f, 2.0];
-                s.add(&shape, x, along(axis), v, w);
+                s.add_moving(&shape, x, along(axis), v, w);
                 n += 1;
             }
         }
@@ -243,7 +202,7 @@ fn a_saved_state_with_capsules_resumes_bit_for_bit() {
         let gap = 2.0 * r - overlap;
         for k in 0..4 {
             let f = k as f64;
-            s.add(&shape, [f * gap, 0.002 * f, r - overlap], along([0.0, 1.0, 0.0]), [0.0; 3], [0.0; 3]);
+            s.add_moving(&shape, [f * gap, 0.002 * f, r - overlap], along([0.0, 1.0, 0.0]), [0.0; 3], [0.0; 3]);
         }
         let height = r - overlap + ((r + ball - overlap).powi(2) - (gap / 2.0).powi(2)).sqrt();
         for k in 0..3 {

@@ -408,14 +408,6 @@ fn a_bad_potential_particle_names_what_is_wrong_and_the_line() {
         &[],
     );
     assert!(e.contains("line 3") && e.contains("`k`") && e.contains("(0, 1]"), "{e}");
-    let e = run_err(
-        "potential_and_capsule",
-        &format!(
-            "{head}sim.potential(m, [0.0, 0.0, 0.0], #{{ shape: \"potential_tetra\" }});\nsim.capsule(m, [0.1, 0.0, 0.0], #{{ radius: 0.01, length: 0.02 }});"
-        ),
-        &[],
-    );
-    assert!(e.contains("line 4") && e.contains("potential") && e.contains("capsule"), "{e}");
 }
 
 /// A build without the `vtkhdf` feature refuses the format where the script asks for it, saying

@@ -1,6 +1,8 @@
 //! Helpers shared by the integration tests.
 #![allow(dead_code)]
 
+pub mod bodies;
+
 use std::path::{Path, PathBuf};
 
 /// The repository root (tests run with the package root as working directory).
