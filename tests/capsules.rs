@@ -162,7 +162,7 @@ fn capsules_and_spheres_settled_in_a_box_rest_their_weight_on_the_walls() {
 /// weight of all of it.
 #[test]
 fn capsules_settled_on_rounded_boxes_rest_their_weight_on_the_walls() {
-    let sets = [("blocks", "8"), ("capsules", "10"), ("spheres", "30"), ("duration", "2"), ("half_width", "0.05")];
+    let sets = [("blocks", "8"), ("capsules", "10"), ("spheres", "30"), ("duration", "2.5"), ("half_width", "0.05")];
     let report = common::run("dem/capsules_in_a_box.rhai", "capsules_on_blocks", &sets, 2).unwrap();
     let (weight, carried) = (common::summary_f64(&report, "weight"), common::summary_f64(&report, "walls_carry"));
     assert_eq!(common::summary_f64(&report, "bodies"), 18.0);

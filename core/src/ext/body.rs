@@ -10,6 +10,10 @@
 //! potential particle moves its planes into the world frame there); the three pair lists are then
 //! handed to what it placed. A geometry whose solve starts from the last step's solution keeps
 //! values per pair ([`BodyGeometry::warm_values`]) that the engine stores with the pair.
+//!
+//! Bodies of two families meet where a plugin registers the geometry of their pair
+//! ([`BodyPairGeometry`], `Registry::add_body_pair_geometry`): a scene holding several families
+//! calls each family's geometry, and each pair geometry, once a step on its share of a list.
 
 use crate::error::Result;
 use crate::math::Vec3;
