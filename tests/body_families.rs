@@ -230,5 +230,23 @@ fn a_family_without_a_geometry_for_the_scene_s_family_is_refused() {
     };
     let e = s.sim.world.add_body(body).unwrap_err().to_string();
     assert!(e.contains("potential bodies cannot join capsule bodies") && e.contains("known: none"), "{e}");
-    assert_eq!(kind.family(), "potential");
+}
+
+/// A scene keeps a family whose bodies were all removed while others remain: its saved state
+/// names that family by the kind it joined with, and loads.
+#[test]
+fn a_state_keeping_a_family_without_bodies_loads() {
+    let mut s = scene(1000.0, &[("kn", 1e4)]);
+    let capsule = s.capsule(0.01, 0.02);
+    let block = s.rounded_box([0.01; 3], 0.002, 0.1, 0.1);
+    s.add(&capsule, [0.0; 3], UnitQuaternion::identity());
+    s.add(&block, [0.1, 0.0, 0.0], UnitQuaternion::identity());
+    s.sim.world.remove_bodies(&[false, true]);
+    s.sim.world.set_dt(1e-5).unwrap();
+    s.sim.step().unwrap();
+    let path = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("family_without_bodies.json");
+    s.sim.save(&path).unwrap();
+    let loaded = DemSim::load(&path, &granite::registry()).unwrap();
+    assert_eq!(loaded.world.kinds.families.len(), 2);
+    assert_eq!(loaded.world.kinds.kind_name(0), "potential");
 }

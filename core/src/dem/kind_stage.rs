@@ -212,7 +212,7 @@ impl BodyContacts {
         side: Side,
         (own, warm): (usize, usize),
     ) -> Result<Vec<Found>> {
-        let (k, bodies) = (geometries.bodies, geometries.bodies);
+        let k = geometries.bodies;
         let mut out = vec![None; list.len()];
         let hs = list.history_stride;
         let fam = &k.family;
@@ -258,7 +258,7 @@ impl BodyContacts {
                 time: around.time,
                 reason: format!(
                     "the contact of {}; the bodies may overlap too deeply: lower the time step",
-                    Self::pair_name(bodies, around, list, (pair, side), &reason)
+                    Self::pair_name(k, around, list, (pair, side), &reason)
                 ),
             });
         }

@@ -19,11 +19,13 @@ use crate::math::Vec3;
 use nalgebra::UnitQuaternion;
 use std::sync::Arc;
 
-/// A geometry family a simulation's bodies are of: its name, geometry, shape values per body and
-/// warm-start values per pair.
+/// A geometry family a simulation's bodies are of: its name, the kind it joined with (what a
+/// saved state finds it again by), geometry, shape values per body and warm-start values per
+/// pair.
 #[derive(Clone)]
 pub struct KindInUse {
     pub name: String,
+    pub kind: String,
     pub geometry: Arc<dyn BodyGeometry>,
     pub stride: usize,
     pub warm: usize,
@@ -34,6 +36,7 @@ impl KindInUse {
         let geometry = factory.geometry();
         KindInUse {
             name: factory.family().to_string(),
+            kind: factory.name().to_string(),
             warm: geometry.warm_values(),
             geometry,
             stride: factory.values_per_shape(),

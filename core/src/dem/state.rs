@@ -151,10 +151,7 @@ impl DemSim {
         if k.is_empty() {
             return None;
         }
-        // A kind of each family: that of its first body's shape.
-        let families: Vec<String> = (0..k.families.len())
-            .map(|f| k.family.iter().position(|&g| g as usize == f).map_or("", |i| k.kind_name(i)).to_string())
-            .collect();
+        let families: Vec<String> = k.families.iter().map(|f| f.kind.clone()).collect();
         Some(BodiesRecord {
             kind: families[0].clone(),
             families,
