@@ -126,3 +126,84 @@ fn checkpoints_of_every_released_format_load_and_run() {
         assert!(summary.contains(has_count) && summary.contains(has_steps), "{file}: {summary}");
     }
 }
+
+/// Writes `path`'s checkpoint again with its state changed by `edit` and a checksum that fits,
+/// as a program crafting a file would: the checksum is then no defence.
+fn crafted(path: &Path, name: &str, edit: impl FnOnce(&mut serde_json::Value)) -> PathBuf {
+    let file: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap();
+    let mut state = file["state"].clone();
+    edit(&mut state);
+    let text = granite_core::io::checkpoint_file::seal(
+        file["format"].as_str().unwrap(),
+        file["version"].as_u64().unwrap() as u32,
+        file["written_by"].as_str().unwrap(),
+        &serde_json::to_string(&state).unwrap(),
+    );
+    let out = path.with_file_name(name);
+    std::fs::write(&out, text).unwrap();
+    out
+}
+
+/// Values a step cannot use are refused even under a valid checksum, naming the value: a time so
+/// large that a step no longer moves it on, a next point id no new point can take, a plane wall
+/// without a normal. A sphere moved in the file is taken where it was put (the contact lists are
+/// built again), instead of stopping the run as if it had flown there.
+#[test]
+fn crafted_checkpoints_with_a_valid_checksum_are_refused_naming_the_value() {
+    let mpm = run("ckpt_crafted_mpm", MPM_RUN).unwrap().join("state.json");
+    let dem = run("ckpt_crafted_dem", DEM_RUN).unwrap().join("state.json");
+    let cases: [(&Path, &str, &str, Box<dyn FnOnce(&mut serde_json::Value)>, &[&str]); 3] = [
+        (&mpm, "mpm_load", "late.json", Box::new(|s| s["time"] = 1e308.into()), &["time 1e308", "leaves it unchanged"]),
+        (
+            &mpm,
+            "mpm_load",
+            "ids.json",
+            Box::new(|s| s["next_id"] = u64::MAX.into()),
+            &["next id of new points is 18446744073709551615", "above every id held"],
+        ),
+        (
+            &dem,
+            "dem_load",
+            "flat.json",
+            Box::new(|s| s["walls"][0]["shape"]["Plane"]["normal"] = serde_json::json!([0.0, 0.0, 0.0])),
+            &["wall 0 (\"x-\")", "plane normal [0.0, 0.0, 0.0] (a unit vector)"],
+        ),
+    ];
+    for (source, load, name, edit, expected) in cases {
+        let file = crafted(source, name, edit);
+        let e = run("ckpt_crafted_load", &load_script(load, &file)).unwrap_err();
+        assert!(e.contains("not a usable") && expected.iter().all(|x| e.contains(x)), "{name}: {e}");
+    }
+    // The first sphere moved 15 mm sideways in the box, three times what half the skin and the
+    // smallest radius allow between two builds of the lists.
+    let x0 = {
+        let file: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&dem).unwrap()).unwrap();
+        file["state"]["spheres"]["x"][0][0].as_f64().unwrap()
+    };
+    let moved = crafted(&dem, "moved.json", |s| s["spheres"]["x"][0][0] = (x0 + 0.015).into());
+    let source = format!(
+        "let sim = dem_load({:?});\nsim.run_steps(5);\nsummary(\"x\", sim.body(sim.ids()[0]).position[0]);\n",
+        moved.to_str().unwrap()
+    );
+    let dir = run("ckpt_crafted_moved", &source).unwrap();
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("summary.json")).unwrap()).unwrap();
+    // Five steps of a sphere settling under gravity move it by far less than a millimetre.
+    assert!((summary["x"].as_f64().unwrap() - (x0 + 0.015)).abs() < 1e-3, "{summary}");
+}
+
+/// `dem_load` and `mpm_load` of a FIFO or a device are refused at once, naming what the file
+/// is: opening a FIFO would block the run where no stop request is seen, a device would be read
+/// until memory runs out.
+#[test]
+fn a_fifo_or_a_device_is_not_loaded() {
+    let dir = common::out_dir("ckpt_fifo");
+    std::fs::create_dir_all(&dir).unwrap();
+    let fifo = dir.join("pipe.json");
+    let _ = std::fs::remove_file(&fifo);
+    assert!(std::process::Command::new("mkfifo").arg(&fifo).status().unwrap().success());
+    for (load, file, kind) in [("dem_load", fifo.as_path(), "a FIFO"), ("mpm_load", Path::new("/dev/urandom"), "a device")] {
+        let e = run("ckpt_fifo_load", &load_script(load, file)).unwrap_err();
+        assert!(e.contains(kind) && e.contains("not a regular file") && e.contains("line 1"), "{load}: {e}");
+    }
+}

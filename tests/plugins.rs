@@ -175,21 +175,41 @@ fn plugins_command_lists_a_library() {
 }
 
 /// A plugin law does not silently take the name of a law already registered (a built-in one, or
-/// one of a plugin loaded before): refused unless asked for with `replace: true`.
+/// one of another library loaded before): refused unless asked for with `replace: true`. The
+/// same library loaded again, by the same path or another one, is a no-op.
 #[test]
 fn a_plugin_law_replaces_a_registered_name_only_when_asked() {
     let lib = build_plugin(&[], "plugin-test");
-    let twice = format!("load_plugin(\"{0}\");\nload_plugin(\"{0}\");", lib.display());
-    let e = common::run_text_err("plugin_twice", &twice);
+    // The same file by a second path: a link beside it.
+    let link = lib.with_file_name("same_library_linked.so");
+    let _ = std::fs::remove_file(&link);
+    std::os::unix::fs::symlink(&lib, &link).unwrap();
+    let twice = format!(
+        "let a = load_plugin(\"{0}\");\nlet b = load_plugin(\"{0}\");\nlet c = load_plugin(\"{1}\");\n\
+         summary(\"laws\", [a, b, c]);",
+        lib.display(),
+        link.display()
+    );
+    let out = common::run_text("plugin_twice", &twice);
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(summary["laws"], serde_json::json!(["drucker_prager", "drucker_prager", "drucker_prager"]));
+    // Another library file with a law of the same name.
+    let other = lib.with_file_name("another_library.so");
+    std::fs::copy(&lib, &other).unwrap();
+    let clash = format!("load_plugin(\"{}\");\nload_plugin(\"{}\");", lib.display(), other.display());
+    let e = common::run_text_err("plugin_clash", &clash);
     assert!(
         e.contains("a law named `drucker_prager` is already registered")
+            && e.contains("another_library.so")
             && e.contains("replace: true")
             && e.contains("line 2"),
         "{e}"
     );
     let replaced = format!(
-        "load_plugin(\"{0}\");\nlet n = load_plugin(\"{0}\", #{{ replace: true }});\nsummary(\"law\", n);",
-        lib.display()
+        "load_plugin(\"{0}\");\nlet n = load_plugin(\"{1}\", #{{ replace: true }});\nsummary(\"law\", n);",
+        lib.display(),
+        other.display()
     );
     let out = common::run_text("plugin_replace", &replaced);
     let summary: serde_json::Value =

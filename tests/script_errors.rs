@@ -312,6 +312,44 @@ fn a_material_of_one_simulation_is_refused_by_another() {
     );
 }
 
+/// A wall belongs to the simulation that made it, as a material does: `b.wall_velocity(a_wall,
+/// ...)` is refused naming both simulations instead of moving b's wall of the same index. An
+/// index names the simulation's own wall.
+#[test]
+fn a_wall_of_one_simulation_is_refused_by_another() {
+    let dem = "let a = dem();\nlet glass = a.material(#{ name: \"glass\", density: 2500.0 });\n\
+               let floor = a.wall_plane(glass, [0.0, 0.0, 0.0], [0.0, 0.0, 1.0]);\n\
+               let box = a.box_walls(glass, [0.0, 0.0, 0.0], [1.0, 1.0, 1.0]);\n\
+               let b = dem();\nlet steel = b.material(#{ name: \"steel\", density: 7800.0 });\n\
+               let own = b.wall_plane(steel, [0.0, 0.0, 0.0], [0.0, 0.0, 1.0]);\n";
+    for call in [
+        "b.wall_velocity(floor, [0.0, 0.0, 1.0]);",
+        "b.wall_velocity([own, floor], [0.0, 0.0, 1.0]);",
+        "b.wall_force(box[0]);",
+        "b.wall_position(box);",
+        "b.wall_velocity(floor, \"z\", |t| 1.0);",
+    ] {
+        let e = run_err("wall_of_another_dem", &format!("{dem}{call}"), &[]);
+        assert!(e.contains("belongs to simulation #1, not to this one (#2)") && e.contains("line 8"), "{call}: {e}");
+    }
+    // Its own walls, by handle or index, are taken; the handle says which wall it is.
+    let out = common::out_dir("wall_of_its_own");
+    let source = format!(
+        "{dem}b.wall_velocity(own, [0.0, 0.0, 2.0]);\nb.wall_velocity(0, [0.0, 1.0, 2.0]);\n\
+         summary(\"own\", own.index);\nsummary(\"box_last\", box[5].index);\nsummary(\"same\", box[1] == box[1] && box[0] != box[1]);\n"
+    );
+    let report = granite_script::run_source(
+        "walls.rhai",
+        &source,
+        granite::registry(),
+        granite_script::RunOptions { out_dir: out, quiet: true, ..Default::default() },
+    )
+    .unwrap();
+    assert_eq!(report.summary["own"], 0);
+    assert_eq!(report.summary["box_last"], 6);
+    assert_eq!(report.summary["same"], true);
+}
+
 /// A script's series column may not take the name of a column granite writes (two
 /// `volumetric_strain` columns of opposite signs were written before).
 #[test]

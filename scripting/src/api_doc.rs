@@ -8,7 +8,7 @@
 #[derive(Debug, Clone, Copy)]
 pub struct ApiDoc {
     /// What it is called on: `""` (a global function), `"sim"` (both simulations), `"MpmSim"`,
-    /// `"DemSim"`, `"Material"` (an MPM material), `"DemMaterial"`, `"Mesh"` (a gmsh mesh), or a Rhai type (`"array"`,
+    /// `"DemSim"`, `"Material"` (an MPM material), `"DemMaterial"`, `"DemWall"`, `"Mesh"` (a gmsh mesh), or a Rhai type (`"array"`,
     /// `"string"`, `"blob"`) for the few of Rhai's own functions granite replaces.
     pub on: &'static str,
     pub name: &'static str,
@@ -42,7 +42,7 @@ pub static API: &[ApiDoc] = &[
     f("", "out_dir", &["out_dir()"], NONE, "this run's output folder"),
     f("", "print_line", &["print_line(text)"], NONE, "prints a line on standard output"),
     f("", "plot", &["plot(csv, x, [ys], file)"], NONE, "a line plot of columns of a CSV of the output folder: SVG, or PNG when `file` ends in .png"),
-    f("", "load_plugin", &["load_plugin(path)", "load_plugin(path, #{ replace })"], &["replace"], "loads a native constitutive-law plugin (a .so) and returns its law's name; its code runs with your rights: load only libraries you trust. A law of a name already registered (built in, another plugin's) is refused unless `replace: true`"),
+    f("", "load_plugin", &["load_plugin(path)", "load_plugin(path, #{ replace })"], &["replace"], "loads a native constitutive-law plugin (a .so) and returns its law's name; its code runs with your rights: load only libraries you trust. A law of a name already registered (built in, another library's) is refused unless `replace: true`; the same library loaded again is a no-op"),
     f("", "mpm", &["mpm(#{ dim, origin, cell, cells, velocity_update })"], &["dim", "origin", "cell", "cells", "velocity_update"], "a new MPM simulation on a regular mesh: `cell` a size or one per axis, `cells` a count per axis"),
     f("", "mpm_load", &["mpm_load(path)"], NONE, "an MPM simulation from a checkpoint written by `sim.save` (path from the working directory)"),
     f("", "dem", &["dem()", "dem(#{ seed, skin })"], &["seed", "skin"], "a new DEM simulation; the Verlet skin defaults to half the smallest radius"),
@@ -140,13 +140,13 @@ pub static API: &[ApiDoc] = &[
     f("DemSim", "body_contacts", &["sim.body_contacts(id)"], NONE, "a body's touching contacts (last step): #{ with: \"body\" | \"wall\" | \"sphere\", id (the other body's or sphere's id, the wall's index), kind (the other body's kind, the wall's name, \"sphere\"), force (on this body) }"),
     f("DemSim", "body_ids", &["sim.body_ids()"], NONE, "the ids of the bodies of plugin kinds, in their order"),
     f("DemSim", "bodies", &["sim.bodies"], NONE, "the number of bodies of plugin kinds"),
-    f("DemSim", "wall_plane", &["sim.wall_plane(material, point, normal)"], NONE, "an infinite plane wall; returns its index"),
+    f("DemSim", "wall_plane", &["sim.wall_plane(material, point, normal)"], NONE, "an infinite plane wall; returns the wall (a DemWall, which other simulations refuse)"),
     f("DemSim", "wall_rect", &["sim.wall_rect(material, centre, u, v, [half_u, half_v])"], NONE, "a rectangular wall"),
     f("DemSim", "wall_disk", &["sim.wall_disk(material, centre, normal, radius)"], NONE, "a disk wall"),
     f("DemSim", "wall_cylinder", &["sim.wall_cylinder(material, base, axis, radius, length)"], NONE, "a cylindrical shell wall"),
-    f("DemSim", "box_walls", &["sim.box_walls(material, lower, upper)", "sim.box_walls(material, lower, upper, #{ open_top })"], &["open_top"], "six (or five) plane walls around a box; returns their indices"),
-    f("DemSim", "wall_mesh", &["sim.wall_mesh(material, file_or_mesh)", "sim.wall_mesh(material, file_or_mesh, #{ group, scale, translate, rotate })"], &["group", "scale", "translate", "rotate"], "walls of the triangles of an STL file (ASCII or binary), or of a surface `group` of a gmsh file or of a mesh from load_mesh; each point scaled, turned by the rotation vector `rotate` (rad) and moved by `translate`; touched from both sides on faces, edges and corners (a shared edge or corner counted once); returns the array of their indices, which the other wall calls take as one wall"),
-    f("DemSim", "wall_velocity", &["sim.wall_velocity(wall, [vx, vy, vz])", "sim.wall_velocity(wall, axis, |t| v)"], NONE, "moves a wall (an index, or an array of them moving together)"),
+    f("DemSim", "box_walls", &["sim.box_walls(material, lower, upper)", "sim.box_walls(material, lower, upper, #{ open_top })"], &["open_top"], "six (or five) plane walls around a box (x-, x+, y-, y+, z-, z+); returns the array of their walls"),
+    f("DemSim", "wall_mesh", &["sim.wall_mesh(material, file_or_mesh)", "sim.wall_mesh(material, file_or_mesh, #{ group, scale, translate, rotate })"], &["group", "scale", "translate", "rotate"], "walls of the triangles of an STL file (ASCII or binary), or of a surface `group` of a gmsh file or of a mesh from load_mesh; each point scaled, turned by the rotation vector `rotate` (rad) and moved by `translate`; touched from both sides on faces, edges and corners (a shared edge or corner counted once); returns the array of their walls, which the other wall calls take as one wall"),
+    f("DemSim", "wall_velocity", &["sim.wall_velocity(wall, [vx, vy, vz])", "sim.wall_velocity(wall, axis, |t| v)"], NONE, "moves a wall (a wall this simulation made or its index, or an array of them moving together)"),
     f("DemSim", "wall_spin", &["sim.wall_spin(wall, [wx, wy, wz], pivot)"], NONE, "turns walls of a wall mesh (an array from wall_mesh) at an angular velocity (rad/s) about a pivot point, which moves with the walls' velocity; contacts feel the surface's velocity there"),
     f("DemSim", "wall_force", &["sim.wall_force(wall)"], NONE, "the force the spheres and bodies exerted on a wall (or an array of walls: their sum) in the last step"),
     f("DemSim", "wall_torque", &["sim.wall_torque(wall, point)"], NONE, "the torque about `point` of the forces the spheres and bodies exerted on a wall (or an array of walls) in the last step, at their contact points"),
@@ -194,6 +194,7 @@ pub static API: &[ApiDoc] = &[
     f("DemSim", "void_ratio_tetrahedra", &["sim.void_ratio_tetrahedra(#{ n_mc, seed })"], &["n_mc", "seed"], "void ratio from a Delaunay tetrahedralisation (thesis 2.3.3)"),
     f("DemSim", "void_ratio_bounding_box", &["sim.void_ratio_bounding_box()"], NONE, "void ratio of the particles' bounding box"),
     f("DemMaterial", "name", &["material.name"], NONE, "the material's name"),
+    f("DemWall", "index", &["wall.index"], NONE, "the wall's index among its simulation's walls (what `body_contacts`, `wall_contact` and messages name)"),
 ];
 
 /// The option keys a function accepts, from the table (empty for an unknown function).
@@ -291,6 +292,7 @@ pub fn markdown() -> String {
         ("Mesh", "gmsh meshes (`load_mesh(...)`)"),
         ("DemSim", "DEM simulations (`dem(...)`)"),
         ("DemMaterial", "DEM materials"),
+        ("DemWall", "DEM walls (`wall_plane`, `box_walls`, `wall_mesh`, ...)"),
         ("array", "Rhai's arrays"),
         ("string", "Rhai's strings"),
         ("blob", "Rhai's BLOBs"),

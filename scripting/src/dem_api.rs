@@ -29,11 +29,30 @@ pub struct DemMaterialHandle {
 impl DemMaterialHandle {
     /// Its index in `s`'s materials; an error when it is another simulation's material.
     pub(super) fn index_in(&self, s: &DemHandle) -> RhaiResult<u16> {
-        s.owns(self.sim, &format!("material \"{}\"", self.name))?;
+        s.owns(
+            self.sim,
+            &format!("material \"{}\"", self.name),
+            "make one for this simulation with its own material(...)",
+        )?;
         Ok(self.index)
     }
     pub(super) fn name(&self) -> &str {
         &self.name
+    }
+}
+
+/// A wall made by `wall_plane`, `box_walls`, `wall_mesh` and the like: its index among the
+/// simulation's walls and the simulation that made it, so that another simulation refuses it
+/// instead of moving its own wall of that index.
+#[derive(Clone, Copy, PartialEq, Eq)]
+pub struct DemWallHandle {
+    index: usize,
+    sim: u64,
+}
+
+impl DemWallHandle {
+    fn to_text(self) -> String {
+        format!("DemWall({})", self.index)
     }
 }
 
@@ -183,7 +202,13 @@ impl Handle<DemScene> {
         Ok(spheres.len() as i64)
     }
 
-    fn add_wall(&mut self, mat: &DemMaterialHandle, name: String, shape: WallShape, position: Vec3) -> RhaiResult<i64> {
+    fn add_wall(
+        &mut self,
+        mat: &DemMaterialHandle,
+        name: String,
+        shape: WallShape,
+        position: Vec3,
+    ) -> RhaiResult<DemWallHandle> {
         let wall = Wall::new(&name, shape, position, mat.index_in(self)?);
         let mut st = self.lock();
         let twin = st.sim.dem.world.walls.iter().position(|w| w.same_surface(&wall));
@@ -195,7 +220,7 @@ impl Handle<DemScene> {
                 st.sim.dem.world.walls[twin].name
             ));
         }
-        Ok(index as i64)
+        Ok(DemWallHandle { index, sim: self.serial() })
     }
 
     /// The six walls of a box (or five, open at the top), lower corner `lo`, upper `hi`.
@@ -230,24 +255,40 @@ impl Handle<DemScene> {
         Ok(w as usize)
     }
 
-    /// The walls a script names: an index, or an array of indices (what `wall_mesh` and
-    /// `box_walls` return).
-    fn walls_of(&self, w: &Dynamic) -> RhaiResult<Vec<usize>> {
+    /// One wall a script names: a wall this simulation made, or its index among this
+    /// simulation's walls.
+    fn wall_of(&self, w: &Dynamic) -> Option<RhaiResult<usize>> {
         if let Ok(i) = w.as_int() {
-            return Ok(vec![self.wall_index(i)?]);
+            return Some(self.wall_index(i));
+        }
+        let wall = w.clone().try_cast::<DemWallHandle>()?;
+        Some(
+            self.owns(
+                wall.sim,
+                &format!("wall {}", wall.index),
+                "name this simulation's walls by what its own wall_plane, box_walls or wall_mesh returned",
+            )
+            .map(|()| wall.index),
+        )
+    }
+
+    /// The walls a script names: a wall, or an array of them (what `wall_mesh` and `box_walls`
+    /// return); a wall is what made it returned, or its index.
+    fn walls_of(&self, w: &Dynamic) -> RhaiResult<Vec<usize>> {
+        if let Some(one) = self.wall_of(w) {
+            return Ok(vec![one?]);
         }
         let Some(list) = w.clone().try_cast::<Array>() else {
-            return err(format!("a wall is an index or an array of indices, got {}", w.type_name()));
+            return err(format!("a wall is a wall, an index or an array of them, got {}", w.type_name()));
         };
         if list.is_empty() {
             return err("an empty array of walls");
         }
         list.iter()
-            .map(|d| match d.as_int() {
-                Ok(i) => self.wall_index(i),
-                Err(_) => {
-                    err(format!("a wall is an index or an array of indices, got an array holding {}", d.type_name()))
-                }
+            .map(|d| {
+                self.wall_of(d).unwrap_or_else(|| {
+                    err(format!("a wall is a wall, an index or an array of them, got an array holding {}", d.type_name()))
+                })
             })
             .collect()
     }
@@ -275,18 +316,25 @@ impl Handle<DemScene> {
         let placed: Vec<[Vec3; 3]> = triangles.iter().map(|t| t.map(place)).collect();
         let material = m.index_in(self)?;
         let walls = granite_core::dem::mesh_walls::mesh_walls(&placed, &name, material).or_rhai()?;
+        let sim = self.serial();
         let mut st = self.lock();
         let first = st.sim.dem.world.walls.len();
         for w in walls {
             st.sim.dem.world.add_wall(w);
         }
-        Ok((first..st.sim.dem.world.walls.len()).map(|i| Dynamic::from(i as i64)).collect())
+        Ok((first..st.sim.dem.world.walls.len()).map(|index| Dynamic::from(DemWallHandle { index, sim })).collect())
     }
 }
 
 pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
     engine.register_type_with_name::<DemHandle>("DemSim");
     engine.register_type_with_name::<DemMaterialHandle>("DemMaterial");
+    engine.register_type_with_name::<DemWallHandle>("DemWall");
+    engine.register_fn("to_string", |w: &mut DemWallHandle| w.to_text());
+    engine.register_fn("to_debug", |w: &mut DemWallHandle| w.to_text());
+    engine.register_get("index", |w: &mut DemWallHandle| w.index as i64);
+    engine.register_fn("==", |a: DemWallHandle, b: DemWallHandle| a == b);
+    engine.register_fn("!=", |a: DemWallHandle, b: DemWallHandle| a != b);
     engine.register_fn("to_string", |s: &mut DemHandle| s.describe());
     engine.register_fn("to_debug", |s: &mut DemHandle| s.describe());
     engine.register_fn("to_string", |m: &mut DemMaterialHandle| format!("DemMaterial(\"{}\")", m.name));

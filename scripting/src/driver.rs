@@ -183,14 +183,15 @@ impl<S: Simulation> Handle<S> {
         self.0.serial
     }
 
-    /// Checks that a handle made by simulation `owner` (a material) is used with this one.
-    pub fn owns(&self, owner: u64, what: &str) -> RhaiResult<()> {
+    /// Checks that a handle made by simulation `owner` (a material, a wall) is used with this one;
+    /// `remedy` says how to make one for this simulation.
+    pub fn owns(&self, owner: u64, what: &str, remedy: &str) -> RhaiResult<()> {
         if owner == self.serial() {
             return Ok(());
         }
         err(format!(
-            "{what} belongs to simulation #{owner}, not to this one (#{}): a material is used by the simulation \
-             that made it; make one for this simulation with its own material(...)",
+            "{what} belongs to simulation #{owner}, not to this one (#{}): it is used by the simulation that made \
+             it; {remedy}",
             self.serial()
         ))
     }

@@ -110,8 +110,11 @@ impl ScriptContext {
     /// working directory, else from the script's folder, the output folder or one of its
     /// simulation folders (where `sim.save` wrote it).
     pub(crate) fn input_path(&self, file: &str) -> std::result::Result<PathBuf, String> {
-        // A checkpoint whose newest file was lost still has the one before (`io::durable`).
-        let exists = |p: &Path| p.is_file() || granite_core::io::durable::previous_path(p).is_file();
+        // A checkpoint whose newest file was lost still has the one before (`io::durable`). A
+        // FIFO or a device is taken too, to be refused by name where it is read.
+        let exists = |p: &Path| {
+            (p.exists() && !p.is_dir()) || granite_core::io::durable::previous_path(p).is_file()
+        };
         let given = Path::new(file);
         if exists(given) || given.is_absolute() {
             return Ok(given.to_path_buf());
@@ -263,7 +266,11 @@ impl ScriptContext {
     pub fn load_plugin(&self, path: &Path, replace: bool) -> Result<(String, String)> {
         let mut reg = self.registry.write().unwrap_or_else(|p| p.into_inner());
         let (name, version) = granite_loader::load_plugin(path, &mut reg, replace)?;
-        self.plugins.lock().unwrap().push((path.display().to_string(), name.clone(), version.clone()));
+        let entry = (path.display().to_string(), name.clone(), version.clone());
+        let mut plugins = self.plugins.lock().unwrap();
+        if !plugins.contains(&entry) {
+            plugins.push(entry);
+        }
         Ok((name, version))
     }
 

@@ -35,7 +35,11 @@ impl MaterialHandle {
     }
     /// Its index in `s`'s materials; an error when it is another simulation's material.
     fn index_in(&self, s: &SimHandle) -> RhaiResult<usize> {
-        s.owns(self.sim, &format!("material \"{}\"", self.name))?;
+        s.owns(
+            self.sim,
+            &format!("material \"{}\"", self.name),
+            "make one for this simulation with its own material(...)",
+        )?;
         Ok(self.index)
     }
 

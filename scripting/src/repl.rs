@@ -175,7 +175,10 @@ fn readable(signature: &str) -> String {
     for (from, to) in TERMS {
         s = s.replace(from, to);
     }
-    s = s.replace("mpm_api::MaterialHandle", "Material").replace("dem_api::DemMaterialHandle", "DemMaterial");
+    s = s
+        .replace("mpm_api::MaterialHandle", "Material")
+        .replace("dem_api::DemMaterialHandle", "DemMaterial")
+        .replace("dem_api::DemWallHandle", "DemWall");
     s = s.replace("i64", "int").replace("f64", "float");
     let s = s.strip_suffix(" -> ()").unwrap_or(&s).to_string();
     // `name(&mut Receiver, rest) -> out` as `Receiver.name(rest) -> out`; getters as properties.

@@ -108,6 +108,25 @@ pub(crate) struct ListsBuilt {
     pub(crate) wall_turns: Vec<f64>,
 }
 
+impl ListsBuilt {
+    /// The sphere farthest from where the lists saw it (its place then carried by the cell's
+    /// deformation since, `h h0⁻¹`, in a periodic cell) and that distance; None without spheres.
+    pub(crate) fn farthest_moved(&self, x: &[Vec3], cell: Option<&nalgebra::Matrix3<f64>>) -> Option<(usize, f64)> {
+        let f = match (cell, &self.h) {
+            (Some(h), Some(h0)) => h * h0.try_inverse().unwrap_or_else(nalgebra::Matrix3::identity),
+            _ => nalgebra::Matrix3::identity(),
+        };
+        x.iter()
+            .zip(&self.x)
+            .map(|(x, x0)| {
+                let reference = f * nalgebra::Vector3::from(*x0);
+                (0..3).map(|a| (x[a] - reference[a]).powi(2)).sum::<f64>().sqrt()
+            })
+            .enumerate()
+            .max_by(|a, b| a.1.total_cmp(&b.1))
+    }
+}
+
 impl Default for ListsBuilt {
     fn default() -> Self {
         ListsBuilt {

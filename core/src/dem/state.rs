@@ -347,9 +347,18 @@ impl DemSim {
         if let Some(bodies) = st.bodies {
             sim.restore_bodies(bodies, kinds).map_err(|e| GraniteError::Other(format!("{source}: {e}")))?;
         }
-        sim.world.next_id = sim.world.spheres.id.iter().chain(&sim.world.kinds.id).max().map_or(0, |m| m + 1);
+        sim.world.next_id =
+            sim.world.spheres.id.iter().chain(&sim.world.kinds.id).max().map_or(0, |m| m.saturating_add(1));
         widen_pair_layout(&mut sim);
         check_consistent(&sim).map_err(|e| GraniteError::Other(format!("{source}: not a usable DEM state: {e}")))?;
+        // A state as a step leaves it has every sphere within half the skin of where the lists
+        // saw it, or asks for a rebuild; one edited since (a sphere moved in the file) has its
+        // lists built again from the positions it holds, instead of stopping at the next step as
+        // if that sphere had flown there.
+        let moved = sim.built.farthest_moved(&sim.world.spheres.x, sim.world.cell.as_ref().map(|c| &c.h));
+        if moved.is_some_and(|(_, d)| d > 0.5 * sim.skin + 0.5 * sim.built.radius_min) {
+            sim.world.needs_rebuild = true;
+        }
         // The parallel stages' cuts of the pair lists are found again on the first step, not saved.
         // Reading grows arrays by doubling; copies hold just their contents (a loaded RVE is the
         // template of every material point's copy, so its reported memory should be theirs).
@@ -420,7 +429,7 @@ fn check_consistent(sim: &DemSim) -> std::result::Result<(), String> {
     ];
     same_length("spheres", "x", n, &lengths)?;
     crate::loaded::unique_ids("spheres", &s.id)?;
-    crate::loaded::step_and_time(sim.world.step, sim.world.time)?;
+    crate::loaded::step_and_time(sim.world.step, sim.world.time, sim.world.dt)?;
     let finite = |v: &Vec3| v.iter().all(|c| c.is_finite());
     let positive = |x: f64| x.is_finite() && x > 0.0;
     for (m, material) in sim.world.materials.iter().enumerate() {
@@ -488,6 +497,12 @@ fn check_consistent(sim: &DemSim) -> std::result::Result<(), String> {
     crate::loaded::unique_ids("spheres and bodies", &ids)?;
     let k = &sim.world.kinds;
     let walls = sim.world.walls.len();
+    for (i, wall) in sim.world.walls.iter().enumerate() {
+        wall.check_loaded().map_err(|e| format!("wall {i} (\"{}\"): {e}", wall.name))?;
+        if wall.material as usize >= sim.world.materials.len() {
+            return Err(format!("wall {i} (\"{}\"): material {} of {}", wall.name, wall.material, sim.world.materials.len()));
+        }
+    }
     let (of_spheres, of_bodies) =
         (format!("the {n} spheres or {walls} walls"), format!("the {nb} bodies, {n} spheres or {walls} walls"));
     for (name, list, firsts, others, beyond) in [

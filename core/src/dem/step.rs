@@ -16,7 +16,7 @@ use crate::dem::motion::{
 use crate::dem::particles::{ExternalLoads, Spheres};
 use crate::dem::pieces::PieceBounds;
 use crate::dem::rows::SharedRows;
-use crate::dem::sim::{DemSim, DemWorld};
+use crate::dem::sim::{DemSim, DemWorld, ListsBuilt};
 use crate::dem::walls::WallMotion;
 use crate::error::{GraniteError, Result};
 use crate::math::Vec3;
@@ -136,14 +136,14 @@ impl DemSim {
         // contacts can then be missed (it may pass through a wall or another sphere), which no
         // stable run does.
         if moved > 0.5 * skin + built.radius_min {
-            return Err(too_fast(world, built.radius_min));
+            return Err(too_fast(world, built, skin));
         }
         if !moved.is_finite() {
             let Some(bad) = (0..world.spheres.len())
                 .find(|&i| !world.spheres.x[i].iter().chain(&world.spheres.v[i]).all(|c| c.is_finite()))
             else {
                 // Every value is finite but a distance overflowed: a sphere is absurdly fast.
-                return Err(too_fast(world, built.radius_min));
+                return Err(too_fast(world, built, skin));
             };
             return Err(GraniteError::Unstable {
                 step: world.step,
@@ -196,25 +196,26 @@ impl DemSim {
     }
 }
 
-/// The error of a step in which a sphere moved further than the smallest radius, naming the
-/// fastest sphere.
-fn too_fast(world: &DemWorld, radius_min: f64) -> GraniteError {
+/// The error of a step after which a sphere is further from where the lists saw it than half
+/// the skin and the smallest radius: it names that sphere, how far it went and how fast it goes.
+fn too_fast(world: &DemWorld, built: &ListsBuilt, skin: f64) -> GraniteError {
     let s = &world.spheres;
-    let speed = |i: usize| s.v[i].iter().map(|c| c * c).sum::<f64>().sqrt();
-    let fastest = (0..s.len()).max_by(|&i, &j| speed(i).total_cmp(&speed(j))).unwrap_or(0);
-    let v = if s.is_empty() { 0.0 } else { speed(fastest) };
+    let (far, moved) = built.farthest_moved(&s.x, world.cell.as_ref().map(|c| &c.h)).unwrap_or((0, 0.0));
+    let v = s.v.get(far).map_or(0.0, |v| v.iter().map(|c| c * c).sum::<f64>().sqrt());
     let critical = world.critical_dt().map(|c| format!(" (critical_dt() = {c:.4e} s)")).unwrap_or_default();
     GraniteError::Unstable {
         step: world.step,
         time: world.time,
         reason: format!(
-            "sphere {} moves at {v:.4e} m/s, {:.4e} m in one step of {:.4e} s: more than the smallest radius \
-             {:.4e} m, so contacts would be missed. The forces are too large for this time step: lower dt{critical}, \
-             or look for spheres placed overlapping or given such a velocity",
-            s.id.get(fastest).copied().unwrap_or(0),
+            "sphere {} moved {moved:.4e} m since the contact lists were built (it moves at {v:.4e} m/s, {:.4e} m \
+             a step of {:.4e} s): more than half the skin ({:.4e} m) and the smallest radius ({:.4e} m) allow \
+             between two builds, so contacts would be missed. The forces are too large for this time step: lower \
+             dt{critical}, or look for spheres placed overlapping or given such a velocity",
+            s.id.get(far).copied().unwrap_or(0),
             v * world.dt,
             world.dt,
-            radius_min
+            0.5 * skin,
+            built.radius_min
         ),
     }
 }

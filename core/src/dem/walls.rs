@@ -1,6 +1,6 @@
 //! Walls: kinematic boundaries that move at a prescribed velocity and measure the force they take.
 
-use crate::math::{dot3, Vec3};
+use crate::math::{cross3, dot3, norm3, Vec3};
 
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub enum WallShape {
@@ -79,6 +79,38 @@ impl WallMotion {
 }
 
 impl Wall {
+    /// What is wrong with a wall read from a saved state, if anything: its geometry must be one a
+    /// contact can use (unit normals and axes, sizes finite and > 0, a triangle with an area) and
+    /// its motion finite.
+    pub(crate) fn check_loaded(&self) -> std::result::Result<(), String> {
+        let finite = |v: &Vec3| v.iter().all(|c| c.is_finite());
+        let unit = |v: &Vec3| (norm3(*v) - 1.0).abs() <= 1e-9;
+        let size = |x: f64| x.is_finite() && x > 0.0;
+        if !(finite(&self.position) && finite(&self.velocity) && finite(&self.spin) && finite(&self.pivot)) {
+            return Err("a non-finite position, velocity, spin or pivot".into());
+        }
+        let shape = match &self.shape {
+            WallShape::Plane { normal } if !unit(normal) => format!("plane normal {normal:?} (a unit vector)"),
+            WallShape::Rect { u, v, half } if !(unit(u) && unit(v) && dot3(*u, *v).abs() <= 1e-9) => {
+                format!("rectangle sides {u:?}, {v:?} (unit vectors at right angles; half sizes {half:?})")
+            }
+            WallShape::Rect { half, .. } if !(size(half[0]) && size(half[1])) => {
+                format!("rectangle half sizes {half:?} (finite and > 0)")
+            }
+            WallShape::Disk { normal, radius } if !(unit(normal) && size(*radius)) => {
+                format!("disk normal {normal:?}, radius {radius} (a unit normal, a radius > 0)")
+            }
+            WallShape::Cylinder { axis, radius, length } if !(unit(axis) && size(*radius) && size(*length)) => {
+                format!("cylinder axis {axis:?}, radius {radius}, length {length} (a unit axis, sizes > 0)")
+            }
+            WallShape::Triangle { b, c, .. } if !(finite(b) && finite(c) && size(norm3(cross3(*b, *c)))) => {
+                format!("triangle edges {b:?}, {c:?} (finite, spanning an area)")
+            }
+            _ => return Ok(()),
+        };
+        Err(shape)
+    }
+
     /// Whether `other` is the same surface (a plane given through another of its points included):
     /// spheres would touch both, with twice the stiffness.
     pub fn same_surface(&self, other: &Wall) -> bool {

@@ -114,7 +114,7 @@ pub fn read_newest(
     check: impl Fn(&Path, &str) -> Result<()>,
 ) -> Result<(PathBuf, String, Option<String>)> {
     let read = |p: &Path| -> Result<String> {
-        let text = std::fs::read_to_string(p).map_err(|e| GraniteError::io(p, e))?;
+        let text = super::read_input_text(p)?;
         check(p, &text)?;
         Ok(text)
     };

@@ -113,8 +113,7 @@ pub struct GmshMesh {
 impl GmshMesh {
     /// Reads a `.msh` file of version 4.1 or 2.2, ASCII or binary.
     pub fn read(path: &Path) -> Result<GmshMesh> {
-        let data = std::fs::read(path)
-            .map_err(|e| GraniteError::Setup(format!("cannot read the mesh file {}: {e}", path.display())))?;
+        let data = super::read_input(path).map_err(|e| GraniteError::Setup(format!("cannot read the mesh file: {e}")))?;
         GmshMesh::parse(&data).map_err(|why| GraniteError::Setup(format!("mesh file {}: {why}", path.display())))
     }
 
@@ -247,6 +246,39 @@ impl<'a> Reader<'a> {
         Ok(())
     }
 
+    /// Moves past the end of the current line (where a binary block follows a text count).
+    fn skip_line_end(&mut self) {
+        while self.pos < self.data.len() && self.data[self.pos] != b'\n' {
+            self.pos += 1;
+        }
+        self.pos = (self.pos + 1).min(self.data.len());
+    }
+
+    /// Where the reader is, for messages: a line of a text file, a byte of a binary one.
+    fn place(&self, at: usize) -> String {
+        if self.binary {
+            format!("at byte {at}")
+        } else {
+            let line = 1 + self.data[..at.min(self.data.len())].iter().filter(|&&b| b == b'\n').count();
+            format!("on line {line}")
+        }
+    }
+
+    /// A physical or entity dimension: 0 to 3.
+    fn dimension(value: i64) -> Parsed<u8> {
+        u8::try_from(value)
+            .ok()
+            .filter(|&d| d <= 3)
+            .ok_or_else(|| format!("a dimension of {value} (a physical group or entity is of dimension 0, 1, 2 or 3)"))
+    }
+
+    /// In a text file, moves to the next token (so that its line is the one a message names).
+    fn skip_space_if_text(&mut self) {
+        if !self.binary {
+            self.skip_space();
+        }
+    }
+
     fn skip_space(&mut self) {
         while self.pos < self.data.len() && self.data[self.pos].is_ascii_whitespace() {
             self.pos += 1;
@@ -360,10 +392,7 @@ impl<'a> Reader<'a> {
         self.binary = file_type == 1;
         if self.binary {
             // One `int` 1 tells the byte order.
-            while self.pos < self.data.len() && self.data[self.pos] != b'\n' {
-                self.pos += 1;
-            }
-            self.pos += 1;
+            self.skip_line_end();
             let one = self.bytes(4)?;
             self.swap = match one {
                 [1, 0, 0, 0] => false,
@@ -378,12 +407,12 @@ impl<'a> Reader<'a> {
         // Always text, in binary files too.
         let n = self.text_int()?;
         for _ in 0..n {
-            let dim = self.text_int()?;
-            let tag = self.text_int()?;
+            let dim = Self::dimension(self.text_int()?)?;
+            let tag = Self::tag(self.text_int()?)?;
             self.skip_space();
             let line = self.line();
             let name = line.trim().trim_matches('"').to_string();
-            self.add_group(dim as u8, tag as i32, Some(name));
+            self.add_group(dim, tag, Some(name));
         }
         Ok(())
     }
@@ -405,12 +434,12 @@ impl<'a> Reader<'a> {
         let counts = [self.size()?, self.size()?, self.size()?, self.size()?];
         for (dim, &n) in counts.iter().enumerate() {
             for _ in 0..n {
-                let tag = self.int()? as i32;
+                let tag = Self::tag(self.int()?)?;
                 for _ in 0..if dim == 0 { 3 } else { 6 } {
                     self.real()?;
                 }
                 let physical = self.count(4)?;
-                let tags = (0..physical).map(|_| self.int().map(|t| t as i32)).collect::<Parsed<Vec<i32>>>()?;
+                let tags = (0..physical).map(|_| self.int().and_then(Self::tag)).collect::<Parsed<Vec<i32>>>()?;
                 if dim > 0 {
                     let bounding = self.count(4)?;
                     for _ in 0..bounding {
@@ -423,7 +452,22 @@ impl<'a> Reader<'a> {
         Ok(())
     }
 
-    fn push_node(&mut self, tag: u64, x: Vec3) -> Parsed<()> {
+    /// A physical or entity tag, which gmsh writes as an `int`.
+    fn tag(value: i64) -> Parsed<i32> {
+        i32::try_from(value).map_err(|_| format!("a tag of {value} (gmsh's tags fit a 32-bit integer)"))
+    }
+
+    /// Stores node `tag`, read from `at`; a corner at NaN or infinity is refused there.
+    fn push_node(&mut self, tag: u64, x: Vec3, at: usize) -> Parsed<()> {
+        if let Some(bad) = x.iter().find(|v| !v.is_finite()) {
+            return Err(format!(
+                "node {tag} {} is at ({}, {}, {}): a node's coordinates must be finite numbers, not {bad}",
+                self.place(at),
+                x[0],
+                x[1],
+                x[2]
+            ));
+        }
         let index = self.mesh.nodes.len() as u32;
         if self.node_index.insert(tag, index).is_some() {
             return Err(format!("node {tag} is given twice"));
@@ -446,11 +490,13 @@ impl<'a> Reader<'a> {
             let tags = (0..n).map(|_| self.size()).collect::<Parsed<Vec<u64>>>()?;
             let extra = if parametric { dim.max(0) as usize } else { 0 };
             for tag in tags {
+                self.skip_space_if_text();
+                let at = self.pos;
                 let x = [self.real()?, self.real()?, self.real()?];
                 for _ in 0..extra {
                     self.real()?;
                 }
-                self.push_node(tag, x)?;
+                self.push_node(tag, x, at)?;
             }
         }
         Ok(())
@@ -459,13 +505,19 @@ impl<'a> Reader<'a> {
     fn nodes_22(&mut self) -> Parsed<()> {
         // The count is text in binary files too.
         let n = self.text_int()?;
+        if n < 0 {
+            return Err(format!("a count of {n} nodes"));
+        }
         if self.binary {
-            self.pos += 1;
+            self.skip_line_end();
         }
         for _ in 0..n {
+            self.skip_space_if_text();
+            let at = self.pos;
             let tag = self.int()?;
+            let tag = u64::try_from(tag).map_err(|_| format!("node tag {tag} {} (tags are positive)", self.place(at)))?;
             let x = [self.real()?, self.real()?, self.real()?];
-            self.push_node(tag as u64, x)?;
+            self.push_node(tag, x, at)?;
         }
         Ok(())
     }
@@ -485,12 +537,12 @@ impl<'a> Reader<'a> {
         self.size()?;
         self.mesh.elements.reserve(total);
         for _ in 0..blocks {
-            let dim = self.int()? as u8;
-            let entity = self.int()? as i32;
+            let dim = Self::dimension(self.int()?)?;
+            let entity = Self::tag(self.int()?)?;
             let (shape, count) = Self::shape_of(self.int()?)?;
             let n = self.count(8)?;
             let physical = self.entity_groups.get(&(dim, entity)).cloned().unwrap_or_default();
-            let groups: Vec<u32> = physical.iter().map(|&t| self.add_group(dim, t.abs(), None)).collect();
+            let groups: Vec<u32> = physical.iter().map(|&t| self.add_group(dim, t.saturating_abs(), None)).collect();
             for _ in 0..n {
                 self.size()?;
                 let nodes = (0..count).map(|_| self.size().and_then(|t| self.node(t))).collect::<Parsed<Vec<u32>>>()?;
@@ -510,11 +562,14 @@ impl<'a> Reader<'a> {
                 let nodes = (0..count)
                     .map(|_| self.text_int().and_then(|t| self.node(t as u64)))
                     .collect::<Parsed<Vec<u32>>>()?;
-                self.push_element_22(shape, nodes, &tags);
+                self.push_element_22(shape, nodes, &tags)?;
             }
             return Ok(());
         }
-        self.pos += 1;
+        if total < 0 {
+            return Err(format!("a count of {total} elements"));
+        }
+        self.skip_line_end();
         let mut read = 0;
         while read < total {
             let (shape, count) = Self::shape_of(self.int()?)?;
@@ -528,7 +583,7 @@ impl<'a> Reader<'a> {
                 let tags = (0..tag_count).map(|_| self.int()).collect::<Parsed<Vec<i64>>>()?;
                 let nodes =
                     (0..count).map(|_| self.int().and_then(|t| self.node(t as u64))).collect::<Parsed<Vec<u32>>>()?;
-                self.push_element_22(shape, nodes, &tags);
+                self.push_element_22(shape, nodes, &tags)?;
             }
             read += following;
         }
@@ -536,12 +591,13 @@ impl<'a> Reader<'a> {
     }
 
     /// Version 2.2: the first tag is the physical group (0: none).
-    fn push_element_22(&mut self, shape: ElementShape, nodes: Vec<u32>, tags: &[i64]) {
+    fn push_element_22(&mut self, shape: ElementShape, nodes: Vec<u32>, tags: &[i64]) -> Parsed<()> {
         let groups = match tags.first() {
-            Some(&t) if t != 0 => vec![self.add_group(shape.dim(), t as i32, None)],
+            Some(&t) if t != 0 => vec![self.add_group(shape.dim(), Self::tag(t)?, None)],
             _ => Vec::new(),
         };
         self.mesh.elements.push(Element { shape, nodes, groups });
+        Ok(())
     }
 }
 
@@ -642,6 +698,26 @@ mod tests {
     }
 
     #[test]
+    fn nodes_at_nan_or_infinity_are_refused_naming_the_node_and_its_line() {
+        let text = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/meshes/embankment_v22_ascii.msh"))
+            .unwrap();
+        let lines: Vec<&str> = text.lines().collect();
+        let nodes = lines.iter().position(|l| *l == "$Nodes").unwrap();
+        // `$Nodes` is on line nodes + 1 (counted from 1), its count on the next: the third node
+        // is on line nodes + 5.
+        let third = nodes + 5;
+        let tag = lines[third - 1].split_whitespace().next().unwrap().to_string();
+        for bad in ["nan", "inf", "-inf"] {
+            let mut damaged = lines.clone();
+            let fields: Vec<&str> = lines[third - 1].split_whitespace().collect();
+            let line = format!("{} {} {bad} {}", fields[0], fields[1], fields[3]);
+            damaged[third - 1] = &line;
+            let e = GmshMesh::parse(damaged.join("\n").as_bytes()).unwrap_err();
+            assert!(e.contains(&format!("node {tag} on line {third}")) && e.contains("finite"), "{bad}: {e}");
+        }
+    }
+
+    #[test]
     fn damaged_files_and_unknown_groups_are_refused_with_a_reason() {
         let text =
             std::fs::read(Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/meshes/embankment_v41_ascii.msh"))
@@ -651,6 +727,14 @@ mod tests {
         let v3 = GmshMesh::parse(b"$MeshFormat\n3.0 0 8\n$EndMeshFormat\n").unwrap_err();
         assert!(v3.contains("version 3.0 is not read"), "{v3}");
         assert!(GmshMesh::parse(b"solid x\nendsolid\n").unwrap_err().contains("$Section"));
+        // A binary file cut right after an empty count: an error, not a read past its end.
+        let binary_head = [b"$MeshFormat\n2.2 1 8\n".as_slice(), &[1, 0, 0, 0], b"\n$EndMeshFormat\n"].concat();
+        for tail in [b"$Nodes\n0".as_slice(), b"$Nodes\n0\n$EndNodes\n$Elements\n0"] {
+            let e = GmshMesh::parse(&[binary_head.as_slice(), tail].concat()).unwrap_err();
+            assert!(e.contains("has no $End") || e.contains("ends"), "{e}");
+        }
+        let dim = GmshMesh::parse(b"$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$PhysicalNames\n1\n-7 1 \"x\"\n").unwrap_err();
+        assert!(dim.contains("dimension of -7"), "{dim}");
         let m = mesh("embankment_v22_ascii.msh");
         let e = m.group("dam").unwrap_err().to_string();
         assert!(e.contains("\"dam\"") && e.contains("\"slope\" (1D)"), "{e}");

@@ -16,9 +16,75 @@ pub use vtk::VtkWriter;
 use crate::error::{GraniteError, Result};
 use std::path::Path;
 
+/// The bytes of an input file (a checkpoint, a mesh). Only a regular file is read: a FIFO would
+/// block the run before any stop request could be seen, a device such as `/dev/urandom` would be
+/// read until memory runs out.
+pub fn read_input(path: &Path) -> Result<Vec<u8>> {
+    let meta = std::fs::metadata(path).map_err(|e| GraniteError::io(path, e))?;
+    if !meta.is_file() {
+        return Err(GraniteError::Setup(format!(
+            "{} is {}, not a regular file: granite reads checkpoints and meshes from plain files",
+            path.display(),
+            file_kind(&meta.file_type())
+        )));
+    }
+    std::fs::read(path).map_err(|e| GraniteError::io(path, e))
+}
+
+/// [`read_input`] of a text file.
+pub fn read_input_text(path: &Path) -> Result<String> {
+    String::from_utf8(read_input(path)?)
+        .map_err(|_| GraniteError::Setup(format!("{} is not a text file (it is not valid UTF-8)", path.display())))
+}
+
+/// What a file that is not a regular one is, in words.
+fn file_kind(kind: &std::fs::FileType) -> &'static str {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::FileTypeExt;
+        if kind.is_fifo() {
+            return "a FIFO (named pipe)";
+        }
+        if kind.is_char_device() || kind.is_block_device() {
+            return "a device";
+        }
+        if kind.is_socket() {
+            return "a socket";
+        }
+    }
+    if kind.is_dir() {
+        "a folder"
+    } else {
+        "not a regular file"
+    }
+}
+
 /// Writes `summary.json` (a flat object of named results, in insertion order), replacing the
 /// file whole or not at all.
 pub fn write_summary(path: &Path, values: &indexmap::IndexMap<String, serde_json::Value>) -> Result<()> {
     let text = serde_json::to_string_pretty(values).map_err(|e| GraniteError::Other(e.to_string()))?;
     durable::replace(path, (text + "\n").as_bytes(), durable::Flush::ToDisk)
+}
+
+#[cfg(all(test, unix))]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn inputs_that_are_not_regular_files_are_refused_without_reading_them() {
+        let dir = std::env::temp_dir().join(format!("granite-read-input-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        let fifo = dir.join("ck.json");
+        assert!(std::process::Command::new("mkfifo").arg(&fifo).status().unwrap().success());
+        // Opening a FIFO with no writer would block this test for good: it must not be opened.
+        for (path, kind) in [(fifo.as_path(), "a FIFO"), (Path::new("/dev/urandom"), "a device"), (dir.as_path(), "a folder")] {
+            let e = read_input(path).unwrap_err().to_string();
+            assert!(e.contains(kind) && e.contains("not a regular file") && e.contains(&path.display().to_string()), "{e}");
+        }
+        let plain = dir.join("plain.json");
+        std::fs::write(&plain, "{}").unwrap();
+        assert_eq!(read_input_text(&plain).unwrap(), "{}");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
 }

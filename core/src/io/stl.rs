@@ -8,8 +8,7 @@ use std::path::Path;
 /// Reads the triangles of an STL file, ASCII (`solid ... facet ... vertex x y z ...`) or binary
 /// (an 80-byte header, a count, 50 bytes a triangle).
 pub fn read_stl(path: &Path) -> Result<Vec<[Vec3; 3]>> {
-    let data = std::fs::read(path)
-        .map_err(|e| GraniteError::Setup(format!("cannot read the STL file {}: {e}", path.display())))?;
+    let data = super::read_input(path).map_err(|e| GraniteError::Setup(format!("cannot read the STL file: {e}")))?;
     parse_stl(&data).map_err(|why| GraniteError::Setup(format!("STL file {}: {why}", path.display())))
 }
 

@@ -215,7 +215,8 @@ fn check_consistent(sim: &MpmSim) -> std::result::Result<(), String> {
     ];
     crate::loaded::same_length("points", "x", n, &lengths)?;
     crate::loaded::unique_ids("points", &p.id)?;
-    crate::loaded::step_and_time(sim.step, sim.time)?;
+    crate::loaded::step_and_time(sim.step, sim.time, sim.dt)?;
+    crate::loaded::next_id("points", sim.next_id(), &p.id)?;
     let positive = |x: f64| x.is_finite() && x > 0.0;
     for i in 0..n {
         let id = p.id[i];

@@ -63,8 +63,11 @@ pub fn load_plugin(path: &Path, registry: &mut Registry, replace: bool) -> Resul
     if table.is_null() {
         return Err(GraniteError::Other(format!("plugin {library}: `granite_law_table` returned null")));
     }
+    // The library as the file it is, whatever path named it: loading it again (a script run twice
+    // in a REPL, two scripts that load it) finds its own law and does nothing.
+    let file = std::fs::canonicalize(path).map_or_else(|_| library.clone(), |p| p.display().to_string());
     // SAFETY: the library exported the table as a static of the plugin ABI.
-    unsafe { register_table(table, library, registry, replace) }
+    unsafe { register(table, &library, file, registry, replace) }
 }
 
 /// Registers the law of a plugin table (what `load_plugin` found in a library).
@@ -75,6 +78,22 @@ pub fn load_plugin(path: &Path, registry: &mut Registry, replace: bool) -> Resul
 pub unsafe fn register_table(
     table: *const LawTable,
     library: String,
+    registry: &mut Registry,
+    replace: bool,
+) -> Result<(String, String)> {
+    // SAFETY: as the caller promised.
+    unsafe { register(table, &library, library.clone(), registry, replace) }
+}
+
+/// [`register_table`] of a table from the library file `file` (its canonical path, which the law
+/// reports as its description), named `library` in messages.
+///
+/// # Safety
+/// As [`register_table`].
+unsafe fn register(
+    table: *const LawTable,
+    library: &str,
+    file: String,
     registry: &mut Registry,
     replace: bool,
 ) -> Result<(String, String)> {
@@ -134,6 +153,9 @@ pub unsafe fn register_table(
         .collect();
     let state_names = list(table.state_names, table.state_count, "state variables")?;
     if let Ok(existing) = registry.law_factory(&name) {
+        if existing.description() == file {
+            return Ok((name, version));
+        }
         if !replace {
             return Err(GraniteError::Other(format!(
                 "plugin {library}: a law named `{}` is already registered ({}); a plugin does not replace a law \
@@ -149,7 +171,7 @@ pub unsafe fn register_table(
         table: functions,
         name: name.clone(),
         version: version.clone(),
-        library,
+        library: file,
         specs,
         state_names,
     }));
