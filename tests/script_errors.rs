@@ -396,6 +396,11 @@ fn adaptive_rve_tolerances_are_checked_by_name() {
     assert!(e.contains("adaptive_corsen") && e.contains("adaptive_coarsen") && e.contains("line 4"), "{e}");
     let e = run_err("rve_adaptive_refine", &script("#{ coarsen: 0.01, refine: 0.005 }"), &[]);
     assert!(e.contains("adaptive_refine") && e.contains("must exceed adaptive_coarsen") && e.contains("line 4"), "{e}");
+    // A switch is true or false: 2.5 or 5 is neither, not "on".
+    for (value, name) in [("2.5", "adaptive"), ("true, share: 5", "share")] {
+        let e = run_err("rve_switch", &script(value), &[]);
+        assert!(e.contains(&format!("`{name}`")) && e.contains("must be true or false") && e.contains("line 4"), "{e}");
+    }
 }
 
 #[test]

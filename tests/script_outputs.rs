@@ -73,3 +73,27 @@ sim.dt(1.0);
     let e = run("mpm_dt", &out, mpm).unwrap_err().to_string();
     assert!(e.contains("line 5") && e.contains("stability limit"), "{e}");
 }
+
+/// `unbalanced_force` (mean resultant on the free spheres over the mean contact force) has no
+/// value before a contact touches: that row's cell is empty, not NaN. A sphere resting on a floor
+/// under its weight, with its spring's overlap at equilibrium, is balanced: near 0 once damped.
+#[test]
+fn unbalanced_force_is_empty_until_a_contact_carries_a_force() {
+    let out = common::out_dir("outputs_unbalanced");
+    let (kn, mass) = (1e4, 1000.0 * 4.0 / 3.0 * std::f64::consts::PI * 0.01f64.powi(3));
+    let rest = 0.01 - mass * 9.81 / kn;
+    let source = format!(
+        "let sim = dem();\nlet m = sim.material(#{{ density: 1000.0 }});\n\
+         sim.contact_law(\"linear\", #{{ kn: {kn} }});\nsim.wall_plane(m, [0.0, 0.0, 0.0], [0.0, 0.0, 1.0]);\n\
+         sim.sphere(m, [0.0, 0.0, {rest}], 0.01);\nsim.gravity([0.0, 0.0, -9.81]);\nsim.damping(0.2);\n\
+         sim.dt(0.1 * sim.critical_dt());\nsim.series_every(100);\nsim.run_steps(1000);\n"
+    );
+    run("unbalanced", &out, &source).unwrap();
+    let text = std::fs::read_to_string(out.join("series.csv")).unwrap();
+    let mut lines = text.lines();
+    let column = lines.next().unwrap().split(',').position(|c| c == "unbalanced_force").unwrap();
+    let cells: Vec<String> = lines.map(|l| l.split(',').nth(column).unwrap().to_string()).collect();
+    assert_eq!(cells[0], "", "step 0: no contact yet");
+    let last: f64 = cells.last().unwrap().parse().unwrap();
+    assert!(last.abs() < 1e-3, "at rest on the floor: {text}");
+}

@@ -155,6 +155,16 @@ impl Params {
         }
     }
 
+    /// A switch: `true` or `false` in a script (1 or 0 as a number), or an error naming the
+    /// parameter; 2.5 is neither.
+    pub fn flag(&self, name: &str) -> Result<bool> {
+        match self.get(name) {
+            0.0 => Ok(false),
+            1.0 => Ok(true),
+            v => Err(GraniteError::param_in(self.qualified(name), v, "must be true or false (or 1 or 0)")),
+        }
+    }
+
     /// `value >= 0`, or an error naming the parameter.
     pub fn non_negative(&self, name: &str) -> Result<f64> {
         let v = self.get(name);

@@ -68,8 +68,10 @@ impl SeriesWriter {
 
     pub fn write(&mut self, values: &[f64]) -> Result<()> {
         debug_assert_eq!(values.len(), self.columns.len());
-        // `{:e}`-free formatting keeps full f64 precision and stays readable by any CSV reader.
-        let row: Vec<String> = values.iter().map(|v| format!("{v}")).collect();
+        // `{:e}`-free formatting keeps full f64 precision and stays readable by any CSV reader. A
+        // value not defined at this step (NaN: an unbalanced force without contacts) is an empty
+        // cell, which CSV readers take as missing.
+        let row: Vec<String> = values.iter().map(|v| if v.is_nan() { String::new() } else { format!("{v}") }).collect();
         self.append(row.iter().map(|s| s.as_str()))
     }
 

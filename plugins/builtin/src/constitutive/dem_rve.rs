@@ -168,8 +168,8 @@ impl ConstitutiveLawFactory for DemRveFactory {
 impl DemRve {
     /// The law for resolved parameters and the prepared sample in `objects["rve"]`.
     pub fn new(params: Params, objects: &ObjectMap) -> Result<DemRve> {
-        let share = params.get("share") != 0.0;
-        let tolerances = if params.get("adaptive") != 0.0 {
+        let share = params.flag("share")?;
+        let tolerances = if params.flag("adaptive")? {
             let coarsen = params.non_negative("adaptive_coarsen")?;
             let refine = params.positive("adaptive_refine")?;
             if refine <= coarsen {
