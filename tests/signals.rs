@@ -143,3 +143,43 @@ fn signals_stop_long_calls_and_script_code_naming_the_signal() {
         assert_eq!(json(&out.join("summary.json"))["status"], "interrupted");
     }
 }
+
+/// A signal that lands in script code the run calls (a per-step callback, a series column) or in
+/// plain script code between runs stops the run as at a step's end: the series ends on the state
+/// after the last whole step, the checkpoint asked for holds it (written on the way out although
+/// none was due yet), and stderr says where it stopped and how to resume. The script code is the
+/// bulk of each step here, so the signal lands in it.
+#[test]
+fn a_signal_in_a_callback_a_series_column_or_between_runs_still_writes_the_checkpoint() {
+    let busy = "let busy = 0; for i in 0..20000 { busy += i; }";
+    let cases = [
+        ("signal_in_callback", format!("sim.every(1, |s| {{ {busy} }});\nsim.run_steps(100000000);")),
+        (
+            "signal_in_column",
+            format!("sim.series_every(1);\nsim.series_column(\"busy\", |s| {{ {busy} 1.0 }});\nsim.run_steps(100000000);"),
+        ),
+        ("signal_between_runs", format!("loop {{ sim.run_steps(10); {busy} }}")),
+    ];
+    for (name, tail) in cases {
+        let source = ENDLESS.replace("sim.series_every(100);", "sim.series_every(10);").replace("sim.run_steps(100000000);\n", &tail);
+        let (child, out) = start(name, &source);
+        std::thread::sleep(Duration::from_millis(200));
+        signal(&child, libc::SIGTERM);
+        let (exit, stderr) = finish(child);
+        assert_eq!(exit, 143, "{name}: {stderr}");
+        assert_eq!(json(&out.join("summary.json"))["status"], "interrupted");
+        let step: u64 = stderr
+            .split("at step ")
+            .nth(1)
+            .and_then(|s| s.split_whitespace().next())
+            .and_then(|s| s.parse().ok())
+            .unwrap_or_else(|| panic!("{name}: no step in {stderr}"));
+        assert!(stderr.contains("checkpoint") && stderr.contains("mpm_load"), "{name}: {stderr}");
+        let (header, rows) = common::read_csv(&out.join("series.csv"));
+        assert_eq!(rows.last().unwrap()[common::column(&header, "step")], step as f64, "{name}");
+        if name == "signal_in_column" {
+            assert_eq!(rows.last().unwrap()[common::column(&header, "busy")], 1.0, "{name}: the column computed");
+        }
+        assert_eq!(json(&out.join("checkpoint.json"))["state"]["step"], step, "{name}");
+    }
+}

@@ -90,6 +90,11 @@ impl<S: Simulation> Runner<S> {
         self.claimed = true;
     }
 
+    /// Whether this simulation has written anything (it then has outputs to close on a signal).
+    pub fn has_written(&self) -> bool {
+        self.claimed
+    }
+
     /// Where a file of this simulation's output folder goes (its folder made if missing).
     pub fn output_path(&mut self, file: &str) -> PathBuf {
         self.claim_output();

@@ -19,6 +19,8 @@ pub struct State<S: Simulation> {
     /// Extra series columns computed by script functions.
     columns: Vec<(String, FnPtr)>,
     background: Option<Background>,
+    /// A signal's stop was written out (series row, VTK frame, checkpoint): done once.
+    stopped_on_signal: bool,
 }
 
 impl<S: Simulation> std::ops::Deref for State<S> {
@@ -57,9 +59,9 @@ impl<S: Simulation> State<S> {
     /// A signal asked the run to stop: the state as it is after the last whole step is written
     /// (series row, VTK frame, the script's checkpoint), and the script ends with where it stopped
     /// and how to resume.
-    fn stop_on_signal(&mut self, signal: i32) -> Box<rhai::EvalAltResult> {
-        let msg = self.run.stop_on_signal(&super::signal_name(signal));
-        super::convert::to_rhai(GraniteError::Other(msg))
+    fn stop_on_signal(&mut self, signal: i32) -> String {
+        self.stopped_on_signal = true;
+        self.run.stop_on_signal(&super::signal_name(signal))
     }
 
     /// A failed step (the last good state restored and written by the runner) as a script error.
@@ -172,10 +174,58 @@ impl<S: Simulation> Handle<S> {
                 dir.to_path_buf()
             }
         }));
-        let state =
-            State { run, ctx, callbacks: Vec::new(), driven: Vec::new(), columns: Vec::new(), background: None };
+        let state = State {
+            run,
+            ctx,
+            callbacks: Vec::new(),
+            driven: Vec::new(),
+            columns: Vec::new(),
+            background: None,
+            stopped_on_signal: false,
+        };
         let serial = state.ctx.next_simulation_serial();
-        Handle(Arc::new(Shared { serial, state: Mutex::new(state), waiting: AtomicUsize::new(0) }))
+        let ctx = state.ctx.clone();
+        let shared = Arc::new(Shared { serial, state: Mutex::new(state), waiting: AtomicUsize::new(0) });
+        let weak: std::sync::Weak<dyn super::StopsOnSignal> = Arc::downgrade(&shared) as _;
+        ctx.add_simulation(weak);
+        Handle(shared)
+    }
+
+    /// A signal asked the run to stop, whatever was executing (a step's end, a callback, a series
+    /// column, plain script code): the outputs of the state after the last whole step are
+    /// written once (series row, VTK frame, the script's checkpoint). The series row's script
+    /// columns are computed while the signal is set aside (a second signal still ends the
+    /// process at once); one that fails is left empty. Returns what was written and how to
+    /// resume, or None for a simulation that never wrote or was written out already.
+    fn finish_on_signal(&self, caller: Option<&Caller>, signal: i32) -> Option<String> {
+        let (columns, ctx) = {
+            let st = self.lock();
+            if st.stopped_on_signal || !st.run.has_written() {
+                return None;
+            }
+            (st.columns.iter().map(|(_, f)| f.clone()).collect::<Vec<FnPtr>>(), st.ctx.clone())
+        };
+        let detached = ctx.engine().map(|engine| Caller::Detached { engine, ctx: ctx.clone() });
+        let extra: Vec<f64> = {
+            let _allowed = ctx.run_script_while_stopping();
+            columns
+                .iter()
+                .map(|f| {
+                    let value = caller.or(detached.as_ref()).map(|c| c.call(f, (self.clone(),)));
+                    match value {
+                        Some(Ok(v)) => number(&v, "series column value").unwrap_or(f64::NAN),
+                        _ => f64::NAN,
+                    }
+                })
+                .collect()
+        };
+        let mut st = self.lock();
+        let row = st.write_series_row(&extra).err();
+        let mut msg = st.stop_on_signal(signal);
+        if let Some(e) = row {
+            msg.push_str(&format!(" (the last series row could not be written: {e})"));
+        }
+        Some(msg)
     }
 
     /// Which simulation of the session this is (1, 2, ...).
@@ -271,6 +321,20 @@ impl<S: Simulation> Handle<S> {
     }
 
     fn run_plan(&self, caller: &Caller, plan: Plan) -> RhaiResult<()> {
+        let ran = self.run_steps_of(caller, &plan);
+        // A signal may have stopped script code this run called (a callback, a series column, a
+        // boundary function): the stop is written out as at a step's end.
+        if let Err(e) = ran {
+            let signal = self.lock().ctx.stop_requested();
+            return Err(match signal.and_then(|s| self.finish_on_signal(Some(caller), s)) {
+                Some(msg) => super::convert::to_rhai(GraniteError::Other(msg)),
+                None => e,
+            });
+        }
+        Ok(())
+    }
+
+    fn run_steps_of(&self, caller: &Caller, plan: &Plan) -> RhaiResult<()> {
         self.write_series_with(caller)?;
         let progress = Progress::new(!plan.progress, plan.steps);
         let background = plan.stop.is_some();
@@ -293,8 +357,10 @@ impl<S: Simulation> Handle<S> {
             };
             if let Some(signal) = signal {
                 progress.finish();
-                self.write_series_with(caller)?;
-                return Err(self.lock().stop_on_signal(signal));
+                let msg = self.finish_on_signal(Some(caller), signal).unwrap_or_else(|| {
+                    format!("stopped by {}", super::signal_name(signal))
+                });
+                return Err(super::convert::to_rhai(GraniteError::Other(msg)));
             }
             if paused {
                 progress.finish();
@@ -457,6 +523,12 @@ impl<S: Simulation> Handle<S> {
 
     pub fn running(&self) -> bool {
         self.lock().background.as_ref().is_some_and(|b| !b.finished())
+    }
+}
+
+impl<S: Simulation> super::StopsOnSignal for Shared<S> {
+    fn finish_on_signal(self: Arc<Self>, signal: i32) -> Option<String> {
+        Handle(self).finish_on_signal(None, signal)
     }
 }
 

@@ -92,6 +92,7 @@ impl ScriptContext {
     pub fn interrupted(&self) -> Option<String> {
         match INTERRUPTIBLE_SINCE.get() {
             Some(presses) if self.pause_requests() != presses => Some(INTERRUPTED.to_string()),
+            _ if self.stopping.load(std::sync::atomic::Ordering::SeqCst) > 0 => None,
             _ => self.stop_requested().map(|s| format!("stopped by {}", signal_name(s))),
         }
     }
@@ -190,6 +191,28 @@ pub struct ScriptContext {
     warnings: Mutex<(Vec<String>, usize)>,
     /// Simulations made so far (their handles' serial numbers).
     simulations: std::sync::atomic::AtomicU64,
+    /// The simulations of this script (weakly: the script's variables own them), whose outputs a
+    /// signal that stops the script writes out.
+    alive: Mutex<Vec<std::sync::Weak<dyn StopsOnSignal>>>,
+    /// While above 0, a signal does not stop script code: the outputs of a stop are being
+    /// written, and they may call the script's series columns.
+    stopping: std::sync::atomic::AtomicUsize,
+}
+
+/// A simulation that writes out its state when a signal stops the script (see
+/// `driver::Handle::finish_on_signal`).
+pub(crate) trait StopsOnSignal: Send + Sync {
+    /// What was written and how to resume; None when nothing was (never written, done already).
+    fn finish_on_signal(self: Arc<Self>, signal: i32) -> Option<String>;
+}
+
+/// Script code may run while it lives, whatever signal came (see `ScriptContext::stopping`).
+pub(crate) struct StoppingAllowance<'a>(&'a std::sync::atomic::AtomicUsize);
+
+impl Drop for StoppingAllowance<'_> {
+    fn drop(&mut self) {
+        self.0.fetch_sub(1, std::sync::atomic::Ordering::SeqCst);
+    }
 }
 
 /// Warnings summary.json lists in full; past these it counts them.
@@ -212,7 +235,29 @@ impl ScriptContext {
             listing_done: std::sync::atomic::AtomicBool::new(false),
             warnings: Mutex::new((Vec::new(), 0)),
             simulations: std::sync::atomic::AtomicU64::new(0),
+            alive: Mutex::new(Vec::new()),
+            stopping: std::sync::atomic::AtomicUsize::new(0),
         }
+    }
+
+    /// Keeps a new simulation in the list a stopping signal writes out.
+    pub(crate) fn add_simulation(&self, sim: std::sync::Weak<dyn StopsOnSignal>) {
+        let mut alive = self.alive.lock().unwrap();
+        alive.retain(|s| s.strong_count() > 0);
+        alive.push(sim);
+    }
+
+    /// Lets script code run until the allowance is dropped, although a signal asked to stop.
+    pub(crate) fn run_script_while_stopping(&self) -> StoppingAllowance<'_> {
+        self.stopping.fetch_add(1, std::sync::atomic::Ordering::SeqCst);
+        StoppingAllowance(&self.stopping)
+    }
+
+    /// A signal stopped the script: every simulation that wrote outputs and was not written out
+    /// by its run writes them now (series row, VTK frame, checkpoint). What each says.
+    fn finish_simulations_on_signal(&self, signal: i32) -> Vec<String> {
+        let alive: Vec<_> = self.alive.lock().unwrap().iter().filter_map(|s| s.upgrade()).collect();
+        alive.into_iter().filter_map(|s| s.finish_on_signal(signal)).collect()
     }
 
     /// The serial number of a new simulation handle.
@@ -592,6 +637,15 @@ pub fn run_source(name: &str, source: &str, registry: Registry, options: RunOpti
         .and_then(|ast| {
             *ctx.ast.lock().unwrap() = Some(Arc::new(ast.clone()));
             let ran = engine.run_ast(&ast).map_err(|e| format!("{name}: {}", describe(&e, &engine)));
+            // A signal that stopped plain script code (between runs, in a loop of its own) left
+            // the simulations' outputs to close here.
+            let ran = match (ran, ctx.stop_requested()) {
+                (Err(e), Some(signal)) => {
+                    let written = ctx.finish_simulations_on_signal(signal);
+                    Err(std::iter::once(e).chain(written).collect::<Vec<_>>().join("\n"))
+                }
+                (ran, _) => ran,
+            };
             // Runs the script left going in the background finish before its outputs are closed.
             let failed = ctx.finish_background(false);
             ran.and_then(|_| match failed.first() {
