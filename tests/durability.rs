@@ -205,6 +205,30 @@ fn a_resumed_run_continues_the_series_and_the_frames_of_the_run_it_resumes() {
     assert!(!out.join("vtk/points_000005.vtu").exists());
 }
 
+/// A run resumed from a checkpoint between two frames (step 250 of frames every 100) writes no
+/// frame at its first step: its frames are those of a run that never stopped, again and again.
+#[test]
+fn a_run_resumed_between_two_frames_adds_no_frame() {
+    let times = |dir: &Path| -> Vec<f64> {
+        let pvd = std::fs::read_to_string(dir.join("vtk/points.pvd")).unwrap();
+        pvd.split("timestep=\"").skip(1).map(|s| s.split('"').next().unwrap().parse().unwrap()).collect()
+    };
+    let straight = common::out_dir("durability_frames_straight");
+    let outputs = "sim.series_every(10);\nsim.vtk_every(100);\nsim.checkpoint_every(250, \"ck.json\");";
+    let source = block(6, outputs);
+    run_in(&straight, &source, &[("steps", "800")]);
+    let out = common::out_dir("durability_frames_resumed");
+    run_in(&out, &source, &[("steps", "300")]);
+    // Three resumes from steps 250, 500 and 750, each run a little past its next checkpoint (a
+    // kill would leave the frames after it, which the resume replaces).
+    for (from, to) in [(250, 550), (500, 780), (750, 800)] {
+        let report = run_in(&out, &source, &[("resume", "true"), ("steps", &(to - from).to_string())]);
+        assert_eq!(report.summary["end_step"], to);
+    }
+    assert_eq!(times(&out), times(&straight), "the frames of a run that never stopped");
+    assert_eq!(times(&out).len(), 9);
+}
+
 #[test]
 fn standard_error_and_output_closed_or_full_never_fail_a_run() {
     // APIC on linear shape functions warns; print_line writes to standard output.

@@ -211,10 +211,22 @@ impl<S: Simulation> Runner<S> {
         Ok(self.sim.setup_warnings())
     }
 
-    /// The start of a run call: the first frame (unless written), and the state to fall back on.
-    pub fn open(&mut self) -> Result<()> {
+    /// The start of a run call of `cadence`: the first frame (unless written), and the state to
+    /// fall back on. A simulation resumed from a checkpoint continues the frames of the run that
+    /// wrote it: its first state gets a frame only where that run's frame interval put one, so
+    /// that the resumed series is the one a run without a stop writes.
+    pub fn open(&mut self, cadence: Cadence) -> Result<()> {
         if self.output.last_vtk_step.is_none() {
-            self.write_vtk()?;
+            self.claim_output();
+            let step = self.sim.steps();
+            let resumed_between_frames = self.output.resumes_at.is_some_and(|(at, _)| at == step)
+                && !step.is_multiple_of(cadence.vtk_every);
+            if resumed_between_frames {
+                // No frame here: the earlier run's frames before this step stay as they are.
+                self.output.last_vtk_step = Some(step);
+            } else {
+                self.write_vtk()?;
+            }
         }
         self.keep_good();
         Ok(())
@@ -271,7 +283,7 @@ impl<S: Simulation> Runner<S> {
             }
         }
         let cadence = self.cadence(Some(steps));
-        self.open()?;
+        self.open(cadence)?;
         self.write_series_row(&[], &[])?;
         let progress = Progress::new(self.run.quiet, Some(steps));
         for k in 1..=steps {

@@ -300,7 +300,7 @@ impl<S: Simulation> Handle<S> {
             stop,
             pauses_at_start: st.ctx.pause_requests(),
         };
-        st.run.open().or_rhai()?;
+        st.run.open(cadence).or_rhai()?;
         Ok(plan)
     }
 
