@@ -328,6 +328,57 @@ fn scripts_cannot_write_over_the_run_own_files_or_outside_its_folder() {
     assert!(!e.contains("hunter2"), "{e}");
 }
 
+/// Symbolic links left in a reused or shared output folder are never written through: a file
+/// of the run's that is a link (series.csv, summary.json, a checkpoint, a frame, a partial file)
+/// is replaced by the run's own file in the folder (a series a resume continues is read through
+/// it, then written in the folder), and a folder the run writes into that is a link (`vtk/`, a
+/// folder of `sim.save`) is refused, naming the link. The files the links point to are left as
+/// they were.
+#[test]
+fn links_in_the_output_folder_are_not_followed() {
+    let out = common::out_dir("durability_links");
+    let outside = common::out_dir("durability_links_outside");
+    std::fs::create_dir_all(&out).unwrap();
+    std::fs::create_dir_all(outside.join("vtk")).unwrap();
+    let untouched = "not granite's\n";
+    let links = ["series.csv", "summary.json", "ck.json", ".ck.json.partial", "vtk/points_000000.vtu", "vtk/points.pvd"];
+    let link_files = |dir: &Path| {
+        std::fs::create_dir_all(dir.join("vtk")).unwrap();
+        for name in links {
+            std::fs::write(outside.join(name), untouched).unwrap();
+            std::os::unix::fs::symlink(outside.join(name), dir.join(name)).unwrap();
+        }
+    };
+    link_files(&out);
+    let source = block(2, "sim.series_every(5);\nsim.vtk_every(5);\nsim.checkpoint_every(10, \"ck.json\");");
+    run_in(&out, &source, &[("steps", "20")]);
+    for name in links {
+        assert_eq!(std::fs::read_to_string(outside.join(name)).unwrap(), untouched, "{name} was written through");
+        let meta = std::fs::symlink_metadata(out.join(name));
+        assert!(meta.as_ref().map_or(true, |m| !m.file_type().is_symlink()), "{name} is still a link");
+    }
+    assert_eq!(whole_rows(&out.join("series.csv")), [0.0, 5.0, 10.0, 15.0, 20.0]);
+    // A resume continues series.csv: a link there (to a series with the same columns) is read,
+    // and replaced by the continued series in the folder.
+    let series = std::fs::read_to_string(out.join("series.csv")).unwrap();
+    std::fs::write(outside.join("series.csv"), &series).unwrap();
+    std::fs::remove_file(out.join("series.csv")).unwrap();
+    std::os::unix::fs::symlink(outside.join("series.csv"), out.join("series.csv")).unwrap();
+    run_in(&out, &source, &[("resume", "true"), ("steps", "5")]);
+    assert_eq!(std::fs::read_to_string(outside.join("series.csv")).unwrap(), series);
+    assert!(!std::fs::symlink_metadata(out.join("series.csv")).unwrap().file_type().is_symlink());
+    assert_eq!(whole_rows(&out.join("series.csv")), [0.0, 5.0, 10.0, 15.0, 20.0, 25.0]);
+    // Folders: vtk/ and a folder the script saves into.
+    for (folder, extra) in [("vtk", "sim.vtk_every(5);"), ("states", "sim.save(\"states/a.json\");")] {
+        let fresh = common::out_dir(&format!("durability_links_{folder}"));
+        std::fs::create_dir_all(&fresh).unwrap();
+        std::os::unix::fs::symlink(outside.join("vtk"), fresh.join(folder)).unwrap();
+        let e = common::run_source_in_err(&fresh, &block(2, extra), &[("steps", "5")]);
+        assert!(e.contains(&format!("{folder} is a symbolic link")), "{folder}: {e}");
+    }
+    assert_eq!(std::fs::read_dir(outside.join("vtk")).unwrap().count(), 2, "nothing new outside");
+}
+
 /// A checkpoint cut after it was written (a disk that lied about its flush, a copy cut short) is
 /// not resumed from: the one before it is, with a warning, and provenance.json says which file
 /// and step the run continued from.

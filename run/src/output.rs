@@ -9,6 +9,9 @@ use std::path::PathBuf;
 
 pub struct Output {
     pub dir: PathBuf,
+    /// The output folder the run was given (`--out`): `dir` or a `simN/` folder in it. It may be
+    /// a link; folders granite makes below it may not.
+    pub root: PathBuf,
     /// False in the processes of an MPI run other than the first: they run the same simulation
     /// and write nothing.
     pub writes: bool,
@@ -29,11 +32,14 @@ pub struct Output {
     /// The step and time a simulation loaded from a checkpoint starts at: its series continue
     /// the files of the run it resumes, and the VTK series keeps that run's earlier frames.
     pub resumes_at: Option<(u64, f64)>,
+    /// The folder was made (and found not to be a link) for the first file written.
+    folder_made: bool,
 }
 
 impl Output {
     pub fn new(dir: PathBuf) -> Output {
         Output {
+            root: dir.clone(),
             dir,
             writes: true,
             series: None,
@@ -47,7 +53,18 @@ impl Output {
             last_series_step: None,
             last_vtk_step: None,
             resumes_at: None,
+            folder_made: false,
         }
+    }
+
+    /// Makes this simulation's folder before its first file: a `simN/` folder that is a link
+    /// (a reused or shared output folder) is refused, naming it.
+    fn make_folder(&mut self) -> Result<()> {
+        if !self.folder_made {
+            granite_core::io::output_folder(&self.root, &self.dir)?;
+            self.folder_made = true;
+        }
+        Ok(())
     }
 
     /// Appends a row; a change in the column set (e.g. runout tracking starting) continues in
@@ -65,6 +82,7 @@ impl Output {
             Some(w) => w.columns().len() != cols.len() || w.columns().iter().zip(cols).any(|(a, b)| a != b),
         };
         if needs_new {
+            self.make_folder()?;
             let columns: Vec<String> = cols.iter().map(|s| s.to_string()).collect();
             let first = self.series.is_none();
             let resumed = if first { self.resumed_series(&columns)? } else { None };
@@ -134,6 +152,7 @@ impl Output {
             self.last_vtk_step = Some(step);
             return Ok(());
         }
+        self.make_folder()?;
         let dir = self.dir.join("vtk");
         let encoding = match self.vtk_format {
             VtkFormat::Xml(encoding) => encoding,
@@ -211,7 +230,7 @@ pub fn write_table(path: &std::path::Path, header: &str, rows: impl Iterator<Ite
     use granite_core::error::GraniteError;
     use std::io::Write;
     let io = |e| GraniteError::io(path, e);
-    let mut w = std::io::BufWriter::new(std::fs::File::create(path).map_err(io)?);
+    let mut w = std::io::BufWriter::new(granite_core::io::create_in_folder(path).map_err(io)?);
     writeln!(w, "{header}").map_err(io)?;
     for row in rows {
         let line = row.iter().map(|v| v.to_string()).collect::<Vec<_>>().join(",");

@@ -95,14 +95,15 @@ impl<S: Simulation> Runner<S> {
         self.claimed
     }
 
-    /// Where a file of this simulation's output folder goes (its folder made if missing).
-    pub fn output_path(&mut self, file: &str) -> PathBuf {
+    /// Where a file of this simulation's output folder goes (its folder made if missing; a
+    /// folder on the way that is a symbolic link is refused, naming it).
+    pub fn output_path(&mut self, file: &str) -> Result<PathBuf> {
         self.claim_output();
         let path = self.output.dir.join(file);
         if let Some(dir) = path.parent() {
-            let _ = std::fs::create_dir_all(dir);
+            granite_core::io::output_folder(&self.output.root, dir)?;
         }
-        path
+        Ok(path)
     }
 
     /// A series row: the engine's columns, then `extra` (names and values).
@@ -137,7 +138,7 @@ impl<S: Simulation> Runner<S> {
     /// Writes the checkpoint asked for, if one was; its path.
     pub fn write_checkpoint(&mut self) -> Result<Option<PathBuf>> {
         let Some((_, file)) = self.checkpoint.clone() else { return Ok(None) };
-        let path = self.output_path(&file);
+        let path = self.output_path(&file).map_err(|e| self.output_failed(e))?;
         self.sim.save_state(&path, &self.run).map_err(|e| self.output_failed(e))?;
         Ok(Some(path))
     }
@@ -169,9 +170,16 @@ impl<S: Simulation> Runner<S> {
         if let Some(snap) = self.last_good.take() {
             self.sim.restore(snap);
             self.output.last_vtk_step = None;
-            let path = self.output_path("last_good_points.csv");
+            let path = self.output.dir.join("last_good_points.csv");
             let writes = self.output.writes;
-            let written = self.write_vtk().and_then(|_| if writes { self.sim.write_points(&path) } else { Ok(()) });
+            let written = self.write_vtk().and_then(|_| {
+                let path = self.output_path("last_good_points.csv")?;
+                if writes {
+                    self.sim.write_points(&path)
+                } else {
+                    Ok(())
+                }
+            });
             msg = match written {
                 Ok(()) => format!(
                     "{msg}\nthe last good state (step {}, t = {:.6e} s) is kept and written to {} and vtk/",
@@ -329,7 +337,7 @@ impl<S: Simulation> Runner<S> {
         for (name, value) in self.sim.diagnostics() {
             values.entry(name.to_string()).or_insert(Value::from(value));
         }
-        let path = self.output_path("summary.json");
+        let path = self.output_path("summary.json")?;
         granite_core::io::write_summary(&path, &values)
     }
 }

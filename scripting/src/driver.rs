@@ -45,15 +45,15 @@ impl<S: Simulation> State<S> {
 
     /// Where a file the script names is written: relative paths in this simulation's output
     /// folder (made if missing).
-    pub fn points_path(&mut self, file: &str) -> std::path::PathBuf {
-        self.run.output_path(file)
+    pub fn points_path(&mut self, file: &str) -> RhaiResult<std::path::PathBuf> {
+        self.run.output_path(file).or_rhai()
     }
 
     /// [`State::points_path`] of a file the script names for something it writes, checked by
     /// [`super::output::check_script_file`].
     pub fn script_file_path(&mut self, call: &str, file: &str) -> RhaiResult<std::path::PathBuf> {
         super::output::check_script_file(call, file).or_else(err)?;
-        Ok(self.points_path(file))
+        self.points_path(file)
     }
 
     /// A signal asked the run to stop: the state as it is after the last whole step is written

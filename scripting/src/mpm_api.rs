@@ -736,7 +736,7 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
         let objects = sim.materials[m].law.point_objects();
         let frame = if here { objects.and_then(|o| o.object_frame(local)) } else { None };
         let law = sim.materials[m].law.name().to_string();
-        let path = st.points_path(file);
+        let path = st.points_path(file)?;
         let written = match frame {
             Some((x, fields)) => granite_core::io::vtk::write_vtu(&path, &x, &fields),
             None if here => Err(GraniteError::Other(format!("law \"{law}\" keeps no per-point object to write"))),

@@ -209,6 +209,21 @@ pub fn run_source_in(out: &Path, name: &str, source: &str, pairs: &[(&str, &str)
     granite_script::run_source(name, source, granite::registry(), options).unwrap()
 }
 
+/// [`run_source_in`] of a script that must fail: its error.
+#[allow(dead_code)]
+pub fn run_source_in_err(out: &Path, source: &str, pairs: &[(&str, &str)]) -> String {
+    let options = granite_script::RunOptions {
+        out_dir: out.to_path_buf(),
+        overrides: sets(pairs),
+        quiet: true,
+        ..Default::default()
+    };
+    match granite_script::run_source("block.rhai", source, granite::registry(), options) {
+        Ok(_) => panic!("the run in {} should fail", out.display()),
+        Err(e) => e.to_string(),
+    }
+}
+
 /// A small MPM block settling under gravity (`cells` cells a side, half of them filled), loaded
 /// from its checkpoint `ck.json` when `--set resume=true`; `extra` is the test's outputs.
 #[allow(dead_code)]

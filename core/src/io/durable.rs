@@ -87,7 +87,7 @@ pub fn replace_keeping_previous(path: &Path, bytes: &[u8]) -> Result<()> {
 }
 
 fn write_partial(partial: &Path, bytes: &[u8], flush: Flush) -> std::io::Result<()> {
-    let mut file = std::fs::File::create(partial)?;
+    let mut file = super::create_in_folder(partial)?;
     file.write_all(bytes)?;
     if flush == Flush::ToDisk {
         file.sync_all()?;

@@ -59,6 +59,54 @@ fn file_kind(kind: &std::fs::FileType) -> &'static str {
     }
 }
 
+/// Whether `path` is a symbolic link (not followed).
+fn is_link(path: &Path) -> bool {
+    std::fs::symlink_metadata(path).is_ok_and(|m| m.file_type().is_symlink())
+}
+
+/// The error for a link found where a run writes.
+fn link_refused(path: &Path) -> GraniteError {
+    let to = std::fs::read_link(path).map(|t| format!(" (to {})", t.display())).unwrap_or_default();
+    GraniteError::Setup(format!(
+        "{} is a symbolic link{to}: granite does not write through links inside an output folder (a reused or \
+         shared folder could send its files elsewhere); remove the link or choose another --out",
+        path.display()
+    ))
+}
+
+/// Makes the folders from `root` (an output folder, which may itself be a link) down to `dir`,
+/// refusing any of them below `root` that is a symbolic link.
+pub fn output_folder(root: &Path, dir: &Path) -> Result<()> {
+    if let Ok(below) = dir.strip_prefix(root) {
+        let mut at = root.to_path_buf();
+        for part in below.components() {
+            at.push(part);
+            if is_link(&at) {
+                return Err(link_refused(&at));
+            }
+        }
+    }
+    std::fs::create_dir_all(dir).map_err(|e| GraniteError::io(dir, e))
+}
+
+/// Creates `path` anew for writing. Whatever had its name (a symbolic link, a file) is removed
+/// first and the file is made with `O_EXCL`, which never follows a link: the bytes land in the
+/// folder, never where a link left there points.
+pub fn create_in_folder(path: &Path) -> std::io::Result<std::fs::File> {
+    if std::fs::symlink_metadata(path).is_ok_and(|m| !m.is_dir()) {
+        std::fs::remove_file(path)?;
+    }
+    std::fs::OpenOptions::new().write(true).create_new(true).open(path)
+}
+
+/// Opens `path` to append to it, refusing a symbolic link of that name.
+pub fn append_in_folder(path: &Path) -> Result<std::fs::File> {
+    if is_link(path) {
+        return Err(link_refused(path));
+    }
+    std::fs::OpenOptions::new().append(true).open(path).map_err(|e| GraniteError::io(path, e))
+}
+
 /// Writes `summary.json` (a flat object of named results, in insertion order), replacing the
 /// file whole or not at all.
 pub fn write_summary(path: &Path, values: &indexmap::IndexMap<String, serde_json::Value>) -> Result<()> {

@@ -20,7 +20,7 @@ pub struct SeriesWriter {
 
 impl SeriesWriter {
     pub fn create(path: &Path, columns: Vec<String>) -> Result<SeriesWriter> {
-        let file = File::create(path).map_err(|e| GraniteError::io(path, e))?;
+        let file = super::create_in_folder(path).map_err(|e| GraniteError::io(path, e))?;
         let mut series = SeriesWriter::over(path, file, columns, 0);
         let header = series.columns.clone();
         series.append(header.iter().map(|s| s.as_str()))?;
@@ -53,7 +53,7 @@ impl SeriesWriter {
             kept.push_str(line);
         }
         super::durable::replace(path, kept.as_bytes(), super::durable::Flush::ToDisk)?;
-        let file = std::fs::OpenOptions::new().append(true).open(path).map_err(|e| GraniteError::io(path, e))?;
+        let file = super::append_in_folder(path)?;
         Ok(Some(SeriesWriter::over(path, file, columns.to_vec(), kept.len() as u64)))
     }
 

@@ -136,7 +136,8 @@ impl VtkWriter {
     /// A series in `dir` whose first frames are `kept`; other frames of `stem` found there, left by
     /// an earlier run, are removed (a shorter new run would otherwise leave them beside its own).
     fn keeping(dir: &Path, stem: &str, kept: Vec<(f64, String)>) -> Result<VtkWriter> {
-        std::fs::create_dir_all(dir).map_err(|e| GraniteError::io(dir, e))?;
+        // `vtk/` of an output folder: a link there would take every frame elsewhere.
+        super::output_folder(dir.parent().unwrap_or(dir), dir)?;
         let entries = std::fs::read_dir(dir).map_err(|e| GraniteError::io(dir, e))?;
         for entry in entries.flatten() {
             let name = entry.file_name().to_string_lossy().to_string();
@@ -197,7 +198,8 @@ pub fn write_vtu(path: &Path, positions: &[Vec3], fields: &[Field]) -> Result<()
     if let Some(dir) = path.parent() {
         std::fs::create_dir_all(dir).map_err(|e| GraniteError::io(dir, e))?;
     }
-    std::fs::write(path, vtu(positions, fields, Encoding::default())).map_err(|e| GraniteError::io(path, e))
+    let bytes = vtu(positions, fields, Encoding::default());
+    super::create_in_folder(path).and_then(|mut f| f.write_all(&bytes)).map_err(|e| GraniteError::io(path, e))
 }
 
 /// The XML text of a file, and its appended binary data.

@@ -123,7 +123,11 @@ impl VtkHdfWriter {
     /// A new file at `path`, replacing any file there.
     pub fn create(path: &Path) -> Result<VtkHdfWriter> {
         if let Some(dir) = path.parent() {
-            std::fs::create_dir_all(dir).map_err(|e| GraniteError::io(dir, e))?;
+            super::output_folder(dir.parent().unwrap_or(dir), dir)?;
+        }
+        // HDF5 opens what a name points to: a link left there goes first.
+        if std::fs::symlink_metadata(path).is_ok_and(|m| m.file_type().is_symlink()) {
+            std::fs::remove_file(path).map_err(|e| GraniteError::io(path, e))?;
         }
         let err = h5(path);
         let file = File::create(path).map_err(&err)?;
