@@ -162,3 +162,64 @@ fn a_run_killed_while_writing_frames_resumes_its_file_whole() {
         assert_eq!(frames as u64, resumed_from + 6, "trial {trial}, killed {delay:?} after the first checkpoint");
     }
 }
+
+/// Whether this machine lets a test mount a tmpfs of its own (`unshare -rm`).
+#[cfg(unix)]
+fn can_mount_tmpfs() -> bool {
+    Command::new("unshare")
+        .args(["-rm", "sh", "-c", "d=$(mktemp -d) && mount -t tmpfs -o size=1m none \"$d\""])
+        .stderr(std::process::Stdio::null())
+        .status()
+        .is_ok_and(|s| s.success())
+}
+
+/// A disk that fills up while frames go into the VTKHDF file (a 2 MB tmpfs, a frame of 400
+/// points every step): the run stops at the step whose frame could not be written, naming the
+/// file and the cause, and every frame the file lists reads back equal to a run's on a disk with
+/// room (HDF5 1.10 lost such a frame's data without an error: it was listed whole and read as
+/// zeros, and the run went on until series.csv failed).
+#[cfg(unix)]
+#[test]
+fn a_full_disk_stops_the_run_at_the_first_lost_vtkhdf_frame_with_every_listed_frame_whole() {
+    if !can_mount_tmpfs() {
+        println!("skipped: `unshare -rm` with a tmpfs mount is not allowed here");
+        return;
+    }
+    let base = common::out_dir("vtkhdf_disk_full");
+    std::fs::create_dir_all(&base).unwrap();
+    // Rows rarely: the frames are what fills the disk.
+    let source = block(20, 1, 1_000_000).replace("sim.vtk_every(1);", "sim.vtk_every(1);\nsim.series_every(100000);");
+    let script = base.join("block.rhai");
+    std::fs::write(&script, &source).unwrap();
+    let _ = std::fs::remove_dir_all(base.join("out"));
+    Command::new("unshare")
+        .args([
+            "-rm",
+            "sh",
+            "-c",
+            "d=$(mktemp -d) && mount -t tmpfs -o size=2m none \"$d\" && \
+             \"$0\" run --quiet --threads 1 --set steps=2000 --out \"$d/out\" \"$1\" 2>\"$2/stderr.txt\"; \
+             echo $? >\"$2/code.txt\"; cp -a \"$d/out\" \"$2/out\"",
+        ])
+        .arg(env!("CARGO_BIN_EXE_granite"))
+        .arg(&script)
+        .arg(&base)
+        .status()
+        .unwrap();
+    let code = std::fs::read_to_string(base.join("code.txt")).unwrap();
+    let stderr = std::fs::read_to_string(base.join("stderr.txt")).unwrap();
+    assert_eq!(code.trim(), "1", "{stderr}");
+    assert!(stderr.contains("run.vtkhdf") && stderr.contains("No space left on device"), "{stderr}");
+    let step: u64 = stderr
+        .split("at step ")
+        .nth(1)
+        .and_then(|s| s.split_whitespace().next())
+        .and_then(|s| s.parse().ok())
+        .unwrap_or_else(|| panic!("no step in {stderr}"));
+    assert!(step > 5, "the disk held a few frames: {stderr}");
+    // Frames of steps 0 to step - 1 are listed, and hold what a run with room writes.
+    let straight = common::out_dir("vtkhdf_disk_full_straight");
+    run_in(&straight, &source, &[("steps", &(step - 1).to_string())]);
+    let [frames, ..] = compare(&straight.join("vtk/run.vtkhdf"), &base.join("out/vtk/run.vtkhdf"));
+    assert_eq!(frames as u64, step, "the frame of step {step} is the first one lost");
+}

@@ -206,10 +206,14 @@ impl Output {
                 Some(writer) => writer,
                 None => {
                     let path = dir.join("run.vtkhdf");
-                    self.hdf.insert(match self.resumes_at {
+                    let writer = self.hdf.insert(match self.resumes_at {
                         Some((_, resumed)) => VtkHdfWriter::resume(&path, resumed)?,
                         None => VtkHdfWriter::create(&path)?,
-                    })
+                    });
+                    if let Some(note) = writer.take_note() {
+                        granite_core::errln!("granite: warning: {note}");
+                    }
+                    writer
                 }
             };
             let mut blocks = vec![("points", BlockFrame::points(positions, fields))];

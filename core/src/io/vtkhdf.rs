@@ -108,6 +108,8 @@ pub struct VtkHdfWriter {
     times: Vec<f64>,
     /// Block names in the order they were made (their `Index`).
     blocks: Vec<String>,
+    /// Said once to the user: why an earlier file was set aside.
+    note: Option<String>,
 }
 
 fn h5(path: &Path) -> impl Fn(hdf5::Error) -> GraniteError + '_ {
@@ -136,7 +138,7 @@ impl VtkHdfWriter {
         write_version_and_type(&root, "PartitionedDataSetCollection").map_err(&err)?;
         ordered_group(&root, "Assembly").map_err(&err)?;
         file.flush().map_err(&err)?;
-        Ok(VtkHdfWriter { file, path: path.to_path_buf(), times: Vec::new(), blocks: Vec::new() })
+        Ok(VtkHdfWriter { file, path: path.to_path_buf(), times: Vec::new(), blocks: Vec::new(), note: None })
     }
 
     /// The file at `path` continued by a run resumed at `time`: its frames before that time are
@@ -150,17 +152,20 @@ impl VtkHdfWriter {
         if !path.exists() {
             return Self::create(path);
         }
+        // Open in another program (HDF5 locks what it opens): the file may be whole, and must not
+        // be set aside. Asked of the lock itself: HDF5's messages about a damaged file can hold
+        // the word too (`sblock->base_addr`).
+        if locked_elsewhere(path) {
+            return Err(GraniteError::Other(format!(
+                "{}: the file is open in another program (ParaView?), which holds a lock on it; close it there \
+                 and resume again",
+                path.display()
+            )));
+        }
         let read = File::open(path).and_then(|old| whole_series(&old).map(|(blocks, times)| (old, blocks, times)));
         let (old, blocks, times) = match read {
             Ok(found) => found,
-            // Open in another program: the file is whole, and must not be set aside.
-            Err(e) if e.to_string().contains("lock") => {
-                return Err(GraniteError::Other(format!(
-                    "{}: the file is open in another program (ParaView?); close it there and resume again ({e})",
-                    path.display()
-                )))
-            }
-            Err(_) => return Self::set_aside(path),
+            Err(e) => return Self::set_aside(path, &e.to_string()),
         };
         let keep = times.iter().take_while(|&&t| t < time).count();
         let fresh = path.with_extension("vtkhdf.partial");
@@ -173,11 +178,11 @@ impl VtkHdfWriter {
             }
             writer.file.flush()
         };
-        if copy(&writer).is_err() {
+        if let Err(e) = copy(&writer) {
             // Frames listed whole whose rows cannot be read: the old file is damaged after all.
             drop(writer);
             let _ = std::fs::remove_file(&fresh);
-            return Self::set_aside(path);
+            return Self::set_aside(path, &e.to_string());
         }
         drop(old);
         std::fs::rename(&fresh, path).map_err(|e| GraniteError::io(path, e))?;
@@ -187,12 +192,25 @@ impl VtkHdfWriter {
         Ok(writer)
     }
 
-    /// Moves a file that cannot be continued to `<path>.damaged` (what it holds may still be read
-    /// there) and starts a new one.
-    fn set_aside(path: &Path) -> Result<VtkHdfWriter> {
+    /// Moves a file that cannot be continued (`why`: HDF5's reason) to `<path>.damaged` (what it
+    /// holds may still be read there) and starts a new one, which says so in
+    /// [`VtkHdfWriter::take_note`].
+    fn set_aside(path: &Path, why: &str) -> Result<VtkHdfWriter> {
         let aside = path.with_extension("vtkhdf.damaged");
         std::fs::rename(path, &aside).map_err(|e| GraniteError::io(path, e))?;
-        Self::create(path)
+        let mut writer = Self::create(path)?;
+        let why = why.lines().next().unwrap_or(why);
+        writer.note = Some(format!(
+            "{} could not be continued ({why}): it was moved to {} and a new file started",
+            path.display(),
+            aside.display()
+        ));
+        Ok(writer)
+    }
+
+    /// What the user should hear of how the file was opened (set aside on resume), once.
+    pub fn take_note(&mut self) -> Option<String> {
+        self.note.take()
     }
 
     pub fn frames(&self) -> usize {
@@ -214,10 +232,17 @@ impl VtkHdfWriter {
                 self.blocks.push(name.to_string());
             }
         }
+        // Every block's data first, then every block's listing: a write that fails (a full disk)
+        // leaves no block listing a frame whose data is not in the file.
+        let mut ends = Vec::with_capacity(self.blocks.len());
         for name in &self.blocks {
             let block = root.group(name).map_err(&err)?;
             let frame = blocks.iter().find(|(n, _)| n == name).map(|(_, f)| f);
-            append_frame(&block, time, frame).map_err(&err)?;
+            ends.push(append_frame_data(&block, frame).map_err(&err)?);
+        }
+        self.file.flush().map_err(&err)?;
+        for (name, end) in self.blocks.iter().zip(&ends) {
+            list_frame(&root.group(name).map_err(&err)?, time, end).map_err(&err)?;
         }
         self.times.push(time);
         self.file.flush().map_err(&err)
@@ -338,6 +363,24 @@ fn copy_rows<T: H5Type + Clone>(source: &Dataset, target: &Dataset, rows: usize,
     append(target, &values, columns)
 }
 
+/// Whether another program holds HDF5's lock on the file (an exclusive `flock` cannot be taken
+/// now). HDF5 takes that lock on every file it opens, unless `HDF5_USE_FILE_LOCKING=FALSE`.
+fn locked_elsewhere(path: &Path) -> bool {
+    #[cfg(unix)]
+    {
+        use std::os::unix::io::AsRawFd;
+        let Ok(file) = std::fs::File::open(path) else { return false };
+        // SAFETY: flock on a descriptor this function owns; the lock, if taken, goes with it.
+        let taken = unsafe { libc::flock(file.as_raw_fd(), libc::LOCK_EX | libc::LOCK_NB) };
+        taken != 0 && std::io::Error::last_os_error().raw_os_error() == Some(libc::EWOULDBLOCK)
+    }
+    #[cfg(not(unix))]
+    {
+        let _ = path;
+        false
+    }
+}
+
 /// Keeps the file's descriptor out of programs this process starts. HDF5 locks the files it
 /// writes (flock) and opens them without close-on-exec: a child started while a file is open
 /// (a test running a reader, a batch starting a run) would inherit the lock and keep it after this
@@ -432,7 +475,11 @@ fn rows(dataset: &Dataset) -> usize {
     dataset.shape().first().copied().unwrap_or(0)
 }
 
-/// Appends `values` (rows of `columns`) to `dataset`.
+/// Appends `values` (rows of `columns`) to `dataset`, and writes them out of HDF5's chunk cache
+/// at once. HDF5 1.10 drops a chunk it fails to write when it evicts it from the cache (a full
+/// disk, a file-size limit) without an error, and a later file flush then succeeds: measured on a
+/// full 2 MB tmpfs, a frame listed whole was read back as zeros. A dataset flush reports the
+/// failed write instead.
 fn append<T: H5Type>(dataset: &Dataset, values: &[T], columns: usize) -> hdf5::Result<()> {
     let start = rows(dataset);
     let added = values.len() / columns;
@@ -442,46 +489,89 @@ fn append<T: H5Type>(dataset: &Dataset, values: &[T], columns: usize) -> hdf5::R
     let end = start + added;
     if columns == 1 && dataset.ndim() == 1 {
         dataset.resize(end)?;
-        dataset.write_slice(ArrayView1::from(values), start..end)
+        dataset.write_slice(ArrayView1::from(values), start..end)?;
     } else {
         dataset.resize((end, columns))?;
         let view = ArrayView2::from_shape((added, columns), values).map_err(|e| hdf5::Error::from(e.to_string()))?;
-        dataset.write_slice(view, (start..end, 0..columns))
+        dataset.write_slice(view, (start..end, 0..columns))?;
+    }
+    flush_dataset(dataset)
+}
+
+/// Writes a dataset's cached chunks to the file, or says why it could not.
+fn flush_dataset(dataset: &Dataset) -> hdf5::Result<()> {
+    // SAFETY: a valid dataset id; the call goes through hdf5-metno's lock, and its error stack is
+    // read under it, as the crate's own calls do.
+    hdf5::sync::sync(|| hdf5::h5check(unsafe { hdf5_sys::h5d::H5Dflush(dataset.id()) }))
+        .map(|_| ())
+        .map_err(|e| hdf5::Error::from(format!("writing `{}`: {}", dataset.name(), system_cause(&e.to_string()))))
+}
+
+/// The system's reason in an HDF5 error of a failed write (`..., errno = 28, error message = 'No
+/// space left on device', ...`), or the error's first line.
+fn system_cause(message: &str) -> String {
+    let quoted = message.split("error message = '").nth(1).and_then(|rest| rest.split('\'').next());
+    match (quoted, message.split("errno = ").nth(1).and_then(|rest| rest.split(',').next())) {
+        (Some(why), Some(errno)) => format!("{why} (os error {errno})"),
+        (Some(why), None) => why.to_string(),
+        _ => message.lines().next().unwrap_or(message).to_string(),
     }
 }
 
-/// Appends one frame (`None`: empty) to a block: its geometry, its fields, and its row of
-/// offsets in `Steps`.
-fn append_frame(block: &Group, time: f64, frame: Option<&BlockFrame>) -> hdf5::Result<()> {
+/// What a block held before a frame was appended (its frame count and the rows of its points,
+/// cells and connectivity, which the frame's offsets in `Steps` name), and the frame's own counts
+/// of points, cells and connectivity ids.
+struct BlockEnd {
+    step: i64,
+    point_rows: usize,
+    cell_rows: usize,
+    connectivity_rows: usize,
+    counts: [usize; 3],
+}
+
+/// The first half of appending a frame (`None`: empty) to a block: its geometry and fields, the
+/// bulk of the bytes. The frame is not listed yet: a write that fails here leaves the file's
+/// frames as they were.
+fn append_frame_data(block: &Group, frame: Option<&BlockFrame>) -> hdf5::Result<BlockEnd> {
+    let empty = BlockFrame::points(&[], &[]);
+    let frame = frame.unwrap_or(&empty);
+    let (cell_types, offsets, ids) = frame.cells();
+    let end = BlockEnd {
+        step: rows(&block.dataset("NumberOfPoints")?) as i64,
+        point_rows: rows(&block.dataset("Points")?),
+        cell_rows: rows(&block.dataset("Types")?),
+        connectivity_rows: rows(&block.dataset("Connectivity")?),
+        counts: [frame.points.len(), cell_types.len(), ids.len()],
+    };
+    let flat: Vec<f64> = frame.points.iter().flatten().copied().collect();
+    append(&block.dataset("Points")?, &flat, 3)?;
+    append(&block.dataset("Offsets")?, &offsets, 1)?;
+    append(&block.dataset("Connectivity")?, &ids, 1)?;
+    append(&block.dataset("Types")?, &cell_types, 1)?;
+    append_fields(&block.group("PointData")?, frame.point_fields, end.point_rows, frame.points.len())?;
+    append_fields(&block.group("CellData")?, frame.cell_fields, end.cell_rows, cell_types.len())?;
+    Ok(end)
+}
+
+/// The second half: the frame's counts and its row of offsets in `Steps`, which list it, the
+/// frame count `NSteps` last.
+fn list_frame(block: &Group, time: f64, end: &BlockEnd) -> hdf5::Result<()> {
+    for (count, value) in COUNTS.iter().zip(end.counts) {
+        append(&block.dataset(count)?, &[value as i64], 1)?;
+    }
     let steps = block.group("Steps")?;
-    let number_of_points = block.dataset("NumberOfPoints")?;
-    let step = rows(&number_of_points) as i64;
-    let points = block.dataset("Points")?;
-    let point_rows = rows(&points);
-    let types = block.dataset("Types")?;
-    let cell_rows = rows(&types);
-    let connectivity = block.dataset("Connectivity")?;
-    let next = [step, 1, point_rows as i64, cell_rows as i64, rows(&connectivity) as i64];
+    let next = [end.step, 1, end.point_rows as i64, end.cell_rows as i64, end.connectivity_rows as i64];
     append(&steps.dataset("Values")?, &[time], 1)?;
     for (list, value) in STEP_LISTS[1..].iter().zip(next) {
         append(&steps.dataset(list)?, &[value], 1)?;
     }
-    steps.attr("NSteps")?.write_scalar(&(step + 1))?;
+    steps.attr("NSteps")?.write_scalar(&(end.step + 1))
+}
 
-    let empty = BlockFrame::points(&[], &[]);
-    let frame = frame.unwrap_or(&empty);
-    let (cell_types, offsets, ids) = frame.cells();
-    let counts = [frame.points.len(), cell_types.len(), ids.len()];
-    for (count, value) in COUNTS.iter().zip(counts) {
-        append(&block.dataset(count)?, &[value as i64], 1)?;
-    }
-    let flat: Vec<f64> = frame.points.iter().flatten().copied().collect();
-    append(&points, &flat, 3)?;
-    append(&block.dataset("Offsets")?, &offsets, 1)?;
-    append(&connectivity, &ids, 1)?;
-    append(&types, &cell_types, 1)?;
-    append_fields(&block.group("PointData")?, frame.point_fields, point_rows, frame.points.len())?;
-    append_fields(&block.group("CellData")?, frame.cell_fields, cell_rows, cell_types.len())
+/// Appends one frame (`None`: empty) to a block, data first, listing last.
+fn append_frame(block: &Group, time: f64, frame: Option<&BlockFrame>) -> hdf5::Result<()> {
+    let end = append_frame_data(block, frame)?;
+    list_frame(block, time, &end)
 }
 
 /// Appends this frame's `fields` (`count` rows each) to the arrays of `group`, which hold `before`
@@ -763,9 +853,36 @@ mod tests {
     fn a_file_that_cannot_be_read_is_set_aside_on_resume() {
         let path = dir().join("damaged.vtkhdf");
         std::fs::write(&path, b"not an HDF5 file").unwrap();
-        let writer = VtkHdfWriter::resume(&path, 1.0).unwrap();
+        let mut writer = VtkHdfWriter::resume(&path, 1.0).unwrap();
         assert_eq!(writer.frames(), 0);
         assert_eq!(std::fs::read(path.with_extension("vtkhdf.damaged")).unwrap(), b"not an HDF5 file");
+        let note = writer.take_note().unwrap();
+        assert!(note.contains("could not be continued") && note.contains("damaged.vtkhdf.damaged"), "{note}");
+        // A file cut short (a file-size limit): set aside with HDF5's reason, not taken for a
+        // file another program holds.
+        let cut = dir().join("cut.vtkhdf");
+        let mut full = VtkHdfWriter::create(&cut).unwrap();
+        let (x, fields, _) = frame(50, 0);
+        full.write_frame(0.0, &[("points", BlockFrame::points(&x, &fields))]).unwrap();
+        drop(full);
+        let bytes = std::fs::read(&cut).unwrap();
+        std::fs::write(&cut, &bytes[..bytes.len() / 3]).unwrap();
+        let mut writer = VtkHdfWriter::resume(&cut, 1.0).unwrap();
+        assert_eq!(writer.frames(), 0);
+        let note = writer.take_note().unwrap();
+        assert!(!note.contains("another program") && note.contains("cut.vtkhdf.damaged"), "{note}");
+        drop(writer);
+        // A file another program holds (HDF5's lock, as a reader takes it) is left alone.
+        #[cfg(unix)]
+        {
+            use std::os::unix::io::AsRawFd;
+            let reader = std::fs::File::open(&cut).unwrap();
+            // SAFETY: a shared lock on a descriptor this test holds.
+            assert_eq!(unsafe { libc::flock(reader.as_raw_fd(), libc::LOCK_SH | libc::LOCK_NB) }, 0);
+            let e = VtkHdfWriter::resume(&cut, 1.0).err().unwrap().to_string();
+            assert!(e.contains("open in another program"), "{e}");
+            assert!(cut.is_file());
+        }
         // A missing file starts a new series.
         let fresh = dir().join("missing.vtkhdf");
         let _ = std::fs::remove_file(&fresh);
