@@ -7,6 +7,7 @@ pub mod gpu;
 #[cfg(feature = "mpi")]
 pub mod mpi_comm;
 pub mod repl;
+pub mod shown;
 pub mod signals;
 
 use granite_core::{Registry, Result};

@@ -221,7 +221,7 @@ fn main() -> ExitCode {
                     if !quiet && first {
                         granite_core::outln!("granite: done; outputs in {}", report.out_dir.display());
                         for (k, v) in &report.summary {
-                            granite_core::outln!("  {k} = {v}");
+                            granite_core::outln!("  {k} = {}", granite::shown::shown(v));
                         }
                     }
                     ExitCode::SUCCESS

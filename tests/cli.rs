@@ -422,3 +422,31 @@ fn batch_refuses_a_misspelt_parameter_before_any_run() {
     assert!(err.contains("declares no parameter `duraton` (did you mean `duration`?)"), "{err}");
     assert!(!dir.join("runs/run_000").exists(), "no run started");
 }
+
+/// The end of a run prints its summary for a person: long arrays by their ends and length,
+/// numbers to six significant digits, counts as integers; summary.json keeps them whole.
+#[test]
+fn the_end_of_a_run_prints_short_values() {
+    let dir = common::out_dir("cli_shown");
+    std::fs::create_dir_all(&dir).unwrap();
+    let script = dir.join("shown.rhai");
+    std::fs::write(
+        &script,
+        "let sim = dem();\nlet m = sim.material(#{ density: 1000.0 });\nsim.contact_law(\"linear\", #{ kn: 1e4 });\n\
+         sim.sphere(m, [0.0, 0.0, 0.0], 0.01);\nsim.sphere(m, [0.0, 0.0, 0.0199], 0.01);\nsim.dt(1e-5);\nsim.run_steps(3);\n\
+         let d = sim.diagnostics();\nsummary(\"contacts\", d.contacts);\nsummary(\"ratio\", 1.1749999999999998);\n\
+         let times = [];\nfor k in 0..1200 { times.push(k.to_float() * 0.5); }\nsummary(\"times\", times);\n",
+    )
+    .unwrap();
+    let out = granite().args(["run", "--threads", "1", "--out"]).arg(&dir).arg(&script).output().unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(stdout.contains("  contacts = 1\n"), "{stdout}");
+    assert!(stdout.contains("  ratio = 1.175\n"), "{stdout}");
+    assert!(stdout.contains("  times = [0, 0.5, 1, ..., 599.5] (1200 values)\n"), "{stdout}");
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(summary["times"].as_array().unwrap().len(), 1200);
+    assert_eq!(summary["ratio"], 1.1749999999999998);
+    assert!(summary["contacts"].is_i64());
+}

@@ -335,7 +335,7 @@ impl<S: Simulation> Runner<S> {
         }
         let mut values = self.summary.clone();
         for (name, value) in self.sim.diagnostics() {
-            values.entry(name.to_string()).or_insert(Value::from(value));
+            values.entry(name.to_string()).or_insert(crate::simulation::diagnostic_json(name, value));
         }
         let path = self.output_path("summary.json")?;
         granite_core::io::write_summary(&path, &values)

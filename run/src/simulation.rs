@@ -83,3 +83,30 @@ pub trait Simulation: Send + 'static {
         Ok(RunEnd::default())
     }
 }
+
+/// Diagnostics that count things (steps, points, contacts...): whole numbers, which summary.json
+/// and scripts get as integers rather than as `248.0`.
+pub const COUNTS: &[&str] = &[
+    "step",
+    "points",
+    "deleted_points",
+    "contacts",
+    "wall_contacts",
+    "rattlers",
+    "particles",
+    "rve_active",
+    "rve_sphere_steps",
+];
+
+/// A diagnostic as JSON: a count as an integer, anything else as the number it is.
+pub fn diagnostic_json(name: &str, value: f64) -> serde_json::Value {
+    match whole_count(name, value) {
+        Some(n) => serde_json::Value::from(n),
+        None => serde_json::Value::from(value),
+    }
+}
+
+/// `value` as an integer when `name` is a count and the value is whole.
+pub fn whole_count(name: &str, value: f64) -> Option<i64> {
+    (COUNTS.contains(&name) && value.fract() == 0.0 && value.abs() < 9.0e15).then_some(value as i64)
+}

@@ -66,7 +66,7 @@ pub static API: &[ApiDoc] = &[
     f("sim", "every", &["sim.every(steps, |sim| ...)"], NONE, "calls a function every `steps` steps of a run"),
     f("sim", "series_every", &["sim.series_every(steps)"], NONE, "a series.csv row every `steps` steps"),
     f("sim", "vtk_every", &["sim.vtk_every(steps)"], NONE, "a VTK frame every `steps` steps"),
-    f("sim", "series_column", &["sim.series_column(name, |sim| value)"], NONE, "an extra series.csv column computed by a function"),
+    f("sim", "series_column", &["sim.series_column(name, |sim| value)"], NONE, "an extra series.csv column computed by a function; declare every column before the first run (series.csv's header fixes them)"),
     f("sim", "diagnostics", &["sim.diagnostics()"], NONE, "a map of global measures: energies, counts, unbalanced force..."),
     f("sim", "write_points", &["sim.write_points(file)"], NONE, "a CSV of every point or sphere in the output folder"),
     f("sim", "write_series", &["sim.write_series()"], NONE, "a series.csv row now"),

@@ -582,7 +582,11 @@ pub fn register_common<S: Simulation>(engine: &mut Engine) {
         let st = s.lock();
         let mut m = Map::new();
         for (k, v) in st.sim.diagnostics() {
-            m.insert(k.into(), Dynamic::from(v));
+            let value = match granite_run::simulation::whole_count(k, v) {
+                Some(n) => Dynamic::from(n),
+                None => Dynamic::from(v),
+            };
+            m.insert(k.into(), value);
         }
         m
     });
