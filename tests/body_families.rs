@@ -4,7 +4,7 @@
 //! resting across a rounded box (its weight in the spring), energy over many collisions, and a
 //! saved state resumed bit for bit.
 
-mod common;
+use crate::common;
 
 use common::bodies::{along, scene};
 use granite_core::dem::kinds::NewBody;

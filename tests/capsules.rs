@@ -3,7 +3,7 @@
 //! incline at `a = g sin(theta) / (1 + I_axis / (m r^2))`; the energy of capsules bouncing in a
 //! frictionless elastic box.
 
-mod common;
+use crate::common;
 
 use common::bodies::{along, scene};
 use granite_core::dem::walls::{Wall, WallShape};

@@ -2,7 +2,7 @@
 //! wrote it, a newer format is refused with a clear message, and the formats granite released
 //! before (kept in tests/checkpoints/) still load and run.
 
-mod common;
+use crate::common;
 use granite_script::{run_source, RunOptions};
 use std::path::{Path, PathBuf};
 
@@ -202,7 +202,9 @@ fn a_fifo_or_a_device_is_not_loaded() {
     let fifo = dir.join("pipe.json");
     let _ = std::fs::remove_file(&fifo);
     assert!(std::process::Command::new("mkfifo").arg(&fifo).status().unwrap().success());
-    for (load, file, kind) in [("dem_load", fifo.as_path(), "a FIFO"), ("mpm_load", Path::new("/dev/urandom"), "a device")] {
+    for (load, file, kind) in
+        [("dem_load", fifo.as_path(), "a FIFO"), ("mpm_load", Path::new("/dev/urandom"), "a device")]
+    {
         let e = run("ckpt_fifo_load", &load_script(load, file)).unwrap_err();
         assert!(e.contains(kind) && e.contains("not a regular file") && e.contains("line 1"), "{load}: {e}");
     }

@@ -14,7 +14,7 @@
 
 use granite_script::{run_source, RunOptions, RunReport};
 
-mod common;
+use crate::common;
 
 struct Material {
     name: &'static str,

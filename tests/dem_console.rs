@@ -4,7 +4,7 @@
 
 use granite_script::{run_source, RunOptions, RunReport};
 
-mod common;
+use crate::common;
 
 fn run(name: &str, source: &str) -> RunReport {
     let options = RunOptions { out_dir: common::out_dir(name), quiet: true, ..Default::default() };

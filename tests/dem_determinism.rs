@@ -1,7 +1,7 @@
 //! The same DEM scene gives bit-identical results on 1, 2 and 3 threads (per-contact forces, then
 //! per-particle gathers in a fixed order), and with the kernels' AVX2 twins or without them.
 
-mod common;
+use crate::common;
 
 fn deposit(threads: usize) -> (Vec<[f64; 3]>, Vec<[f64; 3]>, usize) {
     let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();

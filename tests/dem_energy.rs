@@ -4,7 +4,7 @@
 
 use granite_script::{run_source, RunOptions};
 
-mod common;
+use crate::common;
 
 /// 120 spheres dropped into a box under `law` and Cundall `damping`, then squeezed by a side wall
 /// moving in at 5 cm/s, the energy tracked throughout; `series` rows every that many steps.

@@ -2,7 +2,7 @@
 //! as on the plane they lie in, a seam between two triangles is one contact, a shaken closed box
 //! of triangles holds its spheres.
 
-mod common;
+use crate::common;
 use common::*;
 use std::fmt::Write;
 

@@ -4,9 +4,9 @@
 //! plane-strain heap gives 42.3°, 35.6° and 29.7° for seeds 1 to 3, so its test takes their
 //! mean; the 800-clump cylinder scatters less. Hence ±5° on one cylinder run and on the mean of
 //! three plane-strain runs.
-//! Long (about 2.5 and 1.5 min on two cores): `cargo test --release --test dem_repose_scripts -- --ignored`.
+//! Long (about 2.5 and 1.5 min on two cores): `cargo test --release --test integration dem_repose_scripts:: -- --ignored`.
 
-mod common;
+use crate::common;
 
 const THESIS_CLUMP_AOR_DEG: f64 = 35.95;
 const SMALL_HEAP_TOLERANCE_DEG: f64 = 5.0;

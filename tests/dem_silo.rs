@@ -2,13 +2,13 @@
 //! outlets follows Beverloo's law, `W = C rho_b sqrt(g) (D - k d)^(5/2)`, within its empirical
 //! band: C from 0.55 to 0.65, k about 1.5 (Beverloo, Leniger and van de Velde 1961; Nedderman
 //! 1992). About 7 minutes in release on 2 cores:
-//! `cargo test --release --test dem_silo -- --ignored`.
+//! `cargo test --release --test integration dem_silo:: -- --ignored`.
 
-mod common;
+use crate::common;
 use common::*;
 
 #[test]
-#[ignore = "a 7-minute run: cargo test --release --test dem_silo -- --ignored"]
+#[ignore = "a 7-minute run: cargo test --release --test integration dem_silo:: -- --ignored"]
 fn a_silo_of_triangles_discharges_at_beverloo_s_rate() {
     let mut points = Vec::new();
     let mut bulk = 0.0;

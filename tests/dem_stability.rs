@@ -7,7 +7,7 @@ use granite_core::dem::{DemSim, Wall, WallShape};
 use granite_core::registry::ParamMap;
 use granite_core::GraniteError;
 
-mod common;
+use crate::common;
 
 fn params(pairs: &[(&str, f64)]) -> ParamMap {
     pairs.iter().map(|(k, v)| (k.to_string(), *v)).collect()
@@ -204,7 +204,10 @@ fn a_sphere_too_fast_for_its_time_step_stops_the_run_instead_of_passing_through_
         Err(GraniteError::Unstable { step, reason, .. }) => {
             assert_eq!(step, 1);
             let speed = format!("{:.4e} m/s", 2.0 * RADIUS / SHOT_DT);
-            assert!(reason.contains(&speed) && reason.contains(&format!("smallest radius ({RADIUS:.4e} m)")), "{reason}");
+            assert!(
+                reason.contains(&speed) && reason.contains(&format!("smallest radius ({RADIUS:.4e} m)")),
+                "{reason}"
+            );
         }
         other => panic!("expected the run to stop, got {other:?}"),
     }

@@ -2,7 +2,7 @@
 //! holds the confining stress while the sample is sheared, at a low and a usual confining
 //! pressure and with grains 20 times stiffer than the script's default.
 
-mod common;
+use crate::common;
 use common::*;
 
 /// Shears 1000 spheres to 5 % axial strain at the script's quasi-static inertial number (2e-4)

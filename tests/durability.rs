@@ -3,7 +3,7 @@
 //! resume into the folder of the run it continues, `timeout -s INT` (a signal sent twice).
 #![cfg(unix)]
 
-mod common;
+use crate::common;
 use granite_core::mpm::MpmSim;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
@@ -341,7 +341,8 @@ fn links_in_the_output_folder_are_not_followed() {
     std::fs::create_dir_all(&out).unwrap();
     std::fs::create_dir_all(outside.join("vtk")).unwrap();
     let untouched = "not granite's\n";
-    let links = ["series.csv", "summary.json", "ck.json", ".ck.json.partial", "vtk/points_000000.vtu", "vtk/points.pvd"];
+    let links =
+        ["series.csv", "summary.json", "ck.json", ".ck.json.partial", "vtk/points_000000.vtu", "vtk/points.pvd"];
     let link_files = |dir: &Path| {
         std::fs::create_dir_all(dir.join("vtk")).unwrap();
         for name in links {

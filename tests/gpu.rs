@@ -1,12 +1,12 @@
 //! The RVEs of MPMxDEM on a GPU (`device: "gpu"`), on whatever Vulkan adapter with 64-bit floats
 //! the machine has (Mesa's lavapipe in CI): the device's DEM against the CPU engine's, run twice
 //! for determinism, through cell flips, checkpoints and the MPM coupling.
-//! `cargo test --features gpu --test gpu`.
+//! `cargo test --features gpu --test integration gpu::`.
 #![cfg(feature = "gpu")]
 // Index loops over the six stress components and three axes read as the formulas do.
 #![allow(clippy::needless_range_loop)]
 
-mod common;
+use crate::common;
 use common::*;
 use granite_core::dem::{DemSim, Rve};
 use granite_core::ext::rve::RveDeviceChoice;
@@ -117,7 +117,7 @@ fn adaptive_rves_on_the_gpu_follow_the_cpu() {
 
 /// The same triaxial to an axial strain of 0.01: q/p, the volumetric strain (the void ratio's
 /// change) and the coordination at the end within 2 % of the CPU's. About a minute on lavapipe:
-/// `cargo test --features gpu --test gpu -- --ignored`.
+/// `cargo test --features gpu --test integration gpu:: -- --ignored`.
 #[test]
 #[ignore]
 fn a_longer_triaxial_on_the_gpu_ends_within_two_percent_of_the_cpu() {

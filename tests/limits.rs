@@ -2,7 +2,7 @@
 //! the allocator: generators, meshes and fills estimate their memory first, and a script's own
 //! arrays, strings and maps stop with an error before they take the memory the process has.
 
-mod common;
+use crate::common;
 use granite_script::{run_source, RunOptions};
 
 fn fails(name: &str, source: &str) -> String {

@@ -1,11 +1,11 @@
-//! MPMxDEM over MPI processes (`cargo test --features mpi --test mpi`, Open MPI's `mpirun` on
+//! MPMxDEM over MPI processes (`cargo test --features mpi --test integration mpi::`, Open MPI's `mpirun` on
 //! the PATH): the same script gives byte-identical results on 1, 2 and 3 processes and without
 //! MPI, a checkpoint written on 2 processes continues on 3 and without MPI bit for bit, and an
 //! RVE failing on rank 1, or a checkpoint the first process cannot write, stops every process
 //! with the cause named.
 #![cfg(feature = "mpi")]
 
-mod common;
+use crate::common;
 use common::*;
 use std::path::{Path, PathBuf};
 use std::process::Command;

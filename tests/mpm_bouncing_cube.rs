@@ -1,6 +1,6 @@
 //! Thesis 3.5: the bouncing cube. USF + FLIP conserves the total energy; USL + PIC dissipates it.
 
-mod common;
+use crate::common;
 use common::*;
 
 /// `test` keeps output folders of tests running in parallel apart.

@@ -1,6 +1,6 @@
 //! Thesis 5.2: a small column collapse runs both phases and dissipates energy as it spreads.
 
-mod common;
+use crate::common;
 use common::*;
 
 #[test]

@@ -2,7 +2,7 @@
 //! against Bishop's simplified method of slices, computed here on its own: the factor of safety
 //! of the most critical circle.
 
-mod common;
+use crate::common;
 
 /// A material of the limit-equilibrium check: unit weight (N/m^3), cohesion (Pa), friction (deg).
 #[derive(Clone, Copy)]
@@ -176,7 +176,7 @@ fn a_1_5_to_1_slope_fails_at_bishops_factor_of_safety() {
     fails_at_bishops_factor("1.5");
 }
 
-/// About a minute in release: `cargo test --release --test mpm_embankment -- --ignored`.
+/// About a minute in release: `cargo test --release --test integration mpm_embankment:: -- --ignored`.
 #[test]
 #[ignore]
 fn a_2_to_1_slope_fails_at_bishops_factor_of_safety() {

@@ -2,7 +2,7 @@
 //! stress rate, shape functions, the affine velocity updates, the body front, and a blow-up that
 //! throws points out of the mesh.
 
-mod common;
+use crate::common;
 use common::*;
 
 /// A pre-stressed elastic block in a prescribed rigid rotation `v = omega x (x - c)` (every node

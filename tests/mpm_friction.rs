@@ -1,7 +1,7 @@
 //! Coulomb friction on the floor (CB-Geo's friction constraint): a block sliding on a floor with
 //! friction coefficient mu decelerates at mu g until it stops.
 
-mod common;
+use crate::common;
 
 fn slide(mu: f64, v0: f64, t_end: f64) -> f64 {
     let src = format!(

@@ -1,7 +1,7 @@
 //! MPM bodies and boundary conditions from gmsh meshes (tests/meshes, written by gmsh itself with
 //! tests/meshes/make_meshes.py): `load_mesh`, `fill_mesh`, and `fix` on a mesh group.
 
-mod common;
+use crate::common;
 use common::*;
 
 fn mesh(name: &str) -> String {

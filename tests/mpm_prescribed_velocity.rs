@@ -1,7 +1,7 @@
 //! A velocity prescribed by a piecewise-linear table compresses an elastic column by the integral
 //! of the table; the same through a script function of time.
 
-mod common;
+use crate::common;
 
 fn compress(value: &str, name: &str) -> f64 {
     let src = format!(

@@ -1,6 +1,6 @@
 //! A linear-elastic column at rest under gravity carries sigma_yy = -rho g depth.
 
-mod common;
+use crate::common;
 use common::*;
 
 #[test]

@@ -4,7 +4,7 @@
 //! modulus it grows with the new modulus from the stress already reached. A change that would
 //! break the time-step limit, or touch the density, is refused and leaves the law as it was.
 
-mod common;
+use crate::common;
 
 const E1: f64 = 1e6;
 const E2: f64 = 4e6;

@@ -1,6 +1,6 @@
 //! A traction on the top face of a column is carried down unchanged: sigma_yy = t_y everywhere.
 
-mod common;
+use crate::common;
 
 #[test]
 fn top_traction_gives_uniform_vertical_stress() {

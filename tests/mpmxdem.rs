@@ -2,12 +2,12 @@
 //! MPMxDEM (thesis chapter 4): the `dem_rve` law against hand-checked numbers, its own RVE at
 //! rest, a pure DEM run of the same strain path, and thread-count independence.
 
+use crate::common;
+use common::prescribe_node_velocities;
 use granite_core::dem::cell::PeriodicCell;
 use granite_core::dem::{DemSim, Rve};
 use granite_core::ext::constitutive::ObjectMap;
 use granite_core::ext::{ConstitutiveLaw, LawBatch, PointObjects};
-mod common;
-use common::prescribe_node_velocities;
 use granite_core::mpm::{Mesh, MpmSim, StressScheme};
 use granite_core::params::Params;
 use granite_core::registry::ParamMap;

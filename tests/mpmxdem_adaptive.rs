@@ -3,7 +3,7 @@
 //! points deform alike, step again where they part, keep the stress close to the run that steps
 //! every RVE, and do not depend on the thread count or on a checkpoint in the middle.
 
-mod common;
+use crate::common;
 use common::prescribe_node_velocities;
 use granite_core::dem::DemSim;
 use granite_core::ext::constitutive::ObjectMap;

@@ -1,6 +1,6 @@
 //! The MPMxDEM scripts end to end at a tiny size: prepare an RVE, run the one-cell triaxial.
 
-mod common;
+use crate::common;
 use common::*;
 use granite_core::dem::cell::PeriodicCell;
 
@@ -57,7 +57,7 @@ fn prepare_and_run_the_one_cell_triaxial() {
 /// defaults: 0.2 m cells, one point each): it settles, collapses, runs out over the floor and
 /// reaches its end time, while RVEs of its front, stretched along the floor, are flattened below
 /// twice their interaction reach across it (their contacts then searched over several images).
-/// About 5 minutes on one core: `cargo test --release --test mpmxdem_scripts -- --ignored`.
+/// About 5 minutes on one core: `cargo test --release --test integration mpmxdem_scripts:: -- --ignored`.
 #[test]
 #[ignore = "a long run: about 5 minutes of one core"]
 fn the_small_column_collapses_and_runs_to_its_end() {

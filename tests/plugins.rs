@@ -2,7 +2,7 @@
 //! is built as a cdylib, loaded by a script and used in a simulation whose stresses are checked
 //! against the same law computed here; a library with another ABI version is refused.
 
-mod common;
+use crate::common;
 use granite_plugin_abi::NativeLaw;
 use std::path::PathBuf;
 use std::process::Command;

@@ -2,7 +2,7 @@
 //! over many rotating contacts, the same results on any number of threads, and a heap built from a
 //! script.
 
-mod common;
+use crate::common;
 
 use granite_core::dem::{DemSim, Wall, WallShape};
 use granite_core::ext::{BodyKindFactory, BodyShape};

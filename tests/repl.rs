@@ -33,7 +33,7 @@ let points = sim.diagnostics().points;
 /// The session piped in; its numbers come from the constants above.
 fn session() -> String {
     falling_block()
-        + &format!(
+        + format!(
             r#"print_line("running");
 sim.run_steps(1000000000);
 print_line(`paused ${{sim.step}} ${{sim.time}} ${{speed(sim)}}`);
@@ -44,6 +44,7 @@ sim.run_steps({RESUMED_STEPS});
 print_line(`resumed ${{sim.step}} ${{sim.time}} ${{speed(sim)}} ${{sim.diagnostics().points - points}}`);
 "#
         )
+        .as_str()
 }
 
 fn numbers(line: &str, tag: &str) -> Vec<f64> {

@@ -3,7 +3,7 @@
 //! waited for by `granite run` before the outputs close; free fall checks nothing was lost, and
 //! a series column (a script function) is computed by the background thread.
 
-mod common;
+use crate::common;
 
 const G: f64 = 9.81;
 const DT: f64 = 1e-5;

@@ -1,7 +1,7 @@
 //! Bad input gives a clear error naming the script line and the parameter; a run that goes
 //! unstable stops, keeps and writes its last good state.
 
-mod common;
+use crate::common;
 use granite_script::{run_source, RunOptions};
 
 fn run_err(name: &str, source: &str, overrides: &[(&str, &str)]) -> String {

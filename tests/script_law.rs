@@ -1,6 +1,6 @@
 //! A constitutive law written as a script function gives the built-in law's results.
 
-mod common;
+use crate::common;
 
 #[test]
 fn script_hooke_matches_linear_elastic() {

@@ -2,7 +2,7 @@
 
 use granite_script::{run_source, RunOptions};
 
-mod common;
+use crate::common;
 
 fn run(name: &str, out: &std::path::Path, source: &str) -> granite_core::Result<granite_script::RunReport> {
     let options = RunOptions { out_dir: out.to_path_buf(), quiet: true, ..Default::default() };

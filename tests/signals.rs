@@ -4,7 +4,7 @@
 //! second signal, a second or more after the first, ends the process at once.
 #![cfg(unix)]
 
-mod common;
+use crate::common;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
@@ -156,12 +156,16 @@ fn a_signal_in_a_callback_a_series_column_or_between_runs_still_writes_the_check
         ("signal_in_callback", format!("sim.every(1, |s| {{ {busy} }});\nsim.run_steps(100000000);")),
         (
             "signal_in_column",
-            format!("sim.series_every(1);\nsim.series_column(\"busy\", |s| {{ {busy} 1.0 }});\nsim.run_steps(100000000);"),
+            format!(
+                "sim.series_every(1);\nsim.series_column(\"busy\", |s| {{ {busy} 1.0 }});\nsim.run_steps(100000000);"
+            ),
         ),
         ("signal_between_runs", format!("loop {{ sim.run_steps(10); {busy} }}")),
     ];
     for (name, tail) in cases {
-        let source = ENDLESS.replace("sim.series_every(100);", "sim.series_every(10);").replace("sim.run_steps(100000000);\n", &tail);
+        let source = ENDLESS
+            .replace("sim.series_every(100);", "sim.series_every(10);")
+            .replace("sim.run_steps(100000000);\n", &tail);
         let (child, out) = start(name, &source);
         std::thread::sleep(Duration::from_millis(200));
         signal(&child, libc::SIGTERM);

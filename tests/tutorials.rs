@@ -1,6 +1,6 @@
 //! The tutorials of examples/ run as a user runs them (at a small size) and do what they say.
 
-mod common;
+use crate::common;
 
 fn run(script: &str, name: &str, sets: &[(&str, &str)]) -> granite_script::RunReport {
     let path = common::root().join("examples").join(script);

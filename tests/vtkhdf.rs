@@ -2,11 +2,11 @@
 //! frame of a run in one file holds exactly what the XML frames of the same run hold, and a run
 //! resumed from a checkpoint continues the file as if it had not stopped.
 //!
-//! `cargo test --features vtkhdf --test vtkhdf`; needs the HDF5 library (Debian: libhdf5-dev)
+//! `cargo test --features vtkhdf --test integration vtkhdf::`; needs the HDF5 library (Debian: libhdf5-dev)
 //! and Python 3 with `vtk` (`pip install vtk`).
 #![cfg(feature = "vtkhdf")]
 
-mod common;
+use crate::common;
 use std::path::Path;
 use std::process::Command;
 

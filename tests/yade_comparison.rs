@@ -12,9 +12,9 @@
 //! not differ from each other much more than each differs from its own twins.
 //!
 //! Needs YADE on the PATH (`apt-get install yade`); ignored by default:
-//! `cargo test --release --test yade_comparison -- --ignored`.
+//! `cargo test --release --test integration yade_comparison:: -- --ignored`.
 
-mod common;
+use crate::common;
 
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;

@@ -227,8 +227,8 @@ impl<S: Simulation> Runner<S> {
         if self.output.last_vtk_step.is_none() {
             self.claim_output();
             let step = self.sim.steps();
-            let resumed_between_frames = self.output.resumes_at.is_some_and(|(at, _)| at == step)
-                && !step.is_multiple_of(cadence.vtk_every);
+            let resumed_between_frames =
+                self.output.resumes_at.is_some_and(|(at, _)| at == step) && !step.is_multiple_of(cadence.vtk_every);
             if resumed_between_frames {
                 // No frame here: the earlier run's frames before this step stay as they are.
                 self.output.last_vtk_step = Some(step);

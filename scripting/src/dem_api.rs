@@ -287,7 +287,10 @@ impl Handle<DemScene> {
         list.iter()
             .map(|d| {
                 self.wall_of(d).unwrap_or_else(|| {
-                    err(format!("a wall is a wall, an index or an array of them, got an array holding {}", d.type_name()))
+                    err(format!(
+                        "a wall is a wall, an index or an array of them, got an array holding {}",
+                        d.type_name()
+                    ))
                 })
             })
             .collect()

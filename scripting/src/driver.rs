@@ -357,9 +357,9 @@ impl<S: Simulation> Handle<S> {
             };
             if let Some(signal) = signal {
                 progress.finish();
-                let msg = self.finish_on_signal(Some(caller), signal).unwrap_or_else(|| {
-                    format!("stopped by {}", super::signal_name(signal))
-                });
+                let msg = self
+                    .finish_on_signal(Some(caller), signal)
+                    .unwrap_or_else(|| format!("stopped by {}", super::signal_name(signal)));
                 return Err(super::convert::to_rhai(GraniteError::Other(msg)));
             }
             if paused {

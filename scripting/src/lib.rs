@@ -113,9 +113,7 @@ impl ScriptContext {
     pub(crate) fn input_path(&self, file: &str) -> std::result::Result<PathBuf, String> {
         // A checkpoint whose newest file was lost still has the one before (`io::durable`). A
         // FIFO or a device is taken too, to be refused by name where it is read.
-        let exists = |p: &Path| {
-            (p.exists() && !p.is_dir()) || granite_core::io::durable::previous_path(p).is_file()
-        };
+        let exists = |p: &Path| (p.exists() && !p.is_dir()) || granite_core::io::durable::previous_path(p).is_file();
         let given = Path::new(file);
         if exists(given) || given.is_absolute() {
             return Ok(given.to_path_buf());
@@ -636,9 +634,12 @@ pub fn run_source(name: &str, source: &str, registry: Registry, options: RunOpti
         .map_err(|e| format!("{name}: syntax error: {e}"))
         .and_then(|ast| {
             *ctx.ast.lock().unwrap() = Some(Arc::new(ast.clone()));
-            let ran = engine.run_ast(&ast).map_err(|e| format!("{name}: {}", describe(&e, &engine)));
-            // A signal that stopped plain script code (between runs, in a loop of its own) left
-            // the simulations' outputs to close here.
+            // The script's variables outlive an error in a scope of this function's: a signal that
+            // stopped plain script code (between runs, in a loop of its own) left the outputs of
+            // the simulations they hold to close here.
+            let mut scope = rhai::Scope::new();
+            let ran =
+                engine.run_ast_with_scope(&mut scope, &ast).map_err(|e| format!("{name}: {}", describe(&e, &engine)));
             let ran = match (ran, ctx.stop_requested()) {
                 (Err(e), Some(signal)) => {
                     let written = ctx.finish_simulations_on_signal(signal);

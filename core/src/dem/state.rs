@@ -500,7 +500,12 @@ fn check_consistent(sim: &DemSim) -> std::result::Result<(), String> {
     for (i, wall) in sim.world.walls.iter().enumerate() {
         wall.check_loaded().map_err(|e| format!("wall {i} (\"{}\"): {e}", wall.name))?;
         if wall.material as usize >= sim.world.materials.len() {
-            return Err(format!("wall {i} (\"{}\"): material {} of {}", wall.name, wall.material, sim.world.materials.len()));
+            return Err(format!(
+                "wall {i} (\"{}\"): material {} of {}",
+                wall.name,
+                wall.material,
+                sim.world.materials.len()
+            ));
         }
     }
     let (of_spheres, of_bodies) =

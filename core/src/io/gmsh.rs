@@ -113,7 +113,8 @@ pub struct GmshMesh {
 impl GmshMesh {
     /// Reads a `.msh` file of version 4.1 or 2.2, ASCII or binary.
     pub fn read(path: &Path) -> Result<GmshMesh> {
-        let data = super::read_input(path).map_err(|e| GraniteError::Setup(format!("cannot read the mesh file: {e}")))?;
+        let data =
+            super::read_input(path).map_err(|e| GraniteError::Setup(format!("cannot read the mesh file: {e}")))?;
         GmshMesh::parse(&data).map_err(|why| GraniteError::Setup(format!("mesh file {}: {why}", path.display())))
     }
 
@@ -515,7 +516,8 @@ impl<'a> Reader<'a> {
             self.skip_space_if_text();
             let at = self.pos;
             let tag = self.int()?;
-            let tag = u64::try_from(tag).map_err(|_| format!("node tag {tag} {} (tags are positive)", self.place(at)))?;
+            let tag =
+                u64::try_from(tag).map_err(|_| format!("node tag {tag} {} (tags are positive)", self.place(at)))?;
             let x = [self.real()?, self.real()?, self.real()?];
             self.push_node(tag, x, at)?;
         }
@@ -699,8 +701,10 @@ mod tests {
 
     #[test]
     fn nodes_at_nan_or_infinity_are_refused_naming_the_node_and_its_line() {
-        let text = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/meshes/embankment_v22_ascii.msh"))
-            .unwrap();
+        let text = std::fs::read_to_string(
+            Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/meshes/embankment_v22_ascii.msh"),
+        )
+        .unwrap();
         let lines: Vec<&str> = text.lines().collect();
         let nodes = lines.iter().position(|l| *l == "$Nodes").unwrap();
         // `$Nodes` is on line nodes + 1 (counted from 1), its count on the next: the third node
@@ -733,7 +737,8 @@ mod tests {
             let e = GmshMesh::parse(&[binary_head.as_slice(), tail].concat()).unwrap_err();
             assert!(e.contains("has no $End") || e.contains("ends"), "{e}");
         }
-        let dim = GmshMesh::parse(b"$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$PhysicalNames\n1\n-7 1 \"x\"\n").unwrap_err();
+        let dim =
+            GmshMesh::parse(b"$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$PhysicalNames\n1\n-7 1 \"x\"\n").unwrap_err();
         assert!(dim.contains("dimension of -7"), "{dim}");
         let m = mesh("embankment_v22_ascii.msh");
         let e = m.group("dam").unwrap_err().to_string();

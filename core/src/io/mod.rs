@@ -126,9 +126,14 @@ mod tests {
         let fifo = dir.join("ck.json");
         assert!(std::process::Command::new("mkfifo").arg(&fifo).status().unwrap().success());
         // Opening a FIFO with no writer would block this test for good: it must not be opened.
-        for (path, kind) in [(fifo.as_path(), "a FIFO"), (Path::new("/dev/urandom"), "a device"), (dir.as_path(), "a folder")] {
+        for (path, kind) in
+            [(fifo.as_path(), "a FIFO"), (Path::new("/dev/urandom"), "a device"), (dir.as_path(), "a folder")]
+        {
             let e = read_input(path).unwrap_err().to_string();
-            assert!(e.contains(kind) && e.contains("not a regular file") && e.contains(&path.display().to_string()), "{e}");
+            assert!(
+                e.contains(kind) && e.contains("not a regular file") && e.contains(&path.display().to_string()),
+                "{e}"
+            );
         }
         let plain = dir.join("plain.json");
         std::fs::write(&plain, "{}").unwrap();
