@@ -85,13 +85,13 @@ fn a_checkpoint_says_which_granite_wrote_it_and_a_newer_format_is_refused() {
         writer.contains(env!("CARGO_PKG_VERSION")) && writer.contains(env!("GRANITE_GIT_COMMIT")),
         "written by {writer}"
     );
-    assert_eq!(header["version"], 3);
+    assert_eq!(header["version"], 4);
     // The same file as a future granite would write it.
-    let newer = text.replacen("\"version\":3", "\"version\":4", 1).replacen(writer, "granite 9.9.9 (future)", 1);
+    let newer = text.replacen("\"version\":4", "\"version\":5", 1).replacen(writer, "granite 9.9.9 (future)", 1);
     let future = dir.join("future.json");
     std::fs::write(&future, newer).unwrap();
     let e = run("ckpt_future", &load_script("mpm_load", &future)).unwrap_err();
-    assert!(e.contains("granite 9.9.9 (future)") && e.contains("version 4") && e.contains("versions 1 to 3"), "{e}");
+    assert!(e.contains("granite 9.9.9 (future)") && e.contains("version 5") && e.contains("versions 1 to 4"), "{e}");
 }
 
 /// Formats released before load through their upgrade path and run on: a DEM state of version 2
@@ -99,7 +99,8 @@ fn a_checkpoint_says_which_granite_wrote_it_and_a_newer_format_is_refused() {
 /// of version 3 (a periodic cell whose stress servo had no integral part yet, saved
 /// mid-compaction) and an MPM checkpoint of version 2 (before shape functions and stress rates),
 /// both written by granite 5416ea0; a DEM state of version 5 (bodies of one family, before a
-/// scene could hold several), written by granite 46b9482.
+/// scene could hold several), written by granite 46b9482; an MPM checkpoint of version 3 (before
+/// loads carried by points), written by granite 262568d.
 #[test]
 fn checkpoints_of_every_released_format_load_and_run() {
     // Each file, how to load it, and what summary.json must then say.
@@ -113,6 +114,9 @@ fn checkpoints_of_every_released_format_load_and_run() {
         ("mpm_checkpoint_v1.json", "mpm_load", "points", "\"points\": 4", "\"step\": 150"),
         // Written at step 50 with 16 points (2 x 2 cells, four points each).
         ("mpm_checkpoint_v2.json", "mpm_load", "points", "\"points\": 16", "\"step\": 150"),
+        // Written at step 50 by granite 262568d (before loads carried by points): the same
+        // block on quadratic B-splines with a Jaumann rate and a traction on its top.
+        ("mpm_checkpoint_v3.json", "mpm_load", "points", "\"points\": 16", "\"step\": 150"),
     ];
     for (file, load, count, has_count, has_steps) in cases {
         let path = common::root().join("tests").join("checkpoints").join(file);

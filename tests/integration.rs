@@ -40,6 +40,7 @@ mod mpm_embankment;
 mod mpm_fidelity;
 mod mpm_friction;
 mod mpm_gmsh;
+mod mpm_point_traction;
 mod mpm_prescribed_velocity;
 mod mpm_self_weight;
 mod mpm_set_material;

@@ -113,6 +113,44 @@ impl Simplices {
             .min_by(f64::total_cmp)
     }
 
+    /// The nearest segment or triangle of the group within `reach` of `x`: its index and distance.
+    pub fn nearest_within(&self, x: Vec3, reach: f64) -> Option<(usize, f64)> {
+        self.near(x, reach)
+            .map(|s| {
+                let c = &self.corners[s];
+                let d = match self.dim {
+                    1 => distance_to_segment(x, c[0], c[1]),
+                    _ => distance_to_triangle(x, c[0], c[1], c[2]),
+                };
+                (s, d)
+            })
+            .filter(|&(_, d)| d <= reach)
+            .min_by(|a, b| a.1.total_cmp(&b.1))
+    }
+
+    /// The unit normal of segment (in the plane z = 0) or triangle `s`, in the orientation its
+    /// corners give, and its length or area.
+    pub fn normal_and_measure(&self, s: usize) -> (Vec3, f64) {
+        let c = &self.corners[s];
+        let (n, measure) = match self.dim {
+            1 => {
+                let t = sub(c[1], c[0]);
+                ([t[1], -t[0], 0.0], norm(t))
+            }
+            _ => {
+                let n = cross(sub(c[1], c[0]), sub(c[2], c[0]));
+                (n, 0.5 * norm(n))
+            }
+        };
+        let l = norm(n);
+        (if l > 0.0 { scale(n, 1.0 / l) } else { n }, measure)
+    }
+
+    /// Where the group's simplex `s` lies: one of its corners.
+    pub fn corner(&self, s: usize) -> Vec3 {
+        self.corners[s][0]
+    }
+
     /// Length, area or volume of the group.
     pub fn measure(&self) -> f64 {
         self.corners

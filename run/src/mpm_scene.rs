@@ -53,6 +53,8 @@ pub enum Driven {
     Velocity(usize),
     /// The factor of the nodal force `boundary.forces[i]`.
     Force(usize),
+    /// The factor of the load carried by points `boundary.point_loads[i]`.
+    PointLoad(usize),
 }
 
 impl Simulation for MpmScene {
@@ -264,6 +266,7 @@ impl Simulation for MpmScene {
         match self.driven.get(target) {
             Some(Driven::Velocity(i)) => self.mpm.boundary.velocity[*i].value = TimeFunction::Driven(value),
             Some(Driven::Force(i)) => self.mpm.boundary.forces[*i].factor = TimeFunction::Driven(value),
+            Some(Driven::PointLoad(i)) => self.mpm.boundary.point_loads[*i].factor = TimeFunction::Driven(value),
             None => {}
         }
     }

@@ -72,9 +72,24 @@ impl<S: Simulation> State<S> {
         super::convert::to_rhai(e)
     }
 
-    /// Clears script functions driving boundary values (their targets are gone).
-    pub fn clear_driven(&mut self) {
-        self.driven.clear();
+    /// Keeps the script functions driving boundary values whose targets stay (`keep[target]`),
+    /// numbering those targets anew in order; the others' targets are gone.
+    pub fn retain_driven(&mut self, keep: &[bool]) {
+        let renumbered: Vec<Option<usize>> = keep
+            .iter()
+            .scan(0, |next, &k| {
+                let at = k.then_some(*next);
+                *next += usize::from(k);
+                Some(at)
+            })
+            .collect();
+        self.driven.retain_mut(|(target, _)| match renumbered.get(*target).copied().flatten() {
+            Some(at) => {
+                *target = at;
+                true
+            }
+            None => false,
+        });
     }
 }
 

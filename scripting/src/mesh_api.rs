@@ -144,6 +144,93 @@ fn traction(s: &mut SimHandle, mesh: &MeshHandle, group: &str, t: Dynamic, facto
     s.add_force(nodes, forces, factor)
 }
 
+/// What a load carried by points pushes with: a traction vector, or a pressure on the surface's
+/// outward normal.
+enum Push {
+    Traction(Dynamic),
+    Pressure(Dynamic),
+}
+
+/// `sim.point_traction(mesh, group, t)` and `sim.point_pressure(mesh, group, p)`: the points
+/// within their own size of a curve (2D) or surface (3D) group (the layer under it) carry the
+/// load. Each segment or triangle of the group hands its length or area to the points nearest to
+/// it, in proportion to their surface shares, so that each piece of the surface carries the
+/// traction (or pressure) times its measure, and the whole load is the traction times the group's
+/// measure. A pressure pushes along each piece's inward normal (the side its points are on).
+fn point_load(s: &mut SimHandle, mesh: &MeshHandle, group: &str, push: Push, factor: Dynamic) -> RhaiResult<()> {
+    use granite_core::math::{dot3, sub3};
+    use granite_core::mpm::boundary::{point_size, surface_share, PointLoad, TimeFunction};
+    let call = match push {
+        Push::Traction(_) => "point_traction",
+        Push::Pressure(_) => "point_pressure",
+    };
+    let (ids, forces) = {
+        let st = s.lock();
+        let sim = &st.sim.mpm;
+        let dim = sim.dim();
+        let simplices = mesh.group(group, dim, dim - 1, call)?;
+        let pts = &sim.points;
+        // (point, its share, its nearest piece of the surface)
+        let mut carriers = Vec::new();
+        for p in 0..pts.len() {
+            if let Some((piece, _)) = simplices.nearest_within(pts.x[p], point_size(pts.volume[p], dim)) {
+                carriers.push((p, surface_share(pts.volume[p], dim), piece));
+            }
+        }
+        if carriers.is_empty() {
+            return err(format!(
+                "sim.{call}(mesh, \"{group}\", ...): no material point lies within its own size of the group: it \
+                 must lie on the surface of the material (fill it first)"
+            ));
+        }
+        let pieces = simplices.corners.len();
+        // Per piece: the shares of its points, and which side they are on (points on the surface
+        // itself count for neither side).
+        let (mut shares, mut side) = (vec![0.0; pieces], vec![0.0; pieces]);
+        for &(p, a, piece) in &carriers {
+            shares[piece] += a;
+            let (n, _) = simplices.normal_and_measure(piece);
+            side[piece] += dot3(n, sub3(simplices.corner(piece), pts.x[p]));
+        }
+        // Pieces no point is nearest to hand their measure to all the others.
+        let (mut held, mut whole) = (0.0, 0.0);
+        for piece in 0..pieces {
+            let (_, measure) = simplices.normal_and_measure(piece);
+            whole += measure;
+            if shares[piece] > 0.0 {
+                held += measure;
+            }
+        }
+        let spread = whole / held;
+        let traction = match &push {
+            Push::Traction(t) => Some(vector(t, dim, "traction")?),
+            Push::Pressure(_) => None,
+        };
+        let pressure = match &push {
+            Push::Pressure(p) => super::convert::finite(p, "pressure")?,
+            Push::Traction(_) => 0.0,
+        };
+        let forces: Vec<_> = carriers
+            .iter()
+            .map(|&(_, a, piece)| {
+                let (n, measure) = simplices.normal_and_measure(piece);
+                let area = a / shares[piece] * measure * spread;
+                match traction {
+                    Some(t) => t.map(|c| c * area),
+                    // Outward: away from the piece's points (as given when all lie on it).
+                    None => {
+                        let outward = if side[piece] < 0.0 { -1.0 } else { 1.0 };
+                        n.map(|c| -pressure * outward * c * area)
+                    }
+                }
+            })
+            .collect();
+        (carriers.iter().map(|&(p, ..)| pts.id[p]).collect::<Vec<u64>>(), forces)
+    };
+    let name = format!("{call} on group \"{group}\"");
+    s.add_point_load(PointLoad::new(name, ids, forces, TimeFunction::Constant(1.0)), factor)
+}
+
 pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
     engine.register_type_with_name::<MeshHandle>("Mesh");
     engine.register_fn("to_string", |m: &mut MeshHandle| m.describe());
@@ -194,6 +281,24 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
     engine.register_fn("friction", |s: &mut SimHandle, mesh: MeshHandle, group: &str, mu: Dynamic| {
         friction(s, &mesh, group, mu)
     });
+    engine.register_fn("point_traction", |s: &mut SimHandle, mesh: MeshHandle, group: &str, t: Dynamic| {
+        point_load(s, &mesh, group, Push::Traction(t), Dynamic::from(1.0))
+    });
+    engine.register_fn(
+        "point_traction",
+        |s: &mut SimHandle, mesh: MeshHandle, group: &str, t: Dynamic, factor: Dynamic| {
+            point_load(s, &mesh, group, Push::Traction(t), factor)
+        },
+    );
+    engine.register_fn("point_pressure", |s: &mut SimHandle, mesh: MeshHandle, group: &str, p: Dynamic| {
+        point_load(s, &mesh, group, Push::Pressure(p), Dynamic::from(1.0))
+    });
+    engine.register_fn(
+        "point_pressure",
+        |s: &mut SimHandle, mesh: MeshHandle, group: &str, p: Dynamic, factor: Dynamic| {
+            point_load(s, &mesh, group, Push::Pressure(p), factor)
+        },
+    );
     engine.register_fn("traction", |s: &mut SimHandle, mesh: MeshHandle, group: &str, t: Dynamic| {
         traction(s, &mesh, group, t, Dynamic::from(1.0))
     });

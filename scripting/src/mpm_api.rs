@@ -408,6 +408,53 @@ impl Handle<MpmScene> {
         Ok(())
     }
 
+    /// Adds a load carried by points, its factor a number, a table or a script function of time.
+    pub(super) fn add_point_load(
+        &mut self,
+        mut load: granite_core::mpm::boundary::PointLoad,
+        factor: Dynamic,
+    ) -> RhaiResult<()> {
+        let (f, driver) = time_function(&factor, "factor")?;
+        load.factor = f;
+        let mut st = self.lock();
+        st.sim.mpm.boundary.point_loads.push(load);
+        let idx = st.sim.mpm.boundary.point_loads.len() - 1;
+        if let Some(fp) = driver {
+            st.sim.driven.push(Driven::PointLoad(idx));
+            let target = st.sim.driven.len() - 1;
+            drop(st);
+            self.drive(target, fp);
+        }
+        Ok(())
+    }
+
+    /// `sim.point_traction(lower, upper, t)`: the points inside a box carry the traction `t`, each
+    /// over its surface share (`V^((d-1)/d)`): one layer of points under a surface carries `t`
+    /// times that surface.
+    fn point_traction_in_box(&mut self, lower: Dynamic, upper: Dynamic, t: Dynamic, factor: Dynamic) -> RhaiResult<()> {
+        use granite_core::mpm::boundary::{surface_share, PointLoad, TimeFunction};
+        let (ids, forces) = {
+            let st = self.lock();
+            let sim = &st.sim.mpm;
+            let dim = sim.dim();
+            let (lo, hi) = (vector(&lower, dim, "lower corner")?, vector(&upper, dim, "upper corner")?);
+            let t = vector(&t, dim, "traction")?;
+            let pts = &sim.points;
+            let inside = |x: &Vec3| (0..dim).all(|a| x[a] >= lo[a] && x[a] <= hi[a]);
+            let picked: Vec<usize> = (0..pts.len()).filter(|&p| inside(&pts.x[p])).collect();
+            if picked.is_empty() {
+                return err(format!(
+                    "sim.point_traction({lo:?}, {hi:?}, ...): no material point lies in that box (it should hold the \
+                     layer of points under the loaded surface)"
+                ));
+            }
+            let forces = picked.iter().map(|&p| t.map(|c| c * surface_share(pts.volume[p], dim))).collect();
+            (picked.iter().map(|&p| pts.id[p]).collect(), forces)
+        };
+        let name = "point_traction in a box".to_string();
+        self.add_point_load(PointLoad::new(name, ids, forces, TimeFunction::Constant(1.0)), factor)
+    }
+
     fn traction(&mut self, face: &str, t: Dynamic, factor: Dynamic) -> RhaiResult<()> {
         let (nodes, forces) = {
             let st = self.lock();
@@ -652,6 +699,15 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
         s.fix(&ctx, sel, axis, Dynamic::from(0.0))
     });
     engine.register_fn("friction", |s: &mut SimHandle, face: &str, mu: Dynamic| s.friction(face, mu));
+    engine.register_fn("point_traction", |s: &mut SimHandle, lower: Dynamic, upper: Dynamic, t: Dynamic| {
+        s.point_traction_in_box(lower, upper, t, Dynamic::from(1.0))
+    });
+    engine.register_fn(
+        "point_traction",
+        |s: &mut SimHandle, lower: Dynamic, upper: Dynamic, t: Dynamic, factor: Dynamic| {
+            s.point_traction_in_box(lower, upper, t, factor)
+        },
+    );
     engine.register_fn("traction", |s: &mut SimHandle, face: &str, t: Dynamic| s.traction(face, t, Dynamic::from(1.0)));
     engine.register_fn("traction", |s: &mut SimHandle, face: &str, t: Dynamic, factor: Dynamic| {
         s.traction(face, t, factor)
@@ -676,8 +732,10 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
         let dim = st.sim.mpm.dim();
         let mesh = parse_mesh(&opts, Some(dim))?;
         st.sim.mpm.replace_mesh(mesh).or_rhai()?;
-        st.sim.driven.clear();
-        st.clear_driven();
+        // The conditions on nodes went with the old mesh; loads carried by points stay.
+        let keep: Vec<bool> = st.sim.driven.iter().map(|d| matches!(d, Driven::PointLoad(_))).collect();
+        st.sim.driven.retain(|d| matches!(d, Driven::PointLoad(_)));
+        st.retain_driven(&keep);
         Ok::<_, Box<rhai::EvalAltResult>>(())
     });
     engine.register_fn("on_leave", |s: &mut SimHandle, what: &str| {

@@ -1,5 +1,6 @@
 //! Boundary conditions on grid nodes: velocity constraints (eqs. 3.19-3.20), Coulomb friction on a
-//! boundary (CB-Geo's friction constraint) and nodal forces (eq. 3.21-3.22).
+//! boundary (CB-Geo's friction constraint) and nodal forces (eq. 3.21-3.22); and loads carried by
+//! material points (CB-Geo's particle tractions), which follow the material.
 
 use crate::error::{GraniteError, Result};
 use crate::math::Vec3;
@@ -119,20 +120,98 @@ pub struct NodalForce {
     pub factor: TimeFunction,
 }
 
-/// All boundary conditions of a simulation. They refer to node indices of one mesh and are
-/// cleared when the mesh is replaced.
+/// A load carried by material points: a force on each point (a traction times the point's share
+/// of the loaded surface; N in 3D, N/m in 2D plane strain), scaled by `factor(t)` and mapped to the
+/// nodes by the point's shape functions at every step, as gravity is (the surface term of eq.
+/// 3.21 lumped on the points next to the surface, CB-Geo's particle traction). Where the
+/// material goes, the load goes: a footing that settles by cells stays loaded. The forces keep
+/// the size and direction they were given (a dead load per reference area, the nominal traction).
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
+pub struct PointLoad {
+    /// What was loaded, for messages (`group "footing"`).
+    pub name: String,
+    /// The loaded points by id (ids survive deletions and reordering).
+    pub ids: Vec<u64>,
+    /// Force on each point at factor 1.
+    pub force: Vec<Vec3>,
+    pub factor: TimeFunction,
+    /// Each point's index among the points, as last found.
+    #[serde(skip)]
+    pub(crate) at: Vec<usize>,
+}
+
+impl PointLoad {
+    pub fn new(name: String, ids: Vec<u64>, force: Vec<Vec3>, factor: TimeFunction) -> PointLoad {
+        PointLoad { name, ids, force, factor, at: Vec::new() }
+    }
+
+    /// Finds the loaded points among `ids` (every point's id, in storage order) where they moved
+    /// (deletions, insertions); points no longer there are dropped, their force with them.
+    /// Returns how many were dropped and the force they carried.
+    pub(crate) fn locate(&mut self, ids: &[u64]) -> (usize, Vec3) {
+        let current =
+            self.at.len() == self.ids.len() && self.at.iter().zip(&self.ids).all(|(&i, &id)| ids.get(i) == Some(&id));
+        if current {
+            return (0, [0.0; 3]);
+        }
+        let index: std::collections::HashMap<u64, usize> = ids.iter().enumerate().map(|(i, &id)| (id, i)).collect();
+        let (mut lost, mut carried) = (0, [0.0; 3]);
+        let mut kept = (Vec::new(), Vec::new(), Vec::new());
+        for (&id, f) in self.ids.iter().zip(&self.force) {
+            match index.get(&id) {
+                Some(&i) => {
+                    kept.0.push(id);
+                    kept.1.push(*f);
+                    kept.2.push(i);
+                }
+                None => {
+                    lost += 1;
+                    carried = [0, 1, 2].map(|a| carried[a] + f[a]);
+                }
+            }
+        }
+        (self.ids, self.force, self.at) = kept;
+        (lost, carried)
+    }
+
+    /// The sum of the forces at factor 1.
+    pub fn total(&self) -> Vec3 {
+        self.force.iter().fold([0.0; 3], |s, f| [s[0] + f[0], s[1] + f[1], s[2] + f[2]])
+    }
+}
+
+/// A material point's share of a surface it lies under: its size `V^(1/d)` to the power `d - 1`
+/// (a length per unit thickness in 2D, an area in 3D), exact for the square or cubic points of a
+/// regular fill (`per_cell` points a cell side).
+pub fn surface_share(volume: f64, dim: usize) -> f64 {
+    volume.powf((dim as f64 - 1.0) / dim as f64)
+}
+
+/// The size of a point of `volume`: the side of a square (2D) or cube (3D) of that volume.
+pub fn point_size(volume: f64, dim: usize) -> f64 {
+    volume.powf(1.0 / dim as f64)
+}
+
+/// All boundary conditions of a simulation. Those on nodes refer to node indices of one mesh and
+/// are cleared when the mesh is replaced; point loads stay with their points.
 #[derive(Debug, Clone, Default, serde::Serialize, serde::Deserialize)]
 pub struct Boundary {
     pub velocity: Vec<VelocityConstraint>,
     pub friction: Vec<FrictionConstraint>,
     pub forces: Vec<NodalForce>,
+    #[serde(default)]
+    pub point_loads: Vec<PointLoad>,
 }
 
 impl Boundary {
+    /// Clears the conditions on nodes (the mesh is replaced); point loads stay.
     pub fn clear(&mut self) {
-        *self = Boundary::default();
+        self.velocity.clear();
+        self.friction.clear();
+        self.forces.clear();
     }
 
+    /// Whether no condition holds the nodes (point loads aside).
     pub fn is_empty(&self) -> bool {
         self.velocity.is_empty() && self.friction.is_empty() && self.forces.is_empty()
     }

@@ -12,10 +12,11 @@ use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
 const FORMAT: &str = "granite-mpm-checkpoint";
+/// 4: loads carried by points (`Boundary::point_loads`; none in older files).
 /// 3: the shape functions and the stress rate are part of the state.
 /// 2: the file is an envelope (`io::checkpoint_file`: writer, CRC-32) around the state of 1.
 /// Bump it whenever `MpmState` changes, and read the older ones through an upgrade path.
-const VERSION: u32 = 3;
+const VERSION: u32 = 4;
 /// The oldest version read: 1, whose state is 3's without the shape functions and stress rate
 /// (read as the linear functions and plain rate that granite then had).
 const OLDEST: u32 = 1;
@@ -277,7 +278,22 @@ fn check_consistent(sim: &MpmSim) -> std::result::Result<(), String> {
             ));
         }
     }
-    let functions = b.velocity.iter().map(|c| &c.value).chain(b.forces.iter().map(|f| &f.factor));
+    for load in &b.point_loads {
+        if load.force.len() != load.ids.len() || load.force.iter().flatten().any(|f| !f.is_finite()) {
+            return Err(format!(
+                "{}: {} points and {} forces, or a force that is not finite",
+                load.name,
+                load.ids.len(),
+                load.force.len()
+            ));
+        }
+    }
+    let functions = b
+        .velocity
+        .iter()
+        .map(|c| &c.value)
+        .chain(b.forces.iter().map(|f| &f.factor))
+        .chain(b.point_loads.iter().map(|l| &l.factor));
     for function in functions {
         if let TimeFunction::Table(points) = function {
             TimeFunction::table(points.clone()).map_err(|e| format!("a boundary table: {e}"))?;

@@ -253,6 +253,8 @@ pub struct MpmSim {
     balance_every: u64,
     /// The mesh was replaced (its boundary conditions with it) since the last run began.
     pub mesh_replaced: bool,
+    /// Nodal loads already said to have lost material under some of their nodes.
+    pub(crate) unloaded_said: Vec<usize>,
 }
 
 impl MpmSim {
@@ -282,6 +284,7 @@ impl MpmSim {
             comm: None,
             balance_every: crate::mpm::spread::DEFAULT_BALANCE_EVERY,
             mesh_replaced: false,
+            unloaded_said: Vec::new(),
         }
     }
 
@@ -425,8 +428,28 @@ impl MpmSim {
         }
         self.mesh = mesh;
         self.boundary.clear();
+        self.unloaded_said.clear();
         self.mesh_replaced = true;
         Ok(())
+    }
+
+    /// Finds the points that carry loads where they now are; a loaded point that is gone (it left
+    /// the mesh) takes its share of the load with it, which the user is told.
+    pub(crate) fn locate_point_loads(&mut self) {
+        for load in &mut self.boundary.point_loads {
+            let (lost, carried) = load.locate(&self.points.id);
+            if lost > 0 {
+                let carried = crate::math::norm3(carried);
+                self.events.push(format!(
+                    "step {} (t = {:.6e} s): {lost} point(s) loaded by {} are gone (they left the mesh), with \
+                     their share of the load ({carried:.4e} N at factor 1); {} points carry the rest",
+                    self.step,
+                    self.time,
+                    load.name,
+                    load.ids.len()
+                ));
+            }
+        }
     }
 
     /// Stable time step of explicit MPM: the cell crossing time of the fastest P wave.

@@ -4,7 +4,7 @@
 use crate::error::{GraniteError, Result};
 use crate::ext::{G2pBatch, LawBatch, VelocityUpdate};
 use crate::math::{rotate_by_spin, strain_rate_from_gradient, Mat3, Vec3, Voigt};
-use crate::mpm::boundary::Boundary;
+use crate::mpm::boundary::{Boundary, PointLoad};
 use crate::mpm::grid::{scatter, Grid, NodeSums, SlabIndex};
 use crate::mpm::mesh::{Location, Mesh};
 use crate::mpm::points::Points;
@@ -60,6 +60,7 @@ impl MpmSim {
         let dt = self.dt;
         let t_next = self.time + dt;
         self.place::<S>()?;
+        self.locate_point_loads();
         let affine = self.velocity_update.affine();
         let at = Placement { mesh: &self.mesh, loc: &self.loc, half: self.shape.half_in_cells(&self.mesh) };
         let grid = &mut self.grid;
@@ -80,6 +81,7 @@ impl MpmSim {
             StressScheme::Usl => {
                 p2g::<S>(grid, &at, slabs, pts, g, affine, Maps::MassMomentumForce);
                 grid_velocity(grid, bc, self.time);
+                point_loads::<S>(grid, &at, pts, &bc.point_loads, self.time);
                 grid_update(grid, bc, self.damping, dt, self.time);
                 g2p::<S>(pts, grid, &at, strategy, dt, Some(kin));
                 stress_update(pts, &mut self.materials)?;
@@ -90,12 +92,14 @@ impl MpmSim {
                 strain_update::<S>(pts, &grid.velocity, &at, dt, kin);
                 stress_update(pts, &mut self.materials)?;
                 p2g::<S>(grid, &at, slabs, pts, g, affine, Maps::Force);
+                point_loads::<S>(grid, &at, pts, &bc.point_loads, self.time);
                 grid_update(grid, bc, self.damping, dt, self.time);
                 g2p::<S>(pts, grid, &at, strategy, dt, None);
             }
             StressScheme::Musl => {
                 p2g::<S>(grid, &at, slabs, pts, g, affine, Maps::MassMomentumForce);
                 grid_velocity(grid, bc, self.time);
+                point_loads::<S>(grid, &at, pts, &bc.point_loads, self.time);
                 grid_update(grid, bc, self.damping, dt, self.time);
                 g2p::<S>(pts, grid, &at, strategy, dt, None);
                 // Remap the updated point momentum (positions as at the start of the step).
@@ -113,7 +117,39 @@ impl MpmSim {
             }
         }
         self.check_stable()?;
+        self.say_unloaded_nodes();
         self.handle_out_of_mesh()
+    }
+
+    /// A nodal load (a traction on a face or a mesh group) acts on nodes fixed in space: once the
+    /// material has moved away from some of them, their share of the load is lost (a node with no
+    /// mass takes no force), and the points near a loaded node left with little mass are flung.
+    /// Said once a load, with the cure.
+    fn say_unloaded_nodes(&mut self) {
+        for (k, f) in self.boundary.forces.iter().enumerate() {
+            if self.unloaded_said.contains(&k) || f.factor.at(self.time) == 0.0 {
+                continue;
+            }
+            let empty = f
+                .nodes
+                .iter()
+                .zip(&f.force)
+                .filter(|(&n, force)| {
+                    **force != [0.0; 3] && self.grid.sums.get(n as usize).is_none_or(|s| s.mass <= MASS_EPS)
+                })
+                .count();
+            if empty > 0 {
+                self.unloaded_said.push(k);
+                self.events.push(format!(
+                    "step {} (t = {:.6e} s): {empty} of the {} nodes of nodal load {k} (a traction or force on grid \
+                     nodes) have no material left under them, and their share of the load is lost; a load that \
+                     follows the material is carried by points: sim.point_traction(...) or sim.point_pressure(...)",
+                    self.step,
+                    self.time,
+                    f.nodes.len()
+                ));
+            }
+        }
     }
 
     /// Maps the points' mass, momentum and forces to the grid (eqs. 3.17, 3.18, 3.21, 3.23) without
@@ -322,6 +358,28 @@ fn p2g<S: ShapeFunction>(
             }
         }
     });
+}
+
+/// The loads carried by points (`PointLoad`) added to the nodal forces through each point's shape
+/// functions, as its weight is: the nodal shares of a point's force sum to it (the shape
+/// functions sum to 1), so the grid feels the whole load wherever the point is. A few points
+/// (one layer under a surface): serial, in a fixed order.
+fn point_loads<S: ShapeFunction>(grid: &mut Grid, at: &Placement, pts: &Points, loads: &[PointLoad], t: f64) {
+    let off = node_offsets::<S>(at.mesh);
+    let mut w = Weights::default();
+    for load in loads {
+        let factor = load.factor.at(t);
+        for (&p, f) in load.at.iter().zip(&load.force) {
+            debug_assert!(p < pts.len());
+            let base = at.weights::<S>(p, &mut w);
+            for k in 0..S::NODES {
+                let node = &mut grid.sums[base + off[k]];
+                for a in 0..3 {
+                    node.force[a] += w.n[k] * factor * f[a];
+                }
+            }
+        }
+    }
 }
 
 /// Nodal velocity from momentum (eq. 3.18), then velocity constraints (eq. 3.19) at time `t`.
