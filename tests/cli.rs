@@ -450,3 +450,22 @@ fn the_end_of_a_run_prints_short_values() {
     assert_eq!(summary["ratio"], 1.1749999999999998);
     assert!(summary["contacts"].is_i64());
 }
+
+/// `--list-params` works on every script of scripts/ from the repository root, as README shows
+/// it: files a script reads before its first simulation (a mesh) are found in its folder.
+#[test]
+fn every_script_lists_its_parameters_from_the_repository_root() {
+    let mut scripts: Vec<std::path::PathBuf> = ["mpm", "dem", "mpmxdem"]
+        .iter()
+        .flat_map(|d| std::fs::read_dir(common::root().join("scripts").join(d)).unwrap().flatten().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|e| e == "rhai"))
+        .collect();
+    scripts.sort();
+    assert!(scripts.len() > 10);
+    for script in scripts {
+        let relative = script.strip_prefix(common::root()).unwrap();
+        let out = granite().arg("run").arg(relative).arg("--list-params").current_dir(common::root()).output().unwrap();
+        assert!(out.status.success(), "{}: {}", relative.display(), String::from_utf8_lossy(&out.stderr));
+        assert!(String::from_utf8_lossy(&out.stdout).contains("parameter(s) declared"), "{}", relative.display());
+    }
+}

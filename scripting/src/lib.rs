@@ -581,7 +581,9 @@ pub(crate) fn prepare(registry: Registry, options: RunOptions) -> Result<(Arc<Sc
 pub fn list_params(path: &Path, registry: Registry, options: RunOptions) -> Result<Vec<Declared>> {
     let source = std::fs::read_to_string(path).map_err(|e| GraniteError::io(path, e))?;
     let name = path.file_name().map(|n| n.to_string_lossy().to_string()).unwrap_or_default();
-    let (ctx, engine) = prepare(registry, RunOptions { list_params: true, ..options })?;
+    // Files the script reads before its first simulation (a mesh) are found as a run finds them.
+    let script_dir = Some(path.parent().map(Path::to_path_buf).unwrap_or_default());
+    let (ctx, engine) = prepare(registry, RunOptions { list_params: true, script_dir, ..options })?;
     let ast = engine.compile(&source).map_err(|e| GraniteError::Other(format!("{name}: syntax error: {e}")))?;
     if let Err(e) = engine.run_ast(&ast) {
         if !ctx.listing_done.load(std::sync::atomic::Ordering::SeqCst) {
