@@ -32,7 +32,13 @@ pub struct Watch {
     /// Where the run's summary.json goes (every process may write it there: the one that speaks
     /// may be the one that hangs); None for a benchmark.
     summary: Option<std::path::PathBuf>,
+    /// The process that started this one (the launcher, or its daemon on this node).
+    parent: i32,
 }
+
+/// How long a process asked to stop by a signal waits for the others in an operation before it
+/// ends on its own: they got the same signal and meet within a step, unless they are gone.
+const STOPPING_WAIT: Duration = Duration::from_secs(30);
 
 /// Default of `--mpi-timeout`: far beyond any wait of a working run (an MPM step of the thesis
 /// column takes well under a second, a checkpoint of thousands of RVEs seconds), short enough
@@ -62,37 +68,70 @@ impl Watch {
         Waiting(Some(self))
     }
 
-    /// Checks once a second; past the timeout, says so, records the run as failed and ends this
-    /// process, which makes the launcher end the others (their files, checkpoints included,
-    /// stay as they were last written whole).
+    /// Checks four times a second. No process outlives its job: past the timeout a waiting
+    /// process says so, records the run as failed and ends, which makes the launcher end the
+    /// others; one whose launcher has gone (it returned after another process died, or was
+    /// killed) ends at once; one asked to stop by a signal that waits for the others more than
+    /// [`STOPPING_WAIT`] ends too. Their files, checkpoints included, stay as they were last
+    /// written whole.
     fn guard(self: Arc<Self>, rank: usize, size: usize) {
         std::thread::spawn(move || loop {
             std::thread::sleep(Duration::from_millis(250));
+            // SAFETY: getppid has no preconditions.
+            let parent = unsafe { libc::getppid() };
+            if parent != self.parent {
+                self.end(
+                    1,
+                    format!(
+                        "rank {rank} of {size}: the process that launched it ({}) has ended, so the job is over; this \
+                         process ends with it, its last checkpoint kept",
+                        self.parent
+                    ),
+                );
+            }
             let since = self.since_ms.load(std::sync::atomic::Ordering::SeqCst);
             if since == 0 {
                 continue;
             }
             let waited = Duration::from_millis(self.origin.elapsed().as_millis() as u64 + 1 - since);
+            let operation = *self.operation.lock().unwrap_or_else(|p| p.into_inner());
+            if let Some(signal) = crate::signals::received().filter(|_| waited >= STOPPING_WAIT) {
+                self.end(
+                    128 + signal,
+                    format!(
+                        "rank {rank} of {size}, asked to stop by signal {signal}, waited {:.0} s for the other processes \
+                         in {operation}: they are gone or stuck; this process ends now, its last checkpoint kept",
+                        waited.as_secs_f64()
+                    ),
+                );
+            }
             if waited < self.timeout {
                 continue;
             }
-            let operation = *self.operation.lock().unwrap_or_else(|p| p.into_inner());
-            let message = format!(
-                "rank {rank} of {size} waited {:.0} s for the other processes in {operation} (--mpi-timeout {:.0} s): \
-                 one of them stopped answering; the run is ended on every process, its last checkpoint kept",
-                waited.as_secs_f64(),
-                self.timeout.as_secs_f64()
+            self.end(
+                1,
+                format!(
+                    "rank {rank} of {size} waited {:.0} s for the other processes in {operation} (--mpi-timeout {:.0} \
+                     s): one of them stopped answering; the run is ended on every process, its last checkpoint kept",
+                    waited.as_secs_f64(),
+                    self.timeout.as_secs_f64()
+                ),
             );
-            granite_core::errln!("granite: error: {message}");
-            let mut summary = indexmap::IndexMap::new();
-            summary.insert("status".to_string(), serde_json::Value::from("failed"));
-            summary.insert("error".to_string(), serde_json::Value::from(message));
-            if let Some(path) = &self.summary {
-                let _ = granite_core::io::write_summary(path, &summary);
-            }
-            // SAFETY: ends this process at once; the launcher then ends the others.
-            unsafe { libc::_exit(1) };
         });
+    }
+
+    /// Says why, records the run as failed and ends this process at once.
+    fn end(&self, code: i32, message: String) -> ! {
+        granite_core::errln!("granite: error: {message}");
+        let mut summary = indexmap::IndexMap::new();
+        summary.insert("status".to_string(), serde_json::Value::from("failed"));
+        summary.insert("error".to_string(), serde_json::Value::from(message));
+        if let Some(path) = &self.summary {
+            let _ = granite_core::io::write_summary(path, &summary);
+        }
+        // SAFETY: ends this process at once (the others are ended by the launcher, or by their
+        // own watch when it is gone).
+        unsafe { libc::_exit(code) }
     }
 }
 
@@ -122,6 +161,8 @@ pub fn start(
         origin: Instant::now(),
         timeout,
         summary: out_dir.map(|d| d.join("summary.json")),
+        // SAFETY: getppid has no preconditions.
+        parent: unsafe { libc::getppid() },
     });
     watch.clone().guard(world.rank() as usize, world.size() as usize);
     Ok((universe, Comm(Arc::new(MpiComm { world, watch }))))

@@ -225,3 +225,46 @@ fn a_frozen_process_ends_the_run_on_every_process_after_the_timeout() {
         std::thread::sleep(std::time::Duration::from_millis(100));
     }
 }
+
+/// No process outlives its job: with three processes, one killed (SIGKILL) makes the launcher
+/// return, and the two left, waiting for it in the next exchange, end within seconds (their
+/// launcher is gone) instead of waiting out `--mpi-timeout` or for good.
+#[test]
+fn a_killed_process_leaves_no_other_behind_once_the_launcher_returns() {
+    let rve = rve().to_str().unwrap();
+    let out = out_dir("mpi_killed");
+    let mut cmd = Command::new("mpirun");
+    let version = Command::new("mpirun").arg("--version").output().expect("mpirun on the PATH (Open MPI)");
+    if String::from_utf8_lossy(&version.stdout).contains("Open MPI") {
+        cmd.args(["--allow-run-as-root", "--oversubscribe"]);
+        cmd.env("OMPI_MCA_mpi_yield_when_idle", "1");
+    }
+    cmd.args(["-np", "3", env!("CARGO_BIN_EXE_granite"), "run"]).arg(test_script("spread_column.rhai"));
+    cmd.args(["--quiet", "--threads", "1", "--mpi-timeout", "600", "--out"]).arg(&out);
+    cmd.args(["--set", &format!("rve={rve}"), "--set", "steps=1000000"]);
+    let child = cmd.stderr(std::process::Stdio::piped()).spawn().expect("running mpirun");
+    common::wait_until_running(&out, std::time::Duration::from_secs(120));
+    let listed = Command::new("pgrep").args(["-f", &format!("granite run .*{}", out.display())]).output().unwrap();
+    let pids: Vec<i32> = String::from_utf8_lossy(&listed.stdout)
+        .lines()
+        .filter_map(|l| l.trim().parse().ok())
+        .filter(|&pid| pid != child.id() as i32)
+        .collect();
+    assert_eq!(pids.len(), 3, "{pids:?}");
+    assert_eq!(unsafe { libc::kill(pids[2], libc::SIGKILL) }, 0);
+    let finished = child.wait_with_output().unwrap();
+    assert_ne!(finished.status.code(), Some(0), "{}", String::from_utf8_lossy(&finished.stderr));
+    let gone = |pid: i32| {
+        std::fs::read_to_string(format!("/proc/{pid}/stat"))
+            .map_or(true, |s| s.rsplit(')').next().and_then(|r| r.split_whitespace().next()) == Some("Z"))
+    };
+    let returned = std::time::Instant::now();
+    while !pids.iter().all(|&pid| gone(pid)) {
+        assert!(
+            returned.elapsed() < std::time::Duration::from_secs(20),
+            "processes of the run outlive the launcher: {:?}",
+            pids.iter().filter(|&&p| !gone(p)).collect::<Vec<_>>()
+        );
+        std::thread::sleep(std::time::Duration::from_millis(100));
+    }
+}

@@ -130,11 +130,13 @@ pub(crate) fn show(v: &Dynamic) -> String {
 
 /// Every function of the script API in the script's terms (see [`readable`]), sorted.
 pub(crate) fn api_signatures(engine: &rhai::Engine) -> Vec<String> {
-    // `to_string` and `to_debug` are how Rhai prints granite's objects, not calls of the API.
+    // `to_string` and `to_debug` are how Rhai prints granite's objects, `==` and `!=` how it
+    // compares them: not calls of the API.
+    const NOT_CALLS: [&str; 4] = ["to_string(", "to_debug(", "==(", "!=("];
     let mut found: Vec<String> = engine
         .gen_fn_signatures(false)
         .iter()
-        .filter(|s| !(s.starts_with("to_string(") || s.starts_with("to_debug(")))
+        .filter(|s| !NOT_CALLS.iter().any(|n| s.starts_with(n)))
         .map(|s| readable(s))
         .collect();
     found.sort();
