@@ -62,13 +62,14 @@ impl MpmSim {
         self.place::<S>()?;
         self.locate_point_loads();
         let affine = self.velocity_update.affine();
-        let at = Placement { mesh: &self.mesh, loc: &self.loc, half: self.shape.half_in_cells(&self.mesh) };
+        let centre_volume = self.volumetric_strain == VolumetricStrain::CellCentre;
+        let at =
+            Placement { mesh: &self.mesh, loc: &self.loc, half: self.shape.half_in_cells(&self.mesh), centre_volume };
         let grid = &mut self.grid;
         let pts = &mut self.points;
         let (slabs, bc, g) = (&self.slabs, &self.boundary, self.gravity);
         let strategy = self.velocity_update.as_ref();
         let turn = self.stress_rate == StressRate::Jaumann;
-        let centre_volume = self.volumetric_strain == VolumetricStrain::CellCentre;
         if centre_volume && !S::Basis::VOLUME_AT_CELL_CENTRE {
             return Err(GraniteError::param(
                 "volumetric_strain",
@@ -162,7 +163,9 @@ impl MpmSim {
     fn map_with<S: ShapeFunction>(&mut self) -> Result<()> {
         self.place::<S>()?;
         let affine = self.velocity_update.affine();
-        let at = Placement { mesh: &self.mesh, loc: &self.loc, half: self.shape.half_in_cells(&self.mesh) };
+        let centre_volume = self.volumetric_strain == VolumetricStrain::CellCentre;
+        let at =
+            Placement { mesh: &self.mesh, loc: &self.loc, half: self.shape.half_in_cells(&self.mesh), centre_volume };
         p2g::<S>(&mut self.grid, &at, &self.slabs, &self.points, self.gravity, affine, Maps::MassMomentumForce);
         Ok(())
     }
@@ -277,6 +280,8 @@ struct Placement<'a> {
     loc: &'a [Location],
     /// GIMP's half point length in cells per axis.
     half: Vec3,
+    /// The volumetric strain is taken at the cells' centres (B-bar, linear functions only).
+    centre_volume: bool,
 }
 
 impl Placement<'_> {
@@ -325,6 +330,12 @@ fn p2g<S: ShapeFunction>(
         }
     });
     let off = node_offsets::<S>(at.mesh);
+    // B-bar: a point's strain rate takes its volumetric part at the cell's centre, so the
+    // internal force must too (the force is the work of the stress on that strain rate): with
+    // `m` the mean of the in-plane normal stresses, `f_I = -V (σ ∇N_I(x_p) + m (∇N_I(c) − ∇N_I(x_p)))`.
+    // A force from the point's own gradient alone does work the strain does not store, which
+    // fed energy into columns that should settle.
+    let dn_centre = (at.centre_volume && S::Basis::VOLUME_AT_CELL_CENTRE).then(|| centre_gradients::<S>(at.mesh));
     scatter(&mut grid.sums, at.mesh, slabs, |p, window: &mut [NodeSums], first, w| {
         let base = at.weights::<S>(p, w) - first;
         let m = pts.mass[p];
@@ -355,6 +366,12 @@ fn p2g<S: ShapeFunction>(
                 node.force[0] += m * n * gravity[0] - vol * (s[0] * g[0] + s[3] * g[1] + s[5] * g[2]);
                 node.force[1] += m * n * gravity[1] - vol * (s[3] * g[0] + s[1] * g[1] + s[4] * g[2]);
                 node.force[2] += m * n * gravity[2] - vol * (s[5] * g[0] + s[4] * g[1] + s[2] * g[2]);
+                if let Some(dc) = &dn_centre {
+                    let mean = s[..S::DIM].iter().sum::<f64>() / S::DIM as f64;
+                    for a in 0..S::DIM {
+                        node.force[a] -= vol * mean * (dc[k][a] - g[a]);
+                    }
+                }
             }
         }
     });
