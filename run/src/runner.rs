@@ -101,7 +101,8 @@ impl<S: Simulation> Runner<S> {
         self.claim_output();
         let path = self.output.dir.join(file);
         if let Some(dir) = path.parent() {
-            granite_core::io::output_folder(&self.output.root, dir)?;
+            granite_core::io::output_folder(&self.output.root, dir)
+                .map_err(|e| GraniteError::Other(format!("cannot write {}: {e}", path.display())))?;
         }
         Ok(path)
     }
