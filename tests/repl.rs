@@ -291,3 +291,38 @@ fn a_line_of_invalid_utf8_is_reported_and_the_session_goes_on() {
     assert!(stderr.contains("not valid UTF-8") && stderr.contains("byte 16"), "{stderr}");
     assert_eq!(done.status.code(), Some(1), "a piped session with a failed input exits 1");
 }
+
+/// README's REPL example says what its simulation holds (`MpmSim(2D, N points, ...)`): the
+/// inputs before that line, evaluated in a session, make a simulation of that many points.
+#[test]
+fn the_readme_repl_example_holds_the_points_it_shows() {
+    let readme = std::fs::read_to_string(crate::common::root().join("README.md")).unwrap();
+    let inputs: Vec<&str> = readme
+        .lines()
+        .filter_map(|l| l.strip_prefix("granite> "))
+        .map(|l| l.split("  //").next().unwrap().trim())
+        .collect();
+    let shown = readme.lines().find(|l| l.contains("// MpmSim(2D, ")).expect("the example's last line");
+    let points: i64 = shown.split("MpmSim(2D, ").nth(1).unwrap().split_whitespace().next().unwrap().parse().unwrap();
+    let mut session = granite_script::repl::ReplSession::new(
+        granite::registry(),
+        granite_script::RunOptions {
+            out_dir: crate::common::out_dir("readme_repl"),
+            quiet: true,
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    // The set-up lines: those before the first run.
+    for input in inputs.iter().take_while(|i| !i.starts_with("sim.run")) {
+        let outcome = session.eval(input, false);
+        assert!(matches!(outcome, granite_script::repl::Outcome::Value(_)), "{input}: {outcome:?}");
+    }
+    match session.eval("sim.points", false) {
+        granite_script::repl::Outcome::Value(v) => {
+            assert_eq!(v, Some(points.to_string()), "README shows {points} points")
+        }
+        other => panic!("{other:?}"),
+    }
+    session.finish();
+}
