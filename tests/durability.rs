@@ -91,17 +91,9 @@ fn whole_rows_allowing_cut_end(path: &Path) -> Vec<f64> {
 }
 
 /// Whether this machine lets a test mount a file system of its own in a private namespace.
-fn can_mount_tmpfs() -> bool {
-    Command::new("unshare")
-        .args(["-rm", "sh", "-c", "d=$(mktemp -d) && mount -t tmpfs -o size=1m none \"$d\""])
-        .stderr(Stdio::null())
-        .status()
-        .is_ok_and(|s| s.success())
-}
-
 #[test]
 fn a_full_disk_fails_the_run_with_the_file_and_step_and_keeps_a_checkpoint_and_whole_rows() {
-    if !can_mount_tmpfs() {
+    if !common::can_mount_tmpfs() {
         println!("skipped: `unshare -rm` with a tmpfs mount is not allowed here (the file-size-limit test covers the same path)");
         return;
     }
@@ -130,12 +122,7 @@ fn a_full_disk_fails_the_run_with_the_file_and_step_and_keeps_a_checkpoint_and_w
     assert_eq!(code.trim(), "1", "{stderr}");
     // The message says which file failed first, at which step, and why.
     assert!(stderr.contains("No space left on device"), "{stderr}");
-    let step: u64 = stderr
-        .split("at step ")
-        .nth(1)
-        .and_then(|s| s.split_whitespace().next())
-        .and_then(|s| s.parse().ok())
-        .unwrap_or_else(|| panic!("no step in {stderr}"));
+    let step = common::stopped_at_step(&stderr);
     assert!(stderr.contains("/out/"), "the file is named: {stderr}");
     let out = kept.join("out").canonicalize().unwrap_or_else(|_| base.join("out"));
     let ck = out.join("ck.json");

@@ -176,33 +176,46 @@ fn a_checkpoint_the_first_process_cannot_write_stops_every_process() {
     assert!(error.contains("half.json") && error.contains("line"), "names the file and the script line: {error}");
 }
 
-/// A process that stops answering (here frozen by SIGSTOP) ends the run on every process once
-/// another has waited `--mpi-timeout` seconds for it, with status failed and the cause named,
-/// instead of leaving them waiting without limit.
-#[test]
-fn a_frozen_process_ends_the_run_on_every_process_after_the_timeout() {
+/// `mpirun -np N granite run spread_column.rhai` stepping without end into `out`, with
+/// `--mpi-timeout timeout_s`; returned once it steps, with the granite processes' ids (their
+/// command lines name the folder, as mpirun's does).
+fn endless_run(np: usize, timeout_s: &str, out: &Path) -> (std::process::Child, Vec<i32>) {
     let rve = rve().to_str().unwrap();
-    let out = out_dir("mpi_frozen");
     let mut cmd = Command::new("mpirun");
     let version = Command::new("mpirun").arg("--version").output().expect("mpirun on the PATH (Open MPI)");
     if String::from_utf8_lossy(&version.stdout).contains("Open MPI") {
         cmd.args(["--allow-run-as-root", "--oversubscribe"]);
         cmd.env("OMPI_MCA_mpi_yield_when_idle", "1");
     }
-    cmd.args(["-np", "2", env!("CARGO_BIN_EXE_granite"), "run"]).arg(test_script("spread_column.rhai"));
-    cmd.args(["--quiet", "--threads", "1", "--mpi-timeout", "3", "--out"]).arg(&out);
+    cmd.args(["-np", &np.to_string(), env!("CARGO_BIN_EXE_granite"), "run"]).arg(test_script("spread_column.rhai"));
+    cmd.args(["--quiet", "--threads", "1", "--mpi-timeout", timeout_s, "--out"]).arg(out);
     cmd.args(["--set", &format!("rve={rve}"), "--set", "steps=1000000"]);
     let child = cmd.stderr(std::process::Stdio::piped()).spawn().expect("running mpirun");
-    // Both processes step once series.csv has rows past its first.
-    common::wait_until_running(&out, std::time::Duration::from_secs(120));
-    // The granite processes of this run: their command lines name its folder (so does mpirun's).
+    // Every process steps once series.csv has rows past its first.
+    common::wait_until_running(out, std::time::Duration::from_secs(120));
     let listed = Command::new("pgrep").args(["-f", &format!("granite run .*{}", out.display())]).output().unwrap();
     let pids: Vec<i32> = String::from_utf8_lossy(&listed.stdout)
         .lines()
         .filter_map(|l| l.trim().parse().ok())
         .filter(|&pid| pid != child.id() as i32)
         .collect();
-    assert_eq!(pids.len(), 2, "{pids:?}");
+    assert_eq!(pids.len(), np, "{pids:?}");
+    (child, pids)
+}
+
+/// Whether process `pid` has ended (a zombie counts as ended).
+fn gone(pid: i32) -> bool {
+    std::fs::read_to_string(format!("/proc/{pid}/stat"))
+        .map_or(true, |s| s.rsplit(')').next().and_then(|r| r.split_whitespace().next()) == Some("Z"))
+}
+
+/// A process that stops answering (here frozen by SIGSTOP) ends the run on every process once
+/// another has waited `--mpi-timeout` seconds for it, with status failed and the cause named,
+/// instead of leaving them waiting without limit.
+#[test]
+fn a_frozen_process_ends_the_run_on_every_process_after_the_timeout() {
+    let out = out_dir("mpi_frozen");
+    let (child, pids) = endless_run(2, "3", &out);
     assert_eq!(unsafe { libc::kill(pids[1], libc::SIGSTOP) }, 0);
     let frozen = std::time::Instant::now();
     let finished = child.wait_with_output().unwrap();
@@ -214,11 +227,7 @@ fn a_frozen_process_ends_the_run_on_every_process_after_the_timeout() {
         serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
     assert_eq!(summary["status"], "failed", "{summary}");
     assert!(summary["error"].as_str().unwrap().contains("stopped answering"), "{summary}");
-    // The launcher ends the frozen one too (a moment after it returns; a zombie counts as gone).
-    let gone = |pid: i32| {
-        std::fs::read_to_string(format!("/proc/{pid}/stat"))
-            .map_or(true, |s| s.rsplit(')').next().and_then(|r| r.split_whitespace().next()) == Some("Z"))
-    };
+    // The launcher ends the frozen one too (a moment after it returns).
     let waited = std::time::Instant::now();
     while !pids.iter().all(|&pid| gone(pid)) {
         assert!(waited.elapsed() < std::time::Duration::from_secs(30), "a process of the run is still there: {pids:?}");
@@ -233,26 +242,8 @@ fn a_frozen_process_ends_the_run_on_every_process_after_the_timeout() {
 /// watch's check of the parent process ends them with launchers that do not.)
 #[test]
 fn no_process_outlives_a_launcher_that_returned() {
-    let rve = rve().to_str().unwrap();
     let out = out_dir("mpi_orphans");
-    let mut cmd = Command::new("mpirun");
-    let version = Command::new("mpirun").arg("--version").output().expect("mpirun on the PATH (Open MPI)");
-    if String::from_utf8_lossy(&version.stdout).contains("Open MPI") {
-        cmd.args(["--allow-run-as-root", "--oversubscribe"]);
-        cmd.env("OMPI_MCA_mpi_yield_when_idle", "1");
-    }
-    cmd.args(["-np", "3", env!("CARGO_BIN_EXE_granite"), "run"]).arg(test_script("spread_column.rhai"));
-    cmd.args(["--quiet", "--threads", "1", "--mpi-timeout", "600", "--out"]).arg(&out);
-    cmd.args(["--set", &format!("rve={rve}"), "--set", "steps=1000000"]);
-    let child = cmd.stderr(std::process::Stdio::piped()).spawn().expect("running mpirun");
-    common::wait_until_running(&out, std::time::Duration::from_secs(120));
-    let listed = Command::new("pgrep").args(["-f", &format!("granite run .*{}", out.display())]).output().unwrap();
-    let pids: Vec<i32> = String::from_utf8_lossy(&listed.stdout)
-        .lines()
-        .filter_map(|l| l.trim().parse().ok())
-        .filter(|&pid| pid != child.id() as i32)
-        .collect();
-    assert_eq!(pids.len(), 3, "{pids:?}");
+    let (child, pids) = endless_run(3, "600", &out);
     assert_eq!(unsafe { libc::kill(pids[2], libc::SIGSTOP) }, 0);
     std::thread::sleep(std::time::Duration::from_millis(500));
     assert_eq!(unsafe { libc::kill(child.id() as i32, libc::SIGKILL) }, 0);
@@ -260,10 +251,6 @@ fn no_process_outlives_a_launcher_that_returned() {
     let returned = std::time::Instant::now();
     // The frozen one runs again: it finds its launcher gone too.
     unsafe { libc::kill(pids[2], libc::SIGCONT) };
-    let gone = |pid: i32| {
-        std::fs::read_to_string(format!("/proc/{pid}/stat"))
-            .map_or(true, |s| s.rsplit(')').next().and_then(|r| r.split_whitespace().next()) == Some("Z"))
-    };
     while !pids.iter().all(|&pid| gone(pid)) {
         assert!(
             returned.elapsed() < std::time::Duration::from_secs(15),

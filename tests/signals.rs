@@ -55,12 +55,7 @@ fn sigint_and_sigterm_stop_the_run_cleanly_and_it_resumes_from_its_checkpoint() 
         assert_eq!(summary["signal"], name);
         assert_eq!(json(&out.join("provenance.json"))["status"], "interrupted");
         // The line on stderr says where it stopped and how to resume.
-        let step: u64 = stderr
-            .split("at step ")
-            .nth(1)
-            .and_then(|s| s.split_whitespace().next())
-            .and_then(|s| s.parse().ok())
-            .unwrap_or_else(|| panic!("{name}: no step in {stderr}"));
+        let step = common::stopped_at_step(&stderr);
         assert!(stderr.contains("checkpoint") && stderr.contains("mpm_load"), "{stderr}");
         // The series ends on that step, and the checkpoint holds it.
         let (header, rows) = common::read_csv(&out.join("series.csv"));
@@ -172,12 +167,7 @@ fn a_signal_in_a_callback_a_series_column_or_between_runs_still_writes_the_check
         let (exit, stderr) = finish(child);
         assert_eq!(exit, 143, "{name}: {stderr}");
         assert_eq!(json(&out.join("summary.json"))["status"], "interrupted");
-        let step: u64 = stderr
-            .split("at step ")
-            .nth(1)
-            .and_then(|s| s.split_whitespace().next())
-            .and_then(|s| s.parse().ok())
-            .unwrap_or_else(|| panic!("{name}: no step in {stderr}"));
+        let step = common::stopped_at_step(&stderr);
         assert!(stderr.contains("checkpoint") && stderr.contains("mpm_load"), "{name}: {stderr}");
         let (header, rows) = common::read_csv(&out.join("series.csv"));
         assert_eq!(rows.last().unwrap()[common::column(&header, "step")], step as f64, "{name}");

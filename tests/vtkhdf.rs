@@ -163,16 +163,6 @@ fn a_run_killed_while_writing_frames_resumes_its_file_whole() {
     }
 }
 
-/// Whether this machine lets a test mount a tmpfs of its own (`unshare -rm`).
-#[cfg(unix)]
-fn can_mount_tmpfs() -> bool {
-    Command::new("unshare")
-        .args(["-rm", "sh", "-c", "d=$(mktemp -d) && mount -t tmpfs -o size=1m none \"$d\""])
-        .stderr(std::process::Stdio::null())
-        .status()
-        .is_ok_and(|s| s.success())
-}
-
 /// A disk that fills up while frames go into the VTKHDF file (a 2 MB tmpfs, a frame of 400
 /// points every step): the run stops at the step whose frame could not be written, naming the
 /// file and the cause, and every frame the file lists reads back equal to a run's on a disk with
@@ -181,7 +171,7 @@ fn can_mount_tmpfs() -> bool {
 #[cfg(unix)]
 #[test]
 fn a_full_disk_stops_the_run_at_the_first_lost_vtkhdf_frame_with_every_listed_frame_whole() {
-    if !can_mount_tmpfs() {
+    if !common::can_mount_tmpfs() {
         println!("skipped: `unshare -rm` with a tmpfs mount is not allowed here");
         return;
     }
@@ -210,12 +200,7 @@ fn a_full_disk_stops_the_run_at_the_first_lost_vtkhdf_frame_with_every_listed_fr
     let stderr = std::fs::read_to_string(base.join("stderr.txt")).unwrap();
     assert_eq!(code.trim(), "1", "{stderr}");
     assert!(stderr.contains("run.vtkhdf") && stderr.contains("No space left on device"), "{stderr}");
-    let step: u64 = stderr
-        .split("at step ")
-        .nth(1)
-        .and_then(|s| s.split_whitespace().next())
-        .and_then(|s| s.parse().ok())
-        .unwrap_or_else(|| panic!("no step in {stderr}"));
+    let step = common::stopped_at_step(&stderr);
     assert!(step > 5, "the disk held a few frames: {stderr}");
     // Frames of steps 0 to step - 1 are listed, and hold what a run with room writes.
     let straight = common::out_dir("vtkhdf_disk_full_straight");

@@ -252,3 +252,25 @@ EXTRA
 sim.run_steps(steps);
 summary("end_step", sim.step);
 "#;
+
+/// The step a run stopped at, from its message on stderr (`... at step N ...`).
+#[allow(dead_code)]
+pub fn stopped_at_step(stderr: &str) -> u64 {
+    stderr
+        .split("at step ")
+        .nth(1)
+        .and_then(|s| s.split_whitespace().next())
+        .and_then(|s| s.parse().ok())
+        .unwrap_or_else(|| panic!("no step in {stderr}"))
+}
+
+/// Whether this machine lets a test mount a tmpfs of its own (`unshare -rm`): the disk-full tests
+/// need one.
+#[allow(dead_code)]
+pub fn can_mount_tmpfs() -> bool {
+    std::process::Command::new("unshare")
+        .args(["-rm", "sh", "-c", "d=$(mktemp -d) && mount -t tmpfs -o size=1m none \"$d\""])
+        .stderr(std::process::Stdio::null())
+        .status()
+        .is_ok_and(|s| s.success())
+}
