@@ -372,14 +372,22 @@ impl Handle<MpmScene> {
         let mut st = self.lock();
         let axis = axis_index(axis, st.sim.mpm.dim())?;
         st.sim.mpm.boundary.velocity.push(VelocityConstraint { nodes, axis, value: f });
-        let idx = st.sim.mpm.boundary.velocity.len() - 1;
-        if let Some(fp) = driver {
-            st.sim.driven.push(Driven::Velocity(idx));
-            let target = st.sim.driven.len() - 1;
-            drop(st);
-            self.drive(target, fp);
-        }
+        let target = Driven::Velocity(st.sim.mpm.boundary.velocity.len() - 1);
+        drop(st);
+        self.drive_by(target, driver);
         Ok(())
+    }
+
+    /// Has the script function `driver`, if any, set boundary value `target` once per step.
+    fn drive_by(&self, target: Driven, driver: Option<FnPtr>) {
+        if let Some(fp) = driver {
+            let index = {
+                let mut st = self.lock();
+                st.sim.driven.push(target);
+                st.sim.driven.len() - 1
+            };
+            self.drive(index, fp);
+        }
     }
 
     fn friction(&mut self, face: &str, mu: Dynamic) -> RhaiResult<()> {
@@ -398,13 +406,9 @@ impl Handle<MpmScene> {
         let (f, driver) = time_function(&factor, "factor")?;
         let mut st = self.lock();
         st.sim.mpm.boundary.forces.push(NodalForce { nodes, force, factor: f });
-        let idx = st.sim.mpm.boundary.forces.len() - 1;
-        if let Some(fp) = driver {
-            st.sim.driven.push(Driven::Force(idx));
-            let target = st.sim.driven.len() - 1;
-            drop(st);
-            self.drive(target, fp);
-        }
+        let target = Driven::Force(st.sim.mpm.boundary.forces.len() - 1);
+        drop(st);
+        self.drive_by(target, driver);
         Ok(())
     }
 
@@ -418,13 +422,9 @@ impl Handle<MpmScene> {
         load.factor = f;
         let mut st = self.lock();
         st.sim.mpm.boundary.point_loads.push(load);
-        let idx = st.sim.mpm.boundary.point_loads.len() - 1;
-        if let Some(fp) = driver {
-            st.sim.driven.push(Driven::PointLoad(idx));
-            let target = st.sim.driven.len() - 1;
-            drop(st);
-            self.drive(target, fp);
-        }
+        let target = Driven::PointLoad(st.sim.mpm.boundary.point_loads.len() - 1);
+        drop(st);
+        self.drive_by(target, driver);
         Ok(())
     }
 
