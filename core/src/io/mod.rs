@@ -16,9 +16,10 @@ pub use vtk::VtkWriter;
 use crate::error::{GraniteError, Result};
 use std::path::Path;
 
-/// The bytes of an input file (a checkpoint, a mesh). Only a regular file is read: a FIFO would
-/// block the run before any stop request could be seen, a device such as `/dev/urandom` would be
-/// read until memory runs out.
+/// The bytes of an input file (a checkpoint, a mesh). Only a regular file is read, and one that
+/// fits in memory: a FIFO would block the run before any stop request could be seen, a device
+/// such as `/dev/urandom` would be read until memory runs out, and a regular file is read at the
+/// disk's speed, so that a stop request is seen soon after.
 pub fn read_input(path: &Path) -> Result<Vec<u8>> {
     let meta = std::fs::metadata(path).map_err(|e| GraniteError::io(path, e))?;
     if !meta.is_file() {
@@ -28,6 +29,14 @@ pub fn read_input(path: &Path) -> Result<Vec<u8>> {
             file_kind(&meta.file_type())
         )));
     }
+    // Read whole and then parsed: refused up front when it could not fit in memory twice.
+    crate::memory::check(
+        &format!("reading {}", path.display()),
+        meta.len() as f64,
+        "bytes",
+        2.0,
+        "is it the file you meant?",
+    )?;
     std::fs::read(path).map_err(|e| GraniteError::io(path, e))
 }
 
