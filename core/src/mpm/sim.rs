@@ -255,6 +255,8 @@ pub struct MpmSim {
     pub mesh_replaced: bool,
     /// Nodal loads already said to have lost material under some of their nodes.
     pub(crate) unloaded_said: Vec<usize>,
+    /// Points faster than their material's waves were said to be flung.
+    pub(crate) flung_said: bool,
 }
 
 impl MpmSim {
@@ -285,6 +287,7 @@ impl MpmSim {
             balance_every: crate::mpm::spread::DEFAULT_BALANCE_EVERY,
             mesh_replaced: false,
             unloaded_said: Vec::new(),
+            flung_said: false,
         }
     }
 

@@ -119,7 +119,42 @@ impl MpmSim {
         }
         self.check_stable()?;
         self.say_unloaded_nodes();
+        self.say_flung_points();
         self.handle_out_of_mesh()
+    }
+
+    /// No part of a solid body outruns the P waves of its own material: points that move faster
+    /// than their material's wave speed have been flung (a load on nodes that lost their
+    /// material, a time step too large, a law gone wrong), however the run goes on. Said once.
+    fn say_flung_points(&mut self) {
+        if self.flung_said {
+            return;
+        }
+        let speeds: Vec<Option<f64>> = self.materials.iter().map(|m| m.law.wave_speed(m.density)).collect();
+        let p = &self.points;
+        let (count, fastest) = (0..p.len())
+            .into_par_iter()
+            .with_min_len(MIN_PER_TASK)
+            .filter_map(|i| {
+                let c = speeds[p.material[i] as usize]?;
+                let v = p.v[i].iter().map(|x| x * x).sum::<f64>().sqrt();
+                (v > c).then_some((1usize, (v, i, c)))
+            })
+            .reduce(
+                || (0, (0.0, 0, 0.0)),
+                |a, b| (a.0 + b.0, if b.1 .0 > a.1 .0 || (b.1 .0 == a.1 .0 && b.1 .1 < a.1 .1) { b.1 } else { a.1 }),
+            );
+        if count == 0 {
+            return;
+        }
+        self.flung_said = true;
+        let (v, i, c) = fastest;
+        self.events.push(format!(
+            "step {} (t = {:.6e} s): {count} material point(s) move faster than their material's P-wave speed, \
+             point {} at {v:.4e} m/s against {c:.4e} m/s: they are flung, not flowing (a load on grid nodes that \
+             lost their material, a time step too large, a law out of its range); said once",
+            self.step, self.time, p.id[i]
+        ));
     }
 
     /// A nodal load (a traction on a face or a mesh group) acts on nodes fixed in space: once the
