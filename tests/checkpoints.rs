@@ -156,7 +156,9 @@ fn crafted(path: &Path, name: &str, edit: impl FnOnce(&mut serde_json::Value)) -
 fn crafted_checkpoints_with_a_valid_checksum_are_refused_naming_the_value() {
     let mpm = run("ckpt_crafted_mpm", MPM_RUN).unwrap().join("state.json");
     let dem = run("ckpt_crafted_dem", DEM_RUN).unwrap().join("state.json");
-    let cases: [(&Path, &str, &str, Box<dyn FnOnce(&mut serde_json::Value)>, &[&str]); 3] = [
+    // The file, how to load it, the crafted file's name, the edit, and what the refusal says.
+    type Case<'a> = (&'a Path, &'a str, &'a str, Box<dyn FnOnce(&mut serde_json::Value)>, &'a [&'a str]);
+    let cases: [Case; 3] = [
         (&mpm, "mpm_load", "late.json", Box::new(|s| s["time"] = 1e308.into()), &["time 1e308", "leaves it unchanged"]),
         (
             &mpm,
