@@ -364,7 +364,8 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
                  RVE: `granite run scripts/mpmxdem/prepare_rve.rhai` writes out/prepare_rve/rve.json)"
             )))
         })?;
-        let (dem, read, fallback) = DemSim::load_newest(&path, &*c.registry()).or_rhai()?;
+        let stop = || c.stop_requested().is_some();
+        let (dem, read, fallback) = DemSim::load_newest_until(&path, &*c.registry(), &stop).or_rhai()?;
         c.record_load(&read, dem.world.step, fallback);
         Ok::<_, Box<rhai::EvalAltResult>>(Handle::new(DemScene::new(dem, false), c.clone()))
     });

@@ -559,7 +559,8 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
         let path = c
             .input_path(file)
             .map_err(|why| super::convert::to_rhai(GraniteError::Setup(format!("mpm_load: {why}"))))?;
-        let (mut mpm, read, fallback) = MpmSim::load_newest(&path, &c.registry()).or_rhai()?;
+        let stop = || c.stop_requested().is_some();
+        let (mut mpm, read, fallback) = MpmSim::load_newest_until(&path, &c.registry(), &stop).or_rhai()?;
         c.record_load(&read, mpm.step, fallback);
         if let Some(comm) = &c.options.comm {
             mpm.set_communicator(comm.clone());

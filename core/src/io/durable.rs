@@ -108,13 +108,14 @@ fn sync_folder(path: &Path) {
 
 /// The text of the checkpoint at `path`, or of the one before it when `path` is missing or fails
 /// `check` (cut, damaged); the path read, and what was wrong with the newer file if the older one
-/// was taken. Both failing is an error naming both.
+/// was taken. Both failing is an error naming both. Reading gives up once `stop()` says so.
 pub fn read_newest(
     path: &Path,
     check: impl Fn(&Path, &str) -> Result<()>,
+    stop: &dyn Fn() -> bool,
 ) -> Result<(PathBuf, String, Option<String>)> {
     let read = |p: &Path| -> Result<String> {
-        let text = super::read_input_text(p)?;
+        let text = super::read_input_text_until(p, stop)?;
         check(p, &text)?;
         Ok(text)
     };
@@ -171,14 +172,14 @@ mod tests {
                 Err(GraniteError::Other(format!("{} is cut", p.display())))
             }
         };
-        let (read, text, note) = read_newest(&ck, whole).unwrap();
+        let (read, text, note) = read_newest(&ck, whole, &|| false).unwrap();
         assert_eq!((read, text.as_str(), note), (ck.clone(), "third", None));
         std::fs::write(&ck, "").unwrap();
-        let (read, text, note) = read_newest(&ck, whole).unwrap();
+        let (read, text, note) = read_newest(&ck, whole, &|| false).unwrap();
         assert_eq!((read, text.as_str()), (previous_path(&ck), "second"));
         assert!(note.unwrap().contains("ck.json is cut"));
         std::fs::write(previous_path(&ck), "").unwrap();
-        let e = read_newest(&ck, whole).unwrap_err().to_string();
+        let e = read_newest(&ck, whole, &|| false).unwrap_err().to_string();
         assert!(e.contains("ck.json is cut") && e.contains("ck.prev.json is cut"), "{e}");
         let names: Vec<String> =
             std::fs::read_dir(&dir).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().to_string()).collect();

@@ -21,6 +21,15 @@ use std::path::Path;
 /// such as `/dev/urandom` would be read until memory runs out, and a regular file is read at the
 /// disk's speed, so that a stop request is seen soon after.
 pub fn read_input(path: &Path) -> Result<Vec<u8>> {
+    read_input_until(path, &|| false)
+}
+
+/// Bytes read between two looks at the stop request: a second or less on a slow disk.
+const READ_PIECE: usize = 16 << 20;
+
+/// [`read_input`] that gives up between two pieces of the file once `stop()` says so (a signal
+/// asking the run to stop while a checkpoint of gigabytes is read).
+pub fn read_input_until(path: &Path, stop: &dyn Fn() -> bool) -> Result<Vec<u8>> {
     let meta = std::fs::metadata(path).map_err(|e| GraniteError::io(path, e))?;
     if !meta.is_file() {
         return Err(GraniteError::Setup(format!(
@@ -37,12 +46,34 @@ pub fn read_input(path: &Path) -> Result<Vec<u8>> {
         2.0,
         "is it the file you meant?",
     )?;
-    std::fs::read(path).map_err(|e| GraniteError::io(path, e))
+    use std::io::Read;
+    let mut file = std::fs::File::open(path).map_err(|e| GraniteError::io(path, e))?;
+    let mut bytes = Vec::with_capacity(meta.len() as usize);
+    loop {
+        if stop() {
+            return Err(GraniteError::Other(format!(
+                "stopped while reading {} ({} of {} bytes read)",
+                path.display(),
+                bytes.len(),
+                meta.len()
+            )));
+        }
+        let read =
+            (&mut file).take(READ_PIECE as u64).read_to_end(&mut bytes).map_err(|e| GraniteError::io(path, e))?;
+        if read == 0 {
+            return Ok(bytes);
+        }
+    }
 }
 
 /// [`read_input`] of a text file.
 pub fn read_input_text(path: &Path) -> Result<String> {
-    String::from_utf8(read_input(path)?)
+    read_input_text_until(path, &|| false)
+}
+
+/// [`read_input_until`] of a text file.
+pub fn read_input_text_until(path: &Path, stop: &dyn Fn() -> bool) -> Result<String> {
+    String::from_utf8(read_input_until(path, stop)?)
         .map_err(|_| GraniteError::Setup(format!("{} is not a text file (it is not valid UTF-8)", path.display())))
 }
 
@@ -147,6 +178,17 @@ mod tests {
         let plain = dir.join("plain.json");
         std::fs::write(&plain, "{}").unwrap();
         assert_eq!(read_input_text(&plain).unwrap(), "{}");
+        // A file of more than a piece, read whole, or given up between pieces once asked to stop.
+        let big = dir.join("big.json");
+        std::fs::write(&big, vec![b' '; READ_PIECE + 10]).unwrap();
+        assert_eq!(read_input(&big).unwrap().len(), READ_PIECE + 10);
+        let looks = std::cell::Cell::new(0);
+        let stop_after_one = || {
+            looks.set(looks.get() + 1);
+            looks.get() > 1
+        };
+        let e = read_input_until(&big, &stop_after_one).unwrap_err().to_string();
+        assert!(e.contains("stopped while reading") && e.contains(&format!("{READ_PIECE} of")), "{e}");
         let _ = std::fs::remove_dir_all(&dir);
     }
 }

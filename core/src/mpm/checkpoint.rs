@@ -135,9 +135,18 @@ impl MpmSim {
     /// (`ck.prev.json`) when `path` is missing, cut or damaged; then also why the older one was
     /// taken, and the file read.
     pub fn load_newest(path: &Path, registry: &Registry) -> Result<(MpmSim, PathBuf, Option<String>)> {
+        Self::load_newest_until(path, registry, &|| false)
+    }
+
+    /// [`MpmSim::load_newest`] that gives up reading once `stop()` says so.
+    pub fn load_newest_until(
+        path: &Path,
+        registry: &Registry,
+        stop: &dyn Fn() -> bool,
+    ) -> Result<(MpmSim, PathBuf, Option<String>)> {
         let whole =
             |p: &Path, text: &str| crate::io::checkpoint_file::open(p, text, FORMAT, VERSION, OLDEST).map(|_| ());
-        let (read, text, note) = crate::io::durable::read_newest(path, whole)?;
+        let (read, text, note) = crate::io::durable::read_newest(path, whole, stop)?;
         Ok((Self::from_checkpoint_text(&read, &text, registry)?, read, note))
     }
 
