@@ -148,3 +148,45 @@ fn a_point_load_resumes_from_a_checkpoint_bit_for_bit() {
     let read = |d: &std::path::Path| std::fs::read_to_string(d.join("end.csv")).unwrap();
     assert_eq!(read(&straight), read(&dir));
 }
+
+/// In 3D, on a surface group of triangles: a wedge of tetrahedra pushed through the points over
+/// its unit-square base gains momentum at traction × area, and a pressure on that base pushes it
+/// up (along the inward normal) at pressure × area, to rounding.
+#[test]
+fn a_point_traction_and_a_pressure_on_a_surface_group_push_with_their_area() {
+    let (t, pressure) = ([300.0, -200.0, 1000.0], 500.0);
+    let source = format!(
+        r#"
+        let file = load_mesh("{}");
+        for load in ["traction", "pressure"] {{
+            let sim = mpm(#{{ dim: 3, origin: [0.0, 0.0, 0.0], cell: 0.1, cells: [10, 10, 6] }});
+            let soil = sim.material("linear_elastic", #{{ density: 2000.0, young: 5e7, poisson: 0.3 }});
+            sim.fill_mesh(soil, file, "block", #{{ per_cell: 2 }});
+            if load == "traction" {{ sim.point_traction(file, "bottom", [{}, {}, {}]); }}
+            else {{ sim.point_pressure(file, "bottom", {pressure}); }}
+            sim.dt(0.2 * sim.critical_dt());
+            sim.run_steps(5);
+            let d = sim.diagnostics();
+            summary(`${{load}}_p`, [d.momentum_x, d.momentum_y, d.momentum_z]);
+            summary(`${{load}}_time`, sim.time);
+        }}
+        summary("area", file.measure("bottom"));
+        "#,
+        mesh("wedge_block.msh"),
+        t[0],
+        t[1],
+        t[2]
+    );
+    let out = common::run_text("point_traction_3d", &source);
+    let s = summary(&out);
+    let area = s["area"].as_f64().unwrap();
+    assert!((area - 1.0).abs() < 1e-12);
+    let momentum = |k: &str| -> Vec<f64> { s[k].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect() };
+    let impulse = area * s["traction_time"].as_f64().unwrap();
+    for (a, p) in momentum("traction_p").iter().enumerate() {
+        assert!((p - t[a] * impulse).abs() <= 1e-9 * 1000.0 * impulse, "axis {a}: {p} against {}", t[a] * impulse);
+    }
+    let up = pressure * area * s["pressure_time"].as_f64().unwrap();
+    let p = momentum("pressure_p");
+    assert!((p[2] - up).abs() <= 1e-9 * up && p[0].abs() <= 1e-9 * up && p[1].abs() <= 1e-9 * up, "{p:?} against {up}");
+}
