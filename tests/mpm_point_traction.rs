@@ -190,3 +190,18 @@ fn a_point_traction_and_a_pressure_on_a_surface_group_push_with_their_area() {
     let p = momentum("pressure_p");
     assert!((p[2] - up).abs() <= 1e-9 * up && p[0].abs() <= 1e-9 * up && p[1].abs() <= 1e-9 * up, "{p:?} against {up}");
 }
+
+/// A strip footing loaded through the points under it (scripts/mpm/strip_footing.rhai) on a
+/// weightless Tresca soil: Prandtl's collapse load `(2 + π) c` bounds what it carries. At 0.95 of
+/// it the footing settles to rest; at 1.15 of it the soil flows and the footing keeps sinking
+/// (0.1 m cells under a 1 m footing: the collapse load of the discretisation lies between).
+#[test]
+fn a_strip_footing_carries_up_to_prandtl_s_load() {
+    let below = common::run("mpm/strip_footing.rhai", "footing_below", &[("q_factor", "0.95")], 2).unwrap();
+    let above = common::run("mpm/strip_footing.rhai", "footing_above", &[("q_factor", "1.15")], 2).unwrap();
+    let rate = |r: &granite_script::RunReport| common::summary_f64(r, "settling_rate");
+    let settled = common::summary_f64(&below, "settlement");
+    assert!(rate(&below).abs() < 1e-5 && settled > 0.0 && settled < 0.05, "0.95 q_u: {settled} m, {} m/s", rate(&below));
+    assert!(rate(&above) > 1e-3, "1.15 q_u: still {} m/s", rate(&above));
+    assert!(common::summary_f64(&above, "settlement") > 2.0 * settled);
+}
