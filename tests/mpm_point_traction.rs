@@ -201,7 +201,11 @@ fn a_strip_footing_carries_up_to_prandtl_s_load() {
     let above = common::run("mpm/strip_footing.rhai", "footing_above", &[("q_factor", "1.15")], 2).unwrap();
     let rate = |r: &granite_script::RunReport| common::summary_f64(r, "settling_rate");
     let settled = common::summary_f64(&below, "settlement");
-    assert!(rate(&below).abs() < 1e-5 && settled > 0.0 && settled < 0.05, "0.95 q_u: {settled} m, {} m/s", rate(&below));
+    assert!(
+        rate(&below).abs() < 1e-5 && settled > 0.0 && settled < 0.05,
+        "0.95 q_u: {settled} m, {} m/s",
+        rate(&below)
+    );
     assert!(rate(&above) > 1e-3, "1.15 q_u: still {} m/s", rate(&above));
     assert!(common::summary_f64(&above, "settlement") > 2.0 * settled);
 }
