@@ -257,3 +257,52 @@ summary("sphere_vx", sim.body(ball).velocity[0]);
     assert!(get("sphere_x") > get("blade_x") + 0.019, "sphere at {}, blade at {}", get("sphere_x"), get("blade_x"));
     assert!(get("sphere_vx") > 0.5, "sphere at {} m/s", get("sphere_vx"));
 }
+
+/// A change of contact parameters reaches the bodies' contacts: a capsule and a sphere sliding
+/// at 1 m/s on a frictionless plane start to roll once friction is set, the sphere at 5/7 of
+/// its speed and the capsule (lying across its motion) at `v0 / (1 + I_axis / (m r²))`. A switch
+/// to another law with bodies in contact then runs on (it stopped the run with a panic before).
+#[test]
+fn a_contact_change_reaches_capsules_and_a_law_switch_runs_on() {
+    let (radius, length, rho) = (0.01f64, 0.04f64, 1000.0f64);
+    let source = format!(
+        r#"
+        let sim = dem();
+        let m = sim.material(#{{ density: {rho} }});
+        sim.contact_law("linear", #{{ kn: 1e6, kt_ratio: 0.5, friction: 0.0 }});
+        sim.wall_plane(m, [0.0, 0.0, 0.0], [0.0, 0.0, 1.0]);
+        let cap = sim.capsule(m, [0.0, 0.0, 0.00999], #{{ radius: {radius}, length: {length}, axis: [0.0, 1.0, 0.0] }});
+        let sp = sim.sphere(m, [0.0, 0.2, 0.00999], {radius});
+        sim.body_velocity(cap, [1.0, 0.0, 0.0]);
+        sim.set_body(sp, #{{ velocity: [1.0, 0.0, 0.0] }});
+        sim.gravity([0.0, 0.0, -9.81]);
+        sim.dt(0.2 * sim.critical_dt());
+        sim.run_until(0.05);
+        summary("sliding", sim.body_state(cap).velocity[0]);
+        sim.set_contact_params(#{{ friction: 45.0 }});
+        sim.run_until(0.5);
+        summary("capsule_v", sim.body_state(cap).velocity[0]);
+        summary("capsule_spin", sim.body_state(cap).spin[1]);
+        summary("sphere_v", sim.body(sp).velocity[0]);
+        sim.contact_law("visco_elastic", #{{ kn: 1e5, kt_ratio: 0.5, friction: 30.0, restitution: 0.5 }});
+        sim.run_steps(100);
+        summary("after_switch", sim.body_state(cap).velocity[0]);
+        "#
+    );
+    let out = common::run_text("capsule_contact_change", &source);
+    let s: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    let get = |k: &str| s[k].as_f64().unwrap();
+    assert!((get("sliding") - 1.0).abs() < 1e-9, "frictionless: it slides at {}", get("sliding"));
+    // A cylinder of the length and two half-spheres: I_axis = m_c r²/2 + 2 m_s r²/5.
+    let (m_cyl, m_sph) = (
+        rho * std::f64::consts::PI * radius * radius * length,
+        rho * 4.0 / 3.0 * std::f64::consts::PI * radius.powi(3),
+    );
+    let ratio = (0.5 * m_cyl + 0.4 * m_sph) / (m_cyl + m_sph);
+    let rolling = 1.0 / (1.0 + ratio);
+    assert!((get("capsule_v") - rolling).abs() < 0.005 * rolling, "capsule at {}, rolling {rolling}", get("capsule_v"));
+    assert!((get("capsule_spin") * radius - get("capsule_v")).abs() < 0.005 * rolling, "rolls without slip: {s}");
+    assert!((get("sphere_v") - 5.0 / 7.0).abs() < 0.005, "sphere at {}", get("sphere_v"));
+    assert!(get("after_switch").is_finite());
+}

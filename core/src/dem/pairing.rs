@@ -84,6 +84,20 @@ impl DemWorld {
         }
         [self.pairs, self.wall_pairs] = lists;
         // The spare list is storage for the next rebuild: its layout is set there.
+        // The contacts of bodies of plugin kinds are found again at the next step with the laws as
+        // they are now (their law history and the geometry's warm starts start afresh): a list
+        // kept would hold the values of laws that are gone.
+        if !self.kinds.is_empty() && self.kinds_hold_pairs() {
+            self.kinds.pairs = Default::default();
+            self.kinds.wall_pairs = Default::default();
+            self.kinds.sphere_pairs = Default::default();
+            self.needs_rebuild = true;
+        }
+    }
+
+    /// Whether bodies of plugin kinds hold contacts of any kind.
+    fn kinds_hold_pairs(&self) -> bool {
+        !(self.kinds.pairs.is_empty() && self.kinds.wall_pairs.is_empty() && self.kinds.sphere_pairs.is_empty())
     }
 
     /// The law of a pair of materials: its own, else the default one.
