@@ -246,8 +246,7 @@ summary("sphere_x", sim.body(ball).position[0]);
 summary("sphere_vx", sim.body(ball).velocity[0]);
 "#,
     );
-    let summary: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    let summary: serde_json::Value = common::summary_of(&out);
     let get = |k: &str| summary[k].as_f64().unwrap();
     // The blade moved at its own velocity (sums of steps: to rounding), spinning as told.
     assert!((get("blade_x") - 0.5 * get("time")).abs() < 1e-12, "blade at {}", get("blade_x"));
@@ -290,8 +289,7 @@ fn a_contact_change_reaches_capsules_and_a_law_switch_runs_on() {
         "#
     );
     let out = common::run_text("capsule_contact_change", &source);
-    let s: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    let s: serde_json::Value = common::summary_of(&out);
     let get = |k: &str| s[k].as_f64().unwrap();
     assert!((get("sliding") - 1.0).abs() < 1e-9, "frictionless: it slides at {}", get("sliding"));
     // A cylinder of the length and two half-spheres: I_axis = m_c r²/2 + 2 m_s r²/5.

@@ -192,8 +192,7 @@ fn crafted_checkpoints_with_a_valid_checksum_are_refused_naming_the_value() {
         moved.to_str().unwrap()
     );
     let dir = run("ckpt_crafted_moved", &source).unwrap();
-    let summary: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(dir.join("summary.json")).unwrap()).unwrap();
+    let summary: serde_json::Value = common::summary_of(&dir);
     // Five steps of a sphere settling under gravity move it by far less than a millimetre.
     assert!((summary["x"].as_f64().unwrap() - (x0 + 0.015)).abs() < 1e-3, "{summary}");
 }

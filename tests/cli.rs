@@ -31,8 +31,7 @@ fn run_writes_the_output_contract() {
         common::column(&header, col);
     }
     assert!(rows.len() > 10);
-    let summary: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(dir.join("summary.json")).unwrap()).unwrap();
+    let summary: serde_json::Value = common::summary_of(&dir);
     assert_eq!(summary["status"], "ok");
     let pvd = std::fs::read_to_string(dir.join("vtk/points.pvd")).unwrap();
     assert!(pvd.contains("points_000000.vtu"));
@@ -444,8 +443,7 @@ fn the_end_of_a_run_prints_short_values() {
     assert!(stdout.contains("  contacts = 1\n"), "{stdout}");
     assert!(stdout.contains("  ratio = 1.175\n"), "{stdout}");
     assert!(stdout.contains("  times = [0, 0.5, 1, ..., 599.5] (1200 values)\n"), "{stdout}");
-    let summary: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(dir.join("summary.json")).unwrap()).unwrap();
+    let summary: serde_json::Value = common::summary_of(&dir);
     assert_eq!(summary["times"].as_array().unwrap().len(), 1200);
     assert_eq!(summary["ratio"], 1.1749999999999998);
     assert!(summary["contacts"].is_i64());

@@ -23,10 +23,6 @@ fn write_stl(path: &std::path::Path, triangles: &[Triangle]) {
     std::fs::write(path, s).unwrap();
 }
 
-fn summary(out: &std::path::Path) -> serde_json::Value {
-    serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap()
-}
-
 #[test]
 fn a_sphere_rolls_down_two_triangles_across_their_seam_as_down_their_plane() {
     // An incline at 20 degrees: two triangles sharing the seam y = 0 along the slope, which
@@ -69,7 +65,7 @@ fn a_sphere_rolls_down_two_triangles_across_their_seam_as_down_their_plane() {
         "#,
         stl = stl.display()
     );
-    let s = summary(&run_text("mesh_wall_incline", &source));
+    let s = common::summary_of(&run_text("mesh_wall_incline", &source));
     let get = |k: &str| s[k].as_f64().unwrap();
     for axis in ["x", "y", "z"] {
         let (p, m) = (get(&format!("plane_{axis}")), get(&format!("mesh_{axis}")));
@@ -126,7 +122,7 @@ fn a_shaken_closed_box_of_triangles_holds_its_spheres() {
         "#,
         stl = stl.display()
     );
-    let s = summary(&run_text("mesh_wall_box", &source));
+    let s = common::summary_of(&run_text("mesh_wall_box", &source));
     assert_eq!(s["walls"].as_i64(), Some(12));
     assert_eq!(s["spheres"].as_i64(), Some(300), "spheres were lost");
     // Every centre within the box (relative to its first corner, which moved with it), at
@@ -165,7 +161,7 @@ fn a_wall_mesh_from_a_gmsh_surface_is_refused_without_its_group_and_placed_with_
             "#
         ),
     );
-    let s = summary(&out);
+    let s = common::summary_of(&out);
     let fz = s["force"][2].as_f64().unwrap();
     let weight = s["weight"].as_f64().unwrap();
     // At rest the surface carries the sphere's weight.
@@ -210,7 +206,7 @@ fn a_ball_rolling_on_a_turntable_of_triangles_circles_at_two_sevenths_of_its_rat
         "#,
         stl = stl.display()
     );
-    let s = summary(&run_text("mesh_wall_turntable", &source));
+    let s = common::summary_of(&run_text("mesh_wall_turntable", &source));
     let series = |k: &str| s[k].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect::<Vec<_>>();
     let (t, vx, vy) = (series("t"), series("vx"), series("vy"));
     // The velocity turns with the ball's orbit: unwrap its angle and fit the rate.

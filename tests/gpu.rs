@@ -395,8 +395,7 @@ fn a_gpu_run_over_two_processes_writes_the_bytes_of_one() {
     for file in ["series.csv", "half.json", "rve_point5.vtu"] {
         assert!(std::fs::read(one.join(file)).unwrap() == std::fs::read(two.join(file)).unwrap(), "{file} differs");
     }
-    let summary: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(two.join("summary.json")).unwrap()).unwrap();
+    let summary: serde_json::Value = common::summary_of(&two);
     let points: Vec<u64> = summary["rank_points"].as_array().unwrap().iter().map(|v| v.as_u64().unwrap()).collect();
     assert!(points.len() == 2 && points.iter().all(|&p| p > 0), "both processes hold RVEs: {points:?}");
     assert!(summary["objects_moved"].as_u64().unwrap() > 0, "the balance moved RVEs between the devices");

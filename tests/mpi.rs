@@ -79,8 +79,7 @@ fn one_two_and_three_processes_write_the_same_bytes_as_a_run_without_mpi() {
             assert!(bytes(&reference.join(file)) == bytes(&out.join(file)), "{np} processes: {file} differs");
         }
         assert_eq!(results(&reference), results(&out), "{np} processes: summary.json differs");
-        let summary: serde_json::Value =
-            serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+        let summary: serde_json::Value = common::summary_of(&out);
         if np > 1 {
             // Every process reports its share, and the RVEs are all somewhere.
             let points: Vec<u64> =
@@ -147,8 +146,7 @@ fn an_rve_failing_on_rank_1_stops_every_process_naming_the_point_and_the_rank() 
         started.elapsed().as_secs() < granite::END_GRACE_S,
         "both processes stop together, without waiting for the grace period of a lone failure"
     );
-    let summary: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    let summary: serde_json::Value = common::summary_of(&out);
     assert_eq!(summary["status"], "failed");
     let error = summary["error"].as_str().unwrap();
     assert!(error.contains("RVE of point 1") && error.contains("rank 1 of 2"), "{error}");
@@ -169,8 +167,7 @@ fn a_checkpoint_the_first_process_cannot_write_stops_every_process() {
     let (code, stderr, out) = mpirun(2, "spread_column.rhai", "mpi_cannot_write", &sets);
     assert_ne!(code, 0, "the run must fail: {stderr}");
     assert!(started.elapsed().as_secs() < granite::END_GRACE_S, "both processes stop together");
-    let summary: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    let summary: serde_json::Value = common::summary_of(&out);
     assert_eq!(summary["status"], "failed");
     let error = summary["error"].as_str().unwrap();
     assert!(error.contains("half.json") && error.contains("line"), "names the file and the script line: {error}");
@@ -223,8 +220,7 @@ fn a_frozen_process_ends_the_run_on_every_process_after_the_timeout() {
     assert_ne!(finished.status.code(), Some(0), "{stderr}");
     assert!(frozen.elapsed() < std::time::Duration::from_secs(60), "{:?} after the freeze", frozen.elapsed());
     assert!(stderr.contains("stopped answering") && stderr.contains("--mpi-timeout 3 s"), "{stderr}");
-    let summary: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    let summary: serde_json::Value = common::summary_of(&out);
     assert_eq!(summary["status"], "failed", "{summary}");
     assert!(summary["error"].as_str().unwrap().contains("stopped answering"), "{summary}");
     // The launcher ends the frozen one too (a moment after it returns).

@@ -184,8 +184,7 @@ summary("voxel", d.runout_normalised);
 summary("front", d.front_runout_normalised);
 "#;
     let out = run_text("runout_front", src);
-    let summary: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    let summary: serde_json::Value = common::summary_of(&out);
     let (voxel, front) = (summary["voxel"].as_f64().unwrap(), summary["front"].as_f64().unwrap());
     // Eq. 5.6: L_x counts whole cells up to the farthest point's; L~ = (L_x - 1 m) / 1 m.
     let cell = 0.1;

@@ -68,8 +68,7 @@ fn a_mesh_group_fills_and_fixes_exactly_as_the_box_and_faces_it_covers() {
         mesh("embankment_v22_binary.msh")
     );
     let out = run_text("gmsh_equivalence", &source);
-    let summary: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    let summary: serde_json::Value = common::summary_of(&out);
     let points = summary["points_box"].as_i64().unwrap();
     // 40 x 8 cells of 2 x 2 points.
     assert_eq!(points, 40 * 8 * 4);
@@ -113,8 +112,7 @@ fn friction_on_a_mesh_curve_is_friction_on_the_grid_face_it_lies_on() {
         mesh("embankment_v41_binary.msh")
     );
     let out = run_text("gmsh_friction", &source);
-    let summary: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    let summary: serde_json::Value = common::summary_of(&out);
     assert_eq!(summary["differ"].as_i64(), Some(0));
     // Sliding, and slower than frictionless: a = g_x - mu g_y at most.
     let (vx, t) = (summary["vx"].as_f64().unwrap(), summary["time"].as_f64().unwrap());
@@ -146,8 +144,7 @@ fn a_traction_on_a_mesh_curve_pushes_with_traction_times_length() {
         q[1]
     );
     let out = run_text("gmsh_traction", &source);
-    let summary: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    let summary: serde_json::Value = common::summary_of(&out);
     let get = |k: &str| summary[k].as_f64().unwrap();
     let impulse = |t: f64| get("length") * t * get("time");
     for (k, t) in [("px", q[0]), ("py", q[1])] {
@@ -209,8 +206,7 @@ fn a_volume_group_fills_its_solid() {
         mesh("wedge_block.msh")
     );
     let out = run_text("gmsh_volume", &source);
-    let summary: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    let summary: serde_json::Value = common::summary_of(&out);
     let d = cell / per_cell;
     let filled = summary["points"].as_f64().unwrap() * d * d * d;
     // A unit square base under a top from 0.5 (x = 0) down to 0.25 (x = 1).

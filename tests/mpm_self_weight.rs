@@ -71,8 +71,7 @@ fn a_free_standing_nearly_incompressible_column_with_cell_volumetric_strain_come
         summary("top", d.max_height);
     "#;
     let out = common::run_text("bbar_free_column", source);
-    let s: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    let s: serde_json::Value = common::summary_of(&out);
     let (kinetic, elastic) = (s["kinetic"].as_f64().unwrap(), s["elastic"].as_f64().unwrap());
     assert_eq!(s["points"], 320, "no point lost: {s}");
     assert!(kinetic < 1e-4 * elastic, "at rest: kinetic {kinetic} J against elastic {elastic} J");

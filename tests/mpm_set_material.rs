@@ -45,8 +45,7 @@ sim.write_points("third.csv");
 "#
     );
     let out = common::run_text("set_material", &src);
-    let summary: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    let summary: serde_json::Value = common::summary_of(&out);
     let dt = summary["dt"].as_f64().unwrap();
     let strain_per_run = -V * dt * STEPS as f64 / H;
     let syy = |file: &str| {

@@ -62,8 +62,7 @@ summary("gamma_p", sim.point_state(0, "gamma_p"));
         assert!((got[c] - s[0][c]).abs() <= 1e-9 * s[0][1].abs().max(1.0), "component {c}: {} vs {}", got[c], s[0][c]);
     }
     assert!(st[0] > 0.0, "the path must reach the yield surface");
-    let summary: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    let summary: serde_json::Value = common::summary_of(&out);
     assert!((summary["gamma_p"].as_f64().unwrap() - st[0]).abs() <= 1e-12 * st[0]);
     let prov: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("provenance.json")).unwrap()).unwrap();
@@ -144,8 +143,7 @@ sim.run_steps(3);
     };
     let lib = build_plugin(&[], "plugin-test");
     let out = common::run_text("plugin_dt", &src(&lib));
-    let summary: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    let summary: serde_json::Value = common::summary_of(&out);
     let lambda = e * nu / ((1.0 + nu) * (1.0 - 2.0 * nu));
     let g = e / (2.0 * (1.0 + nu));
     let expected = cell / ((lambda + 2.0 * g) / rho).sqrt();
@@ -154,8 +152,7 @@ sim.run_steps(3);
 
     let old = build_plugin(&["abi_v1"], "plugin-test-abi-v1");
     let out = common::run_text("plugin_dt_v1", &src(&old));
-    let summary: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    let summary: serde_json::Value = common::summary_of(&out);
     let refused = summary["refused"].as_str().unwrap();
     assert!(refused.contains("reports a wave speed") && refused.contains("drucker_prager"), "{refused}");
     assert_eq!(summary["status"], "ok");
@@ -191,8 +188,7 @@ fn a_plugin_law_replaces_a_registered_name_only_when_asked() {
         link.display()
     );
     let out = common::run_text("plugin_twice", &twice);
-    let summary: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    let summary: serde_json::Value = common::summary_of(&out);
     assert_eq!(summary["laws"], serde_json::json!(["drucker_prager", "drucker_prager", "drucker_prager"]));
     // Another library file with a law of the same name.
     let other = lib.with_file_name("another_library.so");
@@ -212,8 +208,7 @@ fn a_plugin_law_replaces_a_registered_name_only_when_asked() {
         other.display()
     );
     let out = common::run_text("plugin_replace", &replaced);
-    let summary: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    let summary: serde_json::Value = common::summary_of(&out);
     assert_eq!(summary["law"], "drucker_prager");
 }
 

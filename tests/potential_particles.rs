@@ -350,8 +350,7 @@ summary("lowest_centre", lowest);
 summary("kinetic_energy", sim.diagnostics().kinetic_energy);
 "#,
     );
-    let summary: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    let summary: serde_json::Value = common::summary_of(&out);
     let get = |k: &str| summary[k].as_f64().unwrap_or_else(|| panic!("no {k}"));
     assert_eq!(get("count"), 40.0);
     let (weight, floor) = (get("weight"), get("floor_force"));
@@ -405,8 +404,7 @@ summary("carried", carried);
 summary("lowest_sphere", lowest);
 "#,
     );
-    let summary: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    let summary: serde_json::Value = common::summary_of(&out);
     let get = |k: &str| summary[k].as_f64().unwrap_or_else(|| panic!("no {k}"));
     assert_eq!(get("spheres"), 40.0);
     let (weight, carried) = (get("weight"), get("carried"));
@@ -431,8 +429,7 @@ summary("mass_a", sim.potential_body(a).mass);
 summary("mass_b", sim.body_state(b).mass);
 "#,
     );
-    let summary: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    let summary: serde_json::Value = common::summary_of(&out);
     let (a, b) = (summary["mass_a"].as_f64().unwrap(), summary["mass_b"].as_f64().unwrap());
     assert!(a > 0.0 && a == b, "masses {a} and {b} kg");
 }

@@ -30,8 +30,7 @@ sim.run({LAST_RUN});
 "#
     );
     let out = common::run_text("script_background", &src);
-    let summary: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    let summary: serde_json::Value = common::summary_of(&out);
     assert_eq!(summary["paused_step"].as_i64(), Some(PAUSE_AT as i64), "{summary}");
     assert_eq!(summary["running_after_wait"].as_bool(), Some(false), "{summary}");
 

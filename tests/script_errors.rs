@@ -110,8 +110,7 @@ fn nan_stops_the_run_and_keeps_the_last_good_state() {
     assert_eq!(rows.len(), 4 * 2 * 4, "every point (4 x 2 cells, 2 x 2 per cell) of the last good state is written");
     assert!(rows.iter().all(|r| r.iter().all(|v| v.is_finite())), "the kept state is finite");
     let _ = h;
-    let summary: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(dir.join("summary.json")).unwrap()).unwrap();
+    let summary: serde_json::Value = common::summary_of(&dir);
     assert_eq!(summary["status"], "failed");
 }
 
@@ -248,8 +247,7 @@ fn inverted_boxes_are_refused_and_twin_walls_and_deep_overlaps_are_said() {
     let out = common::out_dir("overlaps");
     let options = RunOptions { out_dir: out.clone(), quiet: true, ..Default::default() };
     run_source("overlaps.rhai", &src, granite::registry(), options).unwrap();
-    let summary: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    let summary: serde_json::Value = common::summary_of(&out);
     let warnings: Vec<&str> = summary["warnings"].as_array().unwrap().iter().map(|w| w.as_str().unwrap()).collect();
     assert!(warnings.iter().any(|w| w.contains("wall 1") && w.contains("same surface as wall 0")), "{warnings:?}");
     let deep = warnings.iter().find(|w| w.contains("overlap by more than 10 %")).expect("the deep overlaps");

@@ -48,8 +48,7 @@ summary("calls", b.point_state(0, "calls"));
 summary("script_seconds_per_call", script_time / (200.0 * b.points.to_float()));
 "#;
     let out = common::run_text("script_law", src);
-    let s: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    let s: serde_json::Value = common::summary_of(&out);
     let worst = s["worst_difference"].as_f64().unwrap();
     let scale = s["stress_scale"].as_f64().unwrap();
     assert!(scale > 100.0, "the block must be loaded by its weight (stress scale {scale})");

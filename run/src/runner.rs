@@ -171,18 +171,15 @@ impl<S: Simulation> Runner<S> {
         if let Some(snap) = self.last_good.take() {
             self.sim.restore(snap);
             self.output.last_vtk_step = None;
-            let path = self.output.dir.join("last_good_points.csv");
             let writes = self.output.writes;
-            let written = self.write_vtk().and_then(|_| {
-                let path = self.output_path("last_good_points.csv")?;
+            let written = self.write_vtk().and_then(|()| self.output_path("last_good_points.csv")).and_then(|path| {
                 if writes {
-                    self.sim.write_points(&path)
-                } else {
-                    Ok(())
+                    self.sim.write_points(&path)?;
                 }
+                Ok(path)
             });
             msg = match written {
-                Ok(()) => format!(
+                Ok(path) => format!(
                     "{msg}\nthe last good state (step {}, t = {:.6e} s) is kept and written to {} and vtk/",
                     self.sim.steps(),
                     self.sim.time(),

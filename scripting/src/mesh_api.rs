@@ -202,13 +202,9 @@ fn point_load(s: &mut SimHandle, mesh: &MeshHandle, group: &str, push: Push, fac
             }
         }
         let spread = whole / held;
-        let traction = match &push {
-            Push::Traction(t) => Some(vector(t, dim, "traction")?),
-            Push::Pressure(_) => None,
-        };
-        let pressure = match &push {
-            Push::Pressure(p) => super::convert::finite(p, "pressure")?,
-            Push::Traction(_) => 0.0,
+        let (traction, pressure) = match &push {
+            Push::Traction(t) => (Some(vector(t, dim, "traction")?), 0.0),
+            Push::Pressure(p) => (None, super::convert::finite(p, "pressure")?),
         };
         let forces: Vec<_> = carriers
             .iter()

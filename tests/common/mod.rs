@@ -35,6 +35,14 @@ pub fn run(
     granite::run(&script(script_rel), sets(pairs), Some(out_dir(name)), true, Some(threads))
 }
 
+/// The summary.json of a run's folder.
+#[allow(dead_code)]
+pub fn summary_of(dir: &Path) -> serde_json::Value {
+    let path = dir.join("summary.json");
+    let text = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    serde_json::from_str(&text).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+}
+
 pub fn summary_f64(report: &granite_script::RunReport, key: &str) -> f64 {
     report.summary.get(key).and_then(|v| v.as_f64()).unwrap_or_else(|| panic!("summary has no number `{key}`"))
 }

@@ -87,17 +87,13 @@ impl DemWorld {
         // The contacts of bodies of plugin kinds are found again at the next step with the laws as
         // they are now (their law history and the geometry's warm starts start afresh): a list
         // kept would hold the values of laws that are gone.
-        if !self.kinds.is_empty() && self.kinds_hold_pairs() {
-            self.kinds.pairs = Default::default();
-            self.kinds.wall_pairs = Default::default();
-            self.kinds.sphere_pairs = Default::default();
-            self.needs_rebuild = true;
+        let k = &mut self.kinds;
+        for list in [&mut k.pairs, &mut k.wall_pairs, &mut k.sphere_pairs] {
+            if !list.is_empty() {
+                *list = Default::default();
+                self.needs_rebuild = true;
+            }
         }
-    }
-
-    /// Whether bodies of plugin kinds hold contacts of any kind.
-    fn kinds_hold_pairs(&self) -> bool {
-        !(self.kinds.pairs.is_empty() && self.kinds.wall_pairs.is_empty() && self.kinds.sphere_pairs.is_empty())
     }
 
     /// The law of a pair of materials: its own, else the default one.

@@ -173,11 +173,6 @@ impl PointLoad {
         (self.ids, self.force, self.at) = kept;
         (lost, carried)
     }
-
-    /// The sum of the forces at factor 1.
-    pub fn total(&self) -> Vec3 {
-        self.force.iter().fold([0.0; 3], |s, f| [s[0] + f[0], s[1] + f[1], s[2] + f[2]])
-    }
 }
 
 /// A material point's share of a surface it lies under: its size `V^(1/d)` to the power `d - 1`

@@ -63,8 +63,7 @@ impl MpmSim {
         self.locate_point_loads();
         let affine = self.velocity_update.affine();
         let centre_volume = self.volumetric_strain == VolumetricStrain::CellCentre;
-        let at =
-            Placement { mesh: &self.mesh, loc: &self.loc, half: self.shape.half_in_cells(&self.mesh), centre_volume };
+        let at = Placement::of(&self.mesh, &self.loc, self.shape, self.volumetric_strain);
         let grid = &mut self.grid;
         let pts = &mut self.points;
         let (slabs, bc, g) = (&self.slabs, &self.boundary, self.gravity);
@@ -137,8 +136,8 @@ impl MpmSim {
             .with_min_len(MIN_PER_TASK)
             .filter_map(|i| {
                 let c = speeds[p.material[i] as usize]?;
-                let v = p.v[i].iter().map(|x| x * x).sum::<f64>().sqrt();
-                (v > c).then_some((1usize, (v, i, c)))
+                let v2 = p.v[i].iter().map(|x| x * x).sum::<f64>();
+                (v2 > c * c).then_some((1usize, (v2, i, c)))
             })
             .reduce(
                 || (0, (0.0, 0, 0.0)),
@@ -148,7 +147,8 @@ impl MpmSim {
             return;
         }
         self.flung_said = true;
-        let (v, i, c) = fastest;
+        let (v2, i, c) = fastest;
+        let v = v2.sqrt();
         self.events.push(format!(
             "step {} (t = {:.6e} s): {count} material point(s) move faster than their material's P-wave speed, \
              point {} at {v:.4e} m/s against {c:.4e} m/s: they are flung, not flowing (a load on grid nodes that \
@@ -198,9 +198,7 @@ impl MpmSim {
     fn map_with<S: ShapeFunction>(&mut self) -> Result<()> {
         self.place::<S>()?;
         let affine = self.velocity_update.affine();
-        let centre_volume = self.volumetric_strain == VolumetricStrain::CellCentre;
-        let at =
-            Placement { mesh: &self.mesh, loc: &self.loc, half: self.shape.half_in_cells(&self.mesh), centre_volume };
+        let at = Placement::of(&self.mesh, &self.loc, self.shape, self.volumetric_strain);
         p2g::<S>(&mut self.grid, &at, &self.slabs, &self.points, self.gravity, affine, Maps::MassMomentumForce);
         Ok(())
     }
@@ -319,7 +317,17 @@ struct Placement<'a> {
     centre_volume: bool,
 }
 
-impl Placement<'_> {
+impl<'a> Placement<'a> {
+    /// Where the points are (after `place`), and what the shape functions need besides.
+    fn of(mesh: &'a Mesh, loc: &'a [Location], shape: ShapeFunctions, volumetric: VolumetricStrain) -> Placement<'a> {
+        Placement {
+            mesh,
+            loc,
+            half: shape.half_in_cells(mesh),
+            centre_volume: volumetric == VolumetricStrain::CellCentre,
+        }
+    }
+
     /// Weights of point `p`, and the index of its window's first node.
     #[inline(always)]
     fn weights<S: ShapeFunction>(&self, p: usize, w: &mut Weights) -> usize {
@@ -378,6 +386,8 @@ fn p2g<S: ShapeFunction>(
         let c = &pts.affine[p];
         let s = &pts.stress[p];
         let vol = pts.volume[p];
+        // The mean of the in-plane normal stresses, for the B-bar term.
+        let mean = s[..S::DIM].iter().sum::<f64>() / S::DIM as f64;
         for k in 0..S::NODES {
             let node = &mut window[base + off[k]];
             let n = w.n[k];
@@ -402,7 +412,6 @@ fn p2g<S: ShapeFunction>(
                 node.force[1] += m * n * gravity[1] - vol * (s[3] * g[0] + s[1] * g[1] + s[4] * g[2]);
                 node.force[2] += m * n * gravity[2] - vol * (s[5] * g[0] + s[4] * g[1] + s[2] * g[2]);
                 if let Some(dc) = &dn_centre {
-                    let mean = s[..S::DIM].iter().sum::<f64>() / S::DIM as f64;
                     for a in 0..S::DIM {
                         node.force[a] -= vol * mean * (dc[k][a] - g[a]);
                     }
