@@ -28,12 +28,14 @@ enum Const {
     Slots,
     /// Offsets into `ints`: the pair rows (4 per slot: second sphere, shift), the rows being
     /// rebuilt, the incoming slots (1 per slot), the incoming pairs while rebuilding (4 per
-    /// slot), per sphere its counts (rows, incoming, wrap offset: 8 per sphere).
+    /// slot), per sphere its counts (rows, incoming, wrap offset, row start, cell: 8 per
+    /// sphere), the sphere ids sorted by cell during a rebuild (1 per sphere).
     Rows,
     RebuiltRows,
     Incoming,
     IncomingRebuilt,
     Counts,
+    Items,
     Skin,
     Damping,
     /// 0: rolling_resistance, 1: linear.
@@ -93,6 +95,8 @@ pub enum Rec {
     Taken = 51,
     /// In record w: the RVE workgroup w steps (the longest orders first).
     Queue = 52,
+    /// Distance tests of the candidate searches (all rebuilds so far).
+    Tests = 53,
 }
 
 /// The constants the kernel is written against, as WGSL (put before `rve.wgsl`).
@@ -105,6 +109,7 @@ pub fn wgsl_constants() -> String {
         ("C_INC", C::Incoming as usize),
         ("C_INCT", C::IncomingRebuilt as usize),
         ("C_CNT", C::Counts as usize),
+        ("C_ITEMS", C::Items as usize),
         ("C_SKIN", C::Skin as usize),
         ("C_DAMPING", C::Damping as usize),
         ("C_LAW", C::Law as usize),
@@ -143,6 +148,7 @@ pub fn wgsl_constants() -> String {
         ("R_FLOATERS", Rec::Floaters as usize),
         ("R_TAKEN", Rec::Taken as usize),
         ("R_QUEUE", Rec::Queue as usize),
+        ("R_TESTS", Rec::Tests as usize),
         ("SPH_STRIDE", SPH_STRIDE),
         ("PF_STRIDE", PF_STRIDE),
         ("PF_TOUCH", PF_TOUCH),
@@ -269,6 +275,7 @@ pub struct Layout {
     incoming: usize,
     incoming_rebuilt: usize,
     counts: usize,
+    items: usize,
     ints_len: usize,
 }
 
@@ -324,13 +331,14 @@ impl Layout {
         let incoming = rebuilt_rows + 4 * slot_count;
         let incoming_rebuilt = incoming + slot_count;
         let counts = incoming_rebuilt + 4 * slot_count;
-        let ints_len = counts + 8 * spheres;
+        let items = counts + 8 * spheres;
+        let ints_len = items + spheres;
         if ints_len > i32::MAX as usize || slot_count * PF_STRIDE > u32::MAX as usize {
             return Err(GraniteError::Setup(format!(
                 "device \"gpu\": {spheres} RVE spheres with {slots} pair slots each are more than one buffer addresses"
             )));
         }
-        Ok(Layout { first, slots, rows, rebuilt_rows, incoming, incoming_rebuilt, counts, ints_len })
+        Ok(Layout { first, slots, rows, rebuilt_rows, incoming, incoming_rebuilt, counts, items, ints_len })
     }
 
     fn slot(&self, r: usize, i: usize, k: usize) -> usize {
@@ -349,6 +357,7 @@ impl Layout {
             (Const::Incoming, self.incoming as f64),
             (Const::IncomingRebuilt, self.incoming_rebuilt as f64),
             (Const::Counts, self.counts as f64),
+            (Const::Items, self.items as f64),
             (Const::Skin, law.skin),
             (Const::Damping, law.damping),
             (Const::Law, law.kind),

@@ -16,6 +16,11 @@ const WG: u32 = 64u;
 // `consts` (C_), into an RVE's record (R_, RVE_STRIDE values a record), the strides and fields of
 // the sphere and pair buffers (SPH_, PF_, PH_) and the failure codes (FAIL_).
 const MAX_IMAGES_ACROSS: f64 = 64.0;
+// Most cells of a rebuild's cell list (workgroup memory), cells per sphere at most, and cells
+// across the reach.
+const MAX_CELLS: u32 = 2048u;
+const CELLS_PER_SPHERE: u32 = 2u;
+const CELL_SPLIT: f64 = 1.0lf;
 // Pairs summed together in the Love-Weber stress (as `measures.rs` sums them).
 const PAIRS_PER_BLOCK: u32 = 1024u;
 
@@ -43,6 +48,13 @@ var<workgroup> w_done: u32;
 var<workgroup> w_rebuild: u32;
 var<workgroup> w_flip: u32;
 var<workgroup> w_fail: u32;
+// The cell list of a rebuild: cells along each axis, cells the reach spans on each side, each
+// cell's count, then its start, then its end; a scan's partial sums; distance tests made.
+var<workgroup> w_dims: vec3<u32>;
+var<workgroup> w_reach_cells: vec3<i32>;
+var<workgroup> w_cells: array<atomic<u32>, MAX_CELLS>;
+var<workgroup> w_scan: array<u32, WG>;
+var<workgroup> w_tests: atomic<u32>;
 
 fn cu(i: u32) -> u32 { return u32(consts[i]); }
 
@@ -270,9 +282,41 @@ fn move_sphere(first: u32, i: u32, dt: f64) -> f64 {
     return sdot(d, d);
 }
 
-// Candidate search and merge for sphere i's row (the CPU's `rebuild_candidates`): every sphere j
-// and every image within reach; pairs already in the row keep their history.
-fn rebuild_row(first: u32, i: u32, count: u32) -> bool {
+// Whether entry (j, n) comes before entry (k, m) in the pairs' order: by sphere, then by
+// shift, lexicographically (the CPU's sort of candidates by (a, b, shift)).
+fn entry_before(p: vec4<i32>, q: vec4<i32>) -> bool {
+    if (p.x != q.x) { return p.x < q.x; }
+    if (p.y != q.y) { return p.y < q.y; }
+    if (p.z != q.z) { return p.z < q.z; }
+    return p.w < q.w;
+}
+
+fn entry(at: u32) -> vec4<i32> { return vec4<i32>(ints[at], ints[at + 1u], ints[at + 2u], ints[at + 3u]); }
+fn set_entry(at: u32, e: vec4<i32>) { ints[at] = e.x; ints[at + 1u] = e.y; ints[at + 2u] = e.z; ints[at + 3u] = e.w; }
+
+// Sorts `len` entries of 4 ints from slot `q0` of region `region` (a row is short: insertion).
+fn sort_entries(region: u32, q0: u32, len: u32) {
+    for (var k = 1u; k < len; k++) {
+        let e = entry(region + (q0 + k) * 4u);
+        var at = k;
+        while (at > 0u && entry_before(e, entry(region + (q0 + at - 1u) * 4u))) {
+            set_entry(region + (q0 + at) * 4u, entry(region + (q0 + at - 1u) * 4u));
+            at--;
+        }
+        set_entry(region + (q0 + at) * 4u, e);
+    }
+}
+
+// The cell list: the first item of cell q and one past its last (after the placement, w_cells
+// holds each cell's end).
+fn cell_start(q: u32) -> u32 { return select(0u, atomicLoad(&w_cells[max(q, 1u) - 1u]), q > 0u); }
+fn cell_end(q: u32) -> u32 { return atomicLoad(&w_cells[q]); }
+
+// Candidate search and merge for sphere i's row (the CPU's `rebuild_candidates`): the spheres of
+// the cells within reach of its own, each cell under the image it is met through; pairs already
+// in the row keep their history. Returns the distance tests made, or -1 if the row or the
+// incoming list outgrew its slots.
+fn rebuild_row(first: u32, i: u32) -> i32 {
     let kk = cu(C_K);
     let skin = consts[C_SKIN];
     let si = sph_base(first, i);
@@ -280,73 +324,64 @@ fn rebuild_row(first: u32, i: u32, count: u32) -> bool {
     let ri = sph[si + 12u];
     let c = cnt_base(first, i);
     let old = u32(ints[c]);
-    // Reach in reduced coordinates along each axis: |row a of h^-1| per unit length.
-    let g = vec3<f64>(
-        sqrt(w_inv[0] * w_inv[0] + w_inv[1] * w_inv[1] + w_inv[2] * w_inv[2]),
-        sqrt(w_inv[3] * w_inv[3] + w_inv[4] * w_inv[4] + w_inv[5] * w_inv[5]),
-        sqrt(w_inv[6] * w_inv[6] + w_inv[7] * w_inv[7] + w_inv[8] * w_inv[8]));
+    let dims = vec3<i32>(w_dims);
+    let at = ints[c + 6u];
+    let own_cell = vec3<i32>(at % dims.x, (at / dims.x) % dims.y, at / (dims.x * dims.y));
+    let m = w_reach_cells;
+    let items = cu(C_ITEMS) + first;
     var fresh = 0u;
     var incoming = 0u;
-    for (var j = 0u; j < count; j++) {
-        let sj = sph_base(first, j);
-        let rj = sph[sj + 12u];
-        let reach = ri + rj + skin;
-        let s = mat_vec(w_inv, load3(sj) - xi);
-        let span = reach * g * 1.000001lf;
-        let lo = vec3<i32>(ceil(-s - span));
-        let hi = vec3<i32>(floor(-s + span));
-        let from_here = incoming;
-        for (var n0 = lo.x; n0 <= hi.x; n0++) {
-            for (var n1 = lo.y; n1 <= hi.y; n1++) {
-                for (var n2 = lo.z; n2 <= hi.z; n2++) {
-                    let n = vec3<i32>(n0, n1, n2);
+    var tests = 0;
+    for (var dz = -m.z; dz <= m.z; dz++) {
+        for (var dy = -m.y; dy <= m.y; dy++) {
+            for (var dx = -m.x; dx <= m.x; dx++) {
+                let raw = own_cell + vec3<i32>(dx, dy, dz);
+                // The cell (wrapped) and the image it is met through: each offset its own pair.
+                let q = ((raw % dims) + dims) % dims;
+                let n = (raw - q) / dims;
+                let cell = u32(q.x + dims.x * (q.y + dims.y * q.z));
+                let end = cell_end(cell);
+                for (var t = cell_start(cell); t < end; t++) {
+                    let j = u32(ints[items + t]);
                     if (j == i && all(n == vec3<i32>(0))) { continue; }
+                    tests++;
+                    let rj = sph[sph_base(first, j) + 12u];
+                    let reach = ri + rj + skin;
                     // The pair as stored: from its first sphere.
                     let mine = j < i || (j == i && positive_shift(n));
                     var d: vec3<f64>;
                     if (mine) { d = branch(first, i, j, n); } else { d = branch(first, j, i, -n); }
                     if (sdot(d, d) >= reach * reach) { continue; }
                     if (mine) {
-                        if (fresh >= kk) { return false; }
-                        let q = slot_of(first, i, fresh);
-                        let pj = cu(C_PJ) + q * 4u;
-                        ints[pj] = i32(j); ints[pj + 1u] = n.x; ints[pj + 2u] = n.y; ints[pj + 3u] = n.z;
-                        for (var e = 0u; e < PH_STRIDE; e++) { ph[q * PH_STRIDE + e] = 0.0lf; }
-                        for (var k = 0u; k < old; k++) {
-                            let o = slot_of(first, i, k);
-                            if (row_partner(o) == i32(j) && all(row_shift(o) == n)) {
-                                for (var e = 0u; e < PH_STRIDE; e++) { ph[q * PH_STRIDE + e] = pf[o * PF_STRIDE + e]; }
-                                break;
-                            }
-                        }
+                        if (fresh >= kk) { return -1; }
+                        set_entry(cu(C_PJ) + slot_of(first, i, fresh) * 4u, vec4<i32>(i32(j), n));
                         fresh++;
                     } else {
-                        if (incoming >= kk) { return false; }
-                        let t = cu(C_INCT) + slot_of(first, i, incoming) * 4u;
-                        ints[t] = i32(j); ints[t + 1u] = -n.x; ints[t + 2u] = -n.y; ints[t + 3u] = -n.z;
+                        if (incoming >= kk) { return -1; }
+                        set_entry(cu(C_INCT) + slot_of(first, i, incoming) * 4u, vec4<i32>(i32(j), -n));
                         incoming++;
                     }
                 }
             }
         }
-        // This sphere's pairs as second with sphere j were met by increasing image n, which is
-        // decreasing shift -n of the pair: turned round into the pairs' order (by shift).
-        var lo_k = from_here;
-        var hi_k = incoming;
-        while (lo_k + 1u < hi_k) {
-            hi_k--;
-            let a = cu(C_INCT) + slot_of(first, i, lo_k) * 4u;
-            let b = cu(C_INCT) + slot_of(first, i, hi_k) * 4u;
-            for (var e = 0u; e < 4u; e++) {
-                let keep = ints[a + e];
-                ints[a + e] = ints[b + e];
-                ints[b + e] = keep;
+    }
+    let row0 = slot_of(first, i, 0u);
+    sort_entries(cu(C_PJ), row0, fresh);
+    sort_entries(cu(C_INCT), row0, incoming);
+    for (var k = 0u; k < fresh; k++) {
+        let q = row0 + k;
+        let e = entry(cu(C_PJ) + q * 4u);
+        for (var h = 0u; h < PH_STRIDE; h++) { ph[q * PH_STRIDE + h] = 0.0lf; }
+        for (var o = 0u; o < old; o++) {
+            let was = row0 + o;
+            if (row_partner(was) == e.x && all(row_shift(was) == e.yzw)) {
+                for (var h = 0u; h < PH_STRIDE; h++) { ph[q * PH_STRIDE + h] = pf[was * PF_STRIDE + h]; }
+                break;
             }
-            lo_k++;
         }
     }
     for (var k = 0u; k < fresh; k++) {
-        let q = slot_of(first, i, k);
+        let q = row0 + k;
         for (var e = 0u; e < 4u; e++) { ints[cu(C_PI) + q * 4u + e] = ints[cu(C_PJ) + q * 4u + e]; }
         for (var e = 0u; e < PH_STRIDE; e++) { pf[q * PF_STRIDE + e] = ph[q * PH_STRIDE + e]; }
         for (var e = PH_STRIDE; e < PF_STRIDE; e++) { pf[q * PF_STRIDE + e] = 0.0lf; }
@@ -354,7 +389,7 @@ fn rebuild_row(first: u32, i: u32, count: u32) -> bool {
     ints[c] = i32(fresh);
     ints[c + 1u] = i32(incoming);
     store3(si + 9u, xi);
-    return true;
+    return tests;
 }
 
 // The slot of pair (a, b = i, shift) in row a, for sphere i's incoming list.
@@ -378,6 +413,32 @@ fn resolve_incoming(first: u32, i: u32) -> bool {
         if (!found) { return false; }
     }
     return true;
+}
+
+// Counts per cell into the cells' starts, in place: each invocation a run of cells, the runs'
+// totals scanned across the workgroup (integers: the same in any order).
+fn exclusive_scan_cells(lid: u32, cells: u32) {
+    let per = (cells + WG - 1u) / WG;
+    let lo = min(lid * per, cells);
+    let hi = min(lo + per, cells);
+    var total = 0u;
+    for (var q = lo; q < hi; q++) { total += atomicLoad(&w_cells[q]); }
+    w_scan[lid] = total;
+    workgroupBarrier();
+    for (var step = 1u; step < WG; step = step * 2u) {
+        var add = 0u;
+        if (lid >= step) { add = w_scan[lid - step]; }
+        workgroupBarrier();
+        w_scan[lid] += add;
+        workgroupBarrier();
+    }
+    var run = w_scan[lid] - total;
+    for (var q = lo; q < hi; q++) {
+        let here = atomicLoad(&w_cells[q]);
+        atomicStore(&w_cells[q], run);
+        run += here;
+    }
+    workgroupBarrier();
 }
 
 fn barrier_all() {
@@ -404,18 +465,65 @@ fn rebuild(r: u32, lid: u32, first: u32, count: u32) {
         for (var a = 0u; a < 3u; a++) {
             let g = sqrt(w_inv[3u * a] * w_inv[3u * a] + w_inv[3u * a + 1u] * w_inv[3u * a + 1u] + w_inv[3u * a + 2u] * w_inv[3u * a + 2u]);
             if (!(MAX_IMAGES_ACROSS >= reach * g)) { fail(r, FAIL_CELL_COLLAPSED, 1.0lf / g); }
+            // Cells at least 1/CELL_SPLIT of the reach thick, and the cells on each side that
+            // the reach spans (more than CELL_SPLIT in a cell thinner than the reach).
+            let across = clamp(floor(CELL_SPLIT / (reach * g)), 1.0lf, 1024.0lf);
+            w_dims[a] = u32(across);
         }
+        let most = min(MAX_CELLS, max(CELLS_PER_SPHERE * count, 27u));
+        while (w_dims.x * w_dims.y * w_dims.z > most) {
+            var a = 0u;
+            if (w_dims.y > w_dims[a]) { a = 1u; }
+            if (w_dims.z > w_dims[a]) { a = 2u; }
+            w_dims[a] = max(w_dims[a] / 2u, 1u);
+        }
+        for (var a = 0u; a < 3u; a++) {
+            let g = sqrt(w_inv[3u * a] * w_inv[3u * a] + w_inv[3u * a + 1u] * w_inv[3u * a + 1u] + w_inv[3u * a + 2u] * w_inv[3u * a + 2u]);
+            // A hair more than the reach: positions may lie a rounding error outside their cell.
+            w_reach_cells[a] = max(i32(ceil(reach * g * f64(w_dims[a]) * 1.000001lf)), 1);
+        }
+        atomicStore(&w_tests, 0u);
     }
     if (workgroupUniformLoad(&w_fail) != 0u) { return; }
+    let dims = w_dims;
+    let cells = dims.x * dims.y * dims.z;
+    for (var q = lid; q < cells; q += WG) { atomicStore(&w_cells[q], 0u); }
+    workgroupBarrier();
+    // Positions wrapped into the cell, each sphere's cell counted.
     for (var i = lid; i < count; i += WG) {
         let s = sph_base(first, i);
-        let x = load3(s);
+        var x = load3(s);
         let k = vec3<i32>(floor(mat_vec(w_inv, x)));
         let c = cnt_base(first, i);
         ints[c + 2u] = k.x; ints[c + 3u] = k.y; ints[c + 4u] = k.z;
-        if (any(k != vec3<i32>(0))) { store3(s, x - image(k)); }
+        if (any(k != vec3<i32>(0))) { x = x - image(k); store3(s, x); }
+        // Rounding may leave a reduced coordinate a hair outside [0, 1): the nearest cell.
+        let at = vec3<i32>(floor(mat_vec(w_inv, x) * vec3<f64>(dims)));
+        let q = vec3<u32>(clamp(at, vec3<i32>(0), vec3<i32>(dims) - vec3<i32>(1)));
+        let cell = q.x + dims.x * (q.y + dims.y * q.z);
+        ints[c + 6u] = i32(cell);
+        atomicAdd(&w_cells[cell], 1u);
     }
     barrier_all();
+    exclusive_scan_cells(lid, cells);
+    // Sphere ids by cell: placed in any order, then each cell's run sorted (the lists do not
+    // depend on the order within a cell; the search reads ids in increasing order all the same).
+    let items = cu(C_ITEMS) + first;
+    for (var i = lid; i < count; i += WG) {
+        let at = atomicAdd(&w_cells[u32(ints[cnt_base(first, i) + 6u])], 1u);
+        ints[items + at] = i32(i);
+    }
+    barrier_all();
+    for (var q = lid; q < cells; q += WG) {
+        let lo = cell_start(q);
+        let end = cell_end(q);
+        for (var k = lo + 1u; k < end; k++) {
+            let id = ints[items + k];
+            var at = k;
+            while (at > lo && ints[items + at - 1u] > id) { ints[items + at] = ints[items + at - 1u]; at--; }
+            ints[items + at] = id;
+        }
+    }
     var ok = true;
     var lost = false;
     for (var i = lid; i < count; i += WG) {
@@ -430,9 +538,12 @@ fn rebuild(r: u32, lid: u32, first: u32, count: u32) {
         }
     }
     barrier_all();
+    var tests = 0u;
     for (var i = lid; i < count; i += WG) {
-        if (!rebuild_row(first, i, count)) { ok = false; }
+        let made = rebuild_row(first, i);
+        if (made < 0) { ok = false; } else { tests += u32(made); }
     }
+    atomicAdd(&w_tests, tests);
     barrier_all();
     for (var i = lid; i < count; i += WG) {
         if (!resolve_incoming(first, i)) { lost = true; }
@@ -442,6 +553,7 @@ fn rebuild(r: u32, lid: u32, first: u32, count: u32) {
     // A row that did not fit kept its old pairs (all valid, history and all) and the lists stay
     // due for a rebuild: the host gives the rows more slots and the RVE goes on from here.
     barrier_all();
+    if (lid == 0u) { rve[base + R_TESTS] += f64(atomicLoad(&w_tests)); }
     if (lid == 0u && w_fail == 0u) {
         for (var q = 0u; q < 9u; q++) { rve[base + R_HB + q] = w_h[q]; }
         rve[base + R_REBUILD] = 0.0lf;
