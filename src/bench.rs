@@ -867,25 +867,18 @@ struct DeviceScene {
     rve: granite_core::dem::DemSim,
     copies: usize,
     calls: usize,
-    dem_steps: u64,
 }
 
 impl DeviceScene {
     fn new(scene: &str) -> Result<DeviceScene> {
         match scene {
-            "oedometric" => Ok(DeviceScene {
-                name: "oedometric",
-                rve: bench_rve()?,
-                copies: 16,
-                calls: 40,
-                dem_steps: DEM_STEPS as u64,
-            }),
+            "oedometric" => Ok(DeviceScene { name: "oedometric", rve: bench_rve()?, copies: 16, calls: 40 }),
             // Thesis 5.4: 400 points (0.1 m cells), each a 2000-sphere RVE.
             "column" => {
                 let mut rve = periodic_rve(2000, 1e5)?;
                 let r_min = rve.world.spheres.smallest_radius();
                 rve.set_skin(0.05 * r_min)?;
-                Ok(DeviceScene { name: "column", rve, copies: 400, calls: 5, dem_steps: DEM_STEPS as u64 })
+                Ok(DeviceScene { name: "column", rve, copies: 400, calls: 5 })
             }
             other => Err(granite_core::GraniteError::Setup(format!(
                 "unknown scene `{other}` of granite bench mpmxdem --device: oedometric or column"
@@ -893,105 +886,260 @@ impl DeviceScene {
         }
     }
 
-    /// The velocity gradient of one call (the oedometric scene's strain rate).
-    fn gradient(&self) -> nalgebra::Matrix3<f64> {
+    /// The velocity gradient of one call of `dem_steps` DEM steps (the oedometric scene's strain
+    /// per MPM step); perturbed, copy `k` of `copies` is also sheared, each at its own rate.
+    fn gradient(&self, dem_steps: u64, perturbed: Option<(usize, usize)>) -> nalgebra::Matrix3<f64> {
         let mut l = nalgebra::Matrix3::zeros();
-        l[(1, 1)] = -TOP_SPEED / (2.0 * CELL) * MPM_DT / (self.dem_steps as f64 * self.rve.world.dt);
+        let rate = TOP_SPEED / (2.0 * CELL) * MPM_DT / (dem_steps as f64 * self.rve.world.dt);
+        l[(1, 1)] = -rate;
+        if let Some((k, copies)) = perturbed {
+            l[(0, 1)] = 2.0 * rate * k as f64 / copies as f64;
+        }
         l
     }
+}
 
-    fn sphere_steps(&self) -> f64 {
-        (self.copies * self.rve.world.spheres.len() * self.calls) as f64 * self.dem_steps as f64
-    }
+/// What `granite bench mpmxdem --device` measures; see [`mpmxdem_on_device`].
+pub struct DeviceBench {
+    pub device: String,
+    pub scene: String,
+    pub repeat: usize,
+    /// RVEs (the scene's count when None).
+    pub copies: Option<usize>,
+    /// DEM steps per call, one measurement each (51 when empty).
+    pub dem_steps: Vec<u64>,
+    /// RVEs that differ: each sheared at its own rate, after its own number of steps.
+    pub perturb: bool,
+    /// Candidate lists rebuilt before every DEM step, on the device and the CPU alike.
+    pub force_rebuild: bool,
+    pub json: Option<std::path::PathBuf>,
+}
+
+/// One measurement of [`mpmxdem_on_device`], as `--json` writes it.
+#[derive(serde::Serialize)]
+struct DeviceFigures {
+    adapter: String,
+    scene: String,
+    copies: usize,
+    spheres_per_rve: usize,
+    dem_steps: u64,
+    perturb: bool,
+    force_rebuild: bool,
+    sphere_steps_per_s: f64,
+    sphere_steps_per_s_slowest: f64,
+    cpu_threads: usize,
+    cpu_sphere_steps_per_s: f64,
+    pair_tests_per_sphere_rebuild: Option<f64>,
+    device_bytes_per_rve: f64,
+    submissions_per_mpm_step: f64,
+    chunks: u64,
+    host_ms_per_mpm_step: f64,
+    device_ms_per_mpm_step: Option<f64>,
+    idle_ms_per_mpm_step: f64,
+    thesis_run_hours: f64,
 }
 
 /// `granite bench mpmxdem --device gpu [--scene column]`: the same RVEs stepped on the device and
 /// on all CPU threads of this machine, rounds interleaved; fastest and slowest of each printed,
-/// in sphere-steps per second, with the device's name.
-pub fn mpmxdem_on_device(device: &str, scene: &str, repeat: usize) -> Result<()> {
+/// in sphere-steps per second, with the device's name, what the device counted (distance tests
+/// per sphere and search, bytes per RVE, submissions per call, buffer sets) and the projected
+/// wall time of the thesis column at this rate.
+pub fn mpmxdem_on_device(bench: &DeviceBench) -> Result<()> {
+    let scene = DeviceScene::new(&bench.scene)?;
+    let copies = bench.copies.unwrap_or(scene.copies);
+    let on: std::sync::Arc<dyn granite_core::ext::RveDevice> = match (bench.device.as_str(), bench.force_rebuild) {
+        (_, false) => crate::registry().rve_device(&bench.device)?.clone(),
+        #[cfg(feature = "gpu")]
+        ("gpu", true) => std::sync::Arc::new(crate::gpu::GpuDevice::forcing_rebuilds()),
+        (other, true) => {
+            return Err(granite_core::GraniteError::Setup(format!(
+                "--force-rebuild: the device \"{other}\" cannot be told to (device \"gpu\" of a build with --features gpu can)"
+            )))
+        }
+    };
+    let steps_list = if bench.dem_steps.is_empty() { vec![DEM_STEPS as u64] } else { bench.dem_steps.clone() };
+    let mut figures = Vec::new();
+    for &dem_steps in &steps_list {
+        figures.push(device_round(&scene, copies, dem_steps, bench, &*on)?);
+    }
+    if let Some(path) = &bench.json {
+        let value = if figures.len() == 1 { serde_json::to_value(&figures[0]) } else { serde_json::to_value(&figures) }
+            .map_err(|e| granite_core::GraniteError::Other(e.to_string()))?;
+        let text =
+            serde_json::to_string_pretty(&value).map_err(|e| granite_core::GraniteError::Other(e.to_string()))?;
+        std::fs::write(path, text + "\n")
+            .map_err(|e| granite_core::GraniteError::Other(format!("--json {}: {e}", path.display())))?;
+    }
+    Ok(())
+}
+
+/// The RVEs of a device round, each after its warm-up call, with the orders of a timed call.
+fn device_rves(
+    scene: &DeviceScene,
+    copies: usize,
+    dem_steps: u64,
+    perturb: bool,
+) -> (Vec<granite_core::ext::RveOrder>, Vec<granite_core::ext::RveOrder>) {
+    use granite_core::ext::RveOrder;
+    let perturbed = |k: usize| perturb.then_some((k, copies));
+    let orders: Vec<RveOrder> = (0..copies)
+        .map(|k| RveOrder {
+            velocity_gradient: scene.gradient(dem_steps, perturbed(k)),
+            full_steps: dem_steps,
+            last_step: 0.0,
+        })
+        .collect();
+    // Perturbed, the copies' warm-up calls differ in length: their rebuilds fall out of step.
+    let warm_up = orders
+        .iter()
+        .enumerate()
+        .map(|(k, o)| RveOrder { full_steps: if perturb { 1 + (37 * k as u64) % 101 } else { dem_steps }, ..*o })
+        .collect();
+    (warm_up, orders)
+}
+
+/// One DEM-steps value of [`mpmxdem_on_device`]: `bench.repeat` interleaved rounds of the
+/// device and the CPU threads on the same RVEs and orders.
+fn device_round(
+    scene: &DeviceScene,
+    copies: usize,
+    dem_steps: u64,
+    bench: &DeviceBench,
+    on: &dyn granite_core::ext::RveDevice,
+) -> Result<DeviceFigures> {
+    use granite_core::dem::Rve;
     use granite_core::ext::RveOrder;
     use rayon::prelude::*;
-    let scene = DeviceScene::new(scene)?;
-    let registry = crate::registry();
-    let on = registry.rve_device(device)?.clone();
     let threads = rayon::current_num_threads();
-    let order = RveOrder { velocity_gradient: scene.gradient(), full_steps: scene.dem_steps, last_step: 0.0 };
-    let rve = granite_core::dem::Rve::prepare(scene.rve.clone(), "granite bench mpmxdem")?;
-    let mut device_name = String::new();
-    let (mut gpu_times, mut cpu_times, mut idle_times) = (Vec::new(), Vec::new(), Vec::new());
-    let idle = RveOrder { full_steps: 0, ..order };
-    for _ in 0..repeat {
-        let mut batch = on.open(vec![rve.clone(); scene.copies])?;
-        device_name = batch.device_name();
-        let orders = vec![order; scene.copies];
-        // The first call uploads the RVEs: not timed.
-        batch.step(&orders)?;
+    let rve = Rve::prepare(scene.rve.clone(), "granite bench mpmxdem")?;
+    let (warm_up, orders) = device_rves(scene, copies, dem_steps, bench.perturb);
+    let idle: Vec<RveOrder> = orders.iter().map(|o| RveOrder { full_steps: 0, ..*o }).collect();
+    let mut adapter = String::new();
+    let (mut device_times, mut cpu_times, mut idle_times) = (Vec::new(), Vec::new(), Vec::new());
+    let mut counted = (granite_core::ext::BatchCounters::default(), granite_core::ext::BatchCounters::default());
+    let failed = |reports: Vec<granite_core::ext::RveReport>| match reports.into_iter().find_map(|r| r.failure) {
+        Some(failure) => Err(granite_core::GraniteError::Other(format!("an RVE failed on the device: {failure}"))),
+        None => Ok(()),
+    };
+    for _ in 0..bench.repeat {
+        let mut batch = on.open(vec![rve.clone(); copies])?;
+        adapter = batch.device_name();
+        // The warm-up call uploads the RVEs: not timed.
+        failed(batch.step(&warm_up)?)?;
+        let before = batch.counters();
         let t = Instant::now();
         for _ in 0..scene.calls {
-            if let Some(failure) = batch.step(&orders)?.into_iter().find_map(|r| r.failure) {
-                return Err(granite_core::GraniteError::Other(format!("an RVE failed on the device: {failure}")));
-            }
+            failed(batch.step(&orders)?)?;
         }
-        gpu_times.push(t.elapsed().as_secs_f64());
+        device_times.push(t.elapsed().as_secs_f64());
+        counted = (before, batch.counters());
         // The same calls without DEM steps: submission, the orders and reports across, the
         // stress sums (what a call costs besides its steps).
-        let idle_orders = vec![idle; scene.copies];
         let t = Instant::now();
         for _ in 0..scene.calls {
-            batch.step(&idle_orders)?;
+            batch.step(&idle)?;
         }
         idle_times.push(t.elapsed().as_secs_f64());
+        drop(batch);
         // The CPU threads carry out the same orders as dem_rve does (steps, then the response).
-        let mut rves: Vec<_> = (0..scene.copies).map(|_| rve.clone()).collect();
-        for rve in &mut rves {
-            rve.deform(&order)?;
-        }
+        let mut rves: Vec<Rve> = vec![rve.clone(); copies];
+        rves.par_iter_mut().zip(&warm_up).try_for_each(|(rve, o)| cpu_call(rve, o, bench.force_rebuild))?;
         let t = Instant::now();
         for _ in 0..scene.calls {
-            rves.par_iter_mut().try_for_each(|rve| rve.deform(&order).map(|_| ()))?;
+            rves.par_iter_mut().zip(&orders).try_for_each(|(rve, o)| cpu_call(rve, o, bench.force_rebuild))?;
         }
         cpu_times.push(t.elapsed().as_secs_f64());
     }
-    let work = scene.sphere_steps();
-    granite_core::outln!(
-        "granite bench mpmxdem --device {device} --scene {}: {} RVEs x {} spheres, {} calls x {} DEM steps ({:.3e} sphere-steps a round)",
-        scene.name,
-        scene.copies,
-        rve.sphere_count(),
-        scene.calls,
-        scene.dem_steps,
-        work
-    );
+    let work = (copies * rve.sphere_count() * scene.calls) as f64 * dem_steps as f64;
     let fastest = |t: &[f64]| t.iter().cloned().fold(f64::INFINITY, f64::min);
     let slowest = |t: &[f64]| t.iter().cloned().fold(0.0, f64::max);
-    let (g, c) = (fastest(&gpu_times), fastest(&cpu_times));
-    granite_core::outln!(
-        "device  {device_name}: {g:.3} s ({:.3})  {:.4e} sphere-steps/s",
-        slowest(&gpu_times),
-        work / g
-    );
-    granite_core::outln!(
-        "cpu     {threads} threads: {c:.3} s ({:.3})  {:.4e} sphere-steps/s",
-        slowest(&cpu_times),
-        work / c
-    );
-    granite_core::outln!("device over all CPU threads: {:.2}x", c / g);
-    let per_call = fastest(&idle_times) / scene.calls as f64;
-    let stepping = ((g - fastest(&idle_times)) / scene.calls as f64).max(0.0);
-    granite_core::outln!(
-        "per call: {:.3} ms in DEM steps, {:.3} ms in submission, transfers and synchronisation (a call without steps)",
-        1e3 * stepping,
-        1e3 * per_call
-    );
-    // Thesis 5.4 at its size: 3.5 s at dt 1.46e-6 s (2.40 M MPM steps), 400 RVEs of 2000 spheres,
-    // s DEM steps per RVE and MPM step (eq. 4.5: 1 at least).
-    let rate = work / (g - fastest(&idle_times)).max(f64::MIN_POSITIVE);
-    let mpm_steps = 3.5 / 1.46e-6;
-    for s in [1.0, 10.0] {
-        let hours = mpm_steps * (per_call + 400.0 * 2000.0 * s / rate) / 3600.0;
-        granite_core::outln!(
-            "the thesis column (2.40e6 MPM steps, 400 x 2000-sphere RVEs, {s} DEM steps each) at this rate and call cost: {hours:.1} h"
-        );
+    let (g, c, idle_call) = (fastest(&device_times), fastest(&cpu_times), fastest(&idle_times) / scene.calls as f64);
+    let (before, after) = counted;
+    let calls = (after.calls - before.calls).max(1) as f64;
+    let searches = after.sphere_searches - before.sphere_searches;
+    let device_seconds = after.device_seconds.map(|a| a - before.device_seconds.unwrap_or(0.0));
+    // Thesis 5.4 at its size: 3.5 s at dt 1.46e-6 s (2.40 M MPM steps), 400 RVEs of 2000 spheres.
+    let rate = work / (g - idle_call * scene.calls as f64).max(f64::MIN_POSITIVE);
+    let thesis_hours = 3.5 / 1.46e-6 * (idle_call + 400.0 * 2000.0 * dem_steps as f64 / rate) / 3600.0;
+    let figures = DeviceFigures {
+        adapter,
+        scene: scene.name.into(),
+        copies,
+        spheres_per_rve: rve.sphere_count(),
+        dem_steps,
+        perturb: bench.perturb,
+        force_rebuild: bench.force_rebuild,
+        sphere_steps_per_s: work / g,
+        sphere_steps_per_s_slowest: work / slowest(&device_times),
+        cpu_threads: threads,
+        cpu_sphere_steps_per_s: work / c,
+        pair_tests_per_sphere_rebuild: (searches > 0)
+            .then(|| (after.pair_tests - before.pair_tests) as f64 / searches as f64),
+        device_bytes_per_rve: after.device_bytes as f64 / copies as f64,
+        submissions_per_mpm_step: (after.submissions - before.submissions) as f64 / calls,
+        chunks: after.chunks,
+        host_ms_per_mpm_step: 1e3 * g / scene.calls as f64,
+        device_ms_per_mpm_step: device_seconds.map(|s| 1e3 * s / calls),
+        idle_ms_per_mpm_step: 1e3 * idle_call,
+        thesis_run_hours: thesis_hours,
+    };
+    print_device_figures(&figures, work, g, slowest(&cpu_times), c);
+    Ok(figures)
+}
+
+/// One call of `order` on the CPU, as `dem_rve` makes it; with `force_rebuild`, the candidate
+/// lists rebuilt before every step as the device is told to.
+fn cpu_call(rve: &mut granite_core::dem::Rve, order: &granite_core::ext::RveOrder, force_rebuild: bool) -> Result<()> {
+    if !force_rebuild {
+        return rve.deform(order).map(|_| ());
+    }
+    let one = granite_core::ext::RveOrder { full_steps: 1, last_step: 0.0, ..*order };
+    for _ in 0..order.full_steps {
+        let mut sim =
+            std::mem::replace(rve, granite_core::dem::Rve::as_is(granite_core::dem::DemSim::new())).into_dem();
+        sim.rebuild_candidates()?;
+        *rve = granite_core::dem::Rve::as_is(sim);
+        rve.deform(&one)?;
     }
     Ok(())
+}
+
+fn print_device_figures(f: &DeviceFigures, work: f64, device_time: f64, cpu_slowest: f64, cpu_time: f64) {
+    granite_core::outln!(
+        "granite bench mpmxdem --device --scene {}: {} RVEs x {} spheres{}{}, {} DEM steps a call ({work:.3e} sphere-steps a round)",
+        f.scene,
+        f.copies,
+        f.spheres_per_rve,
+        if f.perturb { ", perturbed" } else { "" },
+        if f.force_rebuild { ", lists rebuilt every step" } else { "" },
+        f.dem_steps
+    );
+    granite_core::outln!(
+        "device  {}: {:.4e} sphere-steps/s (slowest {:.4e}); {:.3} ms a call on the host{}",
+        f.adapter,
+        f.sphere_steps_per_s,
+        f.sphere_steps_per_s_slowest,
+        f.host_ms_per_mpm_step,
+        f.device_ms_per_mpm_step.map(|d| format!(", {d:.3} ms on the device")).unwrap_or_default()
+    );
+    granite_core::outln!(
+        "cpu     {} threads: {:.4e} sphere-steps/s (slowest {:.4e}); device over all CPU threads: {:.2}x",
+        f.cpu_threads,
+        f.cpu_sphere_steps_per_s,
+        work / cpu_slowest,
+        cpu_time / device_time
+    );
+    granite_core::outln!(
+        "device  distance tests per sphere and search: {}; {:.3} MB per RVE in {} buffer set(s); {:.2} submissions a call; {:.3} ms a call without steps",
+        f.pair_tests_per_sphere_rebuild.map(|t| format!("{t:.1}")).unwrap_or_else(|| "no search".into()),
+        f.device_bytes_per_rve / 1e6,
+        f.chunks,
+        f.submissions_per_mpm_step,
+        f.idle_ms_per_mpm_step
+    );
+    granite_core::outln!(
+        "the thesis column (2.40e6 MPM steps, 400 x 2000-sphere RVEs, {} DEM steps each) at this rate and call cost: {:.1} h",
+        f.dem_steps,
+        f.thesis_run_hours
+    );
 }

@@ -69,9 +69,10 @@ enum Command {
         /// DEM: particle counts, comma separated (dem: 10000,50000; potential: 512 grains).
         #[arg(long, value_delimiter = ',', value_parser = granite::parse_at_least::<1>)]
         particles: Option<Vec<usize>>,
-        /// DEM: timed steps (after 200 of warm-up).
-        #[arg(long, default_value_t = 2000, value_parser = granite::parse_at_least::<1>)]
-        dem_steps: usize,
+        /// dem, potential: timed steps (after 200 of warm-up; 2000). mpmxdem --device: DEM steps
+        /// per call, comma separated, one measurement each (51).
+        #[arg(long, value_delimiter = ',', value_parser = granite::parse_at_least::<1>)]
+        dem_steps: Vec<usize>,
         /// Thread counts to measure, comma separated.
         #[arg(long, default_value = "1,2", value_delimiter = ',', value_parser = granite::parse_threads)]
         threads: Vec<usize>,
@@ -89,6 +90,20 @@ enum Command {
         /// column's 400 x 2000-sphere RVEs).
         #[arg(long, default_value = "oedometric")]
         scene: String,
+        /// mpmxdem --device: RVEs in the batch (the scene's count by default).
+        #[arg(long, value_parser = granite::parse_at_least::<1>)]
+        copies: Option<usize>,
+        /// mpmxdem --device: RVEs that differ (each sheared at its own rate after its own number
+        /// of steps), so that their candidate searches fall at different steps.
+        #[arg(long)]
+        perturb: bool,
+        /// mpmxdem --device: rebuild the candidate lists before every DEM step (device and CPU).
+        #[arg(long)]
+        force_rebuild: bool,
+        /// mpmxdem --device: write the figures to this JSON file (one object per DEM-steps value;
+        /// a list when there are several).
+        #[arg(long, value_name = "FILE")]
+        json: Option<PathBuf>,
     },
     /// List the registered plugins (constitutive laws, contact laws, shapes, velocity updates)
     /// and their parameters, with the laws of native plugin libraries given with --plugin.
@@ -238,7 +253,23 @@ fn main() -> ExitCode {
             }
             code
         }
-        Command::Bench { which, points, steps, particles, dem_steps, threads, axial_strain, repeat, device, scene } => {
+        Command::Bench {
+            which,
+            points,
+            steps,
+            particles,
+            dem_steps,
+            threads,
+            axial_strain,
+            repeat,
+            device,
+            scene,
+            copies,
+            perturb,
+            force_rebuild,
+            json,
+        } => {
+            let timed_steps = dem_steps.first().copied().unwrap_or(2000);
             #[cfg(feature = "mpi")]
             if which == "mpmxdem" && granite::launched_by_mpirun() {
                 let timeout = std::time::Duration::from_secs_f64(granite::mpi_comm::DEFAULT_TIMEOUT_S);
@@ -259,15 +290,27 @@ fn main() -> ExitCode {
             }
             let result = match which.as_str() {
                 "mpm" => granite::bench::mpm(points, steps, &threads),
-                "dem" => {
-                    granite::bench::dem(&particles.unwrap_or_else(|| vec![10_000, 50_000]), dem_steps, &threads, repeat)
-                }
-                "mpmxdem" if device != "cpu" => granite::bench::mpmxdem_on_device(&device, &scene, repeat),
+                "dem" => granite::bench::dem(
+                    &particles.unwrap_or_else(|| vec![10_000, 50_000]),
+                    timed_steps,
+                    &threads,
+                    repeat,
+                ),
+                "mpmxdem" if device != "cpu" => granite::bench::mpmxdem_on_device(&granite::bench::DeviceBench {
+                    device,
+                    scene,
+                    repeat,
+                    copies,
+                    dem_steps: dem_steps.iter().map(|&s| s as u64).collect(),
+                    perturb,
+                    force_rebuild,
+                    json,
+                }),
                 "mpmxdem" => granite::bench::mpmxdem(&threads, repeat),
                 "triaxial" => granite::bench::triaxial(&threads, axial_strain),
                 "potential" => {
                     let count = particles.and_then(|p| p.first().copied()).unwrap_or(512);
-                    granite::bench::potential(count, dem_steps, repeat)
+                    granite::bench::potential(count, timed_steps, repeat)
                 }
                 other => {
                     granite_core::errln!(

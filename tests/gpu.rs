@@ -400,3 +400,44 @@ fn a_gpu_run_over_two_processes_writes_the_bytes_of_one() {
     assert!(points.len() == 2 && points.iter().all(|&p| p > 0), "both processes hold RVEs: {points:?}");
     assert!(summary["objects_moved"].as_u64().unwrap() > 0, "the balance moved RVEs between the devices");
 }
+
+#[test]
+fn a_batch_over_several_buffer_sets_steps_byte_for_byte_as_one() {
+    // Nine RVEs sheared at nine rates (their lists rebuilt at different steps), stepped in one
+    // buffer set and again with a binding limit that holds two RVEs a set: the same reports and
+    // the same RVEs to the last bit, whatever set an RVE lies in.
+    let mut rve = granite::bench::periodic_rve(60, 1e5).unwrap();
+    rve.set_sequential(true);
+    let copies = 9;
+    let orders: Vec<RveOrder> = (0..copies)
+        .map(|k| {
+            let mut l = Matrix3::zeros();
+            l[(0, 1)] = 0.05 * k as f64 / (100.0 * rve.world.dt);
+            l[(1, 1)] = -0.01 / (100.0 * rve.world.dt);
+            RveOrder { velocity_gradient: l, full_steps: 40 + 7 * k as u64, last_step: 0.0 }
+        })
+        .collect();
+    let run = |device: granite::gpu::GpuDevice| {
+        let mut batch = device.open(vec![Rve::as_is(rve.clone()); copies]).unwrap();
+        let mut reports = Vec::new();
+        for _ in 0..4 {
+            reports = batch.step(&orders).unwrap();
+            assert!(reports.iter().all(|r| r.failure.is_none()), "{:?}", reports[0].failure);
+        }
+        let counted = batch.counters();
+        let rves: Vec<String> = (0..copies).map(|k| batch.get(k).unwrap().to_json().unwrap().to_string()).collect();
+        (reports, rves, counted)
+    };
+    let (whole, whole_rves, one) = run(granite::gpu::GpuDevice::new());
+    assert_eq!(one.chunks, 1);
+    // The largest buffer of two RVEs is about 1.05 of what one RVE holds in all its buffers.
+    let per_rve = one.device_bytes / copies as u64;
+    let (split, split_rves, several) = run(granite::gpu::GpuDevice::with_max_binding(per_rve * 6 / 5));
+    assert!(several.chunks >= 3, "{} buffer sets", several.chunks);
+    assert_eq!(several.submissions, one.submissions, "the sets share each call's submissions");
+    assert_eq!(split, whole, "the reports differ between {} sets and one", several.chunks);
+    for k in 0..copies {
+        assert!(split_rves[k] == whole_rves[k], "RVE {k} differs between {} sets and one", several.chunks);
+    }
+    assert!(whole[0].stress != whole[8].stress, "the RVEs were to differ");
+}

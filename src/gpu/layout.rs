@@ -54,8 +54,21 @@ enum Const {
     Chunk,
     /// Most candidate-list rebuilds one dispatch makes (0: no limit).
     Rebuilds,
+    /// 1: the lists are rebuilt before every step (benchmarks).
+    ForceRebuild,
 }
-const CONSTS: usize = Const::Rebuilds as usize + 1;
+const CONSTS: usize = Const::ForceRebuild as usize + 1;
+
+/// How the kernel's work goes in dispatches (see `Gpu::chunk`).
+#[derive(Debug, Clone, Copy)]
+pub struct Dispatching {
+    /// Most steps one dispatch takes.
+    pub chunk: u32,
+    /// Most candidate-list rebuilds one dispatch makes (0: no limit).
+    pub rebuilds: u32,
+    /// Rebuild the lists before every step, needed or not (benchmarks).
+    pub force_rebuild: bool,
+}
 
 /// Offsets into an RVE's record.
 #[derive(Clone, Copy)]
@@ -123,6 +136,8 @@ pub fn wgsl_constants() -> String {
         ("C_ETA_R", C::EtaR as usize),
         ("C_CHUNK", C::Chunk as usize),
         ("C_REBUILDS", C::Rebuilds as usize),
+        ("C_FORCE_REBUILD", C::ForceRebuild as usize),
+        ("N_CONSTS", CONSTS),
         ("RVE_STRIDE", RVE_STRIDE),
         ("R_H", Rec::H as usize),
         ("R_HB", Rec::HBuild as usize),
@@ -299,31 +314,78 @@ fn check_pair(list: &PairList, k: usize) -> Result<(usize, usize)> {
     Ok((a, b))
 }
 
-impl Layout {
-    /// The layout of these RVEs, with at least `min_slots` slots per sphere.
-    pub fn new(rves: &[DemSim], min_slots: usize) -> Result<Layout> {
-        // One workgroup per RVE, along one axis of a dispatch.
-        if rves.len() > 65535 {
+/// Most candidates of one sphere of this RVE, as first and as second sphere.
+fn longest_row(sim: &DemSim) -> Result<usize> {
+    let mut per_sphere = vec![0usize; sim.world.spheres.len()];
+    for k in 0..sim.world.pairs.len() {
+        let (a, b) = check_pair(&sim.world.pairs, k)?;
+        per_sphere[a] += 1;
+        per_sphere[b] += 1;
+    }
+    Ok(per_sphere.into_iter().max().unwrap_or(0))
+}
+
+/// Slots per sphere for rows whose longest holds `longest` candidates: at most all of a sphere's
+/// candidates, with room to grow.
+fn slots_for(longest: usize, min_slots: usize) -> usize {
+    (2 * longest + 8).max(MIN_SLOTS).max(min_slots)
+}
+
+/// Workgroups of one dispatch along one axis: a buffer set holds at most this many RVEs.
+const MOST_RVES_A_SET: usize = 65535;
+
+/// Bytes of the largest buffer of a set of `rves` RVEs holding `spheres` spheres in rows of
+/// `slots` slots.
+fn largest_buffer(rves: usize, spheres: usize, slots: usize) -> u64 {
+    let slot_count = (spheres * slots) as u64;
+    let ints = 4 * (13 * slot_count + 9 * spheres as u64);
+    let pf = 8 * PF_STRIDE as u64 * slot_count;
+    let ph = 8 * PH_STRIDE as u64 * slot_count;
+    let sph = 8 * (SPH_STRIDE * spheres) as u64;
+    let rve = 8 * (RVE_STRIDE * rves) as u64;
+    ints.max(pf).max(ph).max(sph).max(rve)
+}
+
+/// The RVEs split into consecutive sets whose buffers each stay within `limit` bytes (the
+/// adapter's largest binding and buffer), with at least `min_slots` slots per sphere.
+pub fn split(rves: &[DemSim], min_slots: usize, limit: u64) -> Result<Vec<std::ops::Range<usize>>> {
+    let mut sets = Vec::new();
+    let (mut from, mut spheres, mut longest) = (0, 0, 0);
+    for (r, sim) in rves.iter().enumerate() {
+        let (n, l) = (sim.world.spheres.len(), longest_row(sim)?);
+        let alone = largest_buffer(1, n, slots_for(l, min_slots));
+        if alone > limit {
             return Err(GraniteError::Setup(format!(
-                "device \"gpu\": {} RVEs in one material, at most 65535",
-                rves.len()
+                "device \"gpu\": RVE {r} ({n} spheres, {} pair slots each) needs a buffer of {alone} bytes, more than the \
+                 {limit} bytes the adapter binds at once (GRANITE_GPU_MAX_BINDING may lower it, never raise it); run \
+                 it with device \"cpu\"",
+                slots_for(l, min_slots)
             )));
         }
+        let grown = largest_buffer(r + 1 - from, spheres + n, slots_for(longest.max(l), min_slots));
+        if r > from && (grown > limit || r - from == MOST_RVES_A_SET) {
+            sets.push(from..r);
+            (from, spheres, longest) = (r, 0, 0);
+        }
+        spheres += n;
+        longest = longest.max(l);
+    }
+    if from < rves.len() {
+        sets.push(from..rves.len());
+    }
+    Ok(sets)
+}
+
+impl Layout {
+    /// The layout of these RVEs (one buffer set), with at least `min_slots` slots per sphere.
+    pub fn new(rves: &[DemSim], min_slots: usize) -> Result<Layout> {
         let mut first = vec![0];
         let mut longest = 0;
         for sim in rves {
             first.push(first.last().copied().unwrap_or(0) + sim.world.spheres.len());
-            // Candidates per sphere, both as first and as second sphere.
-            let mut per_sphere = vec![0usize; sim.world.spheres.len()];
-            for k in 0..sim.world.pairs.len() {
-                let (a, b) = check_pair(&sim.world.pairs, k)?;
-                per_sphere[a] += 1;
-                per_sphere[b] += 1;
-            }
-            longest = longest.max(per_sphere.into_iter().max().unwrap_or(0));
+            longest = longest.max(longest_row(sim)?);
         }
-        // A row holds the pairs of one sphere as first: at most all of its candidates.
-        let slots = (2 * longest + 8).max(MIN_SLOTS).max(min_slots);
+        let slots = slots_for(longest, min_slots);
         let spheres = *first.last().unwrap_or(&0);
         let slot_count = spheres * slots;
         let rows = 0;
@@ -346,7 +408,7 @@ impl Layout {
     }
 
     /// The buffers' contents for these RVEs, a dispatch taking at most `chunk` steps.
-    pub fn upload(&self, rves: &[DemSim], law: &LawConstants, (chunk, rebuilds): (u32, u32)) -> Result<Uploaded> {
+    pub fn upload(&self, rves: &[DemSim], law: &LawConstants, dispatching: Dispatching) -> Result<Uploaded> {
         let spheres = *self.first.last().unwrap_or(&0);
         let slot_count = spheres * self.slots;
         let mut consts = vec![0.0; CONSTS];
@@ -369,8 +431,9 @@ impl Layout {
             (Const::AlphaT, law.alpha_t),
             (Const::Mu, law.mu),
             (Const::EtaR, law.eta_r),
-            (Const::Chunk, f64::from(chunk)),
-            (Const::Rebuilds, f64::from(rebuilds)),
+            (Const::Chunk, f64::from(dispatching.chunk)),
+            (Const::Rebuilds, f64::from(dispatching.rebuilds)),
+            (Const::ForceRebuild, if dispatching.force_rebuild { 1.0 } else { 0.0 }),
         ] {
             consts[at as usize] = v;
         }

@@ -7,7 +7,7 @@
 mod layout;
 
 use granite_core::dem::{DemSim, Rve};
-use granite_core::ext::{RveBatch, RveDevice, RveOrder, RveReport};
+use granite_core::ext::{BatchCounters, RveBatch, RveDevice, RveOrder, RveReport};
 use granite_core::{GraniteError, Result};
 use layout::{Failure, Layout, Rec};
 use std::sync::{Arc, OnceLock};
@@ -19,6 +19,10 @@ pub struct GpuDevice {
     gpu: OnceLock<std::result::Result<Arc<Gpu>, String>>,
     /// Invocations per workgroup, when not chosen from the RVEs' size.
     workgroup: Option<u32>,
+    /// Rebuild the candidate lists before every step (benchmarks).
+    force_rebuild: bool,
+    /// Most bytes of one bound buffer, below the adapter's own limit.
+    max_binding: Option<u64>,
 }
 
 impl GpuDevice {
@@ -34,6 +38,19 @@ impl GpuDevice {
         Ok(GpuDevice { workgroup: Some(size), ..Default::default() })
     }
 
+    /// The device rebuilding every RVE's candidate lists before each DEM step, needed or not (a
+    /// benchmark of the search; results stay those of a run that rebuilds when needed, to
+    /// rounding).
+    pub fn forcing_rebuilds() -> GpuDevice {
+        GpuDevice { force_rebuild: true, ..Default::default() }
+    }
+
+    /// The device binding at most `bytes` bytes of a buffer at once (as `GRANITE_GPU_MAX_BINDING`
+    /// does): a batch spreads over more buffer sets.
+    pub fn with_max_binding(bytes: u64) -> GpuDevice {
+        GpuDevice { max_binding: Some(bytes), ..Default::default() }
+    }
+
     fn gpu(&self) -> Result<Arc<Gpu>> {
         self.gpu.get_or_init(|| Gpu::start().map(Arc::new)).clone().map_err(GraniteError::Setup)
     }
@@ -45,9 +62,13 @@ impl RveDevice for GpuDevice {
     }
     fn open(&self, rves: Vec<Rve>) -> Result<Box<dyn RveBatch>> {
         let gpu = self.gpu()?;
+        let max_binding = self.max_binding.map_or(gpu.max_binding, |b| b.min(gpu.max_binding));
         let mut batch = GpuBatch {
             gpu,
             workgroup: self.workgroup,
+            force_rebuild: self.force_rebuild,
+            max_binding,
+            counters: BatchCounters::default(),
             min_slots: 0,
             shadows: Vec::new(),
             law: None,
@@ -74,6 +95,28 @@ pub struct Gpu {
     /// rebuild searches many images); a GPU takes a whole MPM step's in one.
     chunk: u32,
     rebuilds: u32,
+    /// Most bytes of one buffer bound to the kernel: the adapter's limits, or less by
+    /// `GRANITE_GPU_MAX_BINDING`.
+    max_binding: u64,
+    /// Whether the adapter times its own work (timestamp queries).
+    timestamps: bool,
+}
+
+/// The environment variable that lowers the largest buffer a set of RVEs binds (bytes).
+pub const MAX_BINDING_VARIABLE: &str = "GRANITE_GPU_MAX_BINDING";
+
+/// The adapter's largest binding, lowered by `GRANITE_GPU_MAX_BINDING` when set.
+fn max_binding(limits: &wgpu::Limits) -> std::result::Result<u64, String> {
+    let adapter = u64::from(limits.max_storage_buffer_binding_size).min(limits.max_buffer_size);
+    match std::env::var(MAX_BINDING_VARIABLE) {
+        Err(_) => Ok(adapter),
+        Ok(v) => match v.trim().parse::<u64>() {
+            Ok(bytes) if bytes >= 1024 => Ok(bytes.min(adapter)),
+            _ => Err(format!(
+                "{MAX_BINDING_VARIABLE}={v}: a whole number of bytes, at least 1024 (the adapter binds at most {adapter})"
+            )),
+        },
+    }
 }
 
 /// The adapter a process uses: under `mpirun`, the local rank's (round robin over the GPUs).
@@ -108,16 +151,33 @@ impl Gpu {
         let adapter = usable.swap_remove(local_rank() % pool);
         let name = adapter.get_info().name;
         let chunk = if adapter.get_info().device_type == wgpu::DeviceType::Cpu { 16 } else { 4096 };
+        let max_binding = max_binding(&adapter.limits())?;
+        let timestamps = adapter.features().contains(wgpu::Features::TIMESTAMP_QUERY);
+        let features = if timestamps {
+            wgpu::Features::SHADER_F64 | wgpu::Features::TIMESTAMP_QUERY
+        } else {
+            wgpu::Features::SHADER_F64
+        };
         let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
             label: Some("granite RVEs"),
-            required_features: wgpu::Features::SHADER_F64,
+            required_features: features,
             required_limits: adapter.limits(),
             ..Default::default()
         }))
         .map_err(|e| format!("device \"gpu\" ({name}): {e}"))?;
         let software = adapter.get_info().device_type == wgpu::DeviceType::Cpu;
         let rebuilds = if software { 1 } else { 0 };
-        let gpu = Gpu { device, queue, pipelines: Default::default(), name, software, chunk, rebuilds };
+        let gpu = Gpu {
+            device,
+            queue,
+            pipelines: Default::default(),
+            name,
+            software,
+            chunk,
+            rebuilds,
+            max_binding,
+            timestamps,
+        };
         // Compiled once now, so that a kernel the driver refuses is said before any run.
         gpu.pipeline(WORKGROUP_SIZES[0]).map_err(|e| e.to_string())?;
         Ok(gpu)
@@ -176,6 +236,11 @@ impl Gpu {
         let mut encoder = self.device.create_command_encoder(&Default::default());
         encoder.copy_buffer_to_buffer(buffer, 0, &staging, 0, size);
         self.queue.submit([encoder.finish()]);
+        self.map_and_read(&staging)
+    }
+
+    /// Waits for the queue and reads a mappable buffer.
+    fn map_and_read(&self, staging: &wgpu::Buffer) -> Result<Vec<u8>> {
         let (tx, rx) = std::sync::mpsc::channel();
         staging.slice(..).map_async(wgpu::MapMode::Read, move |r| {
             tx.send(r).ok();
@@ -198,17 +263,36 @@ const MAX_SLOT_DOUBLINGS: usize = 4;
 /// Workgroup sizes the kernel is compiled for.
 const WORKGROUP_SIZES: [u32; 3] = [64, 128, 256];
 
-/// The device buffers of a batch (see `rve.wgsl` for their layout).
-struct DeviceRves {
-    pipeline: Arc<wgpu::ComputePipeline>,
+/// One set of device buffers (see `rve.wgsl` for their layout): consecutive RVEs of the batch,
+/// as many as the adapter's binding limits allow in one set.
+struct BufferSet {
+    /// The batch's RVEs this set holds.
+    range: std::ops::Range<usize>,
     layout: Layout,
     rve: wgpu::Buffer,
     sph: wgpu::Buffer,
     pf: wgpu::Buffer,
     ints: wgpu::Buffer,
     bind_group: wgpu::BindGroup,
-    /// The RVE records as the last call left them.
+    /// The set's RVE records as the last call left them.
     records: Vec<f64>,
+    bytes: u64,
+}
+
+impl BufferSet {
+    fn record(&mut self, r: usize) -> &mut [f64] {
+        &mut self.records[r * layout::RVE_STRIDE..(r + 1) * layout::RVE_STRIDE]
+    }
+}
+
+/// The batch on the device: its buffer sets, and where a call's records come back.
+struct DeviceRves {
+    pipeline: Arc<wgpu::ComputePipeline>,
+    sets: Vec<BufferSet>,
+    /// The records of every set, then the call's two timestamps: copied here at the end of each
+    /// submission, read by the host.
+    staging: wgpu::Buffer,
+    timestamps: Option<(wgpu::QuerySet, wgpu::Buffer)>,
     /// Whether the device holds a newer state than the host's copies.
     ahead: bool,
 }
@@ -216,6 +300,9 @@ struct DeviceRves {
 struct GpuBatch {
     gpu: Arc<Gpu>,
     workgroup: Option<u32>,
+    force_rebuild: bool,
+    /// Most bytes of one bound buffer.
+    max_binding: u64,
     /// Fewest pair slots per sphere (doubled when rows outgrow them).
     min_slots: usize,
     /// The RVEs as last brought to the host (the device may be ahead).
@@ -224,27 +311,33 @@ struct GpuBatch {
     device: Option<DeviceRves>,
     /// Whether the host's copies changed since the last upload.
     dirty: bool,
+    counters: BatchCounters,
 }
 
 impl GpuBatch {
     /// Brings the device's state back into the host's copies.
     fn sync_to_host(&mut self) -> Result<()> {
         let Some(d) = self.device.as_mut().filter(|d| d.ahead) else { return Ok(()) };
-        let sph = self.gpu.read(&d.sph)?;
-        let pf = self.gpu.read(&d.pf)?;
-        let ints = self.gpu.read(&d.ints)?;
-        d.layout.download(
-            &mut self.shadows,
-            &d.records,
-            bytemuck::cast_slice(&sph),
-            bytemuck::cast_slice(&pf),
-            bytemuck::cast_slice(&ints),
-        )?;
+        for set in &d.sets {
+            let sph = self.gpu.read(&set.sph)?;
+            let pf = self.gpu.read(&set.pf)?;
+            let ints = self.gpu.read(&set.ints)?;
+            self.counters.submissions += 3;
+            set.layout.download(
+                &mut self.shadows[set.range.clone()],
+                &set.records,
+                bytemuck::cast_slice(&sph),
+                bytemuck::cast_slice(&pf),
+                bytemuck::cast_slice(&ints),
+            )?;
+        }
         d.ahead = false;
         Ok(())
     }
 
-    /// One submission of `orders`: each RVE's report, and whether it stopped for want of pair slots.
+    /// One call of `orders` on the device: each RVE's report, and whether it stopped for want of
+    /// pair slots. One submission does every set's dispatches and copies their records back; a
+    /// software adapter may need more (see `Gpu::rebuilds`).
     fn submit(&mut self, orders: &[RveOrder]) -> Result<Vec<(RveReport, bool)>> {
         if self.dirty || self.device.is_none() {
             self.sync_to_host()?;
@@ -252,55 +345,107 @@ impl GpuBatch {
         }
         let gpu = self.gpu.clone();
         let d = self.device.as_mut().ok_or_else(|| GraniteError::Other("no RVE on the device".into()))?;
-        for (r, order) in orders.iter().enumerate() {
-            let rec = &mut d.records[r * layout::RVE_STRIDE..(r + 1) * layout::RVE_STRIDE];
-            for a in 0..3 {
-                for b in 0..3 {
-                    rec[Rec::L as usize + 3 * a + b] = order.velocity_gradient[(a, b)];
-                }
-            }
-            rec[Rec::Steps as usize] = order.full_steps as f64;
-            rec[Rec::LastDt as usize] = order.last_step;
-            rec[Rec::Error as usize] = 0.0;
-            rec[Rec::Taken as usize] = 0.0;
-        }
         let steps = |o: &RveOrder| o.full_steps + u64::from(o.last_step > 0.0);
-        let mut queue: Vec<usize> = (0..orders.len()).collect();
-        queue.sort_by_key(|&r| std::cmp::Reverse(steps(&orders[r])));
-        for (w, &r) in queue.iter().enumerate() {
-            d.records[w * layout::RVE_STRIDE + Rec::Queue as usize] = r as f64;
+        let rebuilds_before: Vec<f64> = d
+            .sets
+            .iter()
+            .flat_map(|s| s.records.chunks(layout::RVE_STRIDE))
+            .map(|r| r[Rec::Rebuilds as usize])
+            .collect();
+        for set in &mut d.sets {
+            let orders = &orders[set.range.clone()];
+            for (r, order) in orders.iter().enumerate() {
+                let rec = set.record(r);
+                for a in 0..3 {
+                    for b in 0..3 {
+                        rec[Rec::L as usize + 3 * a + b] = order.velocity_gradient[(a, b)];
+                    }
+                }
+                rec[Rec::Steps as usize] = order.full_steps as f64;
+                rec[Rec::LastDt as usize] = order.last_step;
+                rec[Rec::Error as usize] = 0.0;
+                rec[Rec::Taken as usize] = 0.0;
+                rec[Rec::Tests as usize] = 0.0;
+            }
+            // Workgroups start in index order: the longest orders first.
+            let mut queue: Vec<usize> = (0..orders.len()).collect();
+            queue.sort_by_key(|&r| std::cmp::Reverse(steps(&orders[r])));
+            for (w, &r) in queue.iter().enumerate() {
+                set.record(w)[Rec::Queue as usize] = r as f64;
+            }
+            gpu.queue.write_buffer(&set.rve, 0, bytemuck::cast_slice(&set.records));
         }
-        gpu.queue.write_buffer(&d.rve, 0, bytemuck::cast_slice(&d.records));
         // Submissions of as many dispatches as the longest order needs, until every RVE has taken
         // its steps (a dispatch may end early: see `Gpu::rebuilds`).
         let mut taken: Vec<f64> = vec![0.0; orders.len()];
         loop {
-            let left = (0..orders.len())
-                .map(|r| {
-                    steps(&orders[r]).saturating_sub(d.records[r * layout::RVE_STRIDE + Rec::Taken as usize] as u64)
+            let left = d
+                .sets
+                .iter()
+                .flat_map(|set| {
+                    set.range.clone().enumerate().map(move |(r, global)| {
+                        steps(&orders[global])
+                            .saturating_sub(set.records[r * layout::RVE_STRIDE + Rec::Taken as usize] as u64)
+                    })
                 })
                 .max()
                 .unwrap_or(0);
             let dispatches = left.div_ceil(u64::from(gpu.chunk)).max(1);
             let mut encoder = gpu.device.create_command_encoder(&Default::default());
             {
-                let mut pass = encoder.begin_compute_pass(&Default::default());
+                let timestamp_writes = d.timestamps.as_ref().map(|(q, _)| wgpu::ComputePassTimestampWrites {
+                    query_set: q,
+                    beginning_of_pass_write_index: Some(0),
+                    end_of_pass_write_index: Some(1),
+                });
+                let mut pass =
+                    encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: None, timestamp_writes });
                 pass.set_pipeline(&d.pipeline);
-                pass.set_bind_group(0, &d.bind_group, &[]);
                 for _ in 0..dispatches {
-                    pass.dispatch_workgroups(orders.len() as u32, 1, 1);
+                    for set in &d.sets {
+                        pass.set_bind_group(0, &set.bind_group, &[]);
+                        pass.dispatch_workgroups(set.range.len() as u32, 1, 1);
+                    }
                 }
             }
+            let mut at = 0;
+            for set in &d.sets {
+                encoder.copy_buffer_to_buffer(&set.rve, 0, &d.staging, at, set.rve.size());
+                at += set.rve.size();
+            }
+            if let Some((q, resolved)) = &d.timestamps {
+                encoder.resolve_query_set(q, 0..2, resolved, 0);
+                encoder.copy_buffer_to_buffer(resolved, 0, &d.staging, at, 16);
+            }
             gpu.queue.submit([encoder.finish()]);
+            self.counters.submissions += 1;
             d.ahead = true;
-            let bytes = gpu.read(&d.rve)?;
-            d.records = bytemuck::cast_slice(&bytes).to_vec();
-            let unfinished: Vec<usize> = (0..orders.len()).filter(|&r| !d.layout.finished(&d.records, r)).collect();
+            let bytes = gpu.map_and_read(&d.staging)?;
+            let mut at = 0;
+            for set in &mut d.sets {
+                let len = set.records.len();
+                set.records.copy_from_slice(bytemuck::cast_slice(&bytes[at..at + 8 * len]));
+                at += 8 * len;
+            }
+            if d.timestamps.is_some() {
+                let ticks: &[u64] = bytemuck::cast_slice(&bytes[at..at + 16]);
+                let seconds =
+                    ticks[1].saturating_sub(ticks[0]) as f64 * f64::from(gpu.queue.get_timestamp_period()) * 1e-9;
+                *self.counters.device_seconds.get_or_insert(0.0) += seconds;
+            }
+            let mut unfinished = Vec::new();
+            let mut now = vec![0.0; orders.len()];
+            for set in &d.sets {
+                for (r, global) in set.range.clone().enumerate() {
+                    now[global] = set.records[r * layout::RVE_STRIDE + Rec::Taken as usize];
+                    if !set.layout.finished(&set.records, r) {
+                        unfinished.push(global);
+                    }
+                }
+            }
             if unfinished.is_empty() {
                 break;
             }
-            let now: Vec<f64> =
-                (0..orders.len()).map(|r| d.records[r * layout::RVE_STRIDE + Rec::Taken as usize]).collect();
             if unfinished.iter().all(|&r| now[r] <= taken[r]) {
                 return Err(GraniteError::Other(format!(
                     "device \"gpu\" ({}): the kernel stopped RVE {} before its last step (a driver's limit on a \
@@ -310,14 +455,29 @@ impl GpuBatch {
             }
             taken = now;
         }
-        Ok((0..orders.len()).map(|r| (d.layout.report(&d.records, r), d.layout.out_of_slots(&d.records, r))).collect())
+        let mut reports = Vec::with_capacity(orders.len());
+        for set in &d.sets {
+            for (r, global) in set.range.clone().enumerate() {
+                let rec = &set.records[r * layout::RVE_STRIDE..(r + 1) * layout::RVE_STRIDE];
+                self.counters.pair_tests += rec[Rec::Tests as usize] as u64;
+                let rebuilds = rec[Rec::Rebuilds as usize] - rebuilds_before[global];
+                self.counters.sphere_searches += (rebuilds * rec[Rec::Count as usize]) as u64;
+                reports.push((set.layout.report(&set.records, r), set.layout.out_of_slots(&set.records, r)));
+            }
+        }
+        Ok(reports)
     }
 
     /// Makes the device's state the host's copies'.
     fn upload(&mut self) -> Result<()> {
         let law = self.law.as_ref().ok_or_else(|| GraniteError::Other("no RVE on the device".into()))?;
-        let layout = Layout::new(&self.shadows, self.min_slots)?;
-        let data = layout.upload(&self.shadows, law, (self.gpu.chunk, self.gpu.rebuilds))?;
+        let dispatching = layout::Dispatching {
+            chunk: self.gpu.chunk,
+            rebuilds: self.gpu.rebuilds,
+            force_rebuild: self.force_rebuild,
+        };
+        let spheres = self.shadows.iter().map(|s| s.world.spheres.len()).max().unwrap_or(0);
+        let pipeline = self.gpu.pipeline(self.workgroup.unwrap_or_else(|| self.gpu.workgroup_size(spheres)))?;
         let device = &self.gpu.device;
         let storage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST;
         let make = |label: &str, bytes: &[u8]| {
@@ -327,27 +487,60 @@ impl GpuBatch {
                 usage: storage,
             })
         };
-        let consts = make("consts", bytemuck::cast_slice(&data.consts));
-        let rve = make("rve", bytemuck::cast_slice(&data.rve));
-        let sph = make("sph", bytemuck::cast_slice(&data.sph));
-        let pf = make("pf", bytemuck::cast_slice(&data.pf));
-        let ph = make("ph", bytemuck::cast_slice(&vec![0.0f64; data.ph_len.max(1)]));
-        let ints = make("ints", bytemuck::cast_slice(&data.ints));
-        let spheres = self.shadows.iter().map(|s| s.world.spheres.len()).max().unwrap_or(0);
-        let pipeline = self.gpu.pipeline(self.workgroup.unwrap_or_else(|| self.gpu.workgroup_size(spheres)))?;
-        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("rves"),
-            layout: &pipeline.get_bind_group_layout(0),
-            entries: &[&consts, &rve, &sph, &pf, &ph, &ints]
-                .iter()
-                .enumerate()
-                .map(|(i, b)| wgpu::BindGroupEntry { binding: i as u32, resource: b.as_entire_binding() })
-                .collect::<Vec<_>>(),
+        let mut sets = Vec::new();
+        for range in layout::split(&self.shadows, self.min_slots, self.max_binding)? {
+            let rves = &self.shadows[range.clone()];
+            let layout = Layout::new(rves, self.min_slots)?;
+            let data = layout.upload(rves, law, dispatching)?;
+            let consts = make("consts", bytemuck::cast_slice(&data.consts));
+            let rve = make("rve", bytemuck::cast_slice(&data.rve));
+            let sph = make("sph", bytemuck::cast_slice(&data.sph));
+            let pf = make("pf", bytemuck::cast_slice(&data.pf));
+            let ph = make("ph", bytemuck::cast_slice(&vec![0.0f64; data.ph_len.max(1)]));
+            let ints = make("ints", bytemuck::cast_slice(&data.ints));
+            let buffers = [&consts, &rve, &sph, &pf, &ph, &ints];
+            let bytes = buffers.iter().map(|b| b.size()).sum();
+            let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("rves"),
+                layout: &pipeline.get_bind_group_layout(0),
+                entries: &buffers
+                    .iter()
+                    .enumerate()
+                    .map(|(i, b)| wgpu::BindGroupEntry { binding: i as u32, resource: b.as_entire_binding() })
+                    .collect::<Vec<_>>(),
+            });
+            sets.push(BufferSet { range, layout, rve, sph, pf, ints, bind_group, records: data.rve, bytes });
+        }
+        let records: u64 = sets.iter().map(|s| s.rve.size()).sum();
+        let staging = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("records back"),
+            size: records + 16,
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
         });
-        self.device =
-            Some(DeviceRves { pipeline, layout, rve, sph, pf, ints, bind_group, records: data.rve, ahead: false });
+        let timestamps = self.gpu.timestamps.then(|| {
+            let query = device.create_query_set(&wgpu::QuerySetDescriptor {
+                label: Some("call time"),
+                ty: wgpu::QueryType::Timestamp,
+                count: 2,
+            });
+            let resolved = device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("call time resolved"),
+                size: 16,
+                usage: wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
+                mapped_at_creation: false,
+            });
+            (query, resolved)
+        });
+        self.counters.device_bytes = sets.iter().map(|s| s.bytes).sum::<u64>() + staging.size();
+        self.counters.chunks = sets.len() as u64;
+        self.device = Some(DeviceRves { pipeline, sets, staging, timestamps, ahead: false });
         self.dirty = false;
         Ok(())
+    }
+
+    fn slots(&self) -> usize {
+        self.device.as_ref().and_then(|d| d.sets.iter().map(|s| s.layout.slots()).max()).unwrap_or(self.min_slots)
     }
 }
 
@@ -391,6 +584,7 @@ impl RveBatch for GpuBatch {
         if self.shadows.is_empty() {
             return Ok(Vec::new());
         }
+        self.counters.calls += 1;
         let mut reports = self.submit(orders)?;
         // RVEs whose rows outgrew their slots (a cell flattened to a few reaches: more images in
         // reach) go on from where they stopped with twice the slots.
@@ -399,7 +593,7 @@ impl RveBatch for GpuBatch {
             if short.is_empty() {
                 break;
             }
-            self.min_slots = 2 * self.device.as_ref().map(|d| d.layout.slots()).unwrap_or(self.min_slots);
+            self.min_slots = 2 * self.slots();
             self.sync_to_host()?;
             self.dirty = true;
             let rest: Vec<RveOrder> = (0..orders.len())
@@ -441,6 +635,9 @@ impl RveBatch for GpuBatch {
         *slot = rve;
         self.dirty = true;
         Ok(())
+    }
+    fn counters(&self) -> BatchCounters {
+        self.counters
     }
 }
 

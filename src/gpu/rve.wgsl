@@ -56,7 +56,12 @@ var<workgroup> w_cells: array<atomic<u32>, MAX_CELLS>;
 var<workgroup> w_scan: array<u32, WG>;
 var<workgroup> w_tests: atomic<u32>;
 
-fn cu(i: u32) -> u32 { return u32(consts[i]); }
+// The batch's constants, copied once per invocation out of `consts` (read in every inner loop).
+var<private> pc: array<f64, N_CONSTS>;
+var<private> pu: array<u32, N_CONSTS>;
+
+fn cu(i: u32) -> u32 { return pu[i]; }
+fn cf(i: u32) -> f64 { return pc[i]; }
 
 fn load3(base: u32) -> vec3<f64> { return vec3<f64>(sph[base], sph[base + 1u], sph[base + 2u]); }
 fn store3(base: u32, v: vec3<f64>) { sph[base] = v.x; sph[base + 1u] = v.y; sph[base + 2u] = v.z; }
@@ -141,11 +146,11 @@ struct Law { force: vec3<f64>, moment: vec3<f64> }
 // The contact law on one touching pair (see `rolling.rs`, `linear.rs`); updates the history in
 // `pf` and returns the force and extra moment on the first sphere.
 fn contact_law(slot: u32, ra: f64, rb: f64, n: vec3<f64>, overlap: f64, rel_v: vec3<f64>, spin: vec3<f64>, dt: f64) -> Law {
-    var kn = consts[C_KN];
-    if (consts[C_YOUNG] > 0.0lf) { kn = 2.0lf * consts[C_YOUNG] * ra * rb / (ra + rb); }
-    var kt = consts[C_KT_RATIO] * kn;
-    if (consts[C_KT] >= 0.0lf) { kt = consts[C_KT]; }
-    let mu = consts[C_MU];
+    var kn = cf(C_KN);
+    if (cf(C_YOUNG) > 0.0lf) { kn = 2.0lf * cf(C_YOUNG) * ra * rb / (ra + rb); }
+    var kt = cf(C_KT_RATIO) * kn;
+    if (cf(C_KT) >= 0.0lf) { kt = cf(C_KT); }
+    let mu = cf(C_MU);
     let h = slot * PF_STRIDE;
     let fn_ = kn * overlap;
     // Tangential spring-slider.
@@ -159,11 +164,11 @@ fn contact_law(slot: u32, ra: f64, rb: f64, n: vec3<f64>, overlap: f64, rel_v: v
     var out: Law;
     out.force = ft - fn_ * n;
     out.moment = vec3<f64>(0.0lf);
-    if (u32(consts[C_LAW]) != 0u) { return out; }
+    if (u32(cf(C_LAW)) != 0u) { return out; }
     // Rolling and twisting springs, capped at eta_r |F_n| min(r1, r2).
-    let kr = consts[C_ALPHA_R] * kt * ra * rb;
-    let ktw = consts[C_ALPHA_T] * kt * ra * rb;
-    let limit = consts[C_ETA_R] * min(ra, rb) * fn_;
+    let kr = cf(C_ALPHA_R) * kt * ra * rb;
+    let ktw = cf(C_ALPHA_T) * kt * ra * rb;
+    let limit = cf(C_ETA_R) * min(ra, rb) * fn_;
     let s_n = sdot(spin, n);
     let roll = spin - s_n * n;
     var theta = rotate_into_plane(vec3<f64>(pf[h + 3u], pf[h + 4u], pf[h + 5u]), n) + roll * dt;
@@ -262,7 +267,7 @@ fn move_sphere(first: u32, i: u32, dt: f64) -> f64 {
     var x = load3(s);
     var v = load3(s + 3u);
     var w = load3(s + 6u);
-    let damping = consts[C_DAMPING];
+    let damping = cf(C_DAMPING);
     let inv_m = 1.0lf / sph[s + 13u];
     let inv_i = 1.0lf / sph[s + 14u];
     v = v + cundall(f * inv_m, v, damping, dt) * dt;
@@ -318,7 +323,7 @@ fn cell_end(q: u32) -> u32 { return atomicLoad(&w_cells[q]); }
 // incoming list outgrew its slots.
 fn rebuild_row(first: u32, i: u32) -> i32 {
     let kk = cu(C_K);
-    let skin = consts[C_SKIN];
+    let skin = cf(C_SKIN);
     let si = sph_base(first, i);
     let xi = load3(si);
     let ri = sph[si + 12u];
@@ -461,7 +466,7 @@ fn rebuild(r: u32, lid: u32, first: u32, count: u32) {
     if (lid == 0u) {
         w_inv = inverse3(w_h);
         // Widths between opposite faces: 1 / |row a of h^-1|.
-        let reach = 2.0lf * rve[base + R_RMAX] + consts[C_SKIN];
+        let reach = 2.0lf * rve[base + R_RMAX] + cf(C_SKIN);
         for (var a = 0u; a < 3u; a++) {
             let g = sqrt(w_inv[3u * a] * w_inv[3u * a] + w_inv[3u * a + 1u] * w_inv[3u * a + 1u] + w_inv[3u * a + 2u] * w_inv[3u * a + 2u]);
             if (!(MAX_IMAGES_ACROSS >= reach * g)) { fail(r, FAIL_CELL_COLLAPSED, 1.0lf / g); }
@@ -600,11 +605,12 @@ fn flip_if_needed() -> bool {
 fn run_rves(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
     // Workgroups start in index order as the GPU's cores free up: the RVEs with the most steps
     // go first, and the short ones fill in behind them.
+    for (var q = 0u; q < N_CONSTS; q++) { pc[q] = consts[q]; pu[q] = u32(max(consts[q], 0.0lf)); }
     let r = u32(rve[group.x * RVE_STRIDE + R_QUEUE]);
     let base = r * RVE_STRIDE;
     let first = u32(rve[base + R_FIRST]);
     let count = u32(rve[base + R_COUNT]);
-    let skin = consts[C_SKIN];
+    let skin = cf(C_SKIN);
     if (lid == 0u) {
         for (var q = 0u; q < 9u; q++) { w_h[q] = rve[base + R_H + q]; w_l[q] = rve[base + R_L + q]; }
         let last = rve[base + R_LAST_DT];
@@ -620,7 +626,7 @@ fn run_rves(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_i
     var rebuilds_here = 0u;
     for (var step = done; step < steps; step++) {
         if (lid == 0u) {
-            w_rebuild = u32(rve[base + R_REBUILD]);
+            w_rebuild = u32(rve[base + R_REBUILD]) | cu(C_FORCE_REBUILD);
             w_dt = rve[base + R_DT];
             if (step == u32(rve[base + R_STEPS])) { w_dt = rve[base + R_LAST_DT]; }
         }

@@ -82,4 +82,28 @@ pub trait RveBatch: Send {
     fn get(&mut self, index: usize) -> Result<Rve>;
     /// Replaces one RVE.
     fn set(&mut self, index: usize, rve: Rve) -> Result<()>;
+    /// What the device counted since the batch opened (benchmarks); all zero where it counts
+    /// nothing.
+    fn counters(&self) -> BatchCounters {
+        BatchCounters::default()
+    }
+}
+
+/// A batch's running counts, for benchmarks: differences of two readings cover what happened
+/// between them.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct BatchCounters {
+    /// Calls of [`RveBatch::step`].
+    pub calls: u64,
+    /// Submissions to the device (its work and the copies back).
+    pub submissions: u64,
+    /// Distance tests of the candidate searches, and the spheres whose candidates were searched.
+    pub pair_tests: u64,
+    pub sphere_searches: u64,
+    /// Bytes the batch holds on the device now.
+    pub device_bytes: u64,
+    /// Buffer sets the batch is split into (each within the device's binding limits).
+    pub chunks: u64,
+    /// Seconds the device spent in the batch's work, where it reports its own time (timestamps).
+    pub device_seconds: Option<f64>,
 }
