@@ -21,8 +21,10 @@ const MAX_IMAGES_ACROSS: f64 = 64.0;
 const MAX_CELLS: u32 = 2048u;
 const CELLS_PER_SPHERE: u32 = 2u;
 const CELL_SPLIT: f64 = 1.0lf;
-// Pairs summed together in the Love-Weber stress (as `measures.rs` sums them).
-const PAIRS_PER_BLOCK: u32 = 1024u;
+// Runs of pairs summed apart in the Love-Weber stress, then added in a tree (as `measures.rs`
+// sums them), and the runs of each invocation.
+const STRESS_LANES: u32 = 256u;
+const LANES_EACH: u32 = STRESS_LANES / WG;
 
 @group(0) @binding(0) var<storage, read> consts: array<f64>;
 @group(0) @binding(1) var<storage, read_write> rve: array<f64>;
@@ -41,8 +43,9 @@ var<workgroup> w_minv: array<i32, 9>;
 var<workgroup> w_dt: f64;
 var<workgroup> w_moved: array<f64, WG>;
 var<workgroup> w_bad: array<u32, WG>;
-var<workgroup> w_pairs: u32;
-var<workgroup> w_counts: array<vec4<u32>, WG>;
+// The call's contact counts (contacts, contact ends, rattlers, floaters) and the stress tree.
+var<workgroup> w_totals: array<atomic<u32>, 4>;
+var<workgroup> w_tree: array<f64, STRESS_LANES>;
 var<workgroup> w_steps: u32;
 var<workgroup> w_done: u32;
 var<workgroup> w_rebuild: u32;
@@ -721,14 +724,25 @@ fn run_rves(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_i
         }
         if (workgroupUniformLoad(&w_fail) != 0u) { break; }
     }
-    // The RVE's measures after the call: contact counts, and the Love-Weber stress (eq. 4.7)
-    // summed in the CPU engine's order (`DemSim::stress_and_axis_stiffness`): blocks of
-    // PAIRS_PER_BLOCK pairs in pair order, each from zero, then the blocks in order.
+    // The RVE's measures after the call: contact counts (integers, in any order), and the
+    // Love-Weber stress (eq. 4.7) summed in the CPU engine's order (`DemWorld::
+    // stress_and_axis_stiffness`): STRESS_LANES runs of consecutive pairs, each from zero, then
+    // the runs' sums added pairwise in a fixed tree.
     barrier_all();
+    if (lid == 0u) {
+        atomicStore(&w_totals[0], 0u); atomicStore(&w_totals[1], 0u);
+        atomicStore(&w_totals[2], 0u); atomicStore(&w_totals[3], 0u);
+    }
     var counts = vec4<u32>(0u);
-    for (var i = lid; i < count; i += WG) {
+    var own_rows = 0u;
+    let per = (count + WG - 1u) / WG;
+    let lo = min(lid * per, count);
+    let hi = min(lo + per, count);
+    // Each invocation a run of spheres: their contacts, and their rows' lengths for the starts.
+    for (var i = lo; i < hi; i++) {
         let c = cnt_base(first, i);
         var mine = 0u;
+        own_rows += u32(ints[c]);
         for (var k = 0u; k < u32(ints[c]); k++) {
             if (pf[slot_of(first, i, k) * PF_STRIDE + PF_TOUCH] != 0.0lf) { mine++; }
         }
@@ -741,34 +755,42 @@ fn run_rves(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_i
         if (mine == 1u) { counts.z += 1u; }
         if (mine == 0u) { counts.w += 1u; }
     }
-    w_counts[lid] = counts;
-    if (lid == 0u) {
-        // Where each sphere's row starts in the pair order.
-        var total = 0u;
-        for (var i = 0u; i < count; i++) {
-            let c = cnt_base(first, i);
-            ints[c + 5u] = i32(total);
-            total += u32(ints[c]);
-        }
-        w_pairs = total;
+    workgroupBarrier();
+    atomicAdd(&w_totals[0], counts.x); atomicAdd(&w_totals[1], counts.y);
+    atomicAdd(&w_totals[2], counts.z); atomicAdd(&w_totals[3], counts.w);
+    // Where each sphere's row starts in the pair order: the runs' lengths scanned across the
+    // workgroup, then each run's rows in order.
+    w_scan[lid] = own_rows;
+    workgroupBarrier();
+    for (var step = 1u; step < WG; step = step * 2u) {
+        var add = 0u;
+        if (lid >= step) { add = w_scan[lid - step]; }
+        workgroupBarrier();
+        w_scan[lid] += add;
+        workgroupBarrier();
     }
-    let pairs = workgroupUniformLoad(&w_pairs);
-    storageBarrier();
-    let blocks = (pairs + PAIRS_PER_BLOCK - 1u) / PAIRS_PER_BLOCK;
-    // Each block's sums go to this RVE's rebuild scratch, unused until the next rebuild.
-    let scratch = first * cu(C_K) * PH_STRIDE;
-    for (var b = lid; b < blocks; b += WG) {
-        var s: array<f64, 9>;
-        let start = b * PAIRS_PER_BLOCK;
-        let end = min(start + PAIRS_PER_BLOCK, pairs);
-        // The last sphere whose row starts at or before the block.
-        var lo = 0u;
-        var hi = count;
-        while (hi - lo > 1u) {
-            let mid = (lo + hi) / 2u;
-            if (u32(ints[cnt_base(first, mid) + 5u]) <= start) { lo = mid; } else { hi = mid; }
+    var run = w_scan[lid] - own_rows;
+    for (var i = lo; i < hi; i++) {
+        let c = cnt_base(first, i);
+        ints[c + 5u] = i32(run);
+        run += u32(ints[c]);
+    }
+    let pairs = w_scan[WG - 1u];
+    barrier_all();
+    let lane_pairs = max((pairs + STRESS_LANES - 1u) / STRESS_LANES, 1u);
+    var sums: array<f64, 9u * LANES_EACH>;
+    for (var u = 0u; u < LANES_EACH; u++) {
+        let start = min((lid + u * WG) * lane_pairs, pairs);
+        let end = min(start + lane_pairs, pairs);
+        if (start >= end) { continue; }
+        // The last sphere whose row starts at or before the run.
+        var lo_a = 0u;
+        var hi_a = count;
+        while (hi_a - lo_a > 1u) {
+            let mid = (lo_a + hi_a) / 2u;
+            if (u32(ints[cnt_base(first, mid) + 5u]) <= start) { lo_a = mid; } else { hi_a = mid; }
         }
-        var a = lo;
+        var a = lo_a;
         var at = start;
         while (at < end) {
             let c = cnt_base(first, a);
@@ -780,21 +802,27 @@ fn run_rves(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_i
                 let f = pf3(p + PF_FORCE);
                 let l = (load3(sph_base(first, u32(row_partner(slot)))) + image(row_shift(slot))) - load3(sph_base(first, a));
                 for (var i = 0u; i < 3u; i++) {
-                    for (var j = 0u; j < 3u; j++) { s[3u * i + j] += f[i] * l[j]; }
+                    for (var j = 0u; j < 3u; j++) { sums[9u * u + 3u * i + j] += f[i] * l[j]; }
                 }
             }
             at++;
         }
-        for (var q = 0u; q < 9u; q++) { ph[scratch + 9u * b + q] = s[q]; }
     }
-    barrier_all();
-    if (lid == 0u) {
-        var s: array<f64, 9>;
-        for (var b = 0u; b < blocks; b++) {
-            for (var q = 0u; q < 9u; q++) { s[q] += ph[scratch + 9u * b + q]; }
+    var s: array<f64, 9>;
+    for (var q = 0u; q < 9u; q++) {
+        for (var u = 0u; u < LANES_EACH; u++) { w_tree[lid + u * WG] = sums[9u * u + q]; }
+        workgroupBarrier();
+        for (var half = STRESS_LANES / 2u; half > 0u; half = half / 2u) {
+            for (var u = 0u; u < LANES_EACH; u++) {
+                let t = lid + u * WG;
+                if (t < half) { w_tree[t] += w_tree[t + half]; }
+            }
+            workgroupBarrier();
         }
-        var total = vec4<u32>(0u);
-        for (var t = 0u; t < WG; t++) { total += w_counts[t]; }
+        s[q] = w_tree[0];
+        workgroupBarrier();
+    }
+    if (lid == 0u) {
         for (var q = 0u; q < 9u; q++) { rve[base + R_H + q] = w_h[q]; }
         let volume = abs(w_h[0] * (w_h[4] * w_h[8] - w_h[5] * w_h[7]) - w_h[1] * (w_h[3] * w_h[8] - w_h[5] * w_h[6])
             + w_h[2] * (w_h[3] * w_h[7] - w_h[4] * w_h[6]));
@@ -804,9 +832,9 @@ fn run_rves(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_i
         rve[base + R_STRESS + 3u] = 0.5lf * (s[1] + s[3]) / volume;
         rve[base + R_STRESS + 4u] = 0.5lf * (s[5] + s[7]) / volume;
         rve[base + R_STRESS + 5u] = 0.5lf * (s[2] + s[6]) / volume;
-        rve[base + R_CONTACTS] = f64(total.x);
-        rve[base + R_ENDS] = f64(total.y);
-        rve[base + R_RATTLERS] = f64(total.z);
-        rve[base + R_FLOATERS] = f64(total.w);
+        rve[base + R_CONTACTS] = f64(atomicLoad(&w_totals[0]));
+        rve[base + R_ENDS] = f64(atomicLoad(&w_totals[1]));
+        rve[base + R_RATTLERS] = f64(atomicLoad(&w_totals[2]));
+        rve[base + R_FLOATERS] = f64(atomicLoad(&w_totals[3]));
     }
 }

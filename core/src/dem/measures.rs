@@ -5,8 +5,10 @@ use crate::dem::contacts::PairList;
 use crate::dem::sim::DemWorld;
 use crate::math::{Vec3, Voigt};
 
-/// Pairs summed together in the Love-Weber stress: blocks of a few microseconds of work.
-const PAIRS_PER_BLOCK: usize = 1024;
+/// Runs of consecutive pairs summed apart in the Love-Weber stress, their sums then added
+/// pairwise in a fixed tree: a device sums them in the same order, each run on its own
+/// invocation (`rve.wgsl`), whatever the thread count.
+pub const STRESS_LANES: usize = 256;
 
 #[derive(Debug, Clone, Default)]
 pub struct DemDiagnostics {
@@ -229,23 +231,29 @@ impl DemWorld {
     /// (normal springs only).
     /// In parallel blocks if `parallel`: the same sums either way.
     pub fn stress_and_axis_stiffness(&self, volume: f64, parallel: bool) -> (Voigt, [f64; 3]) {
-        // Summed block by block, and the blocks in order: the same sums whatever the thread
-        // count. The servo needs them every step; when the step runs in parallel, so do the
-        // blocks, keeping both cores busy instead of leaving one to fall asleep while the other
-        // sums alone.
+        // Summed run by run, and the runs' sums in a fixed tree: the same sums whatever the
+        // thread count. The servo needs them every step; when the step runs in parallel, so do
+        // the runs, keeping both cores busy instead of leaving one to fall asleep while the
+        // other sums alone.
         let len = self.pairs.len();
-        let blocks = (0..len).step_by(PAIRS_PER_BLOCK).map(|b| b..(b + PAIRS_PER_BLOCK).min(len));
-        let add = |(mut s, mut k): ([f64; 9], [f64; 3]), (ps, pk): ([f64; 9], [f64; 3])| {
-            s.iter_mut().zip(ps).for_each(|(a, b)| *a += b);
-            k.iter_mut().zip(pk).for_each(|(a, b)| *a += b);
-            (s, k)
-        };
-        let zero = ([0.0; 9], [0.0; 3]);
-        let (s, k) = if parallel {
-            crate::par::run_pieces(blocks.collect(), |b| self.pair_sums(b)).into_iter().fold(zero, add)
+        let per = len.div_ceil(STRESS_LANES).max(1);
+        let lanes: Vec<std::ops::Range<usize>> =
+            (0..STRESS_LANES).map(|t| (t * per).min(len)..((t + 1) * per).min(len)).collect();
+        let mut sums: Vec<([f64; 9], [f64; 3])> = if parallel {
+            crate::par::run_pieces(lanes, |r| self.pair_sums(r))
         } else {
-            blocks.map(|b| self.pair_sums(b)).fold(zero, add)
+            lanes.into_iter().map(|r| self.pair_sums(r)).collect()
         };
+        let mut half = STRESS_LANES / 2;
+        while half > 0 {
+            let (low, high) = sums.split_at_mut(half);
+            for ((s, k), (ps, pk)) in low.iter_mut().zip(high.iter()) {
+                s.iter_mut().zip(ps).for_each(|(a, b)| *a += b);
+                k.iter_mut().zip(pk).for_each(|(a, b)| *a += b);
+            }
+            half /= 2;
+        }
+        let (s, k) = sums[0];
         let sym = |a: usize, b: usize| 0.5 * (s[3 * a + b] + s[3 * b + a]) / volume;
         ([sym(0, 0), sym(1, 1), sym(2, 2), sym(0, 1), sym(1, 2), sym(0, 2)], k.map(|v| v / volume))
     }
