@@ -913,6 +913,9 @@ pub struct DeviceBench {
     /// Candidate lists rebuilt before every DEM step, on the device and the CPU alike.
     pub force_rebuild: bool,
     pub json: Option<std::path::PathBuf>,
+    /// Append one markdown table row per measurement to this file (a header first if it is
+    /// empty or new).
+    pub table: Option<std::path::PathBuf>,
 }
 
 /// One measurement of [`mpmxdem_on_device`], as `--json` writes it.
@@ -961,6 +964,9 @@ pub fn mpmxdem_on_device(bench: &DeviceBench) -> Result<()> {
     let mut figures = Vec::new();
     for &dem_steps in &steps_list {
         figures.push(device_round(&scene, copies, dem_steps, bench, &*on)?);
+    }
+    if let Some(path) = &bench.table {
+        append_table_rows(path, &figures)?;
     }
     if let Some(path) = &bench.json {
         let value = if figures.len() == 1 { serde_json::to_value(&figures[0]) } else { serde_json::to_value(&figures) }
@@ -1142,4 +1148,61 @@ fn print_device_figures(f: &DeviceFigures, work: f64, device_time: f64, cpu_slow
         f.dem_steps,
         f.thesis_run_hours
     );
+}
+
+/// The columns of `--table`: what `scripts/bench/gpu_check.sh` collects into one table.
+const TABLE_HEADER: &str = "| scene | RVEs x spheres | DEM steps | perturbed | rebuilt every step | device sphere-steps/s | CPU sphere-steps/s (threads) | device/CPU | ms a call (host / device) | tests per sphere and search | MB per RVE | buffer sets | submissions a call | thesis run (h) |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
+
+fn append_table_rows(path: &std::path::Path, figures: &[DeviceFigures]) -> Result<()> {
+    use std::io::Write;
+    let fresh = std::fs::metadata(path).map(|m| m.len() == 0).unwrap_or(true);
+    let mut text = String::new();
+    if fresh {
+        text += TABLE_HEADER;
+    }
+    for f in figures {
+        text += &format!(
+            "| {} | {} x {} | {} | {} | {} | {:.3e} | {:.3e} ({}) | {:.2} | {:.2} / {} | {} | {:.2} | {} | {:.2} | {:.1} |\n",
+            f.scene,
+            f.copies,
+            f.spheres_per_rve,
+            f.dem_steps,
+            if f.perturb { "yes" } else { "no" },
+            if f.force_rebuild { "yes" } else { "no" },
+            f.sphere_steps_per_s,
+            f.cpu_sphere_steps_per_s,
+            f.cpu_threads,
+            f.sphere_steps_per_s / f.cpu_sphere_steps_per_s,
+            f.host_ms_per_mpm_step,
+            f.device_ms_per_mpm_step.map(|d| format!("{d:.2}")).unwrap_or_else(|| "-".into()),
+            f.pair_tests_per_sphere_rebuild.map(|t| format!("{t:.0}")).unwrap_or_else(|| "-".into()),
+            f.device_bytes_per_rve / 1e6,
+            f.chunks,
+            f.submissions_per_mpm_step,
+            f.thesis_run_hours
+        );
+    }
+    let mut file = std::fs::OpenOptions::new()
+        .create(true)
+        .append(true)
+        .open(path)
+        .map_err(|e| granite_core::GraniteError::Other(format!("--table {}: {e}", path.display())))?;
+    file.write_all(text.as_bytes())
+        .map_err(|e| granite_core::GraniteError::Other(format!("--table {}: {e}", path.display())))
+}
+
+/// `granite bench adapter`: the GPU adapter the RVEs would run on, its driver and the limits that
+/// shape a batch.
+pub fn adapter() -> Result<()> {
+    #[cfg(feature = "gpu")]
+    {
+        for (name, value) in crate::gpu::GpuDevice::new().adapter_facts()? {
+            granite_core::outln!("{name}: {value}");
+        }
+        Ok(())
+    }
+    #[cfg(not(feature = "gpu"))]
+    Err(granite_core::GraniteError::Setup(
+        "granite bench adapter: this build has no GPU device (cargo build --release --features gpu)".into(),
+    ))
 }

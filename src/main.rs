@@ -58,7 +58,7 @@ enum Command {
     },
     /// Print performance figures.
     Bench {
-        /// Which benchmark: mpm, dem, mpmxdem, triaxial, potential.
+        /// Which benchmark: mpm, dem, mpmxdem, triaxial, potential; or adapter (the GPU's limits).
         which: String,
         /// Material points in the 3D block (about).
         #[arg(long, default_value_t = 100_000, value_parser = granite::parse_at_least::<10>)]
@@ -104,6 +104,9 @@ enum Command {
         /// a list when there are several).
         #[arg(long, value_name = "FILE")]
         json: Option<PathBuf>,
+        /// mpmxdem --device: append one markdown table row per measurement to this file.
+        #[arg(long, value_name = "FILE")]
+        table: Option<PathBuf>,
     },
     /// List the registered plugins (constitutive laws, contact laws, shapes, velocity updates)
     /// and their parameters, with the laws of native plugin libraries given with --plugin.
@@ -268,6 +271,7 @@ fn main() -> ExitCode {
             perturb,
             force_rebuild,
             json,
+            table,
         } => {
             let timed_steps = dem_steps.first().copied().unwrap_or(2000);
             #[cfg(feature = "mpi")]
@@ -305,7 +309,9 @@ fn main() -> ExitCode {
                     perturb,
                     force_rebuild,
                     json,
+                    table,
                 }),
+                "adapter" => granite::bench::adapter(),
                 "mpmxdem" => granite::bench::mpmxdem(&threads, repeat),
                 "triaxial" => granite::bench::triaxial(&threads, axial_strain),
                 "potential" => {
@@ -314,7 +320,7 @@ fn main() -> ExitCode {
                 }
                 other => {
                     granite_core::errln!(
-                        "granite: unknown benchmark `{other}`; available: mpm, dem, mpmxdem, triaxial, potential"
+                        "granite: unknown benchmark `{other}`; available: mpm, dem, mpmxdem, triaxial, potential, adapter"
                     );
                     return ExitCode::from(2);
                 }

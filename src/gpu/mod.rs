@@ -51,6 +51,11 @@ impl GpuDevice {
         GpuDevice { max_binding: Some(bytes), ..Default::default() }
     }
 
+    /// The adapter's name, driver and the limits that shape a batch (opening it if need be).
+    pub fn adapter_facts(&self) -> Result<Vec<(String, String)>> {
+        Ok(self.gpu()?.facts.clone())
+    }
+
     fn gpu(&self) -> Result<Arc<Gpu>> {
         self.gpu.get_or_init(|| Gpu::start().map(Arc::new)).clone().map_err(GraniteError::Setup)
     }
@@ -100,6 +105,8 @@ pub struct Gpu {
     max_binding: u64,
     /// Whether the adapter times its own work (timestamp queries).
     timestamps: bool,
+    /// The adapter's name, driver and the limits that shape a batch, for `granite bench adapter`.
+    facts: Vec<(String, String)>,
 }
 
 /// The environment variable that lowers the largest buffer a set of RVEs binds (bytes).
@@ -150,6 +157,26 @@ impl Gpu {
         }
         let adapter = usable.swap_remove(local_rank() % pool);
         let name = adapter.get_info().name;
+        let info = adapter.get_info();
+        let limits = adapter.limits();
+        let facts = vec![
+            ("adapter".to_string(), name.clone()),
+            ("driver".to_string(), format!("{} {}", info.driver, info.driver_info)),
+            ("kind".to_string(), format!("{:?}", info.device_type)),
+            ("max_storage_buffer_binding_size".to_string(), limits.max_storage_buffer_binding_size.to_string()),
+            ("max_buffer_size".to_string(), limits.max_buffer_size.to_string()),
+            ("max_compute_workgroup_storage_size".to_string(), limits.max_compute_workgroup_storage_size.to_string()),
+            (
+                "max_compute_invocations_per_workgroup".to_string(),
+                limits.max_compute_invocations_per_workgroup.to_string(),
+            ),
+            (
+                "max_compute_workgroups_per_dimension".to_string(),
+                limits.max_compute_workgroups_per_dimension.to_string(),
+            ),
+            ("timestamp_query".to_string(), adapter.features().contains(wgpu::Features::TIMESTAMP_QUERY).to_string()),
+            ("adapters seen".to_string(), seen.join(", ")),
+        ];
         let chunk = if adapter.get_info().device_type == wgpu::DeviceType::Cpu { 16 } else { 4096 };
         let max_binding = max_binding(&adapter.limits())?;
         let timestamps = adapter.features().contains(wgpu::Features::TIMESTAMP_QUERY);
@@ -177,6 +204,7 @@ impl Gpu {
             rebuilds,
             max_binding,
             timestamps,
+            facts,
         };
         // Compiled once now, so that a kernel the driver refuses is said before any run.
         gpu.pipeline(WORKGROUP_SIZES[0]).map_err(|e| e.to_string())?;
