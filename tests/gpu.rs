@@ -441,3 +441,32 @@ fn a_batch_over_several_buffer_sets_steps_byte_for_byte_as_one() {
     }
     assert!(whole[0].stress != whole[8].stress, "the RVEs were to differ");
 }
+
+#[test]
+fn an_rve_whose_law_has_no_device_form_is_refused_by_name() {
+    // Hertz-Mindlin keeps no WGSL form beside its Rust code, and a drawn friction has none either:
+    // the device says which law and why, and what to run the RVE on instead.
+    let reg = granite::registry();
+    let law = |name: &str, pairs: &[(&str, f64)]| {
+        let mut p = ParamMap::new();
+        for (k, v) in pairs {
+            p.insert(k.to_string(), *v);
+        }
+        reg.build_contact_law(name, &p).unwrap()
+    };
+    let cases = [
+        (law("hertz_mindlin", &[("young", 1e8), ("poisson", 0.2), ("friction", 30.0)]), "has no device form"),
+        (
+            law("linear", &[("young", 1e8), ("kt_ratio", 0.5), ("friction", 20.0), ("friction_max", 30.0)]),
+            "friction_max",
+        ),
+    ];
+    for (law, why) in cases {
+        let name = law.name().to_string();
+        let mut rve = granite::bench::periodic_rve(20, 1e5).unwrap();
+        rve.world.set_contact_law(law, None).unwrap();
+        let err = device().open(vec![Rve::as_is(rve)]).err().expect("refused").to_string();
+        assert!(err.contains(&format!("contact law \"{name}\"")) && err.contains(why), "{err}");
+        assert!(err.contains("device \"cpu\""), "{err}");
+    }
+}

@@ -3,7 +3,7 @@
 use granite_core::dem::contacts::PairList;
 use granite_core::dem::sim::VerletState;
 use granite_core::dem::DemSim;
-use granite_core::ext::RveReport;
+use granite_core::ext::{DeviceLaw, RveReport};
 use granite_core::{GraniteError, Result};
 use nalgebra::Matrix3;
 
@@ -38,26 +38,16 @@ enum Const {
     Items,
     Skin,
     Damping,
-    /// 0: rolling_resistance, 1: linear.
-    Law,
-    /// kn = 2 E r1 r2 / (r1 + r2) when above 0, else the fixed `Kn`.
-    Young,
-    Kn,
-    /// kt = ratio kn, or the fixed `Kt` when at least 0.
-    KtRatio,
-    Kt,
-    AlphaR,
-    AlphaT,
-    Mu,
-    EtaR,
     /// Most steps one dispatch takes (the host dispatches again).
     Chunk,
     /// Most candidate-list rebuilds one dispatch makes (0: no limit).
     Rebuilds,
     /// 1: the lists are rebuilt before every step (benchmarks).
     ForceRebuild,
+    /// The contact law's constants (`DeviceLaw::constants`) from here on.
+    LawFirst,
 }
-const CONSTS: usize = Const::ForceRebuild as usize + 1;
+const CONSTS: usize = Const::LawFirst as usize + DeviceLaw::MOST_CONSTANTS;
 
 /// How the kernel's work goes in dispatches (see `Gpu::chunk`).
 #[derive(Debug, Clone, Copy)]
@@ -125,18 +115,10 @@ pub fn wgsl_constants() -> String {
         ("C_ITEMS", C::Items as usize),
         ("C_SKIN", C::Skin as usize),
         ("C_DAMPING", C::Damping as usize),
-        ("C_LAW", C::Law as usize),
-        ("C_YOUNG", C::Young as usize),
-        ("C_KN", C::Kn as usize),
-        ("C_KT_RATIO", C::KtRatio as usize),
-        ("C_KT", C::Kt as usize),
-        ("C_ALPHA_R", C::AlphaR as usize),
-        ("C_ALPHA_T", C::AlphaT as usize),
-        ("C_MU", C::Mu as usize),
-        ("C_ETA_R", C::EtaR as usize),
         ("C_CHUNK", C::Chunk as usize),
         ("C_REBUILDS", C::Rebuilds as usize),
         ("C_FORCE_REBUILD", C::ForceRebuild as usize),
+        ("C_LAW_FIRST", C::LawFirst as usize),
         ("N_CONSTS", CONSTS),
         ("RVE_STRIDE", RVE_STRIDE),
         ("R_H", Rec::H as usize),
@@ -206,16 +188,7 @@ impl Failure {
 /// The contact law the kernel runs, with its constants (one per batch).
 #[derive(Debug, Clone, PartialEq)]
 pub struct LawConstants {
-    /// 0: rolling_resistance, 1: linear.
-    kind: f64,
-    young: f64,
-    kn: f64,
-    kt_ratio: f64,
-    kt: f64,
-    alpha_r: f64,
-    alpha_t: f64,
-    mu: f64,
-    eta_r: f64,
+    pub law: DeviceLaw,
     skin: f64,
     damping: f64,
 }
@@ -239,42 +212,19 @@ impl LawConstants {
             return refuse("has gravity or a cell servo");
         }
         let [law] = &sim.world.laws[..] else { return refuse("has several contact laws (the device runs one)") };
-        let p = law.params();
-        if p.is_set("friction_max") {
-            return refuse("draws its friction per pair (friction_max)");
-        }
-        let mu = p.get("friction").to_radians().tan();
-        let common = |kind: f64| LawConstants {
-            kind,
-            young: 0.0,
-            kn: 0.0,
-            kt_ratio: 0.0,
-            kt: -1.0,
-            alpha_r: 0.0,
-            alpha_t: 0.0,
-            mu,
-            eta_r: 0.0,
-            skin: sim.skin,
-            damping: sim.world.damping,
+        let form = match law.device_form() {
+            Ok(form) => form,
+            Err(why) => return refuse(&format!("uses contact law \"{}\", which {why}", law.name())),
         };
-        match law.name() {
-            "rolling_resistance" => Ok(LawConstants {
-                young: p.get("young"),
-                kt_ratio: p.get("alpha_s"),
-                alpha_r: p.get("alpha_r"),
-                alpha_t: p.get("alpha_t"),
-                eta_r: p.get("eta_r"),
-                ..common(0.0)
-            }),
-            "linear" => Ok(LawConstants {
-                young: if p.is_set("young") { p.get("young") } else { 0.0 },
-                kn: if p.is_set("kn") { p.get("kn") } else { 0.0 },
-                kt_ratio: p.get("kt_ratio"),
-                kt: if p.is_set("kt") { p.get("kt") } else { -1.0 },
-                ..common(1.0)
-            }),
-            other => refuse(&format!("uses contact law \"{other}\" (the device runs rolling_resistance and linear)")),
+        if form.constants.len() > DeviceLaw::MOST_CONSTANTS {
+            return refuse(&format!(
+                "uses contact law \"{}\", whose device form has {} constants (at most {})",
+                law.name(),
+                form.constants.len(),
+                DeviceLaw::MOST_CONSTANTS
+            ));
         }
+        Ok(LawConstants { law: form, skin: sim.skin, damping: sim.world.damping })
     }
 }
 
@@ -422,21 +372,13 @@ impl Layout {
             (Const::Items, self.items as f64),
             (Const::Skin, law.skin),
             (Const::Damping, law.damping),
-            (Const::Law, law.kind),
-            (Const::Young, law.young),
-            (Const::Kn, law.kn),
-            (Const::KtRatio, law.kt_ratio),
-            (Const::Kt, law.kt),
-            (Const::AlphaR, law.alpha_r),
-            (Const::AlphaT, law.alpha_t),
-            (Const::Mu, law.mu),
-            (Const::EtaR, law.eta_r),
             (Const::Chunk, f64::from(dispatching.chunk)),
             (Const::Rebuilds, f64::from(dispatching.rebuilds)),
             (Const::ForceRebuild, if dispatching.force_rebuild { 1.0 } else { 0.0 }),
         ] {
             consts[at as usize] = v;
         }
+        consts[Const::LawFirst as usize..][..law.law.constants.len()].copy_from_slice(&law.law.constants);
         let mut rve = vec![0.0; rves.len() * RVE_STRIDE];
         let mut sph = vec![0.0; spheres * SPH_STRIDE];
         let mut pf = vec![0.0; slot_count * PF_STRIDE];

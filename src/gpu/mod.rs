@@ -90,7 +90,7 @@ pub struct Gpu {
     device: wgpu::Device,
     queue: wgpu::Queue,
     /// The kernel compiled for each workgroup size asked for so far.
-    pipelines: std::sync::Mutex<std::collections::HashMap<u32, Arc<wgpu::ComputePipeline>>>,
+    pipelines: std::sync::Mutex<std::collections::HashMap<(u32, &'static str), Arc<wgpu::ComputePipeline>>>,
     name: String,
     /// A software adapter (lavapipe): runs a workgroup's invocations on one CPU thread.
     software: bool,
@@ -206,8 +206,6 @@ impl Gpu {
             timestamps,
             facts,
         };
-        // Compiled once now, so that a kernel the driver refuses is said before any run.
-        gpu.pipeline(WORKGROUP_SIZES[0]).map_err(|e| e.to_string())?;
         Ok(gpu)
     }
 
@@ -220,14 +218,15 @@ impl Gpu {
         WORKGROUP_SIZES.into_iter().rev().find(|&w| (w as usize) * 8 <= spheres).unwrap_or(WORKGROUP_SIZES[0])
     }
 
-    /// The kernel for workgroups of `size` invocations.
-    fn pipeline(&self, size: u32) -> Result<Arc<wgpu::ComputePipeline>> {
+    /// The kernel for workgroups of `size` invocations running the contact law `law` (its
+    /// device form's WGSL).
+    fn pipeline(&self, size: u32, law: &'static str) -> Result<Arc<wgpu::ComputePipeline>> {
         let mut pipelines = self.pipelines.lock().map_err(|_| GraniteError::Other("GPU pipelines poisoned".into()))?;
-        if let Some(p) = pipelines.get(&size) {
+        if let Some(p) = pipelines.get(&(size, law)) {
             return Ok(p.clone());
         }
         let kernel = include_str!("rve.wgsl").replace("const WG: u32 = 64u;", &format!("const WG: u32 = {size}u;"));
-        let source = layout::wgsl_constants() + kernel.as_str();
+        let source = layout::wgsl_constants() + kernel.as_str() + "\n" + law;
         let scope = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
         let module = self.device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("rve.wgsl"),
@@ -248,7 +247,7 @@ impl Gpu {
             )));
         }
         let pipeline = Arc::new(pipeline);
-        pipelines.insert(size, pipeline.clone());
+        pipelines.insert((size, law), pipeline.clone());
         Ok(pipeline)
     }
 
@@ -505,7 +504,8 @@ impl GpuBatch {
             force_rebuild: self.force_rebuild,
         };
         let spheres = self.shadows.iter().map(|s| s.world.spheres.len()).max().unwrap_or(0);
-        let pipeline = self.gpu.pipeline(self.workgroup.unwrap_or_else(|| self.gpu.workgroup_size(spheres)))?;
+        let pipeline =
+            self.gpu.pipeline(self.workgroup.unwrap_or_else(|| self.gpu.workgroup_size(spheres)), law.law.wgsl)?;
         let device = &self.gpu.device;
         let storage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST;
         let make = |label: &str, bytes: &[u8]| {

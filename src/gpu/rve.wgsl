@@ -144,47 +144,25 @@ fn rotate_into_plane(u: vec3<f64>, n: vec3<f64>) -> vec3<f64> {
     return t * sqrt(len2 / t2);
 }
 
+// What a contact law returns: the force and the extra moment on the pair's first sphere. The law
+// itself (`fn contact_law`, see `granite_core::ext::DeviceLaw`) comes after this text, supplied by
+// the law's plugin; its constants are `law_constant(i)`.
 struct Law { force: vec3<f64>, moment: vec3<f64> }
 
-// The contact law on one touching pair (see `rolling.rs`, `linear.rs`); updates the history in
-// `pf` and returns the force and extra moment on the first sphere.
-fn contact_law(slot: u32, ra: f64, rb: f64, n: vec3<f64>, overlap: f64, rel_v: vec3<f64>, spin: vec3<f64>, dt: f64) -> Law {
-    var kn = cf(C_KN);
-    if (cf(C_YOUNG) > 0.0lf) { kn = 2.0lf * cf(C_YOUNG) * ra * rb / (ra + rb); }
-    var kt = cf(C_KT_RATIO) * kn;
-    if (cf(C_KT) >= 0.0lf) { kt = cf(C_KT); }
-    let mu = cf(C_MU);
-    let h = slot * PF_STRIDE;
-    let fn_ = kn * overlap;
-    // Tangential spring-slider.
+fn law_constant(i: u32) -> f64 { return pc[C_LAW_FIRST + i]; }
+
+// The tangential spring-slider of `tangential.rs` for the pair whose history starts at `pf[h]`:
+// the spring turned into the contact plane, loaded by the tangential relative displacement,
+// capped at `limit` (Coulomb); returns the tangential force and keeps the spring.
+fn spring_slider(h: u32, n: vec3<f64>, rel_v: vec3<f64>, kt: f64, limit: f64, dt: f64) -> vec3<f64> {
     let r = rotate_into_plane(vec3<f64>(pf[h], pf[h + 1u], pf[h + 2u]), n);
     let vt = rel_v - sdot(rel_v, n) * n;
     var s = r + vt * dt;
     var ft = kt * s;
-    let scale = beyond_scale(ft, mu * fn_);
+    let scale = beyond_scale(ft, limit);
     if (scale >= 0.0lf) { ft = ft * scale; s = s * scale; }
     pf[h] = s.x; pf[h + 1u] = s.y; pf[h + 2u] = s.z;
-    var out: Law;
-    out.force = ft - fn_ * n;
-    out.moment = vec3<f64>(0.0lf);
-    if (u32(cf(C_LAW)) != 0u) { return out; }
-    // Rolling and twisting springs, capped at eta_r |F_n| min(r1, r2).
-    let kr = cf(C_ALPHA_R) * kt * ra * rb;
-    let ktw = cf(C_ALPHA_T) * kt * ra * rb;
-    let limit = cf(C_ETA_R) * min(ra, rb) * fn_;
-    let s_n = sdot(spin, n);
-    let roll = spin - s_n * n;
-    var theta = rotate_into_plane(vec3<f64>(pf[h + 3u], pf[h + 4u], pf[h + 5u]), n) + roll * dt;
-    var m_roll = kr * theta;
-    let rs = beyond_scale(m_roll, limit);
-    if (rs >= 0.0lf) { m_roll = m_roll * rs; theta = theta * rs; }
-    var twist = pf[h + 6u] + s_n * dt;
-    var m_twist = ktw * twist;
-    let ts = beyond_scale(vec3<f64>(m_twist, 0.0lf, 0.0lf), limit);
-    if (ts >= 0.0lf) { m_twist = m_twist * ts; twist = twist * ts; }
-    pf[h + 3u] = theta.x; pf[h + 4u] = theta.y; pf[h + 5u] = theta.z; pf[h + 6u] = twist;
-    out.moment = m_roll + m_twist * n;
-    return out;
+    return ft;
 }
 
 fn open_contact(slot: u32) {

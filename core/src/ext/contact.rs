@@ -231,6 +231,35 @@ pub trait ContactLaw: Send + Sync {
     fn dissipation(&self, _step: &ContactStep<'_>) -> (f64, f64) {
         (0.0, 0.0)
     }
+    /// The law as a device's kernel runs it (the RVEs of `dem_rve` on a GPU), or why it cannot:
+    /// a law that has a device form keeps it beside its Rust code.
+    fn device_form(&self) -> std::result::Result<DeviceLaw, String> {
+        Err(format!("contact law \"{}\" has no device form", self.name()))
+    }
+}
+
+/// A contact law in a device kernel's language (WGSL, f64): the text defines
+///
+/// `fn contact_law(slot: u32, ra: f64, rb: f64, n: vec3<f64>, overlap: f64, rel_v: vec3<f64>,
+/// spin: vec3<f64>, dt: f64) -> Law`
+///
+/// returning the force and extra moment on the first sphere of a touching pair (`n` from the first
+/// sphere to the second, `rel_v` the second's velocity at the contact point minus the first's,
+/// `spin` the second's angular velocity minus the first's), with its constants read by
+/// `law_constant(i)` and its history (7 values at most) at `pf[slot * PF_STRIDE + k]`, zero when
+/// the contact opened. The kernel (`gpu/src/rve.wgsl`) gives it the helpers `sdot`, `scross`,
+/// `rotate_into_plane`, `beyond_scale` and `spring_slider`. Its sums must follow the law's Rust
+/// code operation by operation: where the driver fuses no multiply-add the device then computes
+/// the CPU engine's numbers bit for bit.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DeviceLaw {
+    pub wgsl: &'static str,
+    /// At most [`DeviceLaw::MOST_CONSTANTS`].
+    pub constants: Vec<f64>,
+}
+
+impl DeviceLaw {
+    pub const MOST_CONSTANTS: usize = 16;
 }
 
 pub trait ContactLawFactory: Send + Sync {

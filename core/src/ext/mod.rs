@@ -12,7 +12,7 @@ pub mod velocity_update;
 
 pub use body::{BodyGeometry, BodyKindFactory, BodyPairGeometry, BodyShape, PlacedBodies};
 pub use constitutive::{ConstitutiveLaw, ConstitutiveLawFactory, LawBatch, PointObjects};
-pub use contact::{ContactBatch, ContactLaw, ContactLawFactory, PairInfo};
+pub use contact::{ContactBatch, ContactLaw, ContactLawFactory, DeviceLaw, PairInfo};
 pub use rve::{BatchCounters, RveBatch, RveDevice, RveOrder, RveReport};
 pub use shape::{ShapeModel, ShapeModelFactory};
 pub use velocity_update::{G2pBatch, VelocityUpdate, VelocityUpdateFactory};

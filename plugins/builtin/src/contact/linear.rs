@@ -6,7 +6,7 @@
 use super::tangential::{dot, minus_along, spring_slider};
 use super::Ranged;
 use granite_core::ext::contact::{Contact, ContactPhysics};
-use granite_core::ext::{ContactBatch, ContactLaw, ContactLawFactory, PairInfo};
+use granite_core::ext::{ContactBatch, ContactLaw, ContactLawFactory, DeviceLaw, PairInfo};
 use granite_core::math::Vec3;
 use granite_core::params::{ParamSpec, Params};
 use granite_core::{GraniteError, Result};
@@ -154,6 +154,20 @@ impl ContactLaw for Linear {
             super::tangential::spring_slip_work(c.history_before, c.history_after, c.normal, c.rel_velocity, c.dt, kt),
             0.0,
         )
+    }
+    fn device_form(&self) -> std::result::Result<DeviceLaw, String> {
+        if self.friction.max > self.friction.min {
+            return Err("draws its friction per pair (friction_max)".into());
+        }
+        let (young, kn) = match self.springs.normal {
+            Stiffness::Modulus { young } => (young, 0.0),
+            Stiffness::Fixed { kn } => (0.0, kn),
+        };
+        let mu = self.friction.min.to_radians().tan();
+        Ok(DeviceLaw {
+            wgsl: include_str!("linear.wgsl"),
+            constants: vec![young, kn, self.springs.kt_ratio, self.springs.kt.unwrap_or(-1.0), mu],
+        })
     }
 }
 

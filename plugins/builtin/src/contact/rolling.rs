@@ -9,7 +9,7 @@ use super::linear::read_friction;
 use super::tangential::{dot, minus_along, rotate_into_plane, rotational_spring, spring_slider};
 use super::Ranged;
 use granite_core::ext::contact::{Contact, ContactPhysics};
-use granite_core::ext::{ContactBatch, ContactLaw, ContactLawFactory, PairInfo};
+use granite_core::ext::{ContactBatch, ContactLaw, ContactLawFactory, DeviceLaw, PairInfo};
 use granite_core::math::Vec3;
 use granite_core::params::{ParamSpec, Params};
 use granite_core::Result;
@@ -95,6 +95,16 @@ impl ContactLaw for RollingResistance {
         out[3] = self.alpha_r * kt * r1 * r2;
         out[4] = self.alpha_t * kt * r1 * r2;
         out[5] = self.eta_r * r1.min(r2);
+    }
+    fn device_form(&self) -> std::result::Result<DeviceLaw, String> {
+        if self.friction.max > self.friction.min {
+            return Err("draws its friction per pair (friction_max)".into());
+        }
+        let mu = self.friction.min.to_radians().tan();
+        Ok(DeviceLaw {
+            wgsl: include_str!("rolling.wgsl"),
+            constants: vec![self.young, self.alpha_s, self.alpha_r, self.alpha_t, self.eta_r, mu],
+        })
     }
     fn max_normal_stiffness(&self, info: &PairInfo) -> f64 {
         let (r1, r2) = Self::radii(info);
