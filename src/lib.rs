@@ -3,7 +3,7 @@
 pub mod batch;
 pub mod bench;
 #[cfg(feature = "gpu")]
-pub mod gpu;
+pub use granite_gpu as gpu;
 #[cfg(feature = "mpi")]
 pub mod mpi_comm;
 pub mod repl;

@@ -1,8 +1,10 @@
 //! The RVEs of `dem_rve` on a GPU (`device: "gpu"`): wgpu over Vulkan, f64 WGSL compute
-//! (`rve.wgsl`). All RVEs of a material live in one set of device buffers; each MPM step is one
-//! submission of one workgroup per RVE, which runs all of that RVE's DEM steps; only the orders
-//! (velocity gradient, step counts) go up and the reports (stress, cell, counts) come back.
-//! Everything else comes back only when asked for (checkpoints, outputs, a point's object).
+//! (`rve.wgsl`, with the contact law's own WGSL form). The RVEs of a material live in device
+//! buffers split into sets within the adapter's binding limits; each MPM step is one submission
+//! of one workgroup per RVE over every set, each workgroup running all of its RVE's DEM steps;
+//! only the orders (velocity gradient, step counts) go up and the reports (stress, cell, counts)
+//! come back. Everything else comes back only when asked for (checkpoints, outputs, a point's
+//! object).
 
 mod layout;
 
@@ -114,7 +116,7 @@ pub const MAX_BINDING_VARIABLE: &str = "GRANITE_GPU_MAX_BINDING";
 
 /// The adapter's largest binding, lowered by `GRANITE_GPU_MAX_BINDING` when set.
 fn max_binding(limits: &wgpu::Limits) -> std::result::Result<u64, String> {
-    let adapter = u64::from(limits.max_storage_buffer_binding_size).min(limits.max_buffer_size);
+    let adapter = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size);
     match std::env::var(MAX_BINDING_VARIABLE) {
         Err(_) => Ok(adapter),
         Ok(v) => match v.trim().parse::<u64>() {
