@@ -275,10 +275,11 @@ fn longest_row(sim: &DemSim) -> Result<usize> {
     Ok(per_sphere.into_iter().max().unwrap_or(0))
 }
 
-/// Slots per sphere for rows whose longest holds `longest` candidates: at most all of a sphere's
-/// candidates, with room to grow.
+/// Slots per sphere when a sphere has at most `longest` candidates: a row (the pairs where it is
+/// first) and an incoming list (where it is second) each hold at most all of them, and 8 more
+/// as the packing changes (a row that outgrows its slots gets twice as many).
 fn slots_for(longest: usize, min_slots: usize) -> usize {
-    (2 * longest + 8).max(MIN_SLOTS).max(min_slots)
+    (longest + 8).max(MIN_SLOTS).max(min_slots)
 }
 
 /// Workgroups of one dispatch along one axis: a buffer set holds at most this many RVEs.
