@@ -912,6 +912,8 @@ pub struct DeviceBench {
     pub perturb: bool,
     /// Candidate lists rebuilt before every DEM step, on the device and the CPU alike.
     pub force_rebuild: bool,
+    /// Invocations per workgroup on the GPU (chosen from the RVEs' size when None).
+    pub workgroup: Option<u32>,
     pub json: Option<std::path::PathBuf>,
     /// Append one markdown table row per measurement to this file (a header first if it is
     /// empty or new).
@@ -928,6 +930,7 @@ struct DeviceFigures {
     dem_steps: u64,
     perturb: bool,
     force_rebuild: bool,
+    workgroup: Option<u32>,
     sphere_steps_per_s: f64,
     sphere_steps_per_s_slowest: f64,
     cpu_threads: usize,
@@ -950,16 +953,7 @@ struct DeviceFigures {
 pub fn mpmxdem_on_device(bench: &DeviceBench) -> Result<()> {
     let scene = DeviceScene::new(&bench.scene)?;
     let copies = bench.copies.unwrap_or(scene.copies);
-    let on: std::sync::Arc<dyn granite_core::ext::RveDevice> = match (bench.device.as_str(), bench.force_rebuild) {
-        (_, false) => crate::registry().rve_device(&bench.device)?.clone(),
-        #[cfg(feature = "gpu")]
-        ("gpu", true) => std::sync::Arc::new(crate::gpu::GpuDevice::forcing_rebuilds()),
-        (other, true) => {
-            return Err(granite_core::GraniteError::Setup(format!(
-                "--force-rebuild: the device \"{other}\" cannot be told to (device \"gpu\" of a build with --features gpu can)"
-            )))
-        }
-    };
+    let on = device_of(bench)?;
     let steps_list = if bench.dem_steps.is_empty() { vec![DEM_STEPS as u64] } else { bench.dem_steps.clone() };
     let mut figures = Vec::new();
     for &dem_steps in &steps_list {
@@ -977,6 +971,29 @@ pub fn mpmxdem_on_device(bench: &DeviceBench) -> Result<()> {
             .map_err(|e| granite_core::GraniteError::Other(format!("--json {}: {e}", path.display())))?;
     }
     Ok(())
+}
+
+/// The device a bench runs on: the registry's by name, or the GPU told to rebuild every step or to
+/// use workgroups of a given size.
+fn device_of(bench: &DeviceBench) -> Result<std::sync::Arc<dyn granite_core::ext::RveDevice>> {
+    if !bench.force_rebuild && bench.workgroup.is_none() {
+        return Ok(crate::registry().rve_device(&bench.device)?.clone());
+    }
+    #[cfg(feature = "gpu")]
+    if bench.device == "gpu" {
+        let mut gpu = match bench.workgroup {
+            Some(size) => crate::gpu::GpuDevice::with_workgroup(size)?,
+            None => crate::gpu::GpuDevice::new(),
+        };
+        if bench.force_rebuild {
+            gpu = gpu.forcing_rebuilds();
+        }
+        return Ok(std::sync::Arc::new(gpu));
+    }
+    Err(granite_core::GraniteError::Setup(format!(
+        "--force-rebuild, --workgroup: the device \"{}\" takes neither (device \"gpu\" of a build with --features gpu does)",
+        bench.device
+    )))
 }
 
 /// The RVEs of a device round, each after its warm-up call, with the orders of a timed call.
@@ -1075,6 +1092,7 @@ fn device_round(
         dem_steps,
         perturb: bench.perturb,
         force_rebuild: bench.force_rebuild,
+        workgroup: bench.workgroup,
         sphere_steps_per_s: work / g,
         sphere_steps_per_s_slowest: work / slowest(&device_times),
         cpu_threads: threads,
@@ -1151,7 +1169,7 @@ fn print_device_figures(f: &DeviceFigures, work: f64, device_time: f64, cpu_slow
 }
 
 /// The columns of `--table`: what `scripts/bench/gpu_check.sh` collects into one table.
-const TABLE_HEADER: &str = "| scene | RVEs x spheres | DEM steps | perturbed | rebuilt every step | device sphere-steps/s | CPU sphere-steps/s (threads) | device/CPU | ms a call (host / device) | tests per sphere and search | MB per RVE | buffer sets | submissions a call | thesis run (h) |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
+const TABLE_HEADER: &str = "| scene | RVEs x spheres | DEM steps | perturbed | rebuilt every step | workgroup | device sphere-steps/s | CPU sphere-steps/s (threads) | device/CPU | ms a call (host / device) | tests per sphere and search | MB per RVE | buffer sets | submissions a call | thesis run (h) |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
 
 fn append_table_rows(path: &std::path::Path, figures: &[DeviceFigures]) -> Result<()> {
     use std::io::Write;
@@ -1162,13 +1180,14 @@ fn append_table_rows(path: &std::path::Path, figures: &[DeviceFigures]) -> Resul
     }
     for f in figures {
         text += &format!(
-            "| {} | {} x {} | {} | {} | {} | {:.3e} | {:.3e} ({}) | {:.2} | {:.2} / {} | {} | {:.2} | {} | {:.2} | {:.1} |\n",
+            "| {} | {} x {} | {} | {} | {} | {} | {:.3e} | {:.3e} ({}) | {:.2} | {:.2} / {} | {} | {:.2} | {} | {:.2} | {:.1} |\n",
             f.scene,
             f.copies,
             f.spheres_per_rve,
             f.dem_steps,
             if f.perturb { "yes" } else { "no" },
             if f.force_rebuild { "yes" } else { "no" },
+            f.workgroup.map(|w| w.to_string()).unwrap_or_else(|| "chosen".into()),
             f.sphere_steps_per_s,
             f.cpu_sphere_steps_per_s,
             f.cpu_threads,

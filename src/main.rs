@@ -100,6 +100,10 @@ enum Command {
         /// mpmxdem --device: rebuild the candidate lists before every DEM step (device and CPU).
         #[arg(long)]
         force_rebuild: bool,
+        /// mpmxdem --device gpu: invocations per workgroup (64 to 1024; chosen from the RVEs' size
+        /// by default).
+        #[arg(long)]
+        workgroup: Option<u32>,
         /// mpmxdem --device: write the figures to this JSON file (one object per DEM-steps value;
         /// a list when there are several).
         #[arg(long, value_name = "FILE")]
@@ -270,6 +274,7 @@ fn main() -> ExitCode {
             copies,
             perturb,
             force_rebuild,
+            workgroup,
             json,
             table,
         } => {
@@ -308,6 +313,7 @@ fn main() -> ExitCode {
                     dem_steps: dem_steps.iter().map(|&s| s as u64).collect(),
                     perturb,
                     force_rebuild,
+                    workgroup,
                     json,
                     table,
                 }),

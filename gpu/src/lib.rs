@@ -32,7 +32,8 @@ impl GpuDevice {
         GpuDevice::default()
     }
 
-    /// The device with workgroups of `size` invocations (64, 128 or 256) whatever the RVEs' size.
+    /// The device with workgroups of `size` invocations (64 to 1024, a power of two) whatever the
+    /// RVEs' size.
     pub fn with_workgroup(size: u32) -> Result<GpuDevice> {
         if !WORKGROUP_SIZES.contains(&size) {
             return Err(GraniteError::Setup(format!("workgroup size {size}: one of {WORKGROUP_SIZES:?}")));
@@ -43,8 +44,8 @@ impl GpuDevice {
     /// The device rebuilding every RVE's candidate lists before each DEM step, needed or not (a
     /// benchmark of the search; results stay those of a run that rebuilds when needed, to
     /// rounding).
-    pub fn forcing_rebuilds() -> GpuDevice {
-        GpuDevice { force_rebuild: true, ..Default::default() }
+    pub fn forcing_rebuilds(self) -> GpuDevice {
+        GpuDevice { force_rebuild: true, ..self }
     }
 
     /// The device binding at most `bytes` bytes of a buffer at once (as `GRANITE_GPU_MAX_BINDING`
@@ -109,6 +110,8 @@ pub struct Gpu {
     timestamps: bool,
     /// The adapter's name, driver and the limits that shape a batch, for `granite bench adapter`.
     facts: Vec<(String, String)>,
+    /// Most invocations of one workgroup.
+    max_invocations: u32,
 }
 
 /// The environment variable that lowers the largest buffer a set of RVEs binds (bytes).
@@ -207,6 +210,7 @@ impl Gpu {
             max_binding,
             timestamps,
             facts,
+            max_invocations: limits.max_compute_invocations_per_workgroup,
         };
         Ok(gpu)
     }
@@ -217,7 +221,11 @@ impl Gpu {
         if self.software {
             return WORKGROUP_SIZES[0];
         }
-        WORKGROUP_SIZES.into_iter().rev().find(|&w| (w as usize) * 8 <= spheres).unwrap_or(WORKGROUP_SIZES[0])
+        WORKGROUP_SIZES
+            .into_iter()
+            .rev()
+            .find(|&w| w <= LARGEST_CHOSEN && (w as usize) * 8 <= spheres)
+            .unwrap_or(WORKGROUP_SIZES[0])
     }
 
     /// The kernel for workgroups of `size` invocations running the contact law `law` (its
@@ -226,6 +234,12 @@ impl Gpu {
         let mut pipelines = self.pipelines.lock().map_err(|_| GraniteError::Other("GPU pipelines poisoned".into()))?;
         if let Some(p) = pipelines.get(&(size, law)) {
             return Ok(p.clone());
+        }
+        if size > self.max_invocations {
+            return Err(GraniteError::Setup(format!(
+                "device \"gpu\" ({}): workgroups of {size} invocations, more than the adapter's {}",
+                self.name, self.max_invocations
+            )));
         }
         let kernel = include_str!("rve.wgsl").replace("const WG: u32 = 64u;", &format!("const WG: u32 = {size}u;"));
         let source = layout::wgsl_constants() + kernel.as_str() + "\n" + law;
@@ -289,8 +303,11 @@ fn gpu_error(name: &str, e: impl std::fmt::Display) -> GraniteError {
 /// Times one call may double the pair slots of its RVEs.
 const MAX_SLOT_DOUBLINGS: usize = 4;
 
-/// Workgroup sizes the kernel is compiled for.
-const WORKGROUP_SIZES: [u32; 3] = [64, 128, 256];
+/// Workgroup sizes the kernel is compiled for: up to 256 chosen by the RVEs' size, 512 and 1024
+/// when asked for (`GpuDevice::with_workgroup`).
+const WORKGROUP_SIZES: [u32; 5] = [64, 128, 256, 512, 1024];
+/// The largest chosen without being asked for.
+const LARGEST_CHOSEN: u32 = 256;
 
 /// One set of device buffers (see `rve.wgsl` for their layout): consecutive RVEs of the batch,
 /// as many as the adapter's binding limits allow in one set.

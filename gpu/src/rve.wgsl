@@ -9,7 +9,8 @@
 // image in a thin cell) lives in row a: slot a * K + k. Each sphere also lists the slots where it
 // is the second sphere ("incoming"), so that its loads are one sequential sum.
 
-// Invocations per workgroup: the host sets this line for the batch's RVE size (a power of two).
+// Invocations per workgroup: the host sets this line for the batch's RVE size (a power of two,
+// 64 to 1024).
 const WG: u32 = 64u;
 
 // The host puts the layout's constants before this text (`layout::wgsl_constants`): indices into
@@ -24,7 +25,7 @@ const CELL_SPLIT: f64 = 1.0lf;
 // Runs of pairs summed apart in the Love-Weber stress, then added in a tree (as `measures.rs`
 // sums them), and the runs of each invocation.
 const STRESS_LANES: u32 = 256u;
-const LANES_EACH: u32 = STRESS_LANES / WG;
+const LANES_EACH: u32 = max(STRESS_LANES / WG, 1u);
 
 @group(0) @binding(0) var<storage, read> consts: array<f64>;
 @group(0) @binding(1) var<storage, read_write> rve: array<f64>;
@@ -758,6 +759,8 @@ fn run_rves(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_i
     let lane_pairs = max((pairs + STRESS_LANES - 1u) / STRESS_LANES, 1u);
     var sums: array<f64, 9u * LANES_EACH>;
     for (var u = 0u; u < LANES_EACH; u++) {
+        // Workgroups wider than the runs leave their last invocations out.
+        if (lid + u * WG >= STRESS_LANES) { continue; }
         let start = min((lid + u * WG) * lane_pairs, pairs);
         let end = min(start + lane_pairs, pairs);
         if (start >= end) { continue; }
@@ -788,7 +791,9 @@ fn run_rves(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_i
     }
     var s: array<f64, 9>;
     for (var q = 0u; q < 9u; q++) {
-        for (var u = 0u; u < LANES_EACH; u++) { w_tree[lid + u * WG] = sums[9u * u + q]; }
+        for (var u = 0u; u < LANES_EACH; u++) {
+            if (lid + u * WG < STRESS_LANES) { w_tree[lid + u * WG] = sums[9u * u + q]; }
+        }
         workgroupBarrier();
         for (var half = STRESS_LANES / 2u; half > 0u; half = half / 2u) {
             for (var u = 0u; u < LANES_EACH; u++) {

@@ -7,7 +7,8 @@
 # Writes OUT_DIR/gpu_check.md (default out/gpu_check/): the adapter's limits, then one markdown
 # table of `granite bench mpmxdem --device gpu` over the thesis column's RVEs (copies 1, 132, 264,
 # 400 of a 2000-sphere RVE; 1, 10 and 51 DEM steps a call; RVEs perturbed so that their searches
-# fall at different steps), the same with the lists rebuilt every step, and the oedometric scene.
+# fall at different steps), the same with the lists rebuilt every step, with workgroups of 128,
+# 512 and 1024 invocations, and the oedometric scene.
 # Each measurement sits beside all CPU threads of the same machine on the same RVEs; the JSON of
 # each run lies beside the table. Meant to take under 5 minutes on an H100.
 set -uo pipefail
@@ -50,6 +51,10 @@ for copies in ${GPU_CHECK_COPIES:-1 132 264 400}; do
     run "column_$copies" --scene column --copies "$copies" --dem-steps 1,10,51 --perturb
 done
 run column_rebuilt --scene column --copies "${GPU_CHECK_MOST:-400}" --dem-steps 10 --perturb --force-rebuild
+# Invocations per workgroup for 2000-sphere RVEs (256 is chosen by default): what occupancy buys.
+for size in 128 512 1024; do
+    run "column_workgroup_$size" --scene column --copies "${GPU_CHECK_MOST:-400}" --dem-steps 10 --perturb --workgroup "$size"
+done
 run oedometric --scene oedometric --dem-steps 51
 cat "$TABLE" >> "$REPORT"
 echo >> "$REPORT"
