@@ -402,15 +402,10 @@ fn resolve_incoming(first: u32, i: u32) -> bool {
     return true;
 }
 
-// Counts per cell into the cells' starts, in place: each invocation a run of cells, the runs'
-// totals scanned across the workgroup (integers: the same in any order).
-fn exclusive_scan_cells(lid: u32, cells: u32) {
-    let per = (cells + WG - 1u) / WG;
-    let lo = min(lid * per, cells);
-    let hi = min(lo + per, cells);
-    var total = 0u;
-    for (var q = lo; q < hi; q++) { total += atomicLoad(&w_cells[q]); }
-    w_scan[lid] = total;
+// What the invocations before this one hold in all (`mine` each); afterwards w_scan[WG - 1] is
+// the workgroup's total. Integers: the same in any order.
+fn scan_across(lid: u32, mine: u32) -> u32 {
+    w_scan[lid] = mine;
     workgroupBarrier();
     for (var step = 1u; step < WG; step = step * 2u) {
         var add = 0u;
@@ -419,7 +414,18 @@ fn exclusive_scan_cells(lid: u32, cells: u32) {
         w_scan[lid] += add;
         workgroupBarrier();
     }
-    var run = w_scan[lid] - total;
+    return w_scan[lid] - mine;
+}
+
+// Counts per cell into the cells' starts, in place: each invocation a run of cells, the runs'
+// totals scanned across the workgroup.
+fn exclusive_scan_cells(lid: u32, cells: u32) {
+    let per = (cells + WG - 1u) / WG;
+    let lo = min(lid * per, cells);
+    let hi = min(lo + per, cells);
+    var total = 0u;
+    for (var q = lo; q < hi; q++) { total += atomicLoad(&w_cells[q]); }
+    var run = scan_across(lid, total);
     for (var q = lo; q < hi; q++) {
         let here = atomicLoad(&w_cells[q]);
         atomicStore(&w_cells[q], run);
@@ -739,16 +745,7 @@ fn run_rves(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_i
     atomicAdd(&w_totals[2], counts.z); atomicAdd(&w_totals[3], counts.w);
     // Where each sphere's row starts in the pair order: the runs' lengths scanned across the
     // workgroup, then each run's rows in order.
-    w_scan[lid] = own_rows;
-    workgroupBarrier();
-    for (var step = 1u; step < WG; step = step * 2u) {
-        var add = 0u;
-        if (lid >= step) { add = w_scan[lid - step]; }
-        workgroupBarrier();
-        w_scan[lid] += add;
-        workgroupBarrier();
-    }
-    var run = w_scan[lid] - own_rows;
+    var run = scan_across(lid, own_rows);
     for (var i = lo; i < hi; i++) {
         let c = cnt_base(first, i);
         ints[c + 5u] = i32(run);
