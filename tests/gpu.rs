@@ -471,3 +471,56 @@ fn an_rve_whose_law_has_no_device_form_is_refused_by_name() {
         assert!(err.contains("device \"cpu\""), "{err}");
     }
 }
+
+#[test]
+fn a_thin_rve_sheared_through_flips_keeps_its_contacts_history_as_on_the_cpu() {
+    // A 100-sphere RVE squeezed along x and y to a fraction of its reach (each sphere meets a
+    // neighbour through several images across x and y), then sheared along x by y: each flip
+    // turns the images' shifts (n_x grows by k n_y), which reorders a sphere's images of one
+    // neighbour in its row, and the device keeps every pair's tangential spring through the
+    // rebuild as the CPU does.
+    let mut rve = granite::bench::periodic_rve(100, 1e5).unwrap();
+    rve.set_sequential(true);
+    rve.world.damping = 0.0;
+    let dt = rve.world.dt;
+    let squeeze_steps = 2000;
+    let rate = (5.0f64).ln() / (squeeze_steps as f64 * dt);
+    let mut squeeze = Matrix3::zeros();
+    squeeze[(0, 0)] = -rate;
+    squeeze[(1, 1)] = -rate;
+    squeeze[(2, 2)] = 2.0 * rate;
+    let shear_steps = 1500;
+    let mut shear = Matrix3::zeros();
+    shear[(0, 1)] = 2.2 / (shear_steps as f64 * dt);
+    rve.world.cell.as_mut().unwrap().velocity_gradient = Matrix3::zeros();
+    let mut cpu = rve.clone();
+    let mut batch = device().open(vec![Rve::as_is(rve)]).unwrap();
+    let mut report = None;
+    for (l, steps) in [(squeeze, squeeze_steps), (shear, shear_steps)] {
+        cpu.world.cell.as_mut().unwrap().velocity_gradient = l;
+        for _ in 0..steps {
+            cpu.step().unwrap();
+        }
+        let r = batch.step(&[RveOrder { velocity_gradient: l, full_steps: steps, last_step: 0.0 }]).unwrap().remove(0);
+        assert!(r.failure.is_none(), "{:?}", r.failure);
+        report = Some(r);
+    }
+    let report = report.unwrap();
+    let cell = cpu.world.cell.as_ref().unwrap();
+    let reach = 2.0 * cpu.world.spheres.largest_radius() + cpu.skin;
+    let widths = cell.widths();
+    assert!(widths[0] < reach && widths[1] < reach, "the cell is {widths:?} m, reach {reach:.3e} m");
+    assert!(cell.flips >= 2, "{} flips", cell.flips);
+    let gpu = batch.get(0).unwrap().into_dem();
+    assert_eq!(gpu.world.cell.as_ref().unwrap().flips, cell.flips);
+    let stress = cpu.world.love_weber_stress(cpu.world.cell_volume().unwrap());
+    let p = (stress[0] + stress[1] + stress[2]).abs() / 3.0;
+    assert!(p > 0.0 && cpu.world.coordination().contacts > 0, "the packing lost its contacts");
+    for k in 0..6 {
+        assert!((report.stress[k] - stress[k]).abs() < 1e-6 * p, "stress {k}: GPU {:?}, CPU {stress:?}", report.stress);
+    }
+    if exact_adapter() {
+        assert!(gpu.world.spheres.x == cpu.world.spheres.x && report.stress == stress, "lavapipe and the CPU differ");
+        assert!(gpu.world.pairs.history == cpu.world.pairs.history, "the contacts' history differs");
+    }
+}

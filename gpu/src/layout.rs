@@ -16,8 +16,8 @@ const PF_TOUCH: usize = 7;
 const PF_FORCE: usize = 8;
 const PF_TA: usize = 11;
 const PF_TB: usize = 14;
-/// Per slot of a row being rebuilt: history (7) and touching.
-const PH_STRIDE: usize = 8;
+/// What a rebuild carries over of a kept pair's slot: history (7) and touching.
+const PF_KEPT: usize = 8;
 /// Fewest slots per sphere in the device's pair rows.
 const MIN_SLOTS: usize = 16;
 
@@ -152,7 +152,7 @@ pub fn wgsl_constants() -> String {
         ("PF_FORCE", PF_FORCE),
         ("PF_TA", PF_TA),
         ("PF_TB", PF_TB),
-        ("PH_STRIDE", PH_STRIDE),
+        ("PF_KEPT", PF_KEPT),
     ];
     let mut out: String = u.iter().map(|(name, v)| format!("const {name}: u32 = {v}u;\n")).collect();
     for (name, f) in [
@@ -250,7 +250,6 @@ pub struct Uploaded {
     pub rve: Vec<f64>,
     pub sph: Vec<f64>,
     pub pf: Vec<f64>,
-    pub ph_len: usize,
     pub ints: Vec<i32>,
 }
 
@@ -291,10 +290,9 @@ fn largest_buffer(rves: usize, spheres: usize, slots: usize) -> u64 {
     let slot_count = (spheres * slots) as u64;
     let ints = 4 * (13 * slot_count + 9 * spheres as u64);
     let pf = 8 * PF_STRIDE as u64 * slot_count;
-    let ph = 8 * PH_STRIDE as u64 * slot_count;
     let sph = 8 * (SPH_STRIDE * spheres) as u64;
     let rve = 8 * (RVE_STRIDE * rves) as u64;
-    ints.max(pf).max(ph).max(sph).max(rve)
+    ints.max(pf).max(sph).max(rve)
 }
 
 /// The RVEs split into consecutive sets whose buffers each stay within `limit` bytes (the
@@ -443,7 +441,7 @@ impl Layout {
                 }
             }
         }
-        Ok(Uploaded { consts, rve, sph, pf, ph_len: slot_count * PH_STRIDE, ints })
+        Ok(Uploaded { consts, rve, sph, pf, ints })
     }
 
     /// Writes the device's state into the host's RVEs.

@@ -543,9 +543,8 @@ impl GpuBatch {
             let rve = make("rve", bytemuck::cast_slice(&data.rve));
             let sph = make("sph", bytemuck::cast_slice(&data.sph));
             let pf = make("pf", bytemuck::cast_slice(&data.pf));
-            let ph = make("ph", bytemuck::cast_slice(&vec![0.0f64; data.ph_len.max(1)]));
             let ints = make("ints", bytemuck::cast_slice(&data.ints));
-            let buffers = [&consts, &rve, &sph, &pf, &ph, &ints];
+            let buffers = [&consts, &rve, &sph, &pf, &ints];
             let bytes = buffers.iter().map(|b| b.size()).sum();
             let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("rves"),

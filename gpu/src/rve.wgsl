@@ -15,7 +15,7 @@ const WG: u32 = 64u;
 
 // The host puts the layout's constants before this text (`layout::wgsl_constants`): indices into
 // `consts` (C_), into an RVE's record (R_, RVE_STRIDE values a record), the strides and fields of
-// the sphere and pair buffers (SPH_, PF_, PH_) and the failure codes (FAIL_).
+// the sphere and pair buffers (SPH_, PF_) and the failure codes (FAIL_).
 const MAX_IMAGES_ACROSS: f64 = 64.0;
 // Most cells of a rebuild's cell list (workgroup memory), cells per sphere at most, and cells
 // across the reach.
@@ -31,8 +31,7 @@ const LANES_EACH: u32 = max(STRESS_LANES / WG, 1u);
 @group(0) @binding(1) var<storage, read_write> rve: array<f64>;
 @group(0) @binding(2) var<storage, read_write> sph: array<f64>;
 @group(0) @binding(3) var<storage, read_write> pf: array<f64>;
-@group(0) @binding(4) var<storage, read_write> ph: array<f64>;
-@group(0) @binding(5) var<storage, read_write> ints: array<i32>;
+@group(0) @binding(4) var<storage, read_write> ints: array<i32>;
 
 var<workgroup> w_h: array<f64, 9>;
 var<workgroup> w_hn: array<f64, 9>;
@@ -299,6 +298,11 @@ fn sort_entries(region: u32, q0: u32, len: u32) {
 fn cell_start(q: u32) -> u32 { return select(0u, atomicLoad(&w_cells[max(q, 1u) - 1u]), q > 0u); }
 fn cell_end(q: u32) -> u32 { return atomicLoad(&w_cells[q]); }
 
+// A pair's history and touching flag from slot `from_slot` to slot `to_slot` of the same row.
+fn move_history(from_slot: u32, to_slot: u32) {
+    for (var h = 0u; h < PF_KEPT; h++) { pf[to_slot * PF_STRIDE + h] = pf[from_slot * PF_STRIDE + h]; }
+}
+
 // Candidate search and merge for sphere i's row (the CPU's `rebuild_candidates`): the spheres of
 // the cells within reach of its own, each cell under the image it is met through; pairs already
 // in the row keep their history. Returns the distance tests made, or -1 if the row or the
@@ -355,23 +359,48 @@ fn rebuild_row(first: u32, i: u32) -> i32 {
     let row0 = slot_of(first, i, 0u);
     sort_entries(cu(C_PJ), row0, fresh);
     sort_entries(cu(C_INCT), row0, incoming);
-    for (var k = 0u; k < fresh; k++) {
-        let q = row0 + k;
-        let e = entry(cu(C_PJ) + q * 4u);
-        for (var h = 0u; h < PH_STRIDE; h++) { ph[q * PH_STRIDE + h] = 0.0lf; }
-        for (var o = 0u; o < old; o++) {
-            let was = row0 + o;
-            if (row_partner(was) == e.x && all(row_shift(was) == e.yzw)) {
-                for (var h = 0u; h < PH_STRIDE; h++) { ph[q * PH_STRIDE + h] = pf[was * PF_STRIDE + h]; }
-                break;
-            }
+    // Pairs kept keep their history, moved within the row where they now sit. The old row is
+    // put in the pairs' order first (a flip may have reordered a sphere's images in a thin
+    // cell): a kept pair's old and new slots then rise together, so moves down (to a lower slot)
+    // in increasing order, then moves up in decreasing order, overwrite no history still to be
+    // moved. The old slot of each new pair (-1: none) goes into this sphere's incoming slots,
+    // unused until the incoming lists are resolved after the rebuild.
+    for (var k = 1u; k < old; k++) {
+        let key = entry(cu(C_PI) + (row0 + k) * 4u);
+        var kept: array<f64, PF_KEPT>;
+        for (var h = 0u; h < PF_KEPT; h++) { kept[h] = pf[(row0 + k) * PF_STRIDE + h]; }
+        var at = k;
+        while (at > 0u && entry_before(key, entry(cu(C_PI) + (row0 + at - 1u) * 4u))) {
+            set_entry(cu(C_PI) + (row0 + at) * 4u, entry(cu(C_PI) + (row0 + at - 1u) * 4u));
+            move_history(row0 + at - 1u, row0 + at);
+            at--;
         }
+        if (at != k) {
+            set_entry(cu(C_PI) + (row0 + at) * 4u, key);
+            for (var h = 0u; h < PF_KEPT; h++) { pf[(row0 + at) * PF_STRIDE + h] = kept[h]; }
+        }
+    }
+    let was = cu(C_INC) + row0;
+    for (var k = 0u; k < fresh; k++) {
+        let e = entry(cu(C_PJ) + (row0 + k) * 4u);
+        ints[was + k] = -1;
+        for (var o = 0u; o < old; o++) {
+            if (row_partner(row0 + o) == e.x && all(row_shift(row0 + o) == e.yzw)) { ints[was + k] = i32(o); break; }
+        }
+    }
+    for (var k = 0u; k < fresh; k++) {
+        let old_slot = ints[was + k];
+        if (old_slot > i32(k)) { move_history(row0 + u32(old_slot), row0 + k); }
+    }
+    for (var k = fresh; k > 0u; k--) {
+        let old_slot = ints[was + k - 1u];
+        if (old_slot >= 0 && old_slot < i32(k - 1u)) { move_history(row0 + u32(old_slot), row0 + k - 1u); }
     }
     for (var k = 0u; k < fresh; k++) {
         let q = row0 + k;
         for (var e = 0u; e < 4u; e++) { ints[cu(C_PI) + q * 4u + e] = ints[cu(C_PJ) + q * 4u + e]; }
-        for (var e = 0u; e < PH_STRIDE; e++) { pf[q * PF_STRIDE + e] = ph[q * PH_STRIDE + e]; }
-        for (var e = PH_STRIDE; e < PF_STRIDE; e++) { pf[q * PF_STRIDE + e] = 0.0lf; }
+        let first_cleared = select(PF_KEPT, 0u, ints[was + k] < 0);
+        for (var e = first_cleared; e < PF_STRIDE; e++) { pf[q * PF_STRIDE + e] = 0.0lf; }
     }
     ints[c] = i32(fresh);
     ints[c + 1u] = i32(incoming);
