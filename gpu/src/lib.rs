@@ -99,8 +99,9 @@ pub struct Gpu {
     software: bool,
     /// Most DEM steps, and most candidate-list rebuilds (0: any), of one dispatch. Mesa's
     /// software Vulkan (lavapipe) ends every loop of a kernel invocation after 65535 iterations in
-    /// all, so there a call's steps go in short dispatches of one rebuild at most (a thin cell's
-    /// rebuild searches many images); a GPU takes a whole MPM step's in one.
+    /// all, so there a call's steps go in short dispatches of one rebuild at most (with more, the
+    /// column RVE's searches found fewer pairs: loops were cut); a GPU takes a whole MPM step's
+    /// in one.
     chunk: u32,
     rebuilds: u32,
     /// Most bytes of one buffer bound to the kernel: the adapter's limits, or less by
