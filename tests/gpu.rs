@@ -524,3 +524,34 @@ fn a_thin_rve_sheared_through_flips_keeps_its_contacts_history_as_on_the_cpu() {
         assert!(gpu.world.pairs.history == cpu.world.pairs.history, "the contacts' history differs");
     }
 }
+
+#[test]
+fn granite_gpu_max_binding_splits_the_bench_batch_and_a_bad_value_is_refused_by_name() {
+    // The bench's six 125-sphere RVEs in one buffer set, then under an 800 kB binding limit (a
+    // set holds two of them): three sets or more, as the JSON says; a limit that is not a number
+    // of bytes stops the bench naming the variable.
+    let dir = out_dir("gpu_max_binding");
+    std::fs::create_dir_all(&dir).unwrap();
+    let bench = |limit: Option<&str>, json: &str| {
+        let mut cmd = std::process::Command::new(env!("CARGO_BIN_EXE_granite"));
+        cmd.args(["bench", "mpmxdem", "--device", "gpu", "--copies", "6", "--dem-steps", "2", "--repeat", "1"]);
+        cmd.arg("--json").arg(dir.join(json));
+        match limit {
+            Some(v) => cmd.env("GRANITE_GPU_MAX_BINDING", v),
+            None => cmd.env_remove("GRANITE_GPU_MAX_BINDING"),
+        };
+        cmd.output().unwrap()
+    };
+    let buffer_sets = |json: &str| {
+        let text = std::fs::read_to_string(dir.join(json)).unwrap();
+        serde_json::from_str::<serde_json::Value>(&text).unwrap()["chunks"].as_u64().unwrap()
+    };
+    assert!(bench(None, "whole.json").status.success());
+    assert_eq!(buffer_sets("whole.json"), 1);
+    let out = bench(Some("800000"), "split.json");
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(buffer_sets("split.json") >= 3, "{} sets", buffer_sets("split.json"));
+    let out = bench(Some("2GB"), "bad.json");
+    let said = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && said.contains("GRANITE_GPU_MAX_BINDING=2GB") && said.contains("bytes"), "{said}");
+}
