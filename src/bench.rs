@@ -1111,28 +1111,22 @@ fn device_round(
         idle_ms_per_mpm_step: 1e3 * idle_call,
         thesis_run_hours: thesis_hours,
     };
-    print_device_figures(&figures, work, g, slowest(&cpu_times), c);
+    print_device_figures(&figures, work, slowest(&cpu_times));
     Ok(figures)
 }
 
 /// One call of `order` on the CPU, as `dem_rve` makes it; with `force_rebuild`, the candidate
 /// lists rebuilt before every step as the device is told to.
 fn cpu_call(rve: &mut granite_core::dem::Rve, order: &granite_core::ext::RveOrder, force_rebuild: bool) -> Result<()> {
-    if !force_rebuild {
-        return rve.deform(order).map(|_| ());
-    }
-    let one = granite_core::ext::RveOrder { full_steps: 1, last_step: 0.0, ..*order };
-    for _ in 0..order.full_steps {
-        let mut sim =
-            std::mem::replace(rve, granite_core::dem::Rve::as_is(granite_core::dem::DemSim::new())).into_dem();
-        sim.rebuild_candidates()?;
-        *rve = granite_core::dem::Rve::as_is(sim);
-        rve.deform(&one)?;
+    if force_rebuild {
+        rve.deform_rebuilding_every_step(order)?;
+    } else {
+        rve.deform(order)?;
     }
     Ok(())
 }
 
-fn print_device_figures(f: &DeviceFigures, work: f64, device_time: f64, cpu_slowest: f64, cpu_time: f64) {
+fn print_device_figures(f: &DeviceFigures, work: f64, cpu_slowest: f64) {
     granite_core::outln!(
         "granite bench mpmxdem --device --scene {}: {} RVEs x {} spheres{}{}, {} DEM steps a call ({work:.3e} sphere-steps a round)",
         f.scene,
@@ -1155,7 +1149,7 @@ fn print_device_figures(f: &DeviceFigures, work: f64, device_time: f64, cpu_slow
         f.cpu_threads,
         f.cpu_sphere_steps_per_s,
         work / cpu_slowest,
-        cpu_time / device_time
+        f.sphere_steps_per_s / f.cpu_sphere_steps_per_s
     );
     granite_core::outln!(
         "device  distance tests per sphere and search: {}; {:.3} MB per RVE in {} buffer set(s); {:.2} submissions a call; {:.3} ms a call without steps",

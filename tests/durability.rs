@@ -90,11 +90,11 @@ fn whole_rows_allowing_cut_end(path: &Path) -> Vec<f64> {
     whole.lines().skip(1).map(|l| l.split(',').next().unwrap().parse::<f64>().unwrap()).collect()
 }
 
-/// Whether this machine lets a test mount a file system of its own in a private namespace.
+/// A disk that fills up mid-run (a 2 MB tmpfs in a private namespace); where no such mount is
+/// allowed, the file-size-limit test covers the same path.
 #[test]
 fn a_full_disk_fails_the_run_with_the_file_and_step_and_keeps_a_checkpoint_and_whole_rows() {
     if !common::can_mount_tmpfs() {
-        println!("skipped: `unshare -rm` with a tmpfs mount is not allowed here (the file-size-limit test covers the same path)");
         return;
     }
     // 400 points (a checkpoint of about 0.13 MB) writing a VTK frame every step into 2 MB.

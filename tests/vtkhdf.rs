@@ -172,7 +172,6 @@ fn a_run_killed_while_writing_frames_resumes_its_file_whole() {
 #[test]
 fn a_full_disk_stops_the_run_at_the_first_lost_vtkhdf_frame_with_every_listed_frame_whole() {
     if !common::can_mount_tmpfs() {
-        println!("skipped: `unshare -rm` with a tmpfs mount is not allowed here");
         return;
     }
     let base = common::out_dir("vtkhdf_disk_full");

@@ -228,20 +228,38 @@ impl LawConstants {
     }
 }
 
-/// Where each RVE's spheres and pair slots lie in the buffers.
-pub struct Layout {
-    /// First sphere of each RVE, and one past the last.
-    first: Vec<usize>,
-    /// Slots per sphere (the longest pair row or incoming list, with room to grow).
-    slots: usize,
-    /// Offsets into `ints`.
+/// Where each region of `ints` starts (see `Const::Rows`), and its length.
+struct IntRegions {
     rows: usize,
     rebuilt_rows: usize,
     incoming: usize,
     incoming_rebuilt: usize,
     counts: usize,
     items: usize,
-    ints_len: usize,
+    len: usize,
+}
+
+impl IntRegions {
+    fn of(spheres: usize, slots: usize) -> IntRegions {
+        let slot_count = spheres * slots;
+        let rows = 0;
+        let rebuilt_rows = rows + 4 * slot_count;
+        let incoming = rebuilt_rows + 4 * slot_count;
+        let incoming_rebuilt = incoming + slot_count;
+        let counts = incoming_rebuilt + 4 * slot_count;
+        let items = counts + 8 * spheres;
+        IntRegions { rows, rebuilt_rows, incoming, incoming_rebuilt, counts, items, len: items + spheres }
+    }
+}
+
+/// Where each RVE's spheres and pair slots lie in the buffers.
+pub struct Layout {
+    /// First sphere of each RVE, and one past the last.
+    first: Vec<usize>,
+    /// Slots per sphere (the longest pair row or incoming list, with room to grow).
+    slots: usize,
+    /// The regions of `ints`.
+    ints: IntRegions,
 }
 
 /// The buffers' initial contents.
@@ -288,7 +306,7 @@ const MOST_RVES_A_SET: usize = 65535;
 /// `slots` slots.
 fn largest_buffer(rves: usize, spheres: usize, slots: usize) -> u64 {
     let slot_count = (spheres * slots) as u64;
-    let ints = 4 * (13 * slot_count + 9 * spheres as u64);
+    let ints = 4 * IntRegions::of(spheres, slots).len as u64;
     let pf = 8 * PF_STRIDE as u64 * slot_count;
     let sph = 8 * (SPH_STRIDE * spheres) as u64;
     let rve = 8 * (RVE_STRIDE * rves) as u64;
@@ -336,20 +354,13 @@ impl Layout {
         }
         let slots = slots_for(longest, min_slots);
         let spheres = *first.last().unwrap_or(&0);
-        let slot_count = spheres * slots;
-        let rows = 0;
-        let rebuilt_rows = rows + 4 * slot_count;
-        let incoming = rebuilt_rows + 4 * slot_count;
-        let incoming_rebuilt = incoming + slot_count;
-        let counts = incoming_rebuilt + 4 * slot_count;
-        let items = counts + 8 * spheres;
-        let ints_len = items + spheres;
-        if ints_len > i32::MAX as usize || slot_count * PF_STRIDE > u32::MAX as usize {
+        let ints = IntRegions::of(spheres, slots);
+        if ints.len > i32::MAX as usize || spheres * slots * PF_STRIDE > u32::MAX as usize {
             return Err(GraniteError::Setup(format!(
                 "device \"gpu\": {spheres} RVE spheres with {slots} pair slots each are more than one buffer addresses"
             )));
         }
-        Ok(Layout { first, slots, rows, rebuilt_rows, incoming, incoming_rebuilt, counts, items, ints_len })
+        Ok(Layout { first, slots, ints })
     }
 
     fn slot(&self, r: usize, i: usize, k: usize) -> usize {
@@ -363,12 +374,12 @@ impl Layout {
         let mut consts = vec![0.0; CONSTS];
         for (at, v) in [
             (Const::Slots, self.slots as f64),
-            (Const::Rows, self.rows as f64),
-            (Const::RebuiltRows, self.rebuilt_rows as f64),
-            (Const::Incoming, self.incoming as f64),
-            (Const::IncomingRebuilt, self.incoming_rebuilt as f64),
-            (Const::Counts, self.counts as f64),
-            (Const::Items, self.items as f64),
+            (Const::Rows, self.ints.rows as f64),
+            (Const::RebuiltRows, self.ints.rebuilt_rows as f64),
+            (Const::Incoming, self.ints.incoming as f64),
+            (Const::IncomingRebuilt, self.ints.incoming_rebuilt as f64),
+            (Const::Counts, self.ints.counts as f64),
+            (Const::Items, self.ints.items as f64),
             (Const::Skin, law.skin),
             (Const::Damping, law.damping),
             (Const::Chunk, f64::from(dispatching.chunk)),
@@ -381,7 +392,7 @@ impl Layout {
         let mut rve = vec![0.0; rves.len() * RVE_STRIDE];
         let mut sph = vec![0.0; spheres * SPH_STRIDE];
         let mut pf = vec![0.0; slot_count * PF_STRIDE];
-        let mut ints = vec![0i32; self.ints_len];
+        let mut ints = vec![0i32; self.ints.len];
         for (r, sim) in rves.iter().enumerate() {
             let rec = &mut rve[r * RVE_STRIDE..(r + 1) * RVE_STRIDE];
             let cell = sim.world.cell.as_ref().ok_or_else(|| GraniteError::Other("an RVE without a cell".into()))?;
@@ -423,7 +434,7 @@ impl Layout {
                 let slot = self.slot(r, a, own[a]);
                 own[a] += 1;
                 incoming[b].push(slot);
-                let p = &mut ints[self.rows + 4 * slot..][..4];
+                let p = &mut ints[self.ints.rows + 4 * slot..][..4];
                 p[0] = b as i32;
                 p[1..4].copy_from_slice(&list.shift[k]);
                 let f = &mut pf[slot * PF_STRIDE..][..PF_STRIDE];
@@ -433,11 +444,11 @@ impl Layout {
                 f[PF_FORCE..PF_FORCE + 3].copy_from_slice(&list.force[k]);
             }
             for i in 0..s.len() {
-                let c = self.counts + 8 * (self.first[r] + i);
+                let c = self.ints.counts + 8 * (self.first[r] + i);
                 ints[c] = own[i] as i32;
                 ints[c + 1] = incoming[i].len() as i32;
                 for (k, &slot) in incoming[i].iter().enumerate() {
-                    ints[self.incoming + self.slot(r, i, k)] = slot as i32;
+                    ints[self.ints.incoming + self.slot(r, i, k)] = slot as i32;
                 }
             }
         }
@@ -474,10 +485,10 @@ impl Layout {
             // merge sets them.
             let mut found = Vec::new();
             for a in 0..n {
-                let rows = ints[self.counts + 8 * (self.first[r] + a)] as usize;
+                let rows = ints[self.ints.counts + 8 * (self.first[r] + a)] as usize;
                 for k in 0..rows {
                     let slot = self.slot(r, a, k);
-                    let p = &ints[self.rows + 4 * slot..][..4];
+                    let p = &ints[self.ints.rows + 4 * slot..][..4];
                     found.push((a as u32, p[0] as u32, [p[1], p[2], p[3]], slot));
                 }
             }

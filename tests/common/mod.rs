@@ -272,13 +272,17 @@ pub fn stopped_at_step(stderr: &str) -> u64 {
         .unwrap_or_else(|| panic!("no step in {stderr}"))
 }
 
-/// Whether this machine lets a test mount a tmpfs of its own (`unshare -rm`): the disk-full tests
-/// need one.
+/// Whether this machine lets a test mount a tmpfs of its own (`unshare -rm`), which the disk-full
+/// tests need; when it does not, says that the test is skipped.
 #[allow(dead_code)]
 pub fn can_mount_tmpfs() -> bool {
-    std::process::Command::new("unshare")
+    let can = std::process::Command::new("unshare")
         .args(["-rm", "sh", "-c", "d=$(mktemp -d) && mount -t tmpfs -o size=1m none \"$d\""])
         .stderr(std::process::Stdio::null())
         .status()
-        .is_ok_and(|s| s.success())
+        .is_ok_and(|s| s.success());
+    if !can {
+        println!("skipped: `unshare -rm` with a tmpfs mount is not allowed here");
+    }
+    can
 }

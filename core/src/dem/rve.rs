@@ -59,17 +59,34 @@ impl Rve {
     /// velocity gradient, then the shorter last step if any (eq. 4.4); the cell is left at rest.
     /// What the steps said (a time step above the contacts' bound) comes back in the response.
     pub fn deform(&mut self, order: &RveOrder) -> Result<RveReport> {
+        self.deform_with(order, false)
+    }
+
+    /// [`Rve::deform`] with the candidate lists rebuilt before every step, needed or not: the
+    /// CPU's side of a benchmark of the search (a device told to do the same), with the results
+    /// of [`Rve::deform`] to rounding.
+    pub fn deform_rebuilding_every_step(&mut self, order: &RveOrder) -> Result<RveReport> {
+        self.deform_with(order, true)
+    }
+
+    fn deform_with(&mut self, order: &RveOrder, rebuild_every_step: bool) -> Result<RveReport> {
         let sim = &mut self.sim;
         if let Some(cell) = sim.world.cell.as_mut() {
             cell.velocity_gradient = order.velocity_gradient;
         }
+        let step = |sim: &mut DemSim| {
+            if rebuild_every_step {
+                sim.rebuild_candidates()?;
+            }
+            sim.step()
+        };
         for _ in 0..order.full_steps {
-            sim.step()?;
+            step(sim)?;
         }
         if order.last_step > 0.0 {
             let dt = sim.world.dt;
             sim.world.dt = order.last_step;
-            let stepped = sim.step();
+            let stepped = step(sim);
             sim.world.dt = dt;
             stepped?;
         }
