@@ -189,11 +189,11 @@ fn a_sheared_rve_flips_its_cell_on_the_gpu_as_on_the_cpu() {
 }
 
 #[test]
-fn an_rve_flattened_to_a_fraction_of_its_reach_goes_on_with_longer_rows() {
+fn an_rve_flattened_to_a_fraction_of_its_reach_goes_on_with_more_room_for_its_pairs() {
     // A 100-sphere RVE stretched along x and squeezed along z at constant volume until it is a
     // fraction of the interaction reach thick: each sphere then touches several images of its
-    // neighbours and its row of pairs outgrows the slots it was given; the device gives it more
-    // and goes on, as the CPU engine does.
+    // neighbours and the RVE's candidate pairs outgrow the room they were given on the device;
+    // the device gives them more and goes on, as the CPU engine does.
     let mut rve = granite::bench::periodic_rve(100, 1e5).unwrap();
     rve.set_sequential(true);
     rve.world.damping = 0.0;
@@ -212,9 +212,13 @@ fn an_rve_flattened_to_a_fraction_of_its_reach_goes_on_with_longer_rows() {
     let thickness = cpu.world.cell.as_ref().unwrap().widths()[2];
     assert!(thickness < 0.1 * reach, "the cell is {thickness:.3e} m thick, reach {reach:.3e} m");
     let mut batch = device().open(vec![Rve::as_is(rve)]).unwrap();
+    batch.step(&[RveOrder { velocity_gradient: l, full_steps: 0, last_step: 0.0 }]).unwrap();
+    let bytes_before = batch.counters().device_bytes;
     let report = batch.step(&[RveOrder { velocity_gradient: l, full_steps: steps, last_step: 0.0 }]).unwrap().remove(0);
     assert!(report.failure.is_none(), "{:?}", report.failure);
     assert_eq!(report.steps, steps);
+    let bytes_after = batch.counters().device_bytes;
+    assert!(bytes_after > bytes_before, "the room did not grow: {bytes_before} then {bytes_after} bytes");
     let stress = cpu.world.love_weber_stress(cpu.world.cell_volume().unwrap());
     let p = (stress[0] + stress[1] + stress[2]).abs() / 3.0;
     for k in 0..6 {
@@ -527,9 +531,10 @@ fn a_thin_rve_sheared_through_flips_keeps_its_contacts_history_as_on_the_cpu() {
 
 #[test]
 fn granite_gpu_max_binding_splits_the_bench_batch_and_a_bad_value_is_refused_by_name() {
-    // The bench's six 125-sphere RVEs in one buffer set, then under an 800 kB binding limit (a
-    // set holds two of them): three sets or more, as the JSON says; a limit that is not a number
-    // of bytes stops the bench naming the variable.
+    // The bench's six 125-sphere RVEs in one buffer set, then under a binding limit of what one
+    // of them takes in all its buffers: each still fits alone, the six together do not, and
+    // they spread over three sets or more, as the JSON says; a limit that is not a number of
+    // bytes stops the bench naming the variable.
     let dir = out_dir("gpu_max_binding");
     std::fs::create_dir_all(&dir).unwrap();
     let bench = |limit: Option<&str>, json: &str| {
@@ -542,15 +547,16 @@ fn granite_gpu_max_binding_splits_the_bench_batch_and_a_bad_value_is_refused_by_
         };
         cmd.output().unwrap()
     };
-    let buffer_sets = |json: &str| {
+    let figure = |json: &str, key: &str| {
         let text = std::fs::read_to_string(dir.join(json)).unwrap();
-        serde_json::from_str::<serde_json::Value>(&text).unwrap()["chunks"].as_u64().unwrap()
+        serde_json::from_str::<serde_json::Value>(&text).unwrap()[key].as_f64().unwrap()
     };
     assert!(bench(None, "whole.json").status.success());
-    assert_eq!(buffer_sets("whole.json"), 1);
-    let out = bench(Some("800000"), "split.json");
+    assert_eq!(figure("whole.json", "chunks"), 1.0);
+    let one_rve = figure("whole.json", "device_bytes_per_rve").round().to_string();
+    let out = bench(Some(&one_rve), "split.json");
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-    assert!(buffer_sets("split.json") >= 3, "{} sets", buffer_sets("split.json"));
+    assert!(figure("split.json", "chunks") >= 3.0, "{} sets", figure("split.json", "chunks"));
     let out = bench(Some("2GB"), "bad.json");
     let said = String::from_utf8_lossy(&out.stderr);
     assert!(!out.status.success() && said.contains("GRANITE_GPU_MAX_BINDING=2GB") && said.contains("bytes"), "{said}");

@@ -10,32 +10,34 @@ use nalgebra::Matrix3;
 pub const RVE_STRIDE: usize = 64;
 /// Per sphere: x, v, w, x at the last rebuild, radius, mass, inertia.
 const SPH_STRIDE: usize = 16;
-/// Per pair slot: history (7), touching, force on the first sphere, torques on both.
-const PF_STRIDE: usize = 17;
-const PF_TOUCH: usize = 7;
-const PF_FORCE: usize = 8;
-const PF_TA: usize = 11;
-const PF_TB: usize = 14;
-/// What a rebuild carries over of a kept pair's slot: history (7) and touching.
-const PF_KEPT: usize = 8;
-/// Fewest slots per sphere in the device's pair rows.
-const MIN_SLOTS: usize = 16;
+/// Most history values a pair keeps on the device.
+const MOST_HISTORY: usize = 7;
+/// Per pair, apart from its history: the force on the first sphere, the torques on both.
+const FORCE_STRIDE: usize = 9;
+const PF_FORCE: usize = 0;
+const PF_TA: usize = 3;
+const PF_TB: usize = 6;
+/// Per sphere in `ints`: its row's length, its incoming list's length, the cell images it was
+/// wrapped by (3), its row's first pair, its cell, its incoming list's first entry, and while
+/// rebuilding its new row's length and first pair.
+const CNT_STRIDE: usize = 10;
 
 /// Indices into the batch's constants (`consts`).
 #[derive(Clone, Copy)]
 enum Const {
-    /// Slots per sphere.
-    Slots,
-    /// Offsets into `ints`: the pair rows (4 per slot: second sphere, shift), the rows being
-    /// rebuilt, the incoming slots (1 per slot), the incoming pairs while rebuilding (4 per
-    /// slot), per sphere its counts (rows, incoming, wrap offset, row start, cell: 8 per
-    /// sphere), the sphere ids sorted by cell during a rebuild (1 per sphere).
-    Rows,
-    RebuiltRows,
+    /// Values per pair in each history half: the law's history, then whether it touches.
+    HistoryStride,
+    /// Pair places of the whole set (one half's length).
+    PairRoom,
+    /// Offsets into `ints`: the pairs' entries (4 per pair: second sphere, shift; two halves),
+    /// each sphere's incoming list (1 per pair: the pairs where it is second), per sphere its
+    /// counts (`CNT_STRIDE`), the sphere ids sorted by cell during a rebuild (1 per sphere).
+    Entries,
     Incoming,
-    IncomingRebuilt,
     Counts,
     Items,
+    /// Offset into `pf` of the pairs' forces (the two history halves come first).
+    Forces,
     Skin,
     Damping,
     /// Most steps one dispatch takes (the host dispatches again).
@@ -100,19 +102,26 @@ pub enum Rec {
     Queue = 52,
     /// Distance tests of the candidate searches (all rebuilds so far).
     Tests = 53,
+    /// The RVE's first pair place in the set, and its places.
+    PairFirst = 54,
+    PairRoom = 55,
+    /// Which history and entries half holds the current pairs (0 or 1).
+    Half = 56,
+    /// Candidate pairs in the current lists.
+    Pairs = 57,
 }
 
 /// The constants the kernel is written against, as WGSL (put before `rve.wgsl`).
 pub fn wgsl_constants() -> String {
     use Const as C;
     let u = [
-        ("C_K", C::Slots as usize),
-        ("C_PI", C::Rows as usize),
-        ("C_PJ", C::RebuiltRows as usize),
+        ("C_HS", C::HistoryStride as usize),
+        ("C_ROOM", C::PairRoom as usize),
+        ("C_ENTRIES", C::Entries as usize),
         ("C_INC", C::Incoming as usize),
-        ("C_INCT", C::IncomingRebuilt as usize),
         ("C_CNT", C::Counts as usize),
         ("C_ITEMS", C::Items as usize),
+        ("C_FORCES", C::Forces as usize),
         ("C_SKIN", C::Skin as usize),
         ("C_DAMPING", C::Damping as usize),
         ("C_CHUNK", C::Chunk as usize),
@@ -146,13 +155,16 @@ pub fn wgsl_constants() -> String {
         ("R_TAKEN", Rec::Taken as usize),
         ("R_QUEUE", Rec::Queue as usize),
         ("R_TESTS", Rec::Tests as usize),
+        ("R_PAIR_FIRST", Rec::PairFirst as usize),
+        ("R_PAIR_ROOM", Rec::PairRoom as usize),
+        ("R_HALF", Rec::Half as usize),
+        ("R_PAIRS", Rec::Pairs as usize),
         ("SPH_STRIDE", SPH_STRIDE),
-        ("PF_STRIDE", PF_STRIDE),
-        ("PF_TOUCH", PF_TOUCH),
+        ("FORCE_STRIDE", FORCE_STRIDE),
         ("PF_FORCE", PF_FORCE),
         ("PF_TA", PF_TA),
         ("PF_TB", PF_TB),
-        ("PF_KEPT", PF_KEPT),
+        ("CNT_STRIDE", CNT_STRIDE),
     ];
     let mut out: String = u.iter().map(|(name, v)| format!("const {name}: u32 = {v}u;\n")).collect();
     for (name, f) in [
@@ -189,6 +201,8 @@ impl Failure {
 #[derive(Debug, Clone, PartialEq)]
 pub struct LawConstants {
     pub law: DeviceLaw,
+    /// History values a pair keeps on the device.
+    history: usize,
     skin: f64,
     damping: f64,
 }
@@ -224,40 +238,40 @@ impl LawConstants {
                 DeviceLaw::MOST_CONSTANTS
             ));
         }
-        Ok(LawConstants { law: form, skin: sim.skin, damping: sim.world.damping })
+        let history = law.history_count().min(MOST_HISTORY);
+        Ok(LawConstants { law: form, history, skin: sim.skin, damping: sim.world.damping })
     }
 }
 
-/// Where each region of `ints` starts (see `Const::Rows`), and its length.
+/// Where each region of `ints` starts (see `Const::Entries`), and its length.
 struct IntRegions {
-    rows: usize,
-    rebuilt_rows: usize,
+    entries: usize,
     incoming: usize,
-    incoming_rebuilt: usize,
     counts: usize,
     items: usize,
     len: usize,
 }
 
 impl IntRegions {
-    fn of(spheres: usize, slots: usize) -> IntRegions {
-        let slot_count = spheres * slots;
-        let rows = 0;
-        let rebuilt_rows = rows + 4 * slot_count;
-        let incoming = rebuilt_rows + 4 * slot_count;
-        let incoming_rebuilt = incoming + slot_count;
-        let counts = incoming_rebuilt + 4 * slot_count;
-        let items = counts + 8 * spheres;
-        IntRegions { rows, rebuilt_rows, incoming, incoming_rebuilt, counts, items, len: items + spheres }
+    fn of(spheres: usize, pairs: usize) -> IntRegions {
+        let entries = 0;
+        let incoming = entries + 2 * 4 * pairs;
+        let counts = incoming + pairs;
+        let items = counts + CNT_STRIDE * spheres;
+        IntRegions { entries, incoming, counts, items, len: items + spheres }
     }
 }
 
-/// Where each RVE's spheres and pair slots lie in the buffers.
+/// Where each RVE's spheres and pairs lie in the buffers. An RVE's pairs are one array in the
+/// pairs' order (each sphere's row after the last), with room to grow; `pf` holds two halves of
+/// pair history (a rebuild writes the other half), then the forces.
 pub struct Layout {
     /// First sphere of each RVE, and one past the last.
     first: Vec<usize>,
-    /// Slots per sphere (the longest pair row or incoming list, with room to grow).
-    slots: usize,
+    /// First pair place of each RVE, and one past the last.
+    pair_first: Vec<usize>,
+    /// Values per pair in a history half: the law's history, then whether it touches.
+    history_stride: usize,
     /// The regions of `ints`.
     ints: IntRegions,
 }
@@ -269,6 +283,8 @@ pub struct Uploaded {
     pub sph: Vec<f64>,
     pub pf: Vec<f64>,
     pub ints: Vec<i32>,
+    /// Per sphere, a counter the kernel uses while it builds the incoming lists.
+    pub tally: Vec<u32>,
 }
 
 /// Pairs of a sphere list that the device stores in row `a` (the second sphere earlier, or the
@@ -281,61 +297,60 @@ fn check_pair(list: &PairList, k: usize) -> Result<(usize, usize)> {
     Ok((a, b))
 }
 
-/// Most candidates of one sphere of this RVE, as first and as second sphere.
-fn longest_row(sim: &DemSim) -> Result<usize> {
-    let mut per_sphere = vec![0usize; sim.world.spheres.len()];
-    for k in 0..sim.world.pairs.len() {
-        let (a, b) = check_pair(&sim.world.pairs, k)?;
-        per_sphere[a] += 1;
-        per_sphere[b] += 1;
-    }
-    Ok(per_sphere.into_iter().max().unwrap_or(0))
-}
-
-/// Slots per sphere when a sphere has at most `longest` candidates: a row (the pairs where it is
-/// first) and an incoming list (where it is second) each hold at most all of them, and 8 more
-/// as the packing changes (a row that outgrows its slots gets twice as many).
-fn slots_for(longest: usize, min_slots: usize) -> usize {
-    (longest + 8).max(MIN_SLOTS).max(min_slots)
+/// Pair places for an RVE of `spheres` spheres holding `pairs` candidate pairs, whose lists
+/// needed `least` places at most so far: a quarter more, and some, for the lists to grow between
+/// rebuilds; a list with no pairs yet (never searched) gets four a sphere. Lists that outgrow
+/// their room stop the RVE before the rebuild, and the host lays it out again with more.
+pub fn room_for(spheres: usize, pairs: usize, least: usize) -> usize {
+    let known = pairs.max(least);
+    let known = if known == 0 { 4 * spheres } else { known };
+    known + known / 4 + 64
 }
 
 /// Workgroups of one dispatch along one axis: a buffer set holds at most this many RVEs.
 const MOST_RVES_A_SET: usize = 65535;
 
-/// Bytes of the largest buffer of a set of `rves` RVEs holding `spheres` spheres in rows of
-/// `slots` slots.
-fn largest_buffer(rves: usize, spheres: usize, slots: usize) -> u64 {
-    let slot_count = (spheres * slots) as u64;
-    let ints = 4 * IntRegions::of(spheres, slots).len as u64;
-    let pf = 8 * PF_STRIDE as u64 * slot_count;
+/// Bytes of each buffer of a set of `rves` RVEs holding `spheres` spheres and `pairs` pair
+/// places, history `history_stride` values a pair: ints, pf, sph, rve, tally.
+fn buffer_bytes(rves: usize, spheres: usize, pairs: usize, history_stride: usize) -> [u64; 5] {
+    let ints = 4 * IntRegions::of(spheres, pairs).len as u64;
+    let pf = 8 * ((2 * history_stride + FORCE_STRIDE) * pairs) as u64;
     let sph = 8 * (SPH_STRIDE * spheres) as u64;
     let rve = 8 * (RVE_STRIDE * rves) as u64;
-    ints.max(pf).max(sph).max(rve)
+    [ints, pf, sph, rve, 4 * spheres as u64]
+}
+
+/// The pair places of each RVE (see `room_for`), `least[r]` places at least.
+pub fn rooms(rves: &[DemSim], least: &[usize]) -> Vec<usize> {
+    rves.iter()
+        .enumerate()
+        .map(|(r, sim)| room_for(sim.world.spheres.len(), sim.world.pairs.len(), least.get(r).copied().unwrap_or(0)))
+        .collect()
 }
 
 /// The RVEs split into consecutive sets whose buffers each stay within `limit` bytes (the
-/// adapter's largest binding and buffer), with at least `min_slots` slots per sphere.
-pub fn split(rves: &[DemSim], min_slots: usize, limit: u64) -> Result<Vec<std::ops::Range<usize>>> {
+/// adapter's largest binding and buffer), RVE r with `rooms[r]` pair places.
+pub fn split(rves: &[DemSim], rooms: &[usize], law: &LawConstants, limit: u64) -> Result<Vec<std::ops::Range<usize>>> {
+    let stride = law.history + 1;
+    let largest = |rves, spheres, pairs| buffer_bytes(rves, spheres, pairs, stride).into_iter().max().unwrap_or(0);
     let mut sets = Vec::new();
-    let (mut from, mut spheres, mut longest) = (0, 0, 0);
+    let (mut from, mut spheres, mut pairs) = (0, 0, 0);
     for (r, sim) in rves.iter().enumerate() {
-        let (n, l) = (sim.world.spheres.len(), longest_row(sim)?);
-        let alone = largest_buffer(1, n, slots_for(l, min_slots));
+        let (n, room) = (sim.world.spheres.len(), rooms[r]);
+        let alone = largest(1, n, room);
         if alone > limit {
             return Err(GraniteError::Setup(format!(
-                "device \"gpu\": RVE {r} ({n} spheres, {} pair slots each) needs a buffer of {alone} bytes, more than the \
-                 {limit} bytes the adapter binds at once (GRANITE_GPU_MAX_BINDING may lower it, never raise it); run \
-                 it with device \"cpu\"",
-                slots_for(l, min_slots)
+                "device \"gpu\": RVE {r} ({n} spheres, room for {room} candidate pairs) needs a buffer of {alone} \
+                 bytes, more than the {limit} bytes the adapter binds at once (GRANITE_GPU_MAX_BINDING may lower it, \
+                 never raise it); run it with device \"cpu\""
             )));
         }
-        let grown = largest_buffer(r + 1 - from, spheres + n, slots_for(longest.max(l), min_slots));
-        if r > from && (grown > limit || r - from == MOST_RVES_A_SET) {
+        if r > from && (largest(r + 1 - from, spheres + n, pairs + room) > limit || r - from == MOST_RVES_A_SET) {
             sets.push(from..r);
-            (from, spheres, longest) = (r, 0, 0);
+            (from, spheres, pairs) = (r, 0, 0);
         }
         spheres += n;
-        longest = longest.max(l);
+        pairs += room;
     }
     if from < rves.len() {
         sets.push(from..rves.len());
@@ -344,42 +359,60 @@ pub fn split(rves: &[DemSim], min_slots: usize, limit: u64) -> Result<Vec<std::o
 }
 
 impl Layout {
-    /// The layout of these RVEs (one buffer set), with at least `min_slots` slots per sphere.
-    pub fn new(rves: &[DemSim], min_slots: usize) -> Result<Layout> {
+    /// The layout of these RVEs (one buffer set), RVE r with `rooms[r]` pair places.
+    pub fn new(rves: &[DemSim], rooms: &[usize], law: &LawConstants) -> Result<Layout> {
         let mut first = vec![0];
-        let mut longest = 0;
-        for sim in rves {
+        let mut pair_first = vec![0];
+        for (sim, room) in rves.iter().zip(rooms) {
             first.push(first.last().copied().unwrap_or(0) + sim.world.spheres.len());
-            longest = longest.max(longest_row(sim)?);
+            pair_first.push(pair_first.last().copied().unwrap_or(0) + room);
         }
-        let slots = slots_for(longest, min_slots);
         let spheres = *first.last().unwrap_or(&0);
-        let ints = IntRegions::of(spheres, slots);
-        if ints.len > i32::MAX as usize || spheres * slots * PF_STRIDE > u32::MAX as usize {
+        let pairs = *pair_first.last().unwrap_or(&0);
+        let history_stride = law.history + 1;
+        let ints = IntRegions::of(spheres, pairs);
+        if ints.len > i32::MAX as usize || pairs * (2 * history_stride + FORCE_STRIDE) > u32::MAX as usize {
             return Err(GraniteError::Setup(format!(
-                "device \"gpu\": {spheres} RVE spheres with {slots} pair slots each are more than one buffer addresses"
+                "device \"gpu\": {spheres} RVE spheres with room for {pairs} pairs are more than one buffer addresses"
             )));
         }
-        Ok(Layout { first, slots, ints })
+        Ok(Layout { first, pair_first, history_stride, ints })
     }
 
-    fn slot(&self, r: usize, i: usize, k: usize) -> usize {
-        (self.first[r] + i) * self.slots + k
+    /// Where pair place `q` of RVE `r` in history half `half` starts in `pf`.
+    fn history_at(&self, half: usize, r: usize, q: usize) -> usize {
+        (half * self.pairs() + self.pair_first[r] + q) * self.history_stride
+    }
+
+    fn entry_at(&self, half: usize, r: usize, q: usize) -> usize {
+        self.ints.entries + (half * self.pairs() + self.pair_first[r] + q) * 4
+    }
+
+    fn force_at(&self, r: usize, q: usize) -> usize {
+        2 * self.pairs() * self.history_stride + (self.pair_first[r] + q) * FORCE_STRIDE
+    }
+
+    fn counts_at(&self, r: usize, i: usize) -> usize {
+        self.ints.counts + (self.first[r] + i) * CNT_STRIDE
+    }
+
+    fn pairs(&self) -> usize {
+        *self.pair_first.last().unwrap_or(&0)
     }
 
     /// The buffers' contents for these RVEs, a dispatch taking at most `chunk` steps.
     pub fn upload(&self, rves: &[DemSim], law: &LawConstants, dispatching: Dispatching) -> Result<Uploaded> {
         let spheres = *self.first.last().unwrap_or(&0);
-        let slot_count = spheres * self.slots;
+        let pairs = self.pairs();
         let mut consts = vec![0.0; CONSTS];
         for (at, v) in [
-            (Const::Slots, self.slots as f64),
-            (Const::Rows, self.ints.rows as f64),
-            (Const::RebuiltRows, self.ints.rebuilt_rows as f64),
+            (Const::HistoryStride, self.history_stride as f64),
+            (Const::PairRoom, pairs as f64),
+            (Const::Entries, self.ints.entries as f64),
             (Const::Incoming, self.ints.incoming as f64),
-            (Const::IncomingRebuilt, self.ints.incoming_rebuilt as f64),
             (Const::Counts, self.ints.counts as f64),
             (Const::Items, self.ints.items as f64),
+            (Const::Forces, (2 * pairs * self.history_stride) as f64),
             (Const::Skin, law.skin),
             (Const::Damping, law.damping),
             (Const::Chunk, f64::from(dispatching.chunk)),
@@ -391,8 +424,9 @@ impl Layout {
         consts[Const::LawFirst as usize..][..law.law.constants.len()].copy_from_slice(&law.law.constants);
         let mut rve = vec![0.0; rves.len() * RVE_STRIDE];
         let mut sph = vec![0.0; spheres * SPH_STRIDE];
-        let mut pf = vec![0.0; slot_count * PF_STRIDE];
+        let mut pf = vec![0.0; pairs * (2 * self.history_stride + FORCE_STRIDE)];
         let mut ints = vec![0i32; self.ints.len];
+        let kept = self.history_stride - 1;
         for (r, sim) in rves.iter().enumerate() {
             let rec = &mut rve[r * RVE_STRIDE..(r + 1) * RVE_STRIDE];
             let cell = sim.world.cell.as_ref().ok_or_else(|| GraniteError::Other("an RVE without a cell".into()))?;
@@ -405,6 +439,11 @@ impl Layout {
                 }
             }
             let s = &sim.world.spheres;
+            let list = &sim.world.pairs;
+            let room = self.pair_first[r + 1] - self.pair_first[r];
+            if list.len() > room {
+                return Err(GraniteError::Other(format!("RVE {r}: {} pairs in room for {room}", list.len())));
+            }
             rec[Rec::Dt as usize] = sim.world.dt;
             rec[Rec::First as usize] = self.first[r] as f64;
             rec[Rec::Count as usize] = s.len() as f64;
@@ -415,6 +454,10 @@ impl Layout {
             rec[Rec::Step as usize] = sim.world.step as f64;
             rec[Rec::Rebuilds as usize] = state.rebuilds as f64;
             rec[Rec::Flips as usize] = cell.flips as f64;
+            rec[Rec::PairFirst as usize] = self.pair_first[r] as f64;
+            rec[Rec::PairRoom as usize] = room as f64;
+            rec[Rec::Half as usize] = 0.0;
+            rec[Rec::Pairs as usize] = list.len() as f64;
             for i in 0..s.len() {
                 let o = &mut sph[(self.first[r] + i) * SPH_STRIDE..][..SPH_STRIDE];
                 o[0..3].copy_from_slice(&s.x[i]);
@@ -425,34 +468,49 @@ impl Layout {
                 o[13] = s.mass[i];
                 o[14] = s.inertia[i];
             }
-            let list = &sim.world.pairs;
+            // The list is in its first spheres' order: each sphere's row is a run of it.
             let hs = list.history_stride;
-            let mut own = vec![0usize; s.len()];
             let mut incoming: Vec<Vec<usize>> = vec![Vec::new(); s.len()];
+            let mut row_first = vec![None; s.len()];
+            let mut row_len = vec![0usize; s.len()];
             for k in 0..list.len() {
                 let (a, b) = check_pair(list, k)?;
-                let slot = self.slot(r, a, own[a]);
-                own[a] += 1;
-                incoming[b].push(slot);
-                let p = &mut ints[self.ints.rows + 4 * slot..][..4];
+                if k > 0 && list.a[k - 1] > list.a[k] {
+                    return Err(GraniteError::Other(format!(
+                        "RVE {r}: its pair list is not in its first spheres' order"
+                    )));
+                }
+                row_first[a].get_or_insert(k);
+                row_len[a] += 1;
+                incoming[b].push(k);
+                let p = &mut ints[self.entry_at(0, r, k)..][..4];
                 p[0] = b as i32;
                 p[1..4].copy_from_slice(&list.shift[k]);
-                let f = &mut pf[slot * PF_STRIDE..][..PF_STRIDE];
+                let h = &mut pf[self.history_at(0, r, k)..][..self.history_stride];
                 let history = &list.history[k * hs..(k + 1) * hs];
-                f[..hs.min(7)].copy_from_slice(&history[..hs.min(7)]);
-                f[PF_TOUCH] = if list.touching[k] { 1.0 } else { 0.0 };
-                f[PF_FORCE..PF_FORCE + 3].copy_from_slice(&list.force[k]);
+                h[..hs.min(kept)].copy_from_slice(&history[..hs.min(kept)]);
+                h[kept] = if list.touching[k] { 1.0 } else { 0.0 };
+                pf[self.force_at(r, k) + PF_FORCE..][..3].copy_from_slice(&list.force[k]);
             }
+            let mut next_row = 0;
+            let mut next_incoming = 0;
             for i in 0..s.len() {
-                let c = self.ints.counts + 8 * (self.first[r] + i);
-                ints[c] = own[i] as i32;
+                let c = self.counts_at(r, i);
+                // An empty row starts where the next one does (the pairs' order).
+                let start = row_first[i].unwrap_or(next_row);
+                next_row = start + row_len[i];
+                ints[c] = row_len[i] as i32;
                 ints[c + 1] = incoming[i].len() as i32;
-                for (k, &slot) in incoming[i].iter().enumerate() {
-                    ints[self.ints.incoming + self.slot(r, i, k)] = slot as i32;
+                ints[c + 5] = start as i32;
+                ints[c + 7] = next_incoming as i32;
+                for &k in &incoming[i] {
+                    ints[self.ints.incoming + self.pair_first[r] + next_incoming] = k as i32;
+                    next_incoming += 1;
                 }
             }
         }
-        Ok(Uploaded { consts, rve, sph, pf, ints })
+        // (one counter at least: a buffer bound is never empty)
+        Ok(Uploaded { consts, rve, sph, pf, ints, tally: vec![0; spheres.max(1)] })
     }
 
     /// Writes the device's state into the host's RVEs.
@@ -481,51 +539,47 @@ impl Layout {
                 needs_rebuild: rec[Rec::Rebuild as usize] != 0.0,
                 rebuilds: rec[Rec::Rebuilds as usize] as u64,
             });
-            // The rows as one list sorted by (a, b, shift), parameters set by the law as the CPU's
+            // The rows in their order on the device (the CPU's: by (a, b, shift) since the last
+            // rebuild, shifts changed in place by flips), parameters set by the law as the CPU's
             // merge sets them.
-            let mut found = Vec::new();
-            for a in 0..n {
-                let rows = ints[self.ints.counts + 8 * (self.first[r] + a)] as usize;
-                for k in 0..rows {
-                    let slot = self.slot(r, a, k);
-                    let p = &ints[self.ints.rows + 4 * slot..][..4];
-                    found.push((a as u32, p[0] as u32, [p[1], p[2], p[3]], slot));
-                }
-            }
-            found.sort_by_key(|&(a, b, shift, _)| (a, b, shift));
+            let half = rec[Rec::Half as usize] as usize;
             let (ps, hs) = sim.world.pair_strides();
             let law =
                 sim.world.laws.first().cloned().ok_or_else(|| GraniteError::Other("an RVE without a law".into()))?;
             let mut list = PairList { param_stride: ps, history_stride: hs, ..Default::default() };
-            for (a, b, shift, slot) in found {
-                let f = &pf[slot * PF_STRIDE..][..PF_STRIDE];
-                list.a.push(a);
-                list.b.push(b);
-                list.shift.push(shift);
-                list.law.push(0);
-                let mut params = vec![0.0; ps];
-                law.init_pair(&sim.world.info_for(a as usize, b as usize, false), &mut params);
-                list.params.extend(params);
-                let mut history = vec![0.0; hs];
-                let kept = hs.min(7);
-                history[..kept].copy_from_slice(&f[..kept]);
-                list.history.extend(history);
-                list.touching.push(f[PF_TOUCH] != 0.0);
-                list.force.push([f[PF_FORCE], f[PF_FORCE + 1], f[PF_FORCE + 2]]);
+            let kept = hs.min(self.history_stride - 1);
+            for a in 0..n {
+                let c = self.counts_at(r, a);
+                let (len, start) = (ints[c] as usize, ints[c + 5] as usize);
+                for q in start..start + len {
+                    let p = &ints[self.entry_at(half, r, q)..][..4];
+                    let b = p[0] as u32;
+                    let h = &pf[self.history_at(half, r, q)..][..self.history_stride];
+                    let f = &pf[self.force_at(r, q) + PF_FORCE..][..3];
+                    list.a.push(a as u32);
+                    list.b.push(b);
+                    list.shift.push([p[1], p[2], p[3]]);
+                    list.law.push(0);
+                    let mut params = vec![0.0; ps];
+                    law.init_pair(&sim.world.info_for(a, b as usize, false), &mut params);
+                    list.params.extend(params);
+                    let mut history = vec![0.0; hs];
+                    history[..kept].copy_from_slice(&h[..kept]);
+                    list.history.extend(history);
+                    list.touching.push(h[self.history_stride - 1] != 0.0);
+                    list.force.push([f[0], f[1], f[2]]);
+                }
             }
             sim.world.pairs = list;
         }
         Ok(())
     }
 
-    pub fn slots(&self) -> usize {
-        self.slots
-    }
-
-    /// Whether RVE `r` failed for want of pair slots (it can go on with more).
-    pub fn out_of_slots(&self, records: &[f64], r: usize) -> bool {
-        let code = records[r * RVE_STRIDE + Rec::Error as usize];
-        Failure::from_code(code).is_some_and(|f| matches!(f, Failure::TooManyPairs))
+    /// The pair places RVE `r` needs, if it stopped for want of them (it can go on with more).
+    pub fn pairs_wanted(&self, records: &[f64], r: usize) -> Option<usize> {
+        let rec = &records[r * RVE_STRIDE..(r + 1) * RVE_STRIDE];
+        let failure = Failure::from_code(rec[Rec::Error as usize]);
+        failure.is_some_and(|f| matches!(f, Failure::TooManyPairs)).then_some(rec[Rec::ErrorValue as usize] as usize)
     }
 
     /// Whether RVE `r` took all the steps of its order, or failed.
@@ -549,7 +603,7 @@ impl Layout {
             floaters: count(Rec::Floaters),
             steps: rec[Rec::Taken as usize] as u64,
             failure: Failure::from_code(rec[Rec::Error as usize])
-                .map(|f| f.describe(rec[Rec::ErrorValue as usize], self.slots)),
+                .map(|f| f.describe(rec[Rec::ErrorValue as usize], rec[Rec::PairRoom as usize])),
             events: Vec::new(),
         }
     }

@@ -77,7 +77,7 @@ impl RveDevice for GpuDevice {
             force_rebuild: self.force_rebuild,
             max_binding,
             counters: BatchCounters::default(),
-            min_slots: 0,
+            least_pairs: Vec::new(),
             shadows: Vec::new(),
             law: None,
             device: None,
@@ -301,8 +301,8 @@ fn gpu_error(name: &str, e: impl std::fmt::Display) -> GraniteError {
     GraniteError::Other(format!("device \"gpu\" ({name}): {e}"))
 }
 
-/// Times one call may double the pair slots of its RVEs.
-const MAX_SLOT_DOUBLINGS: usize = 4;
+/// Times one call may give its RVEs more room for pairs.
+const MOST_ROOM_GROWTHS: usize = 8;
 
 /// Workgroup sizes the kernel is compiled for: up to 256 chosen by the RVEs' size, 512 and 1024
 /// when asked for (`GpuDevice::with_workgroup`).
@@ -350,8 +350,9 @@ struct GpuBatch {
     force_rebuild: bool,
     /// Most bytes of one bound buffer.
     max_binding: u64,
-    /// Fewest pair slots per sphere (doubled when rows outgrow them).
-    min_slots: usize,
+    /// Per RVE, the fewest pair places to lay out for it (twice what its lists last needed
+    /// when they outgrew their room; 0 until then).
+    least_pairs: Vec<usize>,
     /// The RVEs as last brought to the host (the device may be ahead).
     shadows: Vec<DemSim>,
     law: Option<layout::LawConstants>,
@@ -382,10 +383,10 @@ impl GpuBatch {
         Ok(())
     }
 
-    /// One call of `orders` on the device: each RVE's report, and whether it stopped for want of
-    /// pair slots. One submission does every set's dispatches and copies their records back; a
+    /// One call of `orders` on the device: each RVE's report, and the pair places it needs if it
+    /// stopped for want of them. One submission does every set's dispatches and copies their records back; a
     /// software adapter may need more (see `Gpu::rebuilds`).
-    fn submit(&mut self, orders: &[RveOrder]) -> Result<Vec<(RveReport, bool)>> {
+    fn submit(&mut self, orders: &[RveOrder]) -> Result<Vec<(RveReport, Option<usize>)>> {
         if self.dirty || self.device.is_none() {
             self.sync_to_host()?;
             self.upload()?;
@@ -509,7 +510,7 @@ impl GpuBatch {
                 self.counters.pair_tests += rec[Rec::Tests as usize] as u64;
                 let rebuilds = rec[Rec::Rebuilds as usize] - rebuilds_before[global];
                 self.counters.sphere_searches += (rebuilds * rec[Rec::Count as usize]) as u64;
-                reports.push((set.layout.report(&set.records, r), set.layout.out_of_slots(&set.records, r)));
+                reports.push((set.layout.report(&set.records, r), set.layout.pairs_wanted(&set.records, r)));
             }
         }
         Ok(reports)
@@ -536,16 +537,18 @@ impl GpuBatch {
             })
         };
         let mut sets = Vec::new();
-        for range in layout::split(&self.shadows, self.min_slots, self.max_binding)? {
+        let rooms = layout::rooms(&self.shadows, &self.least_pairs);
+        for range in layout::split(&self.shadows, &rooms, law, self.max_binding)? {
             let rves = &self.shadows[range.clone()];
-            let layout = Layout::new(rves, self.min_slots)?;
+            let layout = Layout::new(rves, &rooms[range.clone()], law)?;
             let data = layout.upload(rves, law, dispatching)?;
             let consts = make("consts", bytemuck::cast_slice(&data.consts));
             let rve = make("rve", bytemuck::cast_slice(&data.rve));
             let sph = make("sph", bytemuck::cast_slice(&data.sph));
             let pf = make("pf", bytemuck::cast_slice(&data.pf));
             let ints = make("ints", bytemuck::cast_slice(&data.ints));
-            let buffers = [&consts, &rve, &sph, &pf, &ints];
+            let tally = make("tally", bytemuck::cast_slice(&data.tally));
+            let buffers = [&consts, &rve, &sph, &pf, &ints, &tally];
             let bytes = buffers.iter().map(|b| b.size()).sum();
             let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("rves"),
@@ -585,10 +588,6 @@ impl GpuBatch {
         self.dirty = false;
         Ok(())
     }
-
-    fn slots(&self) -> usize {
-        self.device.as_ref().and_then(|d| d.sets.iter().map(|s| s.layout.slots()).max()).unwrap_or(self.min_slots)
-    }
 }
 
 impl RveBatch for GpuBatch {
@@ -613,6 +612,7 @@ impl RveBatch for GpuBatch {
             }
         }
         self.sync_to_host()?;
+        self.least_pairs.extend(std::iter::repeat_n(0, rves.len()));
         self.shadows.extend(rves);
         self.dirty = true;
         Ok(())
@@ -621,6 +621,8 @@ impl RveBatch for GpuBatch {
         self.sync_to_host()?;
         let mut k = keep.iter();
         self.shadows.retain(|_| *k.next().unwrap_or(&true));
+        let mut k = keep.iter();
+        self.least_pairs.retain(|_| *k.next().unwrap_or(&true));
         self.dirty = true;
         Ok(())
     }
@@ -633,21 +635,23 @@ impl RveBatch for GpuBatch {
         }
         self.counters.calls += 1;
         let mut reports = self.submit(orders)?;
-        // RVEs whose rows outgrew their slots (a cell flattened to a few reaches: more images in
-        // reach) go on from where they stopped with twice the slots.
-        for _ in 0..MAX_SLOT_DOUBLINGS {
-            let short: Vec<usize> = (0..orders.len()).filter(|&r| reports[r].1).collect();
+        // RVEs whose lists outgrew their room (a cell flattened to a few reaches: more images in
+        // reach) go on from where they stopped with room for twice the pairs they needed.
+        for _ in 0..MOST_ROOM_GROWTHS {
+            let short: Vec<usize> = (0..orders.len()).filter(|&r| reports[r].1.is_some()).collect();
             if short.is_empty() {
                 break;
             }
-            self.min_slots = 2 * self.slots();
+            for &r in &short {
+                self.least_pairs[r] = 2 * reports[r].1.unwrap_or(0);
+            }
             self.sync_to_host()?;
             self.dirty = true;
             let rest: Vec<RveOrder> = (0..orders.len())
                 .map(|r| {
                     let o = &orders[r];
                     let taken = reports[r].0.steps;
-                    if !reports[r].1 {
+                    if reports[r].1.is_none() {
                         RveOrder { full_steps: 0, last_step: 0.0, ..*o }
                     } else if taken < o.full_steps {
                         RveOrder { full_steps: o.full_steps - taken, ..*o }
@@ -680,6 +684,7 @@ impl RveBatch for GpuBatch {
         let slot =
             self.shadows.get_mut(index).ok_or_else(|| GraniteError::Other(format!("no RVE {index} on the device")))?;
         *slot = rve;
+        self.least_pairs[index] = 0;
         self.dirty = true;
         Ok(())
     }
@@ -690,7 +695,7 @@ impl RveBatch for GpuBatch {
 
 impl Failure {
     /// The failure in the CPU engine's words.
-    pub fn describe(self, value: f64, slots: usize) -> String {
+    pub fn describe(self, value: f64, room: f64) -> String {
         match self {
             Failure::TooFast => format!(
                 "a sphere moved {value:.4e} m since the candidate lists were built, more than half the skin plus the \
@@ -698,7 +703,7 @@ impl Failure {
             ),
             Failure::NotFinite => "non-finite position or velocity; the time step may be too large".into(),
             Failure::TooManyPairs => format!(
-                "a sphere has more than {slots} candidate pairs, the most the device's lists hold (lower the skin)"
+                "the RVE's candidate pairs ({value}) outgrew the device's room for {room} (lower the skin)"
             ),
             Failure::LostPair => {
                 "a candidate pair found from one of its spheres was not found from the other (a fault of the device's \

@@ -6,8 +6,12 @@
 // and the spheres moved with the cell's affine field.
 //
 // Layout. A pair (a, b, shift) with b < a (or a == b and a positive shift: a sphere and its own
-// image in a thin cell) lives in row a: slot a * K + k. Each sphere also lists the slots where it
-// is the second sphere ("incoming"), so that its loads are one sequential sum.
+// image in a thin cell) lives in row a. An RVE's pairs are one array in the pairs' order, row
+// after row, in the RVE's room of pair places; their entries and history are kept twice (halves):
+// a rebuild writes the new lists into the other half, carrying each kept pair's history across,
+// and the RVE's record says which half is current. The forces of the step are apart. Each sphere
+// also lists the pairs where it is the second sphere ("incoming"), in the pairs' order, so that
+// its loads are one sequential sum.
 
 // Invocations per workgroup: the host sets this line for the batch's RVE size (a power of two,
 // 64 to 1024).
@@ -15,7 +19,7 @@ const WG: u32 = 64u;
 
 // The host puts the layout's constants before this text (`layout::wgsl_constants`): indices into
 // `consts` (C_), into an RVE's record (R_, RVE_STRIDE values a record), the strides and fields of
-// the sphere and pair buffers (SPH_, PF_) and the failure codes (FAIL_).
+// the sphere, pair and count buffers (SPH_, FORCE_, PF_, CNT_) and the failure codes (FAIL_).
 const MAX_IMAGES_ACROSS: f64 = 64.0;
 // Most cells of a rebuild's cell list (workgroup memory), cells per sphere at most, and cells
 // across the reach.
@@ -32,6 +36,8 @@ const LANES_EACH: u32 = max(STRESS_LANES / WG, 1u);
 @group(0) @binding(2) var<storage, read_write> sph: array<f64>;
 @group(0) @binding(3) var<storage, read_write> pf: array<f64>;
 @group(0) @binding(4) var<storage, read_write> ints: array<i32>;
+// Per sphere, the pairs where it is second counted and placed while the incoming lists are built.
+@group(0) @binding(5) var<storage, read_write> tally: array<atomic<u32>>;
 
 var<workgroup> w_h: array<f64, 9>;
 var<workgroup> w_hn: array<f64, 9>;
@@ -62,6 +68,9 @@ var<workgroup> w_tests: atomic<u32>;
 // The batch's constants, copied once per invocation out of `consts` (read in every inner loop).
 var<private> pc: array<f64, N_CONSTS>;
 var<private> pu: array<u32, N_CONSTS>;
+// This RVE's first pair place in the set, and its current half.
+var<private> pair_first: u32;
+var<private> half: u32;
 
 fn cu(i: u32) -> u32 { return pu[i]; }
 fn cf(i: u32) -> f64 { return pc[i]; }
@@ -70,6 +79,14 @@ fn load3(base: u32) -> vec3<f64> { return vec3<f64>(sph[base], sph[base + 1u], s
 fn store3(base: u32, v: vec3<f64>) { sph[base] = v.x; sph[base + 1u] = v.y; sph[base + 2u] = v.z; }
 fn pf3(base: u32) -> vec3<f64> { return vec3<f64>(pf[base], pf[base + 1u], pf[base + 2u]); }
 fn set_pf3(base: u32, v: vec3<f64>) { pf[base] = v.x; pf[base + 1u] = v.y; pf[base + 2u] = v.z; }
+
+// Where pair q of this RVE (its place in the room) keeps, in half h, its entry (second sphere,
+// shift) and its history (the law's, then whether it touches); its forces; an incoming entry.
+fn entry_at(h: u32, q: u32) -> u32 { return cu(C_ENTRIES) + (h * cu(C_ROOM) + pair_first + q) * 4u; }
+fn history_at(h: u32, q: u32) -> u32 { return (h * cu(C_ROOM) + pair_first + q) * cu(C_HS); }
+fn touch_at(q: u32) -> u32 { return history_at(half, q) + cu(C_HS) - 1u; }
+fn force_at(q: u32) -> u32 { return cu(C_FORCES) + (pair_first + q) * FORCE_STRIDE; }
+fn incoming_at(k: u32) -> u32 { return cu(C_INC) + pair_first + k; }
 
 // A row-major 3x3 times a vector, summed in the order of `granite_core::math::mat_vec`.
 fn mat_vec(m: array<f64, 9>, v: vec3<f64>) -> vec3<f64> {
@@ -102,11 +119,13 @@ fn inverse3(m: array<f64, 9>) -> array<f64, 9> {
 }
 
 fn sph_base(first: u32, i: u32) -> u32 { return (first + i) * SPH_STRIDE; }
-fn slot_of(first: u32, i: u32, k: u32) -> u32 { return (first + i) * cu(C_K) + k; }
-fn cnt_base(first: u32, i: u32) -> u32 { return cu(C_CNT) + (first + i) * 8u; }
-fn row_partner(slot: u32) -> i32 { return ints[cu(C_PI) + slot * 4u]; }
-fn row_shift(slot: u32) -> vec3<i32> {
-    let b = cu(C_PI) + slot * 4u;
+// Sphere i's counts: its row's length [0], incoming list's length [1], the images it was wrapped
+// by [2..4], its row's first pair [5], its cell [6], its incoming list's first entry [7], and
+// while rebuilding its new row's length [8] and first pair [9].
+fn cnt_base(first: u32, i: u32) -> u32 { return cu(C_CNT) + (first + i) * CNT_STRIDE; }
+fn row_partner(q: u32) -> i32 { return ints[entry_at(half, q)]; }
+fn row_shift(q: u32) -> vec3<i32> {
+    let b = entry_at(half, q);
     return vec3<i32>(ints[b + 1u], ints[b + 2u], ints[b + 3u]);
 }
 
@@ -146,7 +165,7 @@ fn rotate_into_plane(u: vec3<f64>, n: vec3<f64>) -> vec3<f64> {
 
 // What a contact law returns: the force and the extra moment on the pair's first sphere. The law
 // itself (`fn contact_law`, see `granite_core::ext::DeviceLaw`) comes after this text, supplied by
-// the law's plugin; its constants are `law_constant(i)`.
+// the law's plugin; its constants are `law_constant(i)`, its history from `pf[h]` on.
 struct Law { force: vec3<f64>, moment: vec3<f64> }
 
 fn law_constant(i: u32) -> f64 { return pc[C_LAW_FIRST + i]; }
@@ -165,29 +184,31 @@ fn spring_slider(h: u32, n: vec3<f64>, rel_v: vec3<f64>, kt: f64, limit: f64, dt
     return ft;
 }
 
-fn open_contact(slot: u32) {
-    let h = slot * PF_STRIDE;
-    if (pf[h + PF_TOUCH] == 0.0lf) { return; }
-    for (var q = 0u; q < PF_STRIDE; q++) { pf[h + q] = 0.0lf; }
+fn open_contact(q: u32) {
+    if (pf[touch_at(q)] == 0.0lf) { return; }
+    let h = history_at(half, q);
+    for (var e = 0u; e < cu(C_HS); e++) { pf[h + e] = 0.0lf; }
+    let f = force_at(q);
+    for (var e = 0u; e < FORCE_STRIDE; e++) { pf[f + e] = 0.0lf; }
 }
 
 // Contact stage of sphere a's row.
 fn contacts_of(first: u32, a: u32, dt: f64) {
     let k_max = u32(ints[cnt_base(first, a)]);
+    let row = u32(ints[cnt_base(first, a) + 5u]);
     let sa = sph_base(first, a);
     let xa = load3(sa);
     let va = load3(sa + 3u);
     let wa = load3(sa + 6u);
     let ra = sph[sa + 12u];
-    for (var k = 0u; k < k_max; k++) {
-        let slot = slot_of(first, a, k);
-        let b = u32(row_partner(slot));
+    for (var q = row; q < row + k_max; q++) {
+        let b = u32(row_partner(q));
         let sb = sph_base(first, b);
-        let d = (load3(sb) - xa) + image(row_shift(slot));
+        let d = (load3(sb) - xa) + image(row_shift(q));
         let rb = sph[sb + 12u];
         let reach = ra + rb;
         let dist2 = sdot(d, d);
-        if (dist2 >= reach * reach) { open_contact(slot); continue; }
+        if (dist2 >= reach * reach) { open_contact(q); continue; }
         let inv2 = 1.0lf / dist2;
         let dist = sqrt(dist2);
         let n = d * (dist * inv2);
@@ -197,10 +218,10 @@ fn contacts_of(first: u32, a: u32, dt: f64) {
         let wb = load3(sb + 6u);
         let spins = la * wa + lb * wb;
         let rel_v = ((load3(sb + 3u) - va) - scross(spins, n)) + mat_vec(w_l, d);
-        let law = contact_law(slot, ra, rb, n, overlap, rel_v, wb - wa, dt);
+        let law = contact_law(history_at(half, q), ra, rb, n, overlap, rel_v, wb - wa, dt);
         let nf = scross(n, law.force);
-        let p = slot * PF_STRIDE;
-        pf[p + PF_TOUCH] = 1.0lf;
+        let p = force_at(q);
+        pf[touch_at(q)] = 1.0lf;
         set_pf3(p + PF_FORCE, law.force);
         set_pf3(p + PF_TA, la * nf + law.moment);
         set_pf3(p + PF_TB, lb * nf - law.moment);
@@ -224,25 +245,24 @@ fn move_sphere(first: u32, i: u32, dt: f64) -> f64 {
     var run_t = vec3<f64>(0.0lf);
     var f = vec3<f64>(0.0lf);
     var t = vec3<f64>(0.0lf);
-    let own = u32(ints[c]);
-    for (var k = 0u; k < own; k++) {
-        let slot = slot_of(first, i, k);
-        let p = slot * PF_STRIDE;
-        if (pf[p + PF_TOUCH] == 0.0lf) { continue; }
+    let row = u32(ints[c + 5u]);
+    let row_end = row + u32(ints[c]);
+    for (var q = row; q < row_end; q++) {
+        if (pf[touch_at(q)] == 0.0lf) { continue; }
+        let p = force_at(q);
         run_f += pf3(p + PF_FORCE);
         run_t += pf3(p + PF_TA);
-        if (u32(row_partner(slot)) == i) { f -= pf3(p + PF_FORCE); t += pf3(p + PF_TB); }
+        if (u32(row_partner(q)) == i) { f -= pf3(p + PF_FORCE); t += pf3(p + PF_TB); }
     }
     f += run_f;
     t += run_t;
     let incoming = u32(ints[c + 1u]);
-    let base = cu(C_INC) + (first + i) * cu(C_K);
+    let base = incoming_at(u32(ints[c + 7u]));
     for (var k = 0u; k < incoming; k++) {
-        let slot = u32(ints[base + k]);
+        let q = u32(ints[base + k]);
         // Pairs of the sphere with its own image are summed with its row.
-        if (slot / cu(C_K) == first + i) { continue; }
-        let p = slot * PF_STRIDE;
-        if (pf[p + PF_TOUCH] != 0.0lf) { f -= pf3(p + PF_FORCE); t += pf3(p + PF_TB); }
+        if (q >= row && q < row_end) { continue; }
+        if (pf[touch_at(q)] != 0.0lf) { let p = force_at(q); f -= pf3(p + PF_FORCE); t += pf3(p + PF_TB); }
     }
     let s = sph_base(first, i);
     var x = load3(s);
@@ -280,16 +300,17 @@ fn entry_before(p: vec4<i32>, q: vec4<i32>) -> bool {
 fn entry(at: u32) -> vec4<i32> { return vec4<i32>(ints[at], ints[at + 1u], ints[at + 2u], ints[at + 3u]); }
 fn set_entry(at: u32, e: vec4<i32>) { ints[at] = e.x; ints[at + 1u] = e.y; ints[at + 2u] = e.z; ints[at + 3u] = e.w; }
 
-// Sorts `len` entries of 4 ints from slot `q0` of region `region` (a row is short: insertion).
-fn sort_entries(region: u32, q0: u32, len: u32) {
+// Sorts `len` entries of 4 ints from `ints[at]` on into the pairs' order (a row is short:
+// insertion).
+fn sort_entries(at: u32, len: u32) {
     for (var k = 1u; k < len; k++) {
-        let e = entry(region + (q0 + k) * 4u);
-        var at = k;
-        while (at > 0u && entry_before(e, entry(region + (q0 + at - 1u) * 4u))) {
-            set_entry(region + (q0 + at) * 4u, entry(region + (q0 + at - 1u) * 4u));
-            at--;
+        let e = entry(at + k * 4u);
+        var to = k;
+        while (to > 0u && entry_before(e, entry(at + (to - 1u) * 4u))) {
+            set_entry(at + to * 4u, entry(at + (to - 1u) * 4u));
+            to--;
         }
-        set_entry(region + (q0 + at) * 4u, e);
+        set_entry(at + to * 4u, e);
     }
 }
 
@@ -298,31 +319,23 @@ fn sort_entries(region: u32, q0: u32, len: u32) {
 fn cell_start(q: u32) -> u32 { return select(0u, atomicLoad(&w_cells[max(q, 1u) - 1u]), q > 0u); }
 fn cell_end(q: u32) -> u32 { return atomicLoad(&w_cells[q]); }
 
-// A pair's history and touching flag from slot `from_slot` to slot `to_slot` of the same row.
-fn move_history(from_slot: u32, to_slot: u32) {
-    for (var h = 0u; h < PF_KEPT; h++) { pf[to_slot * PF_STRIDE + h] = pf[from_slot * PF_STRIDE + h]; }
-}
-
-// Candidate search and merge for sphere i's row (the CPU's `rebuild_candidates`): the spheres of
-// the cells within reach of its own, each cell under the image it is met through; pairs already
-// in the row keep their history. Returns the distance tests made, or -1 if the row or the
-// incoming list outgrew its slots.
-fn rebuild_row(first: u32, i: u32) -> i32 {
-    let kk = cu(C_K);
+// Candidate search for sphere i's row (the CPU's `rebuild_candidates`): the spheres of the cells
+// within reach of its own, each cell under the image it is met through, that come before it in
+// the pairs' order. Counts them, or (`write`) writes them from new pair `start` on in the other
+// half; returns how many, and the distance tests made.
+fn search_row(first: u32, i: u32, write: bool, start: u32) -> vec2<u32> {
     let skin = cf(C_SKIN);
     let si = sph_base(first, i);
-    let xi = load3(si);
     let ri = sph[si + 12u];
     let c = cnt_base(first, i);
-    let old = u32(ints[c]);
     let dims = vec3<i32>(w_dims);
     let at = ints[c + 6u];
     let own_cell = vec3<i32>(at % dims.x, (at / dims.x) % dims.y, at / (dims.x * dims.y));
     let m = w_reach_cells;
     let items = cu(C_ITEMS) + first;
-    var fresh = 0u;
-    var incoming = 0u;
-    var tests = 0;
+    let most = u32(ints[c + 8u]);
+    var found = 0u;
+    var tests = 0u;
     for (var dz = -m.z; dz <= m.z; dz++) {
         for (var dy = -m.y; dy <= m.y; dy++) {
             for (var dx = -m.x; dx <= m.x; dx++) {
@@ -334,101 +347,58 @@ fn rebuild_row(first: u32, i: u32) -> i32 {
                 let end = cell_end(cell);
                 for (var t = cell_start(cell); t < end; t++) {
                     let j = u32(ints[items + t]);
-                    if (j == i && all(n == vec3<i32>(0))) { continue; }
+                    // The pair as stored: in the row of its later sphere (of a sphere and its
+                    // own image, under the positive shift).
+                    if (!(j < i || (j == i && positive_shift(n)))) { continue; }
                     tests++;
-                    let rj = sph[sph_base(first, j) + 12u];
-                    let reach = ri + rj + skin;
-                    // The pair as stored: from its first sphere.
-                    let mine = j < i || (j == i && positive_shift(n));
-                    var d: vec3<f64>;
-                    if (mine) { d = branch(first, i, j, n); } else { d = branch(first, j, i, -n); }
+                    let reach = ri + sph[sph_base(first, j) + 12u] + skin;
+                    let d = branch(first, i, j, n);
                     if (sdot(d, d) >= reach * reach) { continue; }
-                    if (mine) {
-                        if (fresh >= kk) { return -1; }
-                        set_entry(cu(C_PJ) + slot_of(first, i, fresh) * 4u, vec4<i32>(i32(j), n));
-                        fresh++;
-                    } else {
-                        if (incoming >= kk) { return -1; }
-                        set_entry(cu(C_INCT) + slot_of(first, i, incoming) * 4u, vec4<i32>(i32(j), -n));
-                        incoming++;
-                    }
+                    if (write && found < most) { set_entry(entry_at(1u - half, start + found), vec4<i32>(i32(j), n)); }
+                    found++;
                 }
             }
         }
     }
-    let row0 = slot_of(first, i, 0u);
-    sort_entries(cu(C_PJ), row0, fresh);
-    sort_entries(cu(C_INCT), row0, incoming);
-    // Pairs kept keep their history, moved within the row where they now sit. The old row is
-    // put in the pairs' order first (a flip may have reordered a sphere's images in a thin
-    // cell): a kept pair's old and new slots then rise together, so moves down (to a lower slot)
-    // in increasing order, then moves up in decreasing order, overwrite no history still to be
-    // moved. The old slot of each new pair (-1: none) goes into this sphere's incoming slots,
-    // unused until the incoming lists are resolved after the rebuild.
-    for (var k = 1u; k < old; k++) {
-        let key = entry(cu(C_PI) + (row0 + k) * 4u);
-        var kept: array<f64, PF_KEPT>;
-        for (var h = 0u; h < PF_KEPT; h++) { kept[h] = pf[(row0 + k) * PF_STRIDE + h]; }
-        var at = k;
-        while (at > 0u && entry_before(key, entry(cu(C_PI) + (row0 + at - 1u) * 4u))) {
-            set_entry(cu(C_PI) + (row0 + at) * 4u, entry(cu(C_PI) + (row0 + at - 1u) * 4u));
-            move_history(row0 + at - 1u, row0 + at);
-            at--;
-        }
-        if (at != k) {
-            set_entry(cu(C_PI) + (row0 + at) * 4u, key);
-            for (var h = 0u; h < PF_KEPT; h++) { pf[(row0 + at) * PF_STRIDE + h] = kept[h]; }
-        }
-    }
-    let was = cu(C_INC) + row0;
-    for (var k = 0u; k < fresh; k++) {
-        let e = entry(cu(C_PJ) + (row0 + k) * 4u);
-        ints[was + k] = -1;
-        for (var o = 0u; o < old; o++) {
-            if (row_partner(row0 + o) == e.x && all(row_shift(row0 + o) == e.yzw)) { ints[was + k] = i32(o); break; }
-        }
-    }
-    for (var k = 0u; k < fresh; k++) {
-        let old_slot = ints[was + k];
-        if (old_slot > i32(k)) { move_history(row0 + u32(old_slot), row0 + k); }
-    }
-    for (var k = fresh; k > 0u; k--) {
-        let old_slot = ints[was + k - 1u];
-        if (old_slot >= 0 && old_slot < i32(k - 1u)) { move_history(row0 + u32(old_slot), row0 + k - 1u); }
-    }
-    for (var k = 0u; k < fresh; k++) {
-        let q = row0 + k;
-        for (var e = 0u; e < 4u; e++) { ints[cu(C_PI) + q * 4u + e] = ints[cu(C_PJ) + q * 4u + e]; }
-        let first_cleared = select(PF_KEPT, 0u, ints[was + k] < 0);
-        for (var e = first_cleared; e < PF_STRIDE; e++) { pf[q * PF_STRIDE + e] = 0.0lf; }
-    }
-    ints[c] = i32(fresh);
-    ints[c + 1u] = i32(incoming);
-    store3(si + 9u, xi);
-    return tests;
+    return vec2<u32>(found, tests);
 }
 
-// The slot of pair (a, b = i, shift) in row a, for sphere i's incoming list.
-fn resolve_incoming(first: u32, i: u32) -> bool {
+// Sphere i's new row, counted before (`cnt[8]`, placed at `cnt[9]`): written into the other half
+// in the pairs' order, each pair kept from the current row with its history (its contact's
+// force comes anew at the next step). Returns the distance tests made.
+fn write_row(first: u32, i: u32) -> u32 {
     let c = cnt_base(first, i);
-    let incoming = u32(ints[c + 1u]);
-    for (var k = 0u; k < incoming; k++) {
-        let t = cu(C_INCT) + slot_of(first, i, k) * 4u;
-        let a = u32(ints[t]);
-        let n = vec3<i32>(ints[t + 1u], ints[t + 2u], ints[t + 3u]);
-        let rows = u32(ints[cnt_base(first, a)]);
-        var found = false;
-        for (var q = 0u; q < rows; q++) {
-            let o = slot_of(first, a, q);
-            if (row_partner(o) == i32(i) && all(row_shift(o) == n)) {
-                ints[cu(C_INC) + slot_of(first, i, k)] = i32(o);
-                found = true;
-                break;
-            }
+    let fresh = u32(ints[c + 8u]);
+    let start = u32(ints[c + 9u]);
+    let tests = search_row(first, i, true, start).y;
+    let other = 1u - half;
+    sort_entries(entry_at(other, start), fresh);
+    let old = u32(ints[c + 5u]);
+    let old_len = u32(ints[c]);
+    let hs = cu(C_HS);
+    for (var k = 0u; k < fresh; k++) {
+        let q = start + k;
+        let e = entry(entry_at(other, q));
+        var was = -1;
+        for (var o = old; o < old + old_len; o++) {
+            if (row_partner(o) == e.x && all(row_shift(o) == e.yzw)) { was = i32(o); break; }
         }
-        if (!found) { return false; }
+        let to = history_at(other, q);
+        if (was >= 0) {
+            let from_h = history_at(half, u32(was));
+            for (var h = 0u; h < hs; h++) { pf[to + h] = pf[from_h + h]; }
+        } else {
+            for (var h = 0u; h < hs; h++) { pf[to + h] = 0.0lf; }
+        }
+        let f = force_at(q);
+        for (var h = 0u; h < FORCE_STRIDE; h++) { pf[f + h] = 0.0lf; }
     }
-    return true;
+    // No other invocation reads this sphere's row while the rows are written.
+    ints[c] = i32(fresh);
+    ints[c + 5u] = i32(start);
+    let si = sph_base(first, i);
+    store3(si + 9u, load3(si));
+    return tests;
 }
 
 // What the invocations before this one hold in all (`mine` each); afterwards w_scan[WG - 1] is
@@ -546,13 +516,12 @@ fn rebuild(r: u32, lid: u32, first: u32, count: u32) {
             ints[items + at] = id;
         }
     }
-    var ok = true;
-    var lost = false;
     for (var i = lid; i < count; i += WG) {
         let c = cnt_base(first, i);
         let ka = vec3<i32>(ints[c + 2u], ints[c + 3u], ints[c + 4u]);
-        for (var k = 0u; k < u32(ints[c]); k++) {
-            let p = cu(C_PI) + slot_of(first, i, k) * 4u;
+        let row = u32(ints[c + 5u]);
+        for (var q = row; q < row + u32(ints[c]); q++) {
+            let p = entry_at(half, q);
             let cb = cnt_base(first, u32(ints[p]));
             ints[p + 1u] += ints[cb + 2u] - ka.x;
             ints[p + 2u] += ints[cb + 3u] - ka.y;
@@ -560,26 +529,93 @@ fn rebuild(r: u32, lid: u32, first: u32, count: u32) {
         }
     }
     barrier_all();
+    // Each row counted, the rows placed one after the other in the pairs' order, then written
+    // (searched again) into the other half.
     var tests = 0u;
     for (var i = lid; i < count; i += WG) {
-        let made = rebuild_row(first, i);
-        if (made < 0) { ok = false; } else { tests += u32(made); }
+        let found = search_row(first, i, false, 0u);
+        ints[cnt_base(first, i) + 8u] = i32(found.x);
+        tests += found.y;
     }
+    barrier_all();
+    let per = (count + WG - 1u) / WG;
+    let lo = min(lid * per, count);
+    let hi = min(lo + per, count);
+    var run_len = 0u;
+    for (var i = lo; i < hi; i++) { run_len += u32(ints[cnt_base(first, i) + 8u]); }
+    var at = scan_across(lid, run_len);
+    for (var i = lo; i < hi; i++) {
+        let c = cnt_base(first, i);
+        ints[c + 9u] = i32(at);
+        at += u32(ints[c + 8u]);
+    }
+    let pairs = workgroupUniformLoad(&w_scan[WG - 1u]);
+    // Lists that outgrew the room stay as they were (all valid, history and all) and due for a
+    // rebuild: the host gives the RVE more room and it goes on from here.
+    if (lid == 0u && pairs > u32(rve[base + R_PAIR_ROOM])) { fail(r, FAIL_TOO_MANY_PAIRS, f64(pairs)); }
+    if (workgroupUniformLoad(&w_fail) != 0u) {
+        atomicAdd(&w_tests, tests);
+        barrier_all();
+        if (lid == 0u) { rve[base + R_TESTS] += f64(atomicLoad(&w_tests)); }
+        return;
+    }
+    barrier_all();
+    for (var i = lid; i < count; i += WG) { tests += write_row(first, i); }
     atomicAdd(&w_tests, tests);
     barrier_all();
+    half = 1u - half;
+    // The incoming lists from the rows: each sphere's pairs counted (integers, in any order),
+    // the lists placed one after the other, filled in any order, then each sorted into the
+    // pairs' order.
     for (var i = lid; i < count; i += WG) {
-        if (!resolve_incoming(first, i)) { lost = true; }
+        let c = cnt_base(first, i);
+        let row = u32(ints[c + 5u]);
+        for (var q = row; q < row + u32(ints[c]); q++) { atomicAdd(&tally[first + u32(row_partner(q))], 1u); }
     }
-    if (!ok) { fail(r, FAIL_TOO_MANY_PAIRS, f64(cu(C_K))); }
-    if (lost) { fail(r, FAIL_LOST_PAIR, 0.0lf); }
-    // A row that did not fit kept its old pairs (all valid, history and all) and the lists stay
-    // due for a rebuild: the host gives the rows more slots and the RVE goes on from here.
     barrier_all();
-    if (lid == 0u) { rve[base + R_TESTS] += f64(atomicLoad(&w_tests)); }
-    if (lid == 0u && w_fail == 0u) {
+    var run_in = 0u;
+    for (var i = lo; i < hi; i++) {
+        let c = cnt_base(first, i);
+        ints[c + 1u] = i32(atomicLoad(&tally[first + i]));
+        run_in += u32(ints[c + 1u]);
+    }
+    var at_in = scan_across(lid, run_in);
+    for (var i = lo; i < hi; i++) {
+        let c = cnt_base(first, i);
+        ints[c + 7u] = i32(at_in);
+        at_in += u32(ints[c + 1u]);
+        atomicStore(&tally[first + i], 0u);
+    }
+    barrier_all();
+    for (var i = lid; i < count; i += WG) {
+        let c = cnt_base(first, i);
+        let row = u32(ints[c + 5u]);
+        for (var q = row; q < row + u32(ints[c]); q++) {
+            let b = u32(row_partner(q));
+            let k = atomicAdd(&tally[first + b], 1u);
+            ints[incoming_at(u32(ints[cnt_base(first, b) + 7u]) + k)] = i32(q);
+        }
+    }
+    barrier_all();
+    for (var i = lid; i < count; i += WG) {
+        let c = cnt_base(first, i);
+        let base_in = incoming_at(u32(ints[c + 7u]));
+        for (var k = 1u; k < u32(ints[c + 1u]); k++) {
+            let q = ints[base_in + k];
+            var to = k;
+            while (to > 0u && ints[base_in + to - 1u] > q) { ints[base_in + to] = ints[base_in + to - 1u]; to--; }
+            ints[base_in + to] = q;
+        }
+        atomicStore(&tally[first + i], 0u);
+    }
+    barrier_all();
+    if (lid == 0u) {
+        rve[base + R_TESTS] += f64(atomicLoad(&w_tests));
         for (var q = 0u; q < 9u; q++) { rve[base + R_HB + q] = w_h[q]; }
         rve[base + R_REBUILD] = 0.0lf;
         rve[base + R_REBUILDS] += 1.0lf;
+        rve[base + R_HALF] = f64(half);
+        rve[base + R_PAIRS] = f64(pairs);
     }
     barrier_all();
 }
@@ -627,6 +663,8 @@ fn run_rves(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_i
     let base = r * RVE_STRIDE;
     let first = u32(rve[base + R_FIRST]);
     let count = u32(rve[base + R_COUNT]);
+    pair_first = u32(rve[base + R_PAIR_FIRST]);
+    half = u32(rve[base + R_HALF]);
     let skin = cf(C_SKIN);
     if (lid == 0u) {
         for (var q = 0u; q < 9u; q++) { w_h[q] = rve[base + R_H + q]; w_l[q] = rve[base + R_L + q]; }
@@ -726,8 +764,9 @@ fn run_rves(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_i
         }
         if (workgroupUniformLoad(&w_flip) != 0u) {
             for (var i = lid; i < count; i += WG) {
-                for (var k = 0u; k < u32(ints[cnt_base(first, i)]); k++) {
-                    let p = cu(C_PI) + slot_of(first, i, k) * 4u;
+                let row = u32(ints[cnt_base(first, i) + 5u]);
+                for (var q = row; q < row + u32(ints[cnt_base(first, i)]); q++) {
+                    let p = entry_at(half, q);
                     let n = vec3<i32>(ints[p + 1u], ints[p + 2u], ints[p + 3u]);
                     ints[p + 1u] = w_minv[0] * n.x + w_minv[1] * n.y + w_minv[2] * n.z;
                     ints[p + 2u] = w_minv[3] * n.x + w_minv[4] * n.y + w_minv[5] * n.z;
@@ -748,22 +787,20 @@ fn run_rves(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_i
         atomicStore(&w_totals[2], 0u); atomicStore(&w_totals[3], 0u);
     }
     var counts = vec4<u32>(0u);
-    var own_rows = 0u;
     let per = (count + WG - 1u) / WG;
     let lo = min(lid * per, count);
     let hi = min(lo + per, count);
-    // Each invocation a run of spheres: their contacts, and their rows' lengths for the starts.
     for (var i = lo; i < hi; i++) {
         let c = cnt_base(first, i);
         var mine = 0u;
-        own_rows += u32(ints[c]);
-        for (var k = 0u; k < u32(ints[c]); k++) {
-            if (pf[slot_of(first, i, k) * PF_STRIDE + PF_TOUCH] != 0.0lf) { mine++; }
+        let row = u32(ints[c + 5u]);
+        for (var q = row; q < row + u32(ints[c]); q++) {
+            if (pf[touch_at(q)] != 0.0lf) { mine++; }
         }
         counts.x += mine;
-        let base_in = cu(C_INC) + (first + i) * cu(C_K);
+        let base_in = incoming_at(u32(ints[c + 7u]));
         for (var k = 0u; k < u32(ints[c + 1u]); k++) {
-            if (pf[u32(ints[base_in + k]) * PF_STRIDE + PF_TOUCH] != 0.0lf) { mine++; }
+            if (pf[touch_at(u32(ints[base_in + k]))] != 0.0lf) { mine++; }
         }
         counts.y += mine;
         if (mine == 1u) { counts.z += 1u; }
@@ -772,16 +809,7 @@ fn run_rves(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_i
     workgroupBarrier();
     atomicAdd(&w_totals[0], counts.x); atomicAdd(&w_totals[1], counts.y);
     atomicAdd(&w_totals[2], counts.z); atomicAdd(&w_totals[3], counts.w);
-    // Where each sphere's row starts in the pair order: the runs' lengths scanned across the
-    // workgroup, then each run's rows in order.
-    var run = scan_across(lid, own_rows);
-    for (var i = lo; i < hi; i++) {
-        let c = cnt_base(first, i);
-        ints[c + 5u] = i32(run);
-        run += u32(ints[c]);
-    }
-    let pairs = w_scan[WG - 1u];
-    barrier_all();
+    let pairs = u32(rve[base + R_PAIRS]);
     let lane_pairs = max((pairs + STRESS_LANES - 1u) / STRESS_LANES, 1u);
     var sums: array<f64, 9u * LANES_EACH>;
     for (var u = 0u; u < LANES_EACH; u++) {
@@ -803,11 +831,9 @@ fn run_rves(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_i
             let c = cnt_base(first, a);
             let row_start = u32(ints[c + 5u]);
             if (at >= row_start + u32(ints[c])) { a++; continue; }
-            let slot = slot_of(first, a, at - row_start);
-            let p = slot * PF_STRIDE;
-            if (pf[p + PF_TOUCH] != 0.0lf) {
-                let f = pf3(p + PF_FORCE);
-                let l = (load3(sph_base(first, u32(row_partner(slot)))) + image(row_shift(slot))) - load3(sph_base(first, a));
+            if (pf[touch_at(at)] != 0.0lf) {
+                let f = pf3(force_at(at) + PF_FORCE);
+                let l = (load3(sph_base(first, u32(row_partner(at)))) + image(row_shift(at))) - load3(sph_base(first, a));
                 for (var i = 0u; i < 3u; i++) {
                     for (var j = 0u; j < 3u; j++) { sums[9u * u + 3u * i + j] += f[i] * l[j]; }
                 }

@@ -240,14 +240,14 @@ pub trait ContactLaw: Send + Sync {
 
 /// A contact law in a device kernel's language (WGSL, f64): the text defines
 ///
-/// `fn contact_law(slot: u32, ra: f64, rb: f64, n: vec3<f64>, overlap: f64, rel_v: vec3<f64>,
+/// `fn contact_law(h: u32, ra: f64, rb: f64, n: vec3<f64>, overlap: f64, rel_v: vec3<f64>,
 /// spin: vec3<f64>, dt: f64) -> Law`
 ///
 /// returning the force and extra moment on the first sphere of a touching pair (`n` from the first
 /// sphere to the second, `rel_v` the second's velocity at the contact point minus the first's,
 /// `spin` the second's angular velocity minus the first's), with its constants read by
-/// `law_constant(i)` and its history (7 values at most) at `pf[slot * PF_STRIDE + k]`, zero when
-/// the contact opened. The kernel (`gpu/src/rve.wgsl`) gives it the helpers `sdot`, `scross`,
+/// `law_constant(i)` and its history (`history_count()` values, 7 at most) at `pf[h + k]`, zero
+/// when the contact opened. The kernel (`gpu/src/rve.wgsl`) gives it the helpers `sdot`, `scross`,
 /// `rotate_into_plane`, `beyond_scale` and `spring_slider`. Its sums must follow the law's Rust
 /// code operation by operation: where the driver fuses no multiply-add the device then computes
 /// the CPU engine's numbers bit for bit.
