@@ -269,6 +269,36 @@ fn an_rve_time_step_above_its_contacts_bound_is_said_once_on_the_gpu_too() {
 }
 
 #[test]
+fn the_device_checks_an_rves_time_step_against_its_contacts_as_the_cpu_does() {
+    // The RVE alone on the device (no MPM, so no check of the prepared sample on the host). Its
+    // time step a little above its contacts' bound: the device's check says, at the same step,
+    // what the CPU engine's says, and the RVE steps on. Three times the bound (above the true
+    // limit, which Lanczos iteration proves): the device's screen flags it, the host proves it,
+    // and the RVE stops with the CPU engine's words.
+    let rve = granite::bench::periodic_rve(100, 1e5).unwrap();
+    let limit = rve.world.stable_dt().expect("a compacted RVE has contacts").dt;
+    let order = RveOrder { velocity_gradient: Matrix3::zeros(), full_steps: 20, last_step: 0.0 };
+    for (factor, stops) in [(1.05, false), (3.0, true)] {
+        let mut sample = rve.clone();
+        sample.world.set_dt(factor * limit).unwrap();
+        let cpu = Rve::as_is(sample.clone()).deform(&order);
+        let report = device().open(vec![Rve::as_is(sample)]).unwrap().step(&[order]).unwrap().remove(0);
+        if stops {
+            let said = cpu.expect_err("the CPU engine stops").to_string();
+            assert!(said.contains("above the stability limit of the present contacts"), "{said}");
+            let failure = report.failure.expect("the device's RVE stops");
+            assert!(failure.contains("above the stability limit of the present contacts"), "{failure}");
+        } else {
+            let cpu = cpu.expect("a time step a little above the bound is only said");
+            assert!(cpu.events.len() == 1 && cpu.events[0].contains("above the stability bound"), "{:?}", cpu.events);
+            assert_eq!(report.events, cpu.events);
+            assert!(report.failure.is_none(), "{:?}", report.failure);
+            assert_eq!(report.steps, order.full_steps);
+        }
+    }
+}
+
+#[test]
 fn a_gpu_checkpoint_resumes_bit_for_bit_on_the_gpu_and_within_tolerance_on_the_cpu() {
     let rve = granite::bench::periodic_rve(100, 1e5).unwrap();
     let mut sim = coupled(&rve, Some(device()));

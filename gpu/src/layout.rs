@@ -7,7 +7,7 @@ use granite_core::ext::{DeviceLaw, RveReport};
 use granite_core::{GraniteError, Result};
 use nalgebra::Matrix3;
 
-pub const RVE_STRIDE: usize = 64;
+pub const RVE_STRIDE: usize = 72;
 /// Per sphere: x, v, w, x at the last rebuild, radius, mass, inertia.
 const SPH_STRIDE: usize = 16;
 /// Most history values a pair keeps on the device.
@@ -109,6 +109,18 @@ pub enum Rec {
     Half = 56,
     /// Candidate pairs in the current lists.
     Pairs = 57,
+    /// The time-step check (`DemWorld::check_time_step`): the step of the last (-1: check at
+    /// the next step), whether it was said; then what this call's first check above the bound
+    /// found (limit 0: none): the limit, its step and time, the sphere (index) and its contacts,
+    /// and whether it is to be said.
+    DtLast = 58,
+    DtWarned = 59,
+    DtLimit = 60,
+    DtStep = 61,
+    DtTime = 62,
+    DtSphere = 63,
+    DtContacts = 64,
+    DtSay = 65,
 }
 
 /// The constants the kernel is written against, as WGSL (put before `rve.wgsl`).
@@ -159,6 +171,14 @@ pub fn wgsl_constants() -> String {
         ("R_PAIR_ROOM", Rec::PairRoom as usize),
         ("R_HALF", Rec::Half as usize),
         ("R_PAIRS", Rec::Pairs as usize),
+        ("R_DT_LAST", Rec::DtLast as usize),
+        ("R_DT_WARNED", Rec::DtWarned as usize),
+        ("R_DT_LIMIT", Rec::DtLimit as usize),
+        ("R_DT_STEP", Rec::DtStep as usize),
+        ("R_DT_TIME", Rec::DtTime as usize),
+        ("R_DT_SPHERE", Rec::DtSphere as usize),
+        ("R_DT_CONTACTS", Rec::DtContacts as usize),
+        ("R_DT_SAY", Rec::DtSay as usize),
         ("SPH_STRIDE", SPH_STRIDE),
         ("FORCE_STRIDE", FORCE_STRIDE),
         ("PF_FORCE", PF_FORCE),
@@ -176,6 +196,7 @@ pub fn wgsl_constants() -> String {
     ] {
         out += &format!("const {name}: f64 = {}.0lf;\n", f as u32);
     }
+    out += &format!("const CHECK_EVERY: f64 = {}.0lf;\n", granite_core::dem::stability::CHECK_EVERY);
     out
 }
 
@@ -195,6 +216,17 @@ impl Failure {
             .into_iter()
             .find(|&f| f as u32 as f64 == code)
     }
+}
+
+/// A time-step check on the device that found the time step above the contacts' bound.
+pub struct TimeStepAbove {
+    pub step: u64,
+    pub time: f64,
+    pub dt: f64,
+    pub limit: f64,
+    pub sphere: usize,
+    pub contacts: u32,
+    pub say: bool,
 }
 
 /// The contact law the kernel runs, with its constants (one per batch).
@@ -458,6 +490,9 @@ impl Layout {
             rec[Rec::PairRoom as usize] = room as f64;
             rec[Rec::Half as usize] = 0.0;
             rec[Rec::Pairs as usize] = list.len() as f64;
+            let (last_check, warned) = sim.world.time_step_check_state();
+            rec[Rec::DtLast as usize] = last_check.map_or(-1.0, |s| s as f64);
+            rec[Rec::DtWarned as usize] = if warned { 1.0 } else { 0.0 };
             for i in 0..s.len() {
                 let o = &mut sph[(self.first[r] + i) * SPH_STRIDE..][..SPH_STRIDE];
                 o[0..3].copy_from_slice(&s.x[i]);
@@ -532,6 +567,11 @@ impl Layout {
                 cell.flips = rec[Rec::Flips as usize] as u64;
             }
             sim.world.time = rec[Rec::Time as usize];
+            let last_check = rec[Rec::DtLast as usize];
+            sim.world.set_time_step_check_state(
+                (last_check >= 0.0).then_some(last_check as u64),
+                rec[Rec::DtWarned as usize] != 0.0,
+            );
             sim.world.step = rec[Rec::Step as usize] as u64;
             sim.set_verlet_state(VerletState {
                 x_at_build,
@@ -587,6 +627,22 @@ impl Layout {
         let rec = &records[r * RVE_STRIDE..(r + 1) * RVE_STRIDE];
         let total = rec[Rec::Steps as usize] + if rec[Rec::LastDt as usize] > 0.0 { 1.0 } else { 0.0 };
         rec[Rec::Error as usize] != 0.0 || rec[Rec::Taken as usize] >= total
+    }
+
+    /// What the call's first time-step check above the contacts' bound found in RVE `r`: its
+    /// step, time and limit, the sphere (index) setting it with its contacts, and whether it is
+    /// to be said (the RVE's first).
+    pub fn time_step_above(&self, records: &[f64], r: usize) -> Option<TimeStepAbove> {
+        let rec = &records[r * RVE_STRIDE..(r + 1) * RVE_STRIDE];
+        (rec[Rec::DtLimit as usize] > 0.0).then(|| TimeStepAbove {
+            step: rec[Rec::DtStep as usize] as u64,
+            time: rec[Rec::DtTime as usize],
+            dt: rec[Rec::Dt as usize],
+            limit: rec[Rec::DtLimit as usize],
+            sphere: rec[Rec::DtSphere as usize] as usize,
+            contacts: rec[Rec::DtContacts as usize] as u32,
+            say: rec[Rec::DtSay as usize] != 0.0,
+        })
     }
 
     /// What RVE `r` reported.

@@ -383,10 +383,11 @@ impl GpuBatch {
         Ok(())
     }
 
-    /// One call of `orders` on the device: each RVE's report, and the pair places it needs if it
-    /// stopped for want of them. One submission does every set's dispatches and copies their records back; a
+    /// One call of `orders` on the device: each RVE's report, the pair places it needs if it
+    /// stopped for want of them, and whether a check found its time step above its contacts'
+    /// bound. One submission does every set's dispatches and copies their records back; a
     /// software adapter may need more (see `Gpu::rebuilds`).
-    fn submit(&mut self, orders: &[RveOrder]) -> Result<Vec<(RveReport, Option<usize>)>> {
+    fn submit(&mut self, orders: &[RveOrder]) -> Result<Vec<(RveReport, Option<usize>, bool)>> {
         if self.dirty || self.device.is_none() {
             self.sync_to_host()?;
             self.upload()?;
@@ -413,6 +414,8 @@ impl GpuBatch {
                 rec[Rec::LastDt as usize] = order.last_step;
                 rec[Rec::Error as usize] = 0.0;
                 rec[Rec::Taken as usize] = 0.0;
+                rec[Rec::DtLimit as usize] = 0.0;
+                rec[Rec::DtSay as usize] = 0.0;
                 rec[Rec::Tests as usize] = 0.0;
             }
             // Workgroups start in index order: the longest orders first.
@@ -510,7 +513,22 @@ impl GpuBatch {
                 self.counters.pair_tests += rec[Rec::Tests as usize] as u64;
                 let rebuilds = rec[Rec::Rebuilds as usize] - rebuilds_before[global];
                 self.counters.sphere_searches += (rebuilds * rec[Rec::Count as usize]) as u64;
-                reports.push((set.layout.report(&set.records, r), set.layout.pairs_wanted(&set.records, r)));
+                let mut report = set.layout.report(&set.records, r);
+                let above = set.layout.time_step_above(&set.records, r);
+                let dt_above = above.is_some();
+                if let Some(above) = above.filter(|a| a.say) {
+                    let world = &self.shadows[global].world;
+                    let sphere = world.spheres.id.get(above.sphere).copied().unwrap_or(above.sphere as u64);
+                    report.events.push(granite_core::dem::stability::time_step_warning(
+                        above.step,
+                        above.time,
+                        above.dt,
+                        above.limit,
+                        sphere,
+                        above.contacts,
+                    ));
+                }
+                reports.push((report, set.layout.pairs_wanted(&set.records, r), dt_above));
             }
         }
         Ok(reports)
@@ -590,6 +608,30 @@ impl GpuBatch {
     }
 }
 
+impl GpuBatch {
+    /// The CPU engine's proof for the RVEs whose time step a check on the device found above
+    /// their contacts' bound (and that stop on it): Lanczos iteration on their contacts as the
+    /// call left them; a time step they provably cannot follow stops the RVE with the CPU's
+    /// words. The device only screens (Gershgorin's bound, at the CPU engine's steps).
+    fn prove_time_steps(&mut self, reports: &mut [(RveReport, Option<usize>, bool)]) -> Result<()> {
+        let suspects: Vec<usize> = (0..reports.len())
+            .filter(|&r| reports[r].2 && reports[r].0.failure.is_none() && self.shadows[r].stop_on_unstable_dt)
+            .collect();
+        if suspects.is_empty() {
+            return Ok(());
+        }
+        self.sync_to_host()?;
+        for r in suspects {
+            let mut probe = self.shadows[r].world.clone();
+            probe.set_time_step_check_state(None, true);
+            if let Err(e) = probe.check_time_step(true) {
+                reports[r].0.failure = Some(e.to_string());
+            }
+        }
+        Ok(())
+    }
+}
+
 impl RveBatch for GpuBatch {
     fn device_name(&self) -> String {
         self.gpu.name.clone()
@@ -662,12 +704,15 @@ impl RveBatch for GpuBatch {
                 .collect();
             let again = self.submit(&rest)?;
             for r in short {
-                let taken = reports[r].0.steps;
+                let (taken, said, above) = (reports[r].0.steps, std::mem::take(&mut reports[r].0.events), reports[r].2);
                 reports[r] = again[r].clone();
                 reports[r].0.steps += taken;
+                reports[r].0.events.splice(0..0, said);
+                reports[r].2 |= above;
             }
         }
-        Ok(reports.into_iter().map(|(report, _)| report).collect())
+        self.prove_time_steps(&mut reports)?;
+        Ok(reports.into_iter().map(|(report, _, _)| report).collect())
     }
     fn get(&mut self, index: usize) -> Result<Rve> {
         self.sync_to_host()?;

@@ -57,6 +57,7 @@ var<workgroup> w_done: u32;
 var<workgroup> w_rebuild: u32;
 var<workgroup> w_flip: u32;
 var<workgroup> w_fail: u32;
+var<workgroup> w_check: u32;
 // The cell list of a rebuild: cells along each axis, cells the reach spans on each side, each
 // cell's count, then its start, then its end; a scan's partial sums; distance tests made.
 var<workgroup> w_dims: vec3<u32>;
@@ -620,6 +621,105 @@ fn rebuild(r: u32, lid: u32, first: u32, count: u32) {
     barrier_all();
 }
 
+// The time-step check (`DemWorld::check_time_step`, stability.rs). The contacts, linearised
+// about this step, make `M q'' = -K q` with six degrees of freedom a sphere; Gershgorin bounds the
+// largest eigenvalue of `M^-1/2 K M^-1/2` row by row. Sphere i's rows: its own block (every
+// spring of its contacts) and its couplings to the spheres it touches. A spring `K = k_t I +
+// (k_n - k_t) n n^T` acts on the contact point's relative displacement, which a sphere's scaled
+// motion moves by `B = [I / sqrt(m), -S(arm) / sqrt(I)]` (`S(a) v = a x v`). Returns the largest
+// row's bound and the sphere's contacts (bound -1 without contacts).
+fn skew_times(a: vec3<f64>, m: mat3x3<f64>) -> mat3x3<f64> {
+    return mat3x3<f64>(scross(a, m[0]), scross(a, m[1]), scross(a, m[2]));
+}
+fn times_skew(m: mat3x3<f64>, a: vec3<f64>) -> mat3x3<f64> {
+    return mat3x3<f64>(m * scross(a, vec3<f64>(1.0lf, 0.0lf, 0.0lf)), m * scross(a, vec3<f64>(0.0lf, 1.0lf, 0.0lf)),
+        m * scross(a, vec3<f64>(0.0lf, 0.0lf, 1.0lf)));
+}
+fn row_abs(m: mat3x3<f64>, r: u32) -> f64 { return abs(m[0][r]) + abs(m[1][r]) + abs(m[2][r]); }
+fn col_abs(m: mat3x3<f64>, c: u32) -> f64 { return abs(m[c].x) + abs(m[c].y) + abs(m[c].z); }
+
+// The sphere whose row holds pair q (the last whose row starts at or before it).
+fn first_sphere_of(first: u32, count: u32, q: u32) -> u32 {
+    var lo = 0u;
+    var hi = count;
+    while (hi - lo > 1u) {
+        let mid = (lo + hi) / 2u;
+        if (u32(ints[cnt_base(first, mid) + 5u]) <= q) { lo = mid; } else { hi = mid; }
+    }
+    return lo;
+}
+
+fn stiffness_row(first: u32, count: u32, i: u32) -> vec2<f64> {
+    let c = cnt_base(first, i);
+    let own_len = u32(ints[c]);
+    let row = u32(ints[c + 5u]);
+    let incoming = u32(ints[c + 1u]);
+    let inc0 = incoming_at(u32(ints[c + 7u]));
+    let si = sph_base(first, i);
+    let alpha = 1.0lf / sqrt(sph[si + 13u]);
+    let beta = 1.0lf / sqrt(sph[si + 14u]);
+    var own_a = mat3x3<f64>();
+    var own_b = mat3x3<f64>();
+    var own_d = mat3x3<f64>();
+    var coupling = array<f64, 6>();
+    var contacts = 0u;
+    for (var k = 0u; k < own_len + incoming; k++) {
+        var q = row + k;
+        if (k >= own_len) { q = u32(ints[inc0 + k - own_len]); }
+        if (pf[touch_at(q)] == 0.0lf) { continue; }
+        var a = i;
+        if (k >= own_len) { a = first_sphere_of(first, count, q); }
+        let b = u32(row_partner(q));
+        let sa = sph_base(first, a);
+        let sb = sph_base(first, b);
+        let xa = load3(sa);
+        let xb = load3(sb);
+        let shift = image(row_shift(q));
+        let l = (xb + shift) - xa;
+        let distance = sqrt(sdot(l, l));
+        if (!(distance > 0.0lf)) { continue; }
+        let n = l / distance;
+        let ra = sph[sa + 12u];
+        let overlap = ra + sph[sb + 12u] - distance;
+        let stiffness = contact_stiffness(ra, sph[sb + 12u], overlap);
+        if (!(stiffness.x > 0.0lf)) { continue; }
+        let kt = max(stiffness.y, 0.0lf);
+        let spring = mat3x3<f64>(
+            vec3<f64>(kt, 0.0lf, 0.0lf) + (stiffness.x - kt) * n.x * n,
+            vec3<f64>(0.0lf, kt, 0.0lf) + (stiffness.x - kt) * n.y * n,
+            vec3<f64>(0.0lf, 0.0lf, kt) + (stiffness.x - kt) * n.z * n);
+        // The contact point in the middle of the overlap, seen from each centre.
+        let point = xa + n * (ra - 0.5lf * overlap);
+        var arm = point - xa;
+        var other_arm = (point - shift) - xb;
+        var other = sb;
+        // A pair of a sphere with its own image comes twice (its row, its incoming list): first
+        // as the pair's first sphere, then as its second.
+        if (k >= own_len) { arm = other_arm; other_arm = point - xa; other = sa; }
+        let alpha_o = 1.0lf / sqrt(sph[other + 13u]);
+        let beta_o = 1.0lf / sqrt(sph[other + 14u]);
+        let ks = times_skew(spring, arm);
+        own_a += (alpha * alpha) * spring;
+        own_b -= (alpha * beta) * ks;
+        own_d -= (beta * beta) * skew_times(arm, ks);
+        let ks_o = times_skew(spring, other_arm);
+        let sk = skew_times(arm, spring);
+        let sks_o = skew_times(arm, ks_o);
+        for (var r = 0u; r < 3u; r++) {
+            coupling[r] += alpha * alpha_o * row_abs(spring, r) + alpha * beta_o * row_abs(ks_o, r);
+            coupling[r + 3u] += beta * alpha_o * row_abs(sk, r) + beta * beta_o * row_abs(sks_o, r);
+        }
+        contacts++;
+    }
+    if (contacts == 0u) { return vec2<f64>(-1.0lf, 0.0lf); }
+    var bound = 0.0lf;
+    for (var r = 0u; r < 3u; r++) {
+        bound = max(bound, row_abs(own_a, r) + row_abs(own_b, r) + coupling[r]);
+        bound = max(bound, col_abs(own_b, r) + row_abs(own_d, r) + coupling[r + 3u]);
+    }
+    return vec2<f64>(bound, f64(contacts));
+}
+
 fn round_away(x: f64) -> f64 {
     return sign(x) * floor(abs(x) + 0.5lf);
 }
@@ -694,6 +794,11 @@ fn run_rves(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_i
             if (workgroupUniformLoad(&w_fail) != 0u) { break; }
         }
         if (lid == 0u) {
+            // The time step is checked at the first step, then at a rebuild CHECK_EVERY steps
+            // or more after the last check (`TimeStepCheck::due`).
+            let last = rve[base + R_DT_LAST];
+            let due = last < 0.0lf || (w_rebuild != 0u && rve[base + R_STEP] >= last + CHECK_EVERY);
+            w_check = select(0u, 1u, due);
             // The cell at the step's end, and F = h_end h_build^-1 for the spheres' reference.
             let dt = w_dt;
             for (var q = 0u; q < 9u; q++) { w_ldt[q] = w_l[q] * dt; }
@@ -716,6 +821,47 @@ fn run_rves(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_i
         let dt = workgroupUniformLoad(&w_dt);
         for (var i = lid; i < count; i += WG) { contacts_of(first, i, dt); }
         barrier_all();
+        if (workgroupUniformLoad(&w_check) != 0u) {
+            // The largest row's bound, the lowest sphere first among equals (the CPU's order).
+            var best = -1.0lf;
+            var best_i = 0u;
+            var best_contacts = 0u;
+            for (var i = lid; i < count; i += WG) {
+                let g = stiffness_row(first, count, i);
+                if (g.x > best) { best = g.x; best_i = i; best_contacts = u32(g.y); }
+            }
+            w_moved[lid] = best;
+            w_bad[lid] = best_i;
+            w_scan[lid] = best_contacts;
+            workgroupBarrier();
+            for (var h = WG / 2u; h > 0u; h = h / 2u) {
+                if (lid < h) {
+                    let o = lid + h;
+                    if (w_moved[o] > w_moved[lid] || (w_moved[o] == w_moved[lid] && w_bad[o] < w_bad[lid])) {
+                        w_moved[lid] = w_moved[o]; w_bad[lid] = w_bad[o]; w_scan[lid] = w_scan[o];
+                    }
+                }
+                workgroupBarrier();
+            }
+            if (lid == 0u) {
+                let step_now = rve[base + R_STEP];
+                rve[base + R_DT_LAST] = step_now;
+                let bound = w_moved[0];
+                if (bound >= 0.0lf) {
+                    let limit = 2.0lf / sqrt(bound * (1.0lf + max(cf(C_DAMPING), 0.0lf)));
+                    if (rve[base + R_DT] > limit && rve[base + R_DT_LIMIT] == 0.0lf) {
+                        rve[base + R_DT_LIMIT] = limit;
+                        rve[base + R_DT_STEP] = step_now;
+                        rve[base + R_DT_TIME] = rve[base + R_TIME];
+                        rve[base + R_DT_SPHERE] = f64(w_bad[0]);
+                        rve[base + R_DT_CONTACTS] = f64(w_scan[0]);
+                        rve[base + R_DT_SAY] = 1.0lf - rve[base + R_DT_WARNED];
+                        rve[base + R_DT_WARNED] = 1.0lf;
+                    }
+                }
+            }
+            workgroupBarrier();
+        }
         var worst = 0.0lf;
         var bad = 0u;
         for (var i = lid; i < count; i += WG) {

@@ -634,6 +634,16 @@ impl DemWorld {
         self.time_step_check = TimeStepCheck::default();
     }
 
+    /// Where the time-step check stands (for a device that steps this world): the step of the
+    /// last check (None: check after the next contact stage), and whether it was said.
+    pub fn time_step_check_state(&self) -> (Option<u64>, bool) {
+        (self.time_step_check.last, self.time_step_check.warned)
+    }
+
+    pub fn set_time_step_check_state(&mut self, last: Option<u64>, warned: bool) {
+        self.time_step_check = TimeStepCheck { last, warned };
+    }
+
     /// Asks each law whether it can make the contacts it may meet: between the materials of the
     /// spheres, and between those and the walls' materials.
     fn check_pairs_of_materials(&self) -> Result<()> {

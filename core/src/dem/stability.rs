@@ -26,7 +26,7 @@ pub struct StableStep {
 const PROBE_STEPS: usize = 100;
 /// Fewest steps between two checks of the time step (made at rebuilds of the candidate lists,
 /// and at once after the time step is set): the contact network changes slowly.
-pub(crate) const CHECK_EVERY: u64 = 1000;
+pub const CHECK_EVERY: u64 = 1000;
 /// `Spring::j` of a wall.
 const WALL: u32 = u32::MAX;
 
@@ -305,12 +305,8 @@ impl DemWorld {
         let sphere = self.spheres.id[lin.sphere_of[b]];
         if !self.time_step_check.warned {
             self.time_step_check.warned = true;
-            self.events.push(format!(
-                "step {} (t = {:.6e} s): the time step {:.4e} s is above the stability bound {:.4e} s of the present \
-                 contacts (sphere {sphere} with {contacts} contacts; stable_dt()): the packing can gain energy it \
-                 should not have; lower dt below that bound",
-                self.step, self.time, self.dt, limit
-            ));
+            let said = time_step_warning(self.step, self.time, self.dt, limit, sphere, contacts);
+            self.events.push(said);
         }
         if !stop || !self.clumps.mass.is_empty() {
             return Ok(());
@@ -334,6 +330,16 @@ impl DemWorld {
             ),
         })
     }
+}
+
+/// What a check says of a time step `dt` above the bound `limit` of the contacts at `step` (time
+/// `time`), set by sphere `sphere` (its id) with `contacts` contacts.
+pub fn time_step_warning(step: u64, time: f64, dt: f64, limit: f64, sphere: u64, contacts: u32) -> String {
+    format!(
+        "step {step} (t = {time:.6e} s): the time step {dt:.4e} s is above the stability bound {limit:.4e} s of the \
+         present contacts (sphere {sphere} with {contacts} contacts; stable_dt()): the packing can gain energy it \
+         should not have; lower dt below that bound"
+    )
 }
 
 /// Stiffness matrix of one contact: `k_t I + (k_n - k_t) n n^T`.

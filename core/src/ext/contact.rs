@@ -240,6 +240,11 @@ pub trait ContactLaw: Send + Sync {
 
 /// A contact law in a device kernel's language (WGSL, f64): the text defines
 ///
+/// `fn contact_stiffness(ra: f64, rb: f64, overlap: f64) -> vec2<f64>`
+///
+/// returning the pair's `(k_n, k_t)` as [`ContactLaw::tangent_stiffness`] gives them (the
+/// device's time-step check), and
+///
 /// `fn contact_law(h: u32, ra: f64, rb: f64, n: vec3<f64>, overlap: f64, rel_v: vec3<f64>,
 /// spin: vec3<f64>, dt: f64) -> Law`
 ///

@@ -786,9 +786,9 @@ impl DemRve {
         strain: &[Option<Voigt>],
     ) -> Result<Vec<(usize, RveReport, f64)>> {
         if !self.time_step_checked.swap(true, std::sync::atomic::Ordering::Relaxed) {
-            // The CPU engine checks each RVE's time step against its contacts as it steps; the
-            // device does not, so the prepared sample is checked here once (its warning, or the
-            // stop of a time step its contacts cannot follow).
+            // The prepared sample is checked here once before the device's first steps (its
+            // warning, or the stop of a time step its contacts cannot follow); the device then
+            // checks each RVE as the CPU engine does and proves a stop on the host.
             let first = stepping.iter().position(|&h| h).unwrap_or(0);
             let events = self
                 .template
@@ -802,6 +802,9 @@ impl DemRve {
         let reports = device
             .step(|p| stepping[p], |p, stress, cell| self.order(p, &strain[p].unwrap_or([0.0; 6]), stress, cell, dt))?;
         for (point, report) in &reports {
+            if let Some(event) = report.events.first() {
+                self.tell_once(*point, event.clone());
+            }
             if let Some(failure) = &report.failure {
                 return Err(GraniteError::Other(format!(
                     "RVE of material point {point}: stopped at its DEM step {} of this increment on the device: {failure}",

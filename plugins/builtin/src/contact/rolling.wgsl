@@ -2,9 +2,15 @@
 // alpha_t, eta_r and the friction coefficient. The same operations as `init_pair` and the
 // law's contact: the tangential spring-slider, then rolling and twisting springs capped at
 // eta_r |F_n| min(r1, r2).
-fn contact_law(h: u32, ra: f64, rb: f64, n: vec3<f64>, overlap: f64, rel_v: vec3<f64>, spin: vec3<f64>, dt: f64) -> Law {
+fn contact_stiffness(ra: f64, rb: f64, overlap: f64) -> vec2<f64> {
     let kn = 2.0lf * law_constant(0u) * ra * rb / (ra + rb);
-    let kt = law_constant(1u) * kn;
+    return vec2<f64>(kn, law_constant(1u) * kn);
+}
+
+fn contact_law(h: u32, ra: f64, rb: f64, n: vec3<f64>, overlap: f64, rel_v: vec3<f64>, spin: vec3<f64>, dt: f64) -> Law {
+    let k = contact_stiffness(ra, rb, overlap);
+    let kn = k.x;
+    let kt = k.y;
     let fn_ = kn * overlap;
     var out: Law;
     out.force = spring_slider(h, n, rel_v, kt, law_constant(5u) * fn_, dt) - fn_ * n;
