@@ -8,6 +8,7 @@
 
 use crate::common;
 use common::*;
+use granite_core::dem::cell::CellUpdate;
 use granite_core::dem::{DemSim, Rve};
 use granite_core::ext::rve::RveDeviceChoice;
 use granite_core::ext::{RveDevice, RveOrder};
@@ -590,4 +591,34 @@ fn granite_gpu_max_binding_splits_the_bench_batch_and_a_bad_value_is_refused_by_
     let out = bench(Some("2GB"), "bad.json");
     let said = String::from_utf8_lossy(&out.stderr);
     assert!(!out.status.success() && said.contains("GRANITE_GPU_MAX_BINDING=2GB") && said.contains("bytes"), "{said}");
+}
+
+#[test]
+fn every_cell_update_steps_on_the_device_as_on_the_cpu() {
+    // An RVE stretched along x, squeezed along z and sheared, under each of the cell's updates
+    // (docs/dem.md): the device follows the CPU engine (to the last bit on lavapipe).
+    let rve = granite::bench::periodic_rve(100, 1e5).unwrap();
+    let l = Matrix3::new(2.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, -2.0);
+    let order = RveOrder { velocity_gradient: l, full_steps: 300, last_step: 0.0 };
+    for update in [CellUpdate::Sllod, CellUpdate::Newton, CellUpdate::Yade] {
+        let mut sample = rve.clone();
+        sample.world.cell.as_mut().unwrap().update = update;
+        let mut cpu = Rve::as_is(sample.clone());
+        let stress = cpu.deform(&order).unwrap().stress;
+        let mut batch = device().open(vec![Rve::as_is(sample)]).unwrap();
+        let report = batch.step(&[order]).unwrap().remove(0);
+        assert!(report.failure.is_none(), "{update:?}: {:?}", report.failure);
+        let p = (stress[0] + stress[1] + stress[2]).abs() / 3.0;
+        for k in 0..6 {
+            assert!(
+                (report.stress[k] - stress[k]).abs() < 1e-6 * p,
+                "{update:?}: GPU {:?}, CPU {stress:?}",
+                report.stress
+            );
+        }
+        if exact_adapter() {
+            let gpu = batch.get(0).unwrap().into_dem();
+            assert!(gpu.world.spheres.v == cpu.into_dem().world.spheres.v, "{update:?}: lavapipe and the CPU differ");
+        }
+    }
 }

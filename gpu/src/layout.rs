@@ -1,5 +1,6 @@
 //! The device buffers' layout (`rve.wgsl`), filled from the host's RVEs and read back into them.
 
+use granite_core::dem::cell::CellUpdate;
 use granite_core::dem::contacts::PairList;
 use granite_core::dem::sim::VerletState;
 use granite_core::dem::DemSim;
@@ -121,6 +122,8 @@ pub enum Rec {
     DtSphere = 63,
     DtContacts = 64,
     DtSay = 65,
+    /// How the fluctuations follow the cell's field (`CellUpdate`: 0 SLLOD, 1 Newton, 2 YADE).
+    Update = 66,
 }
 
 /// The constants the kernel is written against, as WGSL (put before `rve.wgsl`).
@@ -179,6 +182,7 @@ pub fn wgsl_constants() -> String {
         ("R_DT_SPHERE", Rec::DtSphere as usize),
         ("R_DT_CONTACTS", Rec::DtContacts as usize),
         ("R_DT_SAY", Rec::DtSay as usize),
+        ("R_UPDATE", Rec::Update as usize),
         ("SPH_STRIDE", SPH_STRIDE),
         ("FORCE_STRIDE", FORCE_STRIDE),
         ("PF_FORCE", PF_FORCE),
@@ -486,6 +490,11 @@ impl Layout {
             rec[Rec::Step as usize] = sim.world.step as f64;
             rec[Rec::Rebuilds as usize] = state.rebuilds as f64;
             rec[Rec::Flips as usize] = cell.flips as f64;
+            rec[Rec::Update as usize] = match cell.update {
+                CellUpdate::Sllod => 0.0,
+                CellUpdate::Newton => 1.0,
+                CellUpdate::Yade => 2.0,
+            };
             rec[Rec::PairFirst as usize] = self.pair_first[r] as f64;
             rec[Rec::PairRoom as usize] = room as f64;
             rec[Rec::Half as usize] = 0.0;

@@ -69,9 +69,11 @@ var<workgroup> w_tests: atomic<u32>;
 // The batch's constants, copied once per invocation out of `consts` (read in every inner loop).
 var<private> pc: array<f64, N_CONSTS>;
 var<private> pu: array<u32, N_CONSTS>;
-// This RVE's first pair place in the set, and its current half.
+// This RVE's first pair place in the set, and its current half; how its fluctuations follow
+// the cell's field (`CellUpdate`: 0 SLLOD, 1 Newton, 2 YADE).
 var<private> pair_first: u32;
 var<private> half: u32;
+var<private> cell_update: u32;
 
 fn cu(i: u32) -> u32 { return pu[i]; }
 fn cf(i: u32) -> f64 { return pc[i]; }
@@ -275,9 +277,9 @@ fn move_sphere(first: u32, i: u32, dt: f64) -> f64 {
     v = v + cundall(f * inv_m, v, damping, dt) * dt;
     let moving = v + mat_vec(w_l, x);
     x = x + moving * dt;
-    // Newton's law holds for the whole velocity v + L x (see `Motion::advance_free`, whose
-    // matrix L dt this is).
-    v = v - mat_vec(w_ldt, moving);
+    // The field's part of the fluctuation's change (`Motion::advance_free`, whose matrix L dt
+    // this is).
+    if (cell_update == 0u) { v = v - mat_vec(w_ldt, v); } else if (cell_update == 1u) { v = v - mat_vec(w_ldt, moving); }
     w = w + cundall(t * inv_i, w, damping, dt) * dt;
     store3(s, x);
     store3(s + 3u, v);
@@ -765,6 +767,7 @@ fn run_rves(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_i
     let count = u32(rve[base + R_COUNT]);
     pair_first = u32(rve[base + R_PAIR_FIRST]);
     half = u32(rve[base + R_HALF]);
+    cell_update = u32(rve[base + R_UPDATE]);
     let skin = cf(C_SKIN);
     if (lid == 0u) {
         for (var q = 0u; q < 9u; q++) { w_h[q] = rve[base + R_H + q]; w_l[q] = rve[base + R_L + q]; }

@@ -770,6 +770,17 @@ fn register_cell(engine: &mut Engine) {
         }
         Ok(())
     });
+    engine.register_fn("cell_update", |s: &mut DemHandle, name: &str| -> RhaiResult<()> {
+        cell_of(s)?;
+        let update = granite_core::dem::cell::CellUpdate::named(name).or_else(err)?;
+        if let Some(c) = s.lock().sim.dem.world.cell.as_mut() {
+            c.update = update;
+        }
+        Ok(())
+    });
+    engine.register_fn("cell_update", |s: &mut DemHandle| -> RhaiResult<String> {
+        Ok(cell_of(s)?.update.name().to_string())
+    });
     engine.register_fn("cell_control", |s: &mut DemHandle, opts: Map| {
         cell_of(s)?;
         api_options(&opts, "DemSim", "cell_control")?;

@@ -18,6 +18,57 @@ pub struct PeriodicCell {
     pub velocity_gradient: Matrix3<f64>,
     /// Flips done so far.
     pub flips: u64,
+    /// How the particles' fluctuations follow the field `L x` (see [`CellUpdate`]).
+    #[serde(default)]
+    pub update: CellUpdate,
+}
+
+/// How a particle's fluctuation velocity `v` (its velocity less the field `L x`) changes over a
+/// step besides the forces, the particle having moved by `(v + L x) dt`.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub enum CellUpdate {
+    /// SLLOD's `v <- v - L v dt`: the peculiar velocity's equation of motion, the same for a
+    /// particle and all its images (a free particle with no fluctuation keeps none wherever it
+    /// sits), so a thin cell steps as its supercell under any `L`.
+    #[default]
+    Sllod,
+    /// Newton's law for the whole velocity `v + L x`, which only forces change:
+    /// `v <- v - L (v + L x) dt`. Differs from SLLOD by `-L L x dt`, a pull towards or away from
+    /// the cell's origin that splits a particle from its images under stretching (YADE's
+    /// `Cell.homoDeform` 1).
+    Newton,
+    /// The fluctuation changes by the forces alone (YADE's default `Cell.homoDeform` 3, and 2,
+    /// whose convective term `L u` in the acceleration of the whole velocity `u` keeps the
+    /// fluctuation to first order in `dt`).
+    Yade,
+}
+
+impl CellUpdate {
+    pub const NAMES: [(&'static str, CellUpdate); 3] =
+        [("sllod", CellUpdate::Sllod), ("newton", CellUpdate::Newton), ("yade", CellUpdate::Yade)];
+
+    /// The update of a script's name, or what the names are.
+    pub fn named(name: &str) -> Result<CellUpdate, String> {
+        Self::NAMES.iter().find(|(n, _)| *n == name).map(|(_, u)| *u).ok_or_else(|| {
+            let names: Vec<&str> = Self::NAMES.iter().map(|(n, _)| *n).collect();
+            format!("cell update \"{name}\": one of {}", names.join(", "))
+        })
+    }
+
+    pub fn name(self) -> &'static str {
+        Self::NAMES.iter().find(|(_, u)| *u == self).map_or("sllod", |(n, _)| n)
+    }
+
+    /// What the field takes from a fluctuation `v` (after the step's forces) of a particle moving
+    /// at `moving` = `v + L x`: `L w dt` for the velocity `w` the update acts on, None for none.
+    #[inline(always)]
+    pub fn field_velocity(self, v: Vec3, moving: Vec3) -> Option<Vec3> {
+        match self {
+            CellUpdate::Sllod => Some(v),
+            CellUpdate::Newton => Some(moving),
+            CellUpdate::Yade => None,
+        }
+    }
 }
 
 impl PeriodicCell {
@@ -27,6 +78,7 @@ impl PeriodicCell {
             h: Matrix3::from_diagonal(&Vector3::new(size[0], size[1], size[2])),
             velocity_gradient: Matrix3::zeros(),
             flips: 0,
+            update: CellUpdate::default(),
         }
     }
 

@@ -1,6 +1,7 @@
 //! The gather of each sphere's loads with the integration: leapfrog with gravity and Cundall
 //! damping, the affine field of a periodic cell, and clumps as rigid bodies.
 
+use crate::dem::cell::CellUpdate;
 use crate::dem::clump::Clumps;
 use crate::dem::contact_stage::Handover;
 use crate::dem::particles::{dof, Spheres, FREE};
@@ -131,16 +132,19 @@ pub(super) struct Motion {
     damping: f64,
     dt: f64,
     affine: Option<(Matrix3<f64>, Matrix3<f64>)>,
+    /// How the fluctuations follow the cell's field.
+    update: CellUpdate,
     /// `gravity` and the columns of `affine`'s `(L, F, L dt)` as lanes.
     gravity_lanes: Lanes,
     affine_columns: Option<([Lanes; 3], [Lanes; 3], [Lanes; 3])>,
 }
 
 impl Motion {
-    pub(super) fn new(gravity: Vec3, damping: f64, dt: f64, affine: Option<(Matrix3<f64>, Matrix3<f64>)>) -> Motion {
+    pub(super) fn new(rigid: &RigidMotion) -> Motion {
+        let RigidMotion { gravity, damping, dt, affine, update } = *rigid;
         let affine_columns =
             affine.as_ref().map(|(l, f)| (simd::columns(l), simd::columns(f), simd::columns(&(l * dt))));
-        Motion { gravity, damping, dt, affine, gravity_lanes: simd::widen(gravity), affine_columns }
+        Motion { gravity, damping, dt, affine, update, gravity_lanes: simd::widen(gravity), affine_columns }
     }
 
     /// [`Motion::advance`], or [`Motion::advance_free`] when the caller knows `ALL_FREE` spheres
@@ -204,13 +208,12 @@ impl Motion {
         let v4 = add4(v4, scale4(cundall4(acc, v4, damping, dt), dt));
         let moving = add4(v4, lx);
         let x4 = add4(x4, scale4(moving, dt));
-        // Newton's law holds for the whole velocity `v + L x`, which only forces change (YADE's
-        // default `homoDeform`): a sphere that moved by `moving dt` keeps its fluctuation around
-        // the field at its new place, `L moving dt` less. (Kept at the old place's field, a sphere
-        // rising across a shear flow would gain speed along it without a force.)
-        let v4 = match &self.affine_columns {
-            Some((_, _, l_dt)) => sub4(v4, mat_vec4(l_dt, moving)),
-            None => v4,
+        // The field's part of the fluctuation's change (`CellUpdate`): SLLOD's `L v dt` by
+        // default, the same for a sphere and its images.
+        let v4 = match (&self.affine_columns, self.update) {
+            (Some((_, _, l_dt)), CellUpdate::Sllod) => sub4(v4, mat_vec4(l_dt, v4)),
+            (Some((_, _, l_dt)), CellUpdate::Newton) => sub4(v4, mat_vec4(l_dt, moving)),
+            _ => v4,
         };
         let w4 = add4(w4, scale4(cundall4(scale4(t, inv_i), w4, damping, dt), dt));
         (*x, *v, *w) = (narrow(x4), narrow(v4), narrow(w4));
@@ -226,7 +229,7 @@ impl Motion {
         (f, t): (Lanes, Lanes),
         x0: &Vec3,
     ) -> (f64, Lanes) {
-        let Motion { gravity, damping, dt, affine, .. } = self;
+        let Motion { gravity, damping, dt, affine, update, .. } = self;
         let (damping, dt) = (*damping, *dt);
         let (lx, reference) = match affine {
             Some((l, f)) => (mat_vec(l, *x), mat_vec(f, *x0)),
@@ -247,12 +250,13 @@ impl Motion {
             x[a] += moving[a] * dt;
         }
         if let Some((l, _)) = affine {
-            // Newton's law for the whole velocity, as in `advance_free`; a blocked component keeps
-            // its prescribed fluctuation.
-            let field_change = mat_vec(l, moving);
-            for a in 0..3 {
-                if blocked & (dof::X << a) == 0 {
-                    v[a] -= field_change[a] * dt;
+            // As in `advance_free`; a blocked component keeps its prescribed fluctuation.
+            if let Some(w) = update.field_velocity(*v, moving) {
+                let field_change = mat_vec(l, w);
+                for a in 0..3 {
+                    if blocked & (dof::X << a) == 0 {
+                        v[a] -= field_change[a] * dt;
+                    }
                 }
             }
         }
@@ -318,16 +322,9 @@ impl Travel {
 /// Rigid-body integration of the clumps (forces and torques gathered from their members), then
 /// members placed and given the clump's velocity field. Returns the largest member displacement
 /// since the candidate lists were built (affine part excluded).
-pub(super) fn integrate_clumps(
-    cl: &mut Clumps,
-    sp: &mut Spheres,
-    x_at_build: &[Vec3],
-    gravity: Vec3,
-    damping: f64,
-    dt: f64,
-    affine: Option<(Matrix3<f64>, Matrix3<f64>)>,
-) -> f64 {
+pub(super) fn integrate_clumps(cl: &mut Clumps, sp: &mut Spheres, x_at_build: &[Vec3], motion: &RigidMotion) -> f64 {
     use nalgebra::Vector3;
+    let affine = motion.affine;
     let mut moved: f64 = 0.0;
     for c in 0..cl.len() {
         let xc = cl.x[c];
@@ -340,7 +337,7 @@ pub(super) fn integrate_clumps(
         cl.force[c] = f;
         cl.torque[c] = t;
         let body = RigidBody { x: &mut cl.x[c], v: &mut cl.v[c], w: &mut cl.w[c], q: &mut cl.q[c] };
-        body.advance((cl.mass[c], cl.inertia[c]), (f, t), &RigidMotion { gravity, damping, dt, affine });
+        body.advance((cl.mass[c], cl.inertia[c]), (f, t), motion);
         let xc = cl.x[c];
         for m in cl.members_of(c) {
             let i = cl.members[m] as usize;
@@ -377,6 +374,8 @@ pub(crate) struct RigidMotion {
     pub dt: f64,
     /// The periodic cell's `(L, F)`: velocities are fluctuations around `L x`.
     pub affine: Option<(Matrix3<f64>, Matrix3<f64>)>,
+    /// How the fluctuations follow the field.
+    pub update: CellUpdate,
 }
 
 /// The state of one rigid body a step changes: centre, velocity, angular velocity (world frame)
@@ -394,7 +393,7 @@ impl RigidBody<'_> {
     /// frame for the rotation, the orientation turned by the new angular velocity.
     pub(crate) fn advance(self, (mass, inertia): (f64, Vec3), (f, t): (Vec3, Vec3), m: &RigidMotion) {
         use nalgebra::{UnitQuaternion, Vector3};
-        let RigidMotion { gravity, damping, dt, ref affine } = *m;
+        let RigidMotion { gravity, damping, dt, ref affine, update } = *m;
         let damp = |acc: f64, vel: f64| cundall(acc, vel, damping, dt);
         let xc = *self.x;
         let lx = match affine {
@@ -410,10 +409,12 @@ impl RigidBody<'_> {
             self.x[a] += moving[a] * dt;
         }
         if let Some((l, _)) = affine {
-            // Newton's law for the whole velocity, as for a sphere (`Motion::advance_free`).
-            let field_change = mat_vec(l, moving);
-            for a in 0..3 {
-                self.v[a] -= field_change[a] * dt;
+            // As for a sphere (`Motion::advance_free`).
+            if let Some(w) = update.field_velocity(*self.v, moving) {
+                let field_change = mat_vec(l, w);
+                for a in 0..3 {
+                    self.v[a] -= field_change[a] * dt;
+                }
             }
         }
         // Euler's equations in the world frame: I w' = T - w x (I w).

@@ -50,7 +50,9 @@ impl DemSim {
             }
             _ => (None, None, 0.0),
         };
-        let motion = Motion::new(world.gravity, world.damping, world.dt, affine);
+        let update = world.cell.as_ref().map(|c| c.update).unwrap_or_default();
+        let rigid = RigidMotion { gravity: world.gravity, damping: world.damping, dt: world.dt, affine, update };
+        let motion = Motion::new(&rigid);
         let tracking = energy.is_some();
         let mut energy_before = None;
         // Bodies of a plugin kind meet spheres where they all are at the step's start: their
@@ -106,21 +108,13 @@ impl DemSim {
             world.cell = deformed;
         }
         if !world.clumps.is_empty() {
-            let clump_moved = integrate_clumps(
-                &mut world.clumps,
-                &mut world.spheres,
-                &built.x,
-                world.gravity,
-                world.damping,
-                world.dt,
-                affine,
-            );
+            let clump_moved = integrate_clumps(&mut world.clumps, &mut world.spheres, &built.x, &rigid);
             moved = farther(moved, clump_moved);
         }
         let kind_moved = if world.kinds.is_empty() {
             0.0
         } else {
-            let motion = RigidMotion { gravity: world.gravity, damping: world.damping, dt: world.dt, affine: None };
+            let motion = RigidMotion { affine: None, ..rigid };
             BodyMotion::run(&mut world.kinds, &motion, (world.step, world.time))?
         };
         let wall_moved = WallMotion::run(&mut world.walls, (&built.walls, &mut built.wall_turns), world.dt);
