@@ -181,7 +181,7 @@ pub static API: &[ApiDoc] = &[
     // DEM: periodic cell and measures.
     f("DemSim", "periodic", &["sim.periodic([lx, ly, lz])"], NONE, "makes the domain a periodic cell"),
     f("DemSim", "cell_velocity_gradient", &["sim.cell_velocity_gradient([[Lxx, Lxy, Lxz], ...])"], NONE, "a prescribed velocity gradient of the cell"),
-    f("DemSim", "cell_update", &["sim.cell_update(\"sllod\" | \"newton\" | \"yade\")", "sim.cell_update()"], NONE, "how the particles' fluctuations follow the cell's field L x: SLLOD's v -= L v dt (default, the same for a particle and its images), Newton's law for the whole velocity (YADE's homoDeform 1), or the forces alone (YADE's default homoDeform 3)"),
+    f("DemSim", "cell_update", &["sim.cell_update(\"sllod\" | \"newton\" | \"yade\")", "sim.cell_update()"], NONE, "how the particles' fluctuations follow the cell's field L x: SLLOD's v -= L v dt (default, the same for a particle and its images), Newton's law for the whole velocity (YADE's homoDeform 1), or the forces alone (YADE's default homoDeform 2)"),
     f("DemSim", "cell_control", &["sim.cell_control(#{ x: #{ stress, max_rate } or #{ rate }, y, z, xy, ..., relax_steps })"], &["x", "y", "z", "xy", "xz", "yz", "yx", "zx", "zy", "relax_steps"], "stress (a proportional-integral servo closing an error in about relax_steps steps, default 200) or strain-rate control of the cell per axis"),
     f("DemSim", "cell_stress", &["sim.cell_stress()"], NONE, "Love-Weber stress of the cell"),
     f("DemSim", "stress_reached", &["sim.stress_reached(tolerance)"], NONE, "whether the controlled stresses are within a relative tolerance"),

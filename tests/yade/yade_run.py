@@ -22,6 +22,8 @@ steps, every = int(options.pop("steps")), int(options.pop("every"))
 
 with open(state_path) as f:
     state = json.load(f)
+# A saved file wraps the state with its format and checksum.
+state = state.get("state", state)
 laws = state["laws"]
 if len(laws) != 1 or laws[0]["name"] != "linear" or "young" not in laws[0]["params"]:
     sys.exit("the state must use one `linear` law given by `young` (kn = 2 E r1 r2 / (r1 + r2))")

@@ -37,7 +37,7 @@ pub enum CellUpdate {
     /// the cell's origin that splits a particle from its images under stretching (YADE's
     /// `Cell.homoDeform` 1).
     Newton,
-    /// The fluctuation changes by the forces alone (YADE's default `Cell.homoDeform` 3, and 2,
+    /// The fluctuation changes by the forces alone (YADE's default `Cell.homoDeform` 2, and 3,
     /// whose convective term `L u` in the acceleration of the whole velocity `u` keeps the
     /// fluctuation to first order in `dt`).
     Yade,
