@@ -490,3 +490,21 @@ fn set_material_by_an_unknown_name_lists_the_materials() {
     let e = run_err("set_by_name", &format!("{HEAD}{body}sim.set_material(\"sand\", #{{ young: 2e6 }});"), &[]);
     assert!(e.contains("line 3") && e.contains("\"sand\"") && e.contains("\"clay\""), "{e}");
 }
+
+#[test]
+fn a_negative_cloud_count_and_an_unknown_cell_update_are_refused_by_name() {
+    let head = "let sim = dem();\nlet g = sim.material(#{ name: \"g\", density: 2000.0 });\n";
+    for (name, call) in [
+        ("cloud_count", "sim.cloud(g, [0.0, 0.0, 0.0], [1.0, 1.0, 1.0], #{ count: -5, radius: 0.01 });"),
+        (
+            "clump_cloud_count",
+            "sim.clump_cloud(g, [0.0, 0.0, 0.0], [1.0, 1.0, 1.0], #{ count: -5, shape: \"tetra\" });",
+        ),
+    ] {
+        let e = run_err(name, &format!("{head}{call}"), &[]);
+        assert!(e.contains("line 3") && e.contains("`count` must be >= 0, got -5"), "{e}");
+    }
+    let e =
+        run_err("cell_update", &format!("{head}sim.periodic([1.0, 1.0, 1.0]);\nsim.cell_update(\"lagrange\");"), &[]);
+    assert!(e.contains("line 4") && e.contains("lagrange") && e.contains("sllod, newton, yade"), "{e}");
+}

@@ -455,7 +455,11 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
         "clump_cloud",
         |s: &mut DemHandle, m: DemMaterialHandle, lo: Dynamic, hi: Dynamic, opts: Map| {
             let (lo, hi) = (vector(&lo, 3, "lower corner")?, vector(&hi, 3, "upper corner")?);
-            let count = integer(get(&opts, "count").unwrap_or(&Dynamic::UNIT), "count")?.max(0) as usize;
+            let count = integer(get(&opts, "count").unwrap_or(&Dynamic::UNIT), "count")?;
+            if count < 0 {
+                return err(format!("`count` must be >= 0, got {count}"));
+            }
+            let count = count as usize;
             let shape_name =
                 get(&opts, "shape").map(|t| string(t, "shape")).transpose()?.unwrap_or_else(|| "tetra".into());
             if super::body_api::is_kind(s, &shape_name) {
