@@ -448,3 +448,42 @@ fn the_potential_heap_scene_forms_a_heap() {
     assert!(left > 0.1 * 300.0 && left < 300.0, "{left} of 300 particles stay in the device");
     assert!(get("angle_of_repose_deg") > 0.0, "a heap sloping down to the opening: {}°", get("angle_of_repose_deg"));
 }
+
+/// A change of contact parameters reaches potential particles as it reaches capsules
+/// (tests/capsules.rs): a rounded box sliding at 1 m/s on a frictionless plane keeps its speed,
+/// and once friction is set (45°: mu = 1) Coulomb's friction stops it, which takes v0 / (mu g)
+/// = 0.10 s; a switch to another law with the box in contact then runs on.
+#[test]
+fn a_contact_change_reaches_potential_particles_and_a_law_switch_runs_on() {
+    let source = r#"
+        let sim = dem();
+        let m = sim.material(#{ density: 1000.0 });
+        sim.contact_law("linear", #{ kn: 1e6, kt_ratio: 0.5, friction: 0.0 });
+        sim.wall_plane(m, [0.0, 0.0, 0.0], [0.0, 0.0, 1.0]);
+        let b = sim.potential(m, [0.0, 0.0, 0.00599], #{ shape: "potential_box", hx: 0.01, hy: 0.01, hz: 0.005 });
+        sim.body_velocity(b, [1.0, 0.0, 0.0]);
+        sim.gravity([0.0, 0.0, -9.81]);
+        sim.dt(0.2 * sim.critical_dt());
+        sim.run_until(0.05);
+        summary("sliding", sim.body_state(b).velocity[0]);
+        sim.set_contact_params(#{ friction: 45.0 });
+        sim.run_until(0.25);
+        summary("with_friction", sim.body_state(b).velocity[0]);
+        sim.contact_law("visco_elastic", #{ kn: 1e5, kt_ratio: 0.5, friction: 30.0, restitution: 0.5 });
+        sim.run_steps(100);
+        summary("after_switch", sim.body_state(b).velocity[0]);
+    "#;
+    let out = common::run_text("potential_contact_change", source);
+    let s: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    let get = |k: &str| s[k].as_f64().unwrap();
+    assert!((get("sliding") - 1.0).abs() < 1e-9, "frictionless: it slides at {}", get("sliding"));
+    // 0.2 s of friction, twice what stopping takes: at rest but for the contact's small swing.
+    let stopping_time = 1.0 / (45f64.to_radians().tan() * 9.81);
+    assert!(
+        get("with_friction").abs() < 0.02,
+        "still sliding at {} m/s 0.2 s after friction was set (Coulomb stops it in {stopping_time:.3} s)",
+        get("with_friction")
+    );
+    assert!(get("after_switch").is_finite());
+}
