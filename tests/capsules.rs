@@ -304,3 +304,41 @@ fn a_contact_change_reaches_capsules_and_a_law_switch_runs_on() {
     assert!((get("sphere_v") - 5.0 / 7.0).abs() < 0.005, "sphere at {}", get("sphere_v"));
     assert!(get("after_switch").is_finite());
 }
+
+/// Capsules placed into the floor, into one another and onto a sphere are said at the start of
+/// the run as deep overlaps, as spheres are: each overlap over the smaller radius (a capsule's
+/// is the radius of the sphere of its volume), deepest first.
+#[test]
+fn capsules_placed_into_the_floor_one_another_and_a_sphere_are_said() {
+    let (r, l) = (0.01f64, 0.04f64);
+    let source = format!(
+        r#"
+        let sim = dem();
+        let m = sim.material(#{{ name: "g", density: 2500.0 }});
+        sim.contact_law("linear", #{{ kn: 1e5, kt_ratio: 0.5, friction: 30.0 }});
+        sim.wall_plane(m, [0.0, 0.0, 0.0], [0.0, 0.0, 1.0]);
+        sim.capsule(m, [0.0, 0.0, 0.007], #{{ radius: {r}, length: {l}, axis: [1.0, 0.0, 0.0] }});
+        sim.capsule(m, [0.2, 0.0, 0.05], #{{ radius: {r}, length: {l}, axis: [1.0, 0.0, 0.0] }});
+        sim.capsule(m, [0.2, 0.0, 0.065], #{{ radius: {r}, length: {l}, axis: [0.0, 1.0, 0.0] }});
+        sim.sphere(m, [0.4, 0.0, 0.05], {r});
+        sim.capsule(m, [0.4, 0.0, 0.08], #{{ radius: {r}, length: {l}, axis: [0.0, 0.0, 1.0] }});
+        sim.dt(0.1 * sim.critical_dt());
+        sim.run_steps(1);
+        "#
+    );
+    let out = common::run_text("capsule_overlaps", &source);
+    let summary = common::summary_of(&out);
+    let warnings: Vec<&str> = summary["warnings"].as_array().unwrap().iter().map(|w| w.as_str().unwrap()).collect();
+    let said = warnings.iter().find(|w| w.contains("overlap by more than 10 %")).expect("the deep overlaps");
+    let volume = std::f64::consts::PI * r * r * l + 4.0 / 3.0 * std::f64::consts::PI * r.powi(3);
+    let r_eq = (3.0 * volume / (4.0 * std::f64::consts::PI)).cbrt();
+    let percent = |overlap: f64, radius: f64| format!("{:.0} %", 100.0 * overlap / radius);
+    // Into the floor by 3 mm; crossed capsules with axes 15 mm apart; the upright capsule's axis
+    // ending 10 mm above the sphere's centre (its lower cap reaches the centre).
+    let floor = format!("capsule 0 and wall 0 (\"plane\") by {}", percent(r - 0.007, r_eq));
+    let crossed = format!("capsule 2 and capsule 1 by {}", percent(2.0 * r - 0.015, r_eq));
+    let sphere = format!("capsule 4 and sphere 3 by {}", percent(2.0 * r - (0.08 - 0.5 * l - 0.05), r));
+    for expected in [&floor, &crossed, &sphere] {
+        assert!(said.contains(expected.as_str()), "expected {expected} in: {said}");
+    }
+}

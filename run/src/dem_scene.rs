@@ -21,7 +21,7 @@ pub struct DemScene {
     /// Deep overlaps are looked for before a run while this holds (`sim.allow_overlaps(true)`
     /// turns it off), once per set of bodies: the sphere and wall counts last checked.
     pub check_overlaps: bool,
-    overlaps_checked_for: Option<(usize, usize)>,
+    overlaps_checked_for: Option<(usize, usize, usize)>,
 }
 
 /// Overlap, as a fraction of the smaller radius, above which a body at the start of a run is
@@ -59,7 +59,8 @@ impl DemScene {
 
 impl Simulation for DemScene {
     fn setup_warnings(&mut self) -> Vec<String> {
-        let bodies = (self.dem.world.spheres.len(), self.dem.world.walls.len());
+        let w = &self.dem.world;
+        let bodies = (w.spheres.len(), w.walls.len(), w.kinds.len());
         if !self.check_overlaps || self.overlaps_checked_for == Some(bodies) {
             return Vec::new();
         }

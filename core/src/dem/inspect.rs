@@ -2,6 +2,7 @@
 //! present positions, forces of the last step, the law and its values for the pair.
 
 use crate::dem::contact_stage::branch;
+use crate::dem::kind_stage::{BodyContacts, Surroundings};
 use crate::dem::sim::DemWorld;
 use crate::math::Vec3;
 
@@ -140,10 +141,11 @@ impl DemWorld {
         }
     }
 
-    /// Sphere pairs and sphere-wall pairs whose overlap exceeds `fraction` of the smaller radius
-    /// (of the sphere's, for a wall), from the candidate lists as they are (after a rebuild):
-    /// `(description, overlap / radius)`, deepest first, at most `most`. A packing made by hand
-    /// with such overlaps starts with forces it was never meant to have.
+    /// Pairs of spheres, bodies of plugin kinds and walls whose overlap exceeds `fraction` of the
+    /// smaller radius (of the sphere's or body's, for a wall; a body's is the radius of the sphere
+    /// of its volume), from the candidate lists as they are (after a rebuild): `(description,
+    /// overlap / radius)`, deepest first, at most `most`. A packing made by hand with such
+    /// overlaps starts with forces it was never meant to have.
     pub fn deep_overlaps(&self, fraction: f64, most: usize) -> Vec<(String, f64)> {
         let s = &self.spheres;
         let mut found: Vec<(String, f64)> = Vec::new();
@@ -164,8 +166,44 @@ impl DemWorld {
                 }
             }
         }
+        found.extend(self.deep_body_overlaps(fraction));
         found.sort_by(|a, b| b.1.total_cmp(&a.1));
         found.truncate(most);
+        found
+    }
+
+    /// [`DemWorld::deep_overlaps`] of the bodies of plugin kinds (none where their geometry fails:
+    /// the step reports why).
+    fn deep_body_overlaps(&self, fraction: f64) -> Vec<(String, f64)> {
+        let k = &self.kinds;
+        let around = Surroundings {
+            spheres: &self.spheres,
+            walls: &self.walls,
+            laws: &self.laws,
+            law_history: self.pair_strides().1,
+            dt: self.dt,
+            step: self.step,
+            time: self.time,
+        };
+        let Ok(lists) = BodyContacts::overlaps(k, &around) else { return Vec::new() };
+        let body = |i: usize| format!("{} {}", k.kind_name(i), k.id[i]);
+        let mut found = Vec::new();
+        for (n, (list, touching)) in [&k.pairs, &k.wall_pairs, &k.sphere_pairs].into_iter().zip(lists).enumerate() {
+            for (pair, overlap) in touching {
+                let (i, j) = (list.a[pair] as usize, list.b[pair] as usize);
+                let (what, radius) = match n {
+                    0 => (format!("{} and {}", body(i), body(j)), k.equivalent_radius(i).min(k.equivalent_radius(j))),
+                    1 => (format!("{} and wall {j} (\"{}\")", body(i), self.walls[j].name), k.equivalent_radius(i)),
+                    _ => (
+                        format!("{} and sphere {}", body(i), self.spheres.id[j]),
+                        k.equivalent_radius(i).min(self.spheres.radius[j]),
+                    ),
+                };
+                if overlap / radius > fraction {
+                    found.push((what, overlap / radius));
+                }
+            }
+        }
         found
     }
 

@@ -201,6 +201,28 @@ impl BodyContacts {
         Ok(())
     }
 
+    /// The overlaps of the bodies' touching candidate pairs as a step would find them now, list
+    /// by list (body pairs, walls, spheres): `(pair, overlap)`. Runs the geometries alone, on
+    /// copies of the lists: the scene is left as it is.
+    pub(crate) fn overlaps(bodies: &KindScene, around: &Surroundings<'_>) -> Result<[Vec<(usize, f64)>; 3]> {
+        let mut out: [Vec<(usize, f64)>; 3] = Default::default();
+        if bodies.families.is_empty() {
+            return Ok(out);
+        }
+        let (own, warm) = (around.law_history, bodies.warm_values());
+        let placed = (0..bodies.families.len())
+            .map(|f| bodies.families[f].geometry.place(bodies.view(f as u16)))
+            .collect::<Result<Vec<_>>>()?;
+        let geometries = Geometries { bodies, placed: &placed, meetings: &bodies.meetings };
+        let lists =
+            [(&bodies.pairs, Side::Bodies), (&bodies.wall_pairs, Side::Walls), (&bodies.sphere_pairs, Side::Spheres)];
+        for (n, (list, side)) in lists.into_iter().enumerate() {
+            let found = Self::touching(&geometries, around, &mut list.clone(), side, (own, warm))?;
+            out[n] = found.into_iter().map(|f| (f.law.slot, f.law.overlap)).collect();
+        }
+        Ok(out)
+    }
+
     /// The touching pairs of a list, from one call of each geometry on its share of it (the
     /// whole list for a scene of one family); pairs found apart start their law's history again at
     /// their next touch. `(own, warm)`: the law's history values a pair, and the geometry's after

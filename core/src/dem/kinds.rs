@@ -101,6 +101,11 @@ impl KindScene {
         self.shapes[self.shape[i] as usize].bounding_radius()
     }
 
+    /// The radius of the sphere of body `i`'s volume: the size an overlap is measured against.
+    pub fn equivalent_radius(&self, i: usize) -> f64 {
+        (3.0 * self.shapes[self.shape[i] as usize].volume() / (4.0 * std::f64::consts::PI)).cbrt()
+    }
+
     /// The candidate lists (body pairs, body-wall, body-sphere) with their last step's touching
     /// contacts.
     pub(crate) fn lists(&self) -> [(&PairList, &[(LawContact, Vec3)]); 3] {
