@@ -466,7 +466,8 @@ fn a_batch_over_several_buffer_sets_steps_byte_for_byte_as_one() {
     };
     let (whole, whole_rves, one) = run(granite::gpu::GpuDevice::new());
     assert_eq!(one.chunks, 1);
-    // The largest buffer of two RVEs is about 1.05 of what one RVE holds in all its buffers.
+    // A binding a fifth above what one RVE holds in all its buffers: every RVE fits in a set,
+    // and the pair buffer, most of an RVE's bytes, keeps the nine from sharing a few.
     let per_rve = one.device_bytes / copies as u64;
     let (split, split_rves, several) = run(granite::gpu::GpuDevice::with_max_binding(per_rve * 6 / 5));
     assert!(several.chunks >= 3, "{} buffer sets", several.chunks);

@@ -63,67 +63,79 @@ pub struct Dispatching {
     pub force_rebuild: bool,
 }
 
-/// Offsets into an RVE's record.
-#[derive(Clone, Copy)]
-pub enum Rec {
+/// Declares the fields of an RVE's record: `Rec`, each field's offset, and the name the kernel
+/// knows it by (`wgsl_constants` writes them).
+macro_rules! record_fields {
+    ($($(#[$doc:meta])* $field:ident = $at:literal => $name:literal,)*) => {
+        /// Offsets into an RVE's record.
+        #[derive(Clone, Copy)]
+        pub enum Rec {
+            $($(#[$doc])* $field = $at,)*
+        }
+        /// Each field of the record with its name in the kernel.
+        const RECORD_NAMES: &[(&str, Rec)] = &[$(($name, Rec::$field),)*];
+    };
+}
+
+record_fields! {
     /// The cell matrix, row-major.
-    H = 0,
+    H = 0 => "R_H",
     /// The cell matrix at the last rebuild.
-    HBuild = 9,
+    HBuild = 9 => "R_HB",
     /// The velocity gradient of this call.
-    L = 18,
-    Dt = 27,
+    L = 18 => "R_L",
+    Dt = 27 => "R_DT",
     /// Full steps of this call.
-    Steps = 28,
+    Steps = 28 => "R_STEPS",
     /// A shorter last step, or 0.
-    LastDt = 29,
+    LastDt = 29 => "R_LAST_DT",
     /// First sphere and spheres.
-    First = 30,
-    Count = 31,
+    First = 30 => "R_FIRST",
+    Count = 31 => "R_COUNT",
     /// The lists must be rebuilt before the next step.
-    Rebuild = 32,
-    RMax = 33,
-    RMin = 34,
+    Rebuild = 32 => "R_REBUILD",
+    RMax = 33 => "R_RMAX",
+    RMin = 34 => "R_RMIN",
     /// 0, or a `Failure` code.
-    Error = 35,
-    ErrorValue = 36,
-    Time = 37,
-    Step = 38,
-    Rebuilds = 39,
-    Flips = 40,
+    Error = 35 => "R_ERROR",
+    ErrorValue = 36 => "R_ERROR_VALUE",
+    Time = 37 => "R_TIME",
+    Step = 38 => "R_STEP",
+    Rebuilds = 39 => "R_REBUILDS",
+    Flips = 40 => "R_FLIPS",
     /// Love-Weber stress, Voigt, tension positive.
-    Stress = 41,
-    Contacts = 47,
-    Ends = 48,
-    Rattlers = 49,
-    Floaters = 50,
+    Stress = 41 => "R_STRESS",
+    Contacts = 47 => "R_CONTACTS",
+    Ends = 48 => "R_ENDS",
+    Rattlers = 49 => "R_RATTLERS",
+    Floaters = 50 => "R_FLOATERS",
     /// Steps taken by this call (its dispatches so far).
-    Taken = 51,
+    Taken = 51 => "R_TAKEN",
     /// In record w: the RVE workgroup w steps (the longest orders first).
-    Queue = 52,
+    Queue = 52 => "R_QUEUE",
     /// Distance tests of the candidate searches (all rebuilds so far).
-    Tests = 53,
+    Tests = 53 => "R_TESTS",
     /// The RVE's first pair place in the set, and its places.
-    PairFirst = 54,
-    PairRoom = 55,
+    PairFirst = 54 => "R_PAIR_FIRST",
+    PairRoom = 55 => "R_PAIR_ROOM",
     /// Which history and entries half holds the current pairs (0 or 1).
-    Half = 56,
+    Half = 56 => "R_HALF",
     /// Candidate pairs in the current lists.
-    Pairs = 57,
+    Pairs = 57 => "R_PAIRS",
     /// The time-step check (`DemWorld::check_time_step`): the step of the last (-1: check at
     /// the next step), whether it was said; then what this call's first check above the bound
     /// found (limit 0: none): the limit, its step and time, the sphere (index) and its contacts,
     /// and whether it is to be said.
-    DtLast = 58,
-    DtWarned = 59,
-    DtLimit = 60,
-    DtStep = 61,
-    DtTime = 62,
-    DtSphere = 63,
-    DtContacts = 64,
-    DtSay = 65,
+    DtLast = 58 => "R_DT_LAST",
+    DtWarned = 59 => "R_DT_WARNED",
+    DtLimit = 60 => "R_DT_LIMIT",
+    DtStep = 61 => "R_DT_STEP",
+    DtTime = 62 => "R_DT_TIME",
+    DtSphere = 63 => "R_DT_SPHERE",
+    DtContacts = 64 => "R_DT_CONTACTS",
+    DtSay = 65 => "R_DT_SAY",
     /// How the fluctuations follow the cell's field (`CellUpdate`: 0 SLLOD, 1 Newton, 2 YADE).
-    Update = 66,
+    Update = 66 => "R_UPDATE",
 }
 
 /// The constants the kernel is written against, as WGSL (put before `rve.wgsl`).
@@ -145,44 +157,6 @@ pub fn wgsl_constants() -> String {
         ("C_LAW_FIRST", C::LawFirst as usize),
         ("N_CONSTS", CONSTS),
         ("RVE_STRIDE", RVE_STRIDE),
-        ("R_H", Rec::H as usize),
-        ("R_HB", Rec::HBuild as usize),
-        ("R_L", Rec::L as usize),
-        ("R_DT", Rec::Dt as usize),
-        ("R_STEPS", Rec::Steps as usize),
-        ("R_LAST_DT", Rec::LastDt as usize),
-        ("R_FIRST", Rec::First as usize),
-        ("R_COUNT", Rec::Count as usize),
-        ("R_REBUILD", Rec::Rebuild as usize),
-        ("R_RMAX", Rec::RMax as usize),
-        ("R_RMIN", Rec::RMin as usize),
-        ("R_ERROR", Rec::Error as usize),
-        ("R_ERROR_VALUE", Rec::ErrorValue as usize),
-        ("R_TIME", Rec::Time as usize),
-        ("R_STEP", Rec::Step as usize),
-        ("R_REBUILDS", Rec::Rebuilds as usize),
-        ("R_FLIPS", Rec::Flips as usize),
-        ("R_STRESS", Rec::Stress as usize),
-        ("R_CONTACTS", Rec::Contacts as usize),
-        ("R_ENDS", Rec::Ends as usize),
-        ("R_RATTLERS", Rec::Rattlers as usize),
-        ("R_FLOATERS", Rec::Floaters as usize),
-        ("R_TAKEN", Rec::Taken as usize),
-        ("R_QUEUE", Rec::Queue as usize),
-        ("R_TESTS", Rec::Tests as usize),
-        ("R_PAIR_FIRST", Rec::PairFirst as usize),
-        ("R_PAIR_ROOM", Rec::PairRoom as usize),
-        ("R_HALF", Rec::Half as usize),
-        ("R_PAIRS", Rec::Pairs as usize),
-        ("R_DT_LAST", Rec::DtLast as usize),
-        ("R_DT_WARNED", Rec::DtWarned as usize),
-        ("R_DT_LIMIT", Rec::DtLimit as usize),
-        ("R_DT_STEP", Rec::DtStep as usize),
-        ("R_DT_TIME", Rec::DtTime as usize),
-        ("R_DT_SPHERE", Rec::DtSphere as usize),
-        ("R_DT_CONTACTS", Rec::DtContacts as usize),
-        ("R_DT_SAY", Rec::DtSay as usize),
-        ("R_UPDATE", Rec::Update as usize),
         ("SPH_STRIDE", SPH_STRIDE),
         ("FORCE_STRIDE", FORCE_STRIDE),
         ("PF_FORCE", PF_FORCE),
@@ -190,13 +164,13 @@ pub fn wgsl_constants() -> String {
         ("PF_TB", PF_TB),
         ("CNT_STRIDE", CNT_STRIDE),
     ];
-    let mut out: String = u.iter().map(|(name, v)| format!("const {name}: u32 = {v}u;\n")).collect();
+    let fields = RECORD_NAMES.iter().map(|&(name, field)| (name, field as usize));
+    let mut out: String = u.into_iter().chain(fields).map(|(name, v)| format!("const {name}: u32 = {v}u;\n")).collect();
     for (name, f) in [
         ("FAIL_TOO_FAST", Failure::TooFast),
         ("FAIL_NOT_FINITE", Failure::NotFinite),
         ("FAIL_TOO_MANY_PAIRS", Failure::TooManyPairs),
         ("FAIL_CELL_COLLAPSED", Failure::CellCollapsed),
-        ("FAIL_LOST_PAIR", Failure::LostPair),
     ] {
         out += &format!("const {name}: f64 = {}.0lf;\n", f as u32);
     }
@@ -211,12 +185,11 @@ pub enum Failure {
     NotFinite = 2,
     TooManyPairs = 3,
     CellCollapsed = 4,
-    LostPair = 5,
 }
 
 impl Failure {
     fn from_code(code: f64) -> Option<Failure> {
-        [Failure::TooFast, Failure::NotFinite, Failure::TooManyPairs, Failure::CellCollapsed, Failure::LostPair]
+        [Failure::TooFast, Failure::NotFinite, Failure::TooManyPairs, Failure::CellCollapsed]
             .into_iter()
             .find(|&f| f as u32 as f64 == code)
     }
@@ -512,11 +485,10 @@ impl Layout {
                 o[13] = s.mass[i];
                 o[14] = s.inertia[i];
             }
-            // The list is in its first spheres' order: each sphere's row is a run of it.
+            // The list is in its first spheres' order: each sphere's row is a run of it, and its
+            // incoming list the pairs where it is second, in list order.
             let hs = list.history_stride;
-            let mut incoming: Vec<Vec<usize>> = vec![Vec::new(); s.len()];
-            let mut row_first = vec![None; s.len()];
-            let mut row_len = vec![0usize; s.len()];
+            let (mut row_len, mut incoming_len) = (vec![0usize; s.len()], vec![0usize; s.len()]);
             for k in 0..list.len() {
                 let (a, b) = check_pair(list, k)?;
                 if k > 0 && list.a[k - 1] > list.a[k] {
@@ -524,9 +496,8 @@ impl Layout {
                         "RVE {r}: its pair list is not in its first spheres' order"
                     )));
                 }
-                row_first[a].get_or_insert(k);
                 row_len[a] += 1;
-                incoming[b].push(k);
+                incoming_len[b] += 1;
                 let p = &mut ints[self.entry_at(0, r, k)..][..4];
                 p[0] = b as i32;
                 p[1..4].copy_from_slice(&list.shift[k]);
@@ -536,21 +507,23 @@ impl Layout {
                 h[kept] = if list.touching[k] { 1.0 } else { 0.0 };
                 pf[self.force_at(r, k) + PF_FORCE..][..3].copy_from_slice(&list.force[k]);
             }
-            let mut next_row = 0;
-            let mut next_incoming = 0;
+            let (mut row_start, mut incoming_start) = (0, 0);
             for i in 0..s.len() {
                 let c = self.counts_at(r, i);
-                // An empty row starts where the next one does (the pairs' order).
-                let start = row_first[i].unwrap_or(next_row);
-                next_row = start + row_len[i];
                 ints[c] = row_len[i] as i32;
-                ints[c + 1] = incoming[i].len() as i32;
-                ints[c + 5] = start as i32;
-                ints[c + 7] = next_incoming as i32;
-                for &k in &incoming[i] {
-                    ints[self.ints.incoming + self.pair_first[r] + next_incoming] = k as i32;
-                    next_incoming += 1;
-                }
+                ints[c + 1] = incoming_len[i] as i32;
+                ints[c + 5] = row_start as i32;
+                ints[c + 7] = incoming_start as i32;
+                row_start += row_len[i];
+                incoming_start += incoming_len[i];
+            }
+            // Each incoming list filled from its start, in list order.
+            incoming_len.iter_mut().for_each(|n| *n = 0);
+            for k in 0..list.len() {
+                let b = list.b[k] as usize;
+                let at = ints[self.counts_at(r, b) + 7] as usize + incoming_len[b];
+                ints[self.ints.incoming + self.pair_first[r] + at] = k as i32;
+                incoming_len[b] += 1;
             }
         }
         // (one counter at least: a buffer bound is never empty)
@@ -609,12 +582,12 @@ impl Layout {
                     list.b.push(b);
                     list.shift.push([p[1], p[2], p[3]]);
                     list.law.push(0);
-                    let mut params = vec![0.0; ps];
-                    law.init_pair(&sim.world.info_for(a, b as usize, false), &mut params);
-                    list.params.extend(params);
-                    let mut history = vec![0.0; hs];
-                    history[..kept].copy_from_slice(&h[..kept]);
-                    list.history.extend(history);
+                    let at = list.params.len();
+                    list.params.resize(at + ps, 0.0);
+                    law.init_pair(&sim.world.info_for(a, b as usize, false), &mut list.params[at..]);
+                    let at = list.history.len();
+                    list.history.resize(at + hs, 0.0);
+                    list.history[at..at + kept].copy_from_slice(&h[..kept]);
                     list.touching.push(h[self.history_stride - 1] != 0.0);
                     list.force.push([f[0], f[1], f[2]]);
                 }

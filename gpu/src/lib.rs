@@ -750,11 +750,6 @@ impl Failure {
             Failure::TooManyPairs => format!(
                 "the RVE's candidate pairs ({value}) outgrew the device's room for {room} (lower the skin)"
             ),
-            Failure::LostPair => {
-                "a candidate pair found from one of its spheres was not found from the other (a fault of the device's \
-                 kernel: please report it with the RVE)"
-                    .into()
-            }
             Failure::CellCollapsed => format!(
                 "periodic cell collapsed: a width {value:.4e} m (between opposite faces) below 1/64 of the interaction reach"
             ),

@@ -967,14 +967,7 @@ fn run_rves(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_i
         let start = min((lid + u * WG) * lane_pairs, pairs);
         let end = min(start + lane_pairs, pairs);
         if (start >= end) { continue; }
-        // The last sphere whose row starts at or before the run.
-        var lo_a = 0u;
-        var hi_a = count;
-        while (hi_a - lo_a > 1u) {
-            let mid = (lo_a + hi_a) / 2u;
-            if (u32(ints[cnt_base(first, mid) + 5u]) <= start) { lo_a = mid; } else { hi_a = mid; }
-        }
-        var a = lo_a;
+        var a = first_sphere_of(first, count, start);
         var at = start;
         while (at < end) {
             let c = cnt_base(first, a);
