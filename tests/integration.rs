@@ -8,6 +8,7 @@
 
 mod common;
 
+mod bodies_periodic;
 mod body_families;
 mod capsules;
 mod checkpoints;

@@ -180,6 +180,7 @@ impl DemWorld {
             spheres: &self.spheres,
             walls: &self.walls,
             laws: &self.laws,
+            cell: self.cell.as_ref(),
             law_history: self.pair_strides().1,
             dt: self.dt,
             step: self.step,

@@ -3,6 +3,7 @@
 //! step's start, the reactions they hand the spheres, and their motion. None reaches the rest of
 //! the scene through `DemSim`: what they read of it is [`Surroundings`].
 
+use crate::dem::cell::PeriodicCell;
 use crate::dem::contacts::PairList;
 use crate::dem::kinds::KindScene;
 use crate::dem::motion::RigidMotion;
@@ -10,9 +11,10 @@ use crate::dem::particles::Spheres;
 use crate::dem::rigid::{laws_in_pair_order, move_rigid_bodies, LawContact, RigidSet};
 use crate::dem::walls::{Wall, WallShape};
 use crate::error::{GraniteError, Result};
-use crate::ext::body::{Ball, BodyPairGeometry, PairFailure, PlacedBodies, Plane, Touch, WarmStarts};
+use crate::ext::body::{Ball, BodyPairGeometry, KindBodies, PairFailure, PlacedBodies, Plane, Touch, WarmStarts};
 use crate::ext::ContactLaw;
-use crate::math::{add3, cross3, sub3, Vec3};
+use crate::math::{add3, cross3, mat_vec, sub3, Vec3};
+use nalgebra::UnitQuaternion;
 use std::sync::Arc;
 
 /// What the bodies' stages read of the rest of the scene at a step's start.
@@ -20,6 +22,9 @@ pub(crate) struct Surroundings<'a> {
     pub spheres: &'a Spheres,
     pub walls: &'a [Wall],
     pub laws: &'a [Arc<dyn ContactLaw>],
+    /// The periodic cell: a pair's second body or sphere may be an image across it, moving with
+    /// the cell's affine field.
+    pub cell: Option<&'a PeriodicCell>,
     /// History values a pair's law keeps: the geometry's warm starts come after them.
     pub law_history: usize,
     pub dt: f64,
@@ -43,8 +48,75 @@ struct Found {
 /// the pairs of families.
 struct Geometries<'a> {
     bodies: &'a KindScene,
+    images: Option<&'a Images>,
     placed: &'a [Box<dyn PlacedBodies + 'a>],
     meetings: &'a [Arc<dyn BodyPairGeometry>],
+}
+
+/// In a periodic cell, the bodies with a copy appended for each image of a body that a body pair
+/// meets (`x + h n`), so that every geometry sees plain pairs `(i, j)` of bodies where they are:
+/// no geometry needs to know of cells. Built where a pair crosses the cell, once a step.
+struct Images {
+    x: Vec<Vec3>,
+    q: Vec<UnitQuaternion<f64>>,
+    values: Vec<f64>,
+    shape: Vec<u32>,
+    family: Vec<u16>,
+    /// Each body pair's second body as the geometries meet it: itself, or its image's copy.
+    second: Vec<u32>,
+}
+
+impl Images {
+    /// The images the body pairs `p` of `bodies` meet across `cell`; None when no pair crosses it.
+    fn of(bodies: &KindScene, p: &PairList, cell: Option<&PeriodicCell>) -> Option<Images> {
+        let cell = cell?;
+        if p.shift.iter().all(|s| *s == [0; 3]) {
+            return None;
+        }
+        let (mut x, mut q, mut values) = (bodies.x.clone(), bodies.q.clone(), bodies.values.clone());
+        let (mut shape, mut family) = (bodies.shape.clone(), bodies.family.clone());
+        let stride = bodies.stride;
+        let second = (0..p.len())
+            .map(|k| {
+                let (j, n) = (p.b[k] as usize, p.shift[k]);
+                if n == [0; 3] {
+                    return p.b[k];
+                }
+                x.push(add3(bodies.x[j], cell.shift_vector(n)));
+                q.push(bodies.q[j]);
+                values.extend_from_slice(&bodies.values[j * stride..(j + 1) * stride]);
+                shape.push(bodies.shape[j]);
+                family.push(bodies.family[j]);
+                (x.len() - 1) as u32
+            })
+            .collect();
+        Some(Images { x, q, values, shape, family, second })
+    }
+}
+
+/// The bodies as family `own`'s geometry reads them: with the images the pairs meet, if any.
+fn view_of<'a>(bodies: &'a KindScene, images: Option<&'a Images>, own: u16) -> KindBodies<'a> {
+    match images {
+        None => bodies.view(own),
+        Some(m) => KindBodies {
+            x: &m.x,
+            q: &m.q,
+            values: &m.values,
+            stride: bodies.stride,
+            shape: &m.shape,
+            shapes: &bodies.shapes,
+            family: &m.family,
+            own,
+        },
+    }
+}
+
+/// Each pair's offset of its second body or sphere: the image's `h n`, zero outside a cell.
+fn image_offsets(list: &PairList, cell: Option<&PeriodicCell>) -> Vec<Vec3> {
+    match cell {
+        Some(cell) => list.shift.iter().map(|&n| if n == [0; 3] { [0.0; 3] } else { cell.shift_vector(n) }).collect(),
+        None => vec![[0.0; 3]; list.len()],
+    }
 }
 
 /// The pairs one geometry settles: the family of their first body, and of their second where it
@@ -109,12 +181,13 @@ impl Geometries<'_> {
         }
         let k = self.bodies;
         let (na, nb) = (k.families[fa as usize].name.as_str(), k.families[fb as usize].name.as_str());
+        let view = |f: u16| view_of(k, self.images, f);
         for m in self.meetings {
             match m.families() {
-                [a, b] if a == na && b == nb => return m.pairs(k.view(fa), k.view(fb), pairs, warm, out),
+                [a, b] if a == na && b == nb => return m.pairs(view(fa), view(fb), pairs, warm, out),
                 [a, b] if a == nb && b == na => {
                     let turned: Vec<(u32, u32)> = pairs.iter().map(|&(i, j)| (j, i)).collect();
-                    m.pairs(k.view(fb), k.view(fa), &turned, warm, out)?;
+                    m.pairs(view(fb), view(fa), &turned, warm, out)?;
                     for t in out.iter_mut().flatten() {
                         t.normal = t.normal.map(|c| -c);
                     }
@@ -174,10 +247,11 @@ impl BodyContacts {
         let sides = [Side::Bodies, Side::Walls, Side::Spheres];
         let mut found = Vec::with_capacity(3);
         {
+            let images = Images::of(bodies, &lists[0], around.cell);
             let placed = (0..families.len())
-                .map(|f| families[f].geometry.place(bodies.view(f as u16)))
+                .map(|f| families[f].geometry.place(view_of(bodies, images.as_ref(), f as u16)))
                 .collect::<Result<Vec<_>>>()?;
-            let geometries = Geometries { bodies, placed: &placed, meetings: &meetings };
+            let geometries = Geometries { bodies, images: images.as_ref(), placed: &placed, meetings: &meetings };
             for (list, &side) in lists.iter_mut().zip(&sides) {
                 found.push(Self::touching(&geometries, around, list, side, (own, warm))?);
             }
@@ -188,7 +262,9 @@ impl BodyContacts {
             let points: Vec<Vec3> = touching.iter().map(|f| f.point).collect();
             let contacts: Vec<LawContact> = touching.into_iter().map(|f| f.law).collect();
             let (force, moment) = laws_in_pair_order(around.laws, &mut list, &contacts, around.dt);
-            Self::sum_loads(bodies, around.spheres, &mut list, (&contacts, &points), (&force, &moment), side);
+            let offsets = image_offsets(&list, around.cell);
+            let loads = (&force[..], &moment[..], &offsets[..]);
+            Self::sum_loads(bodies, around.spheres, &mut list, (&contacts, &points), loads, side);
             let slot = match side {
                 Side::Bodies => &mut bodies.pairs,
                 Side::Walls => &mut bodies.wall_pairs,
@@ -210,10 +286,11 @@ impl BodyContacts {
             return Ok(out);
         }
         let (own, warm) = (around.law_history, bodies.warm_values());
+        let images = Images::of(bodies, &bodies.pairs, around.cell);
         let placed = (0..bodies.families.len())
-            .map(|f| bodies.families[f].geometry.place(bodies.view(f as u16)))
+            .map(|f| bodies.families[f].geometry.place(view_of(bodies, images.as_ref(), f as u16)))
             .collect::<Result<Vec<_>>>()?;
-        let geometries = Geometries { bodies, placed: &placed, meetings: &bodies.meetings };
+        let geometries = Geometries { bodies, images: images.as_ref(), placed: &placed, meetings: &bodies.meetings };
         let lists =
             [(&bodies.pairs, Side::Bodies), (&bodies.wall_pairs, Side::Walls), (&bodies.sphere_pairs, Side::Spheres)];
         for (n, (list, side)) in lists.into_iter().enumerate() {
@@ -237,6 +314,7 @@ impl BodyContacts {
         let k = geometries.bodies;
         let mut out = vec![None; list.len()];
         let hs = list.history_stride;
+        let offsets = image_offsets(list, around.cell);
         let fam = &k.family;
         let groups: Vec<Group> = match side {
             Side::Bodies => list.a.iter().zip(&list.b).map(|(&a, &b)| (fam[a as usize], fam[b as usize])).collect(),
@@ -244,7 +322,8 @@ impl BodyContacts {
         };
         let done = match side {
             Side::Bodies => {
-                let pairs: Vec<(u32, u32)> = list.a.iter().copied().zip(list.b.iter().copied()).collect();
+                let second = geometries.images.map_or(&list.b[..], |m| &m.second[..]);
+                let pairs: Vec<(u32, u32)> = list.a.iter().copied().zip(second.iter().copied()).collect();
                 geometries.detect(&groups, &pairs, (&mut list.history, hs, own, warm), &mut out, Geometries::bodies)
             }
             Side::Walls => {
@@ -265,11 +344,11 @@ impl BodyContacts {
             }
             Side::Spheres => {
                 let s = &around.spheres;
-                let pairs: Vec<(u32, Ball)> = list
-                    .a
-                    .iter()
-                    .zip(&list.b)
-                    .map(|(&a, &b)| (a, Ball { centre: s.x[b as usize], radius: s.radius[b as usize] }))
+                let pairs: Vec<(u32, Ball)> = (0..list.len())
+                    .map(|k| {
+                        let b = list.b[k] as usize;
+                        (list.a[k], Ball { centre: add3(s.x[b], offsets[k]), radius: s.radius[b] })
+                    })
                     .collect();
                 geometries.detect(&groups, &pairs, (&mut list.history, hs, own, warm), &mut out, Geometries::spheres)
             }
@@ -308,14 +387,25 @@ impl BodyContacts {
             let (i, j) = (list.a[slot] as usize, list.b[slot] as usize);
             let at = |v: Vec3, w: Vec3, x: Vec3| add3(v, cross3(w, sub3(touch.point, x)));
             let first = at(k.v[i], k.w[i], k.x[i]);
+            let image = offsets[slot];
             let (second, spin) = match side {
-                Side::Bodies => (at(k.v[j], k.w[j], k.x[j]), k.w[j]),
+                Side::Bodies => (at(k.v[j], k.w[j], add3(k.x[j], image)), k.w[j]),
                 Side::Walls => (around.walls[j].point_velocity(touch.point), around.walls[j].spin),
                 Side::Spheres => {
                     let s = &around.spheres;
-                    (at(s.v[j], s.w[j], s.x[j]), s.w[j])
+                    (at(s.v[j], s.w[j], add3(s.x[j], image)), s.w[j])
                 }
             };
+            // Velocities in a cell are fluctuations about the field `L x`: the second body's
+            // centre is `L (x_j + h n - x_i)` faster in the field than the first's.
+            let field = match (around.cell, side) {
+                (Some(cell), Side::Bodies | Side::Spheres) => {
+                    let centre_j = if matches!(side, Side::Bodies) { k.x[j] } else { around.spheres.x[j] };
+                    mat_vec(&cell.velocity_gradient, sub3(add3(centre_j, image), k.x[i]))
+                }
+                _ => [0.0; 3],
+            };
+            let second = add3(second, field);
             let law = LawContact {
                 slot,
                 normal: touch.normal,
@@ -357,7 +447,7 @@ impl BodyContacts {
         spheres: &Spheres,
         list: &mut PairList,
         (contacts, points): (&[LawContact], &[Vec3]),
-        (force, moment): (&[Vec3], &[Vec3]),
+        (force, moment, offsets): (&[Vec3], &[Vec3], &[Vec3]),
         side: Side,
     ) {
         for (e, (contact, &point)) in contacts.iter().zip(points).enumerate() {
@@ -369,14 +459,16 @@ impl BodyContacts {
             k.force[i] = add3(k.force[i], f);
             k.torque[i] = add3(k.torque[i], add3(cross3(sub3(point, k.x[i]), f), m));
             let back = [-f[0], -f[1], -f[2]];
+            // The second body's arm from its image's centre, where the contact was found.
+            let image = offsets[slot];
             match side {
                 Side::Bodies => {
                     k.force[j] = add3(k.force[j], back);
-                    k.torque[j] = sub3(add3(k.torque[j], cross3(sub3(point, k.x[j]), back)), m);
+                    k.torque[j] = sub3(add3(k.torque[j], cross3(sub3(point, add3(k.x[j], image)), back)), m);
                 }
                 Side::Walls => {}
                 Side::Spheres => {
-                    let torque = sub3(cross3(sub3(point, spheres.x[j]), back), m);
+                    let torque = sub3(cross3(sub3(point, add3(spheres.x[j], image)), back), m);
                     k.sphere_loads.push((j as u32, back, torque));
                 }
             }

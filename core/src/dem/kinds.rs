@@ -1,10 +1,11 @@
 //! Bodies of plugin kinds (`ext::body`: capsules, potential particles, ...) in a DEM simulation:
 //! their storage and set-up, and their candidate lists (with one another, plane walls and
-//! spheres, from their bounding spheres), rebuilt with the spheres'. Bodies of several families
+//! spheres, from their bounding spheres, across the faces of a periodic cell too), rebuilt with
+//! the spheres'. Bodies of several families
 //! meet where a plugin registers the geometry of their pair (`BodyPairGeometry`). Their part of a
 //! step is `kind_stage.rs`.
 
-use crate::dem::broad_phase::{sphere_pairs, wall_pairs, Candidate};
+use crate::dem::broad_phase::{periodic_sphere_pairs, sphere_pairs, wall_pairs, Candidate};
 use crate::dem::contacts::PairList;
 use crate::dem::pairing::{Other, PairBodies};
 use crate::dem::picture::{rigid_picture, RigidBodies};
@@ -110,6 +111,11 @@ impl KindScene {
     /// contacts.
     pub(crate) fn lists(&self) -> [(&PairList, &[(LawContact, Vec3)]); 3] {
         [(&self.pairs, &self.touches[0]), (&self.wall_pairs, &self.touches[1]), (&self.sphere_pairs, &self.touches[2])]
+    }
+
+    /// The candidate lists, to read: body pairs, body-wall and body-sphere pairs.
+    pub fn pair_lists(&self) -> [&PairList; 3] {
+        [&self.pairs, &self.wall_pairs, &self.sphere_pairs]
     }
 
     /// The pairs of bodies touching one another, `(i, j)`.
@@ -329,12 +335,6 @@ impl DemWorld {
     /// Adds a body of a plugin kind; returns its index among the bodies.
     pub fn add_body(&mut self, body: NewBody<'_>) -> Result<usize> {
         let NewBody { kind, meetings, shape, material, x, q, v, w, fixed } = body;
-        if self.cell.is_some() {
-            return Err(GraniteError::Setup(format!(
-                "{} bodies run in open domains, not in a periodic cell",
-                kind.name()
-            )));
-        }
         let density = self
             .materials
             .get(material as usize)
@@ -454,7 +454,10 @@ impl DemWorld {
         let mut radii = self.spheres.radius.clone();
         radii.extend((0..k.len()).map(|i| k.bounding_radius(i)));
         let skin = self.kind_skin(skin);
-        let found = sphere_pairs(&x, &radii, skin);
+        let found = match &self.cell {
+            Some(cell) => periodic_sphere_pairs(&x, &radii, skin, cell),
+            None => sphere_pairs(&x, &radii, skin),
+        };
         let fixed = &k.fixed;
         let (mut bodies, mut spheres): (Vec<Vec<Candidate>>, Vec<Vec<Candidate>>) = (Vec::new(), Vec::new());
         for block in &found {

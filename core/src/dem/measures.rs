@@ -78,6 +78,24 @@ impl DemWorld {
         count
     }
 
+    /// Touching contacts of every grain: the spheres' ([`DemWorld::contact_counts`], with those
+    /// of bodies on them), then the bodies of plugin kinds' (with one another, walls and spheres).
+    pub fn grain_contact_counts(&self) -> Vec<u32> {
+        let mut count = self.contact_counts();
+        let ns = count.len();
+        let k = &self.kinds;
+        count.resize(ns + k.len(), 0);
+        for (list, second) in [(&k.pairs, Some(ns)), (&k.wall_pairs, None), (&k.sphere_pairs, Some(0))] {
+            for c in (0..list.len()).filter(|&c| list.touching[c]) {
+                count[ns + list.a[c] as usize] += 1;
+                if let Some(first) = second {
+                    count[first + list.b[c] as usize] += 1;
+                }
+            }
+        }
+        count
+    }
+
     pub fn diagnostics(&self) -> DemDiagnostics {
         let s = &self.spheres;
         let n = s.len();
@@ -197,9 +215,10 @@ impl DemWorld {
     /// Contact counts and coordination numbers alone (what an RVE reports after every call),
     /// without the energies and forces of [`DemWorld::diagnostics`].
     pub fn coordination(&self) -> Coordination {
-        let n = self.spheres.len();
-        let counts = self.contact_counts();
-        let contacts = self.pairs.touching_count();
+        let k = &self.kinds;
+        let n = self.spheres.len() + k.len();
+        let counts = self.grain_contact_counts();
+        let contacts = self.pairs.touching_count() + k.pairs.touching_count() + k.sphere_pairs.touching_count();
         let rattlers = counts.iter().filter(|&&c| c == 1).count();
         let floaters = counts.iter().filter(|&&c| c == 0).count();
         // Eq. 5.14 with N_contacts counted per particle end: each contact has two ends.
@@ -214,7 +233,8 @@ impl DemWorld {
         }
     }
 
-    /// Love-Weber stress of the sphere-sphere contacts over a volume (eq. 4.7):
+    /// Love-Weber stress of the contacts between grains over a volume (eq. 4.7; spheres, and
+    /// bodies of plugin kinds with one another and with spheres):
     /// `sigma_ij = (1/V) sum_c f_i l_j`, f the force on particle 1 and l the branch vector from 1
     /// to 2. Tension positive: a compressed packing has negative diagonal stress.
     pub fn love_weber_stress(&self, volume: f64) -> Voigt {
@@ -253,9 +273,48 @@ impl DemWorld {
             }
             half /= 2;
         }
-        let (s, k) = sums[0];
+        let (mut s, mut k) = sums[0];
+        if !self.kinds.is_empty() {
+            let (bs, bk) = self.body_pair_sums();
+            s.iter_mut().zip(bs).for_each(|(a, b)| *a += b);
+            k.iter_mut().zip(bk).for_each(|(a, b)| *a += b);
+        }
         let sym = |a: usize, b: usize| 0.5 * (s[3 * a + b] + s[3 * b + a]) / volume;
         ([sym(0, 0), sym(1, 1), sym(2, 2), sym(0, 1), sym(1, 2), sym(0, 2)], k.map(|v| v / volume))
+    }
+
+    /// [`DemWorld::pair_sums`] over the touching contacts of the bodies of plugin kinds with one
+    /// another and with spheres, the branch vector from the body's centre of mass to the other's
+    /// (or its image's): the Love-Weber sum holds for grains of any shape, each in equilibrium
+    /// under its contact forces.
+    fn body_pair_sums(&self) -> ([f64; 9], [f64; 3]) {
+        let mut s = [0.0; 9];
+        let mut k = [0.0; 3];
+        let b = &self.kinds;
+        for (p, centres) in [(&b.pairs, &b.x), (&b.sphere_pairs, &self.spheres.x)] {
+            let ps = p.param_stride;
+            for c in (0..p.len()).filter(|&c| p.touching[c]) {
+                let image = match &self.cell {
+                    Some(cell) => cell.shift_vector(p.shift[c]),
+                    None => [0.0; 3],
+                };
+                let (xi, xj) = (b.x[p.a[c] as usize], centres[p.b[c] as usize]);
+                let l: Vec3 = std::array::from_fn(|a| xj[a] + image[a] - xi[a]);
+                let f = p.force[c];
+                for a in 0..3 {
+                    for d in 0..3 {
+                        s[3 * a + d] += f[a] * l[d];
+                    }
+                }
+                let kn = self.laws[p.law[c] as usize].normal_stiffness(&p.params[c * ps..(c + 1) * ps]);
+                if kn > 0.0 {
+                    for a in 0..3 {
+                        k[a] += kn * l[a] * l[a];
+                    }
+                }
+            }
+        }
+        (s, k)
     }
 
     /// `sum f_a l_b` (row-major) and `sum k_n l_a^2` over the touching pairs of `range`.

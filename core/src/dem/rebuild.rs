@@ -98,7 +98,9 @@ impl DemWorld {
     /// Brings periodic positions back into the cell and fixes the shifts of their pairs.
     fn wrap_into_cell(&mut self, skin: f64) -> Result<()> {
         let Some(cell) = &self.cell else { return Ok(()) };
-        let reach = 2.0 * self.spheres.largest_radius() + skin;
+        let k = &self.kinds;
+        let widest_body = (0..k.len()).map(|i| k.bounding_radius(i)).fold(0.0, f64::max);
+        let reach = 2.0 * self.spheres.largest_radius().max(widest_body) + skin;
         let widths = cell.widths();
         // A thin cell is searched over as many images as the reach spans (see
         // `periodic_sphere_pairs`); one flattened to a sliver of the reach has collapsed.
@@ -120,8 +122,23 @@ impl DemWorld {
                 c => clump_offsets[c as usize],
             })
             .collect();
-        if offsets.iter().all(|k| *k == [0; 3]) {
+        let body_offsets: Vec<[i32; 3]> = self.kinds.x.iter().map(offset_of).collect();
+        if offsets.iter().chain(&body_offsets).all(|k| *k == [0; 3]) {
             return Ok(());
+        }
+        for (x, k) in self.kinds.x.iter_mut().zip(&body_offsets) {
+            *x = sub(*x, cell.shift_vector(*k));
+        }
+        // A pair's second body or sphere is seen through the image that keeps it where it was.
+        let k = &mut self.kinds;
+        for (list, second) in [(&mut k.pairs, &body_offsets), (&mut k.sphere_pairs, &offsets)] {
+            for i in 0..list.len() {
+                let (ka, kb) = (body_offsets[list.a[i] as usize], second[list.b[i] as usize]);
+                for a in 0..3 {
+                    list.shift[i][a] += kb[a] - ka[a];
+                }
+            }
+            list.resort();
         }
         for (x, k) in self.clumps.x.iter_mut().zip(&clump_offsets) {
             let v = cell.shift_vector(*k);

@@ -94,7 +94,13 @@ pub(crate) fn move_rigid_bodies(set: RigidSet<'_>, x_at_build: &[Vec3], motion: 
             let body = RigidBody { x: &mut x[i], v: &mut v[i], w: &mut w[i], q: &mut q[i] };
             body.advance((mass[i], inertia[i]), (force[i], torque[i]), motion);
         }
-        let d = sub3(x[i], x_at_build.get(i).copied().unwrap_or(x[i]));
+        // In a periodic cell, measured from where the cell's field has carried the build's place.
+        let built = x_at_build.get(i).copied().unwrap_or(x[i]);
+        let reference = match &motion.affine {
+            Some((_, deformation)) => crate::math::mat_vec(deformation, built),
+            None => built,
+        };
+        let d = sub3(x[i], reference);
         let distance = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
         if !(distance.is_finite() && v[i].iter().chain(&w[i]).all(|c| c.is_finite())) {
             return Err(i);

@@ -26,9 +26,10 @@ impl Rve {
         if sim.world.cell.is_none() {
             return Err(GraniteError::Setup(format!("{owner}: the `rve` must have a periodic cell")));
         }
-        if sim.world.spheres.is_empty() || sim.world.dt <= 0.0 || sim.world.laws.is_empty() {
+        let grains = sim.world.spheres.len() + sim.world.kinds.len();
+        if grains == 0 || sim.world.dt <= 0.0 || sim.world.laws.is_empty() {
             return Err(GraniteError::Setup(format!(
-                "{owner}: the `rve` needs spheres, a contact law and a time step"
+                "{owner}: the `rve` needs grains (spheres or bodies), a contact law and a time step"
             )));
         }
         sim.set_sequential(true);
@@ -103,7 +104,7 @@ impl Rve {
     pub fn response(&self) -> RveReport {
         let sim = &self.sim;
         let d = sim.world.coordination();
-        let counts = sim.world.contact_counts();
+        let counts = sim.world.grain_contact_counts();
         RveReport {
             stress: self.stress(),
             cell: self.cell(),
@@ -137,20 +138,22 @@ impl Rve {
         self.sim.world.dt
     }
 
-    /// Mass of its spheres (kg).
+    /// Mass of its grains (kg).
     pub fn mass(&self) -> f64 {
-        self.sim.world.spheres.mass.iter().sum()
+        let w = &self.sim.world;
+        w.spheres.mass.iter().sum::<f64>() + w.kinds.mass.iter().sum::<f64>()
     }
 
-    /// Volume of its spheres (m^3).
+    /// Volume of its grains (m^3).
     pub fn solid_volume(&self) -> f64 {
         self.sim.world.solid_volume()
     }
 
-    /// Mean sphere diameter (m).
+    /// Mean grain diameter (m): of a body of a plugin kind, that of the sphere of its volume.
     pub fn mean_diameter(&self) -> f64 {
-        let s = &self.sim.world.spheres;
-        2.0 * s.radius.iter().sum::<f64>() / s.len() as f64
+        let (s, k) = (&self.sim.world.spheres, &self.sim.world.kinds);
+        let radii = s.radius.iter().sum::<f64>() + (0..k.len()).map(|i| k.equivalent_radius(i)).sum::<f64>();
+        2.0 * radii / (s.len() + k.len()) as f64
     }
 
     /// Bytes this RVE holds.

@@ -373,14 +373,17 @@ impl DemWorld {
         Some((axial, (cell.volume() / h0.determinant().abs()).ln()))
     }
 
-    /// Volume of solid: free spheres plus the union volume of each clump.
+    /// Volume of solid: free spheres, the union volume of each clump and the free bodies of
+    /// plugin kinds (fixed ones are container parts).
     pub fn solid_volume(&self) -> f64 {
         let s = &self.spheres;
         let free: f64 = (0..s.len())
             .filter(|&i| s.clump[i] == crate::dem::particles::FREE)
             .map(|i| 4.0 / 3.0 * std::f64::consts::PI * s.radius[i].powi(3))
             .sum();
-        free + self.clumps.volume.iter().sum::<f64>()
+        let k = &self.kinds;
+        let bodies: f64 = (0..k.len()).filter(|&i| !k.fixed[i]).map(|i| k.shapes[k.shape[i] as usize].volume()).sum();
+        free + self.clumps.volume.iter().sum::<f64>() + bodies
     }
 
     /// Void ratio of the periodic cell (thesis 5.15): `(V_cell - V_particles) / V_particles`.

@@ -63,6 +63,7 @@ impl DemSim {
                 spheres: &world.spheres,
                 walls: &world.walls,
                 laws: &world.laws,
+                cell: world.cell.as_ref(),
                 law_history: world.pair_strides().1,
                 dt: world.dt,
                 step: world.step,
@@ -114,8 +115,7 @@ impl DemSim {
         let kind_moved = if world.kinds.is_empty() {
             0.0
         } else {
-            let motion = RigidMotion { affine: None, ..rigid };
-            BodyMotion::run(&mut world.kinds, &motion, (world.step, world.time))?
+            BodyMotion::run(&mut world.kinds, &rigid, (world.step, world.time))?
         };
         let wall_moved = WallMotion::run(&mut world.walls, (&built.walls, &mut built.wall_turns), world.dt);
         // The tracker closes the step once everything has moved (clumps and walls too).
@@ -155,10 +155,13 @@ impl DemSim {
                 // A sphere's pair with its own image (a thin cell) may come out under the
                 // negative shift; the rebuild that follows finds it under the positive one, as a
                 // new contact.
-                for s in world.pairs.shift.iter_mut() {
-                    *s = shift_after_flip(&m, *s);
+                let k = &mut world.kinds;
+                for list in [&mut world.pairs, &mut k.pairs, &mut k.sphere_pairs] {
+                    for s in list.shift.iter_mut() {
+                        *s = shift_after_flip(&m, *s);
+                    }
+                    list.resort();
                 }
-                world.pairs.resort();
                 world.needs_rebuild = true;
             }
         }
@@ -168,7 +171,11 @@ impl DemSim {
         }
         if !world.kinds.is_empty() {
             let skin = world.kind_skin(skin);
-            if 2.0 * kind_moved > skin || kind_moved + wall_moved > skin {
+            // Two bodies' centres drift apart by the cell's strain times their distance.
+            let k = &world.kinds;
+            let widest = (0..k.len()).map(|i| k.bounding_radius(i)).fold(0.0, f64::max);
+            let kind_affine_growth = strain_since_build * (2.0 * widest + skin);
+            if 2.0 * kind_moved + kind_affine_growth > skin || kind_moved + wall_moved > skin {
                 world.needs_rebuild = true;
             }
         }
