@@ -53,6 +53,35 @@ fn prepare_and_run_the_one_cell_triaxial() {
     assert!(summary_f64(&adaptive, "rve_sphere_steps") < summary_f64(&tri, "rve_sphere_steps"));
 }
 
+/// An RVE of capsules (`prepare_rve.rhai --set kind=capsule`) prepared at 100 kPa and run in the
+/// one-cell triaxial on the CPU: the points start at its saved stress and stay in equilibrium
+/// with the lateral traction (p = sigma_lat + q / 3) as q grows.
+#[test]
+fn an_rve_of_capsules_runs_the_one_cell_triaxial() {
+    let prep = run("mpmxdem/prepare_rve.rhai", "mpmxdem_prepare_capsules", &[("kind", "capsule"), ("count", "60")], 2)
+        .unwrap();
+    assert_eq!(summary_f64(&prep, "particles"), 60.0);
+    let p = summary_f64(&prep, "mean_stress");
+    assert!((p + 1e5).abs() < 0.02e5, "prepared at 100 kPa, got {p}");
+    let rve = prep.out_dir.join("rve.json");
+    let tri = run(
+        "mpmxdem/triaxial_one_cell.rhai",
+        "mpmxdem_triaxial_capsules",
+        &[("rve", rve.to_str().unwrap()), ("axial_strain", "0.002"), ("dt", "1e-3")],
+        2,
+    )
+    .unwrap();
+    let (h, rows) = read_csv(&tri.out_dir.join("series.csv"));
+    let (q, axial, p_col) = (column(&h, "q"), column(&h, "axial_strain"), column(&h, "p"));
+    assert!((rows[0][p_col] + p).abs() < 1e-9 * p.abs(), "step 0: p = {} for an RVE saved at {}", rows[0][p_col], -p);
+    let last = rows.last().unwrap();
+    assert!(last[axial] > 0.0019, "axial strain reached {}", last[axial]);
+    assert!(last[q] > 1e4, "q = {}", last[q]);
+    assert!((last[p_col] - (1e5 + last[q] / 3.0)).abs() < 0.05 * last[p_col], "p = {}, q = {}", last[p_col], last[q]);
+    assert_eq!(summary_f64(&tri, "rve_particles"), 60.0);
+    assert!(summary_f64(&tri, "rve_sphere_steps") > 0.0, "the capsules' steps are counted");
+}
+
 /// The documented small column (thesis 5.4 with the 150-sphere RVE at 250 Pa, the script's
 /// defaults: 0.2 m cells, one point each): it settles, collapses, runs out over the floor and
 /// reaches its end time, while RVEs of its front, stretched along the floor, are flattened below

@@ -113,6 +113,18 @@ impl KindScene {
         [(&self.pairs, &self.touches[0]), (&self.wall_pairs, &self.touches[1]), (&self.sphere_pairs, &self.touches[2])]
     }
 
+    /// Bytes of the bodies' own state (their lists apart).
+    pub fn memory_bytes(&self) -> usize {
+        let per_body = std::mem::size_of::<u16>() * 2
+            + std::mem::size_of::<u32>()
+            + std::mem::size_of::<u64>()
+            + 7 * std::mem::size_of::<Vec3>()
+            + std::mem::size_of::<UnitQuaternion<f64>>()
+            + std::mem::size_of::<f64>()
+            + 1;
+        self.x.capacity() * per_body + self.values.capacity() * std::mem::size_of::<f64>()
+    }
+
     /// The candidate lists, to read: body pairs, body-wall and body-sphere pairs.
     pub fn pair_lists(&self) -> [&PairList; 3] {
         [&self.pairs, &self.wall_pairs, &self.sphere_pairs]

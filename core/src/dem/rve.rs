@@ -133,6 +133,11 @@ impl Rve {
         self.sim.world.spheres.len()
     }
 
+    /// Its grains: spheres and bodies of plugin kinds (the work of a step is per grain).
+    pub fn grain_count(&self) -> usize {
+        self.sim.world.spheres.len() + self.sim.world.kinds.len()
+    }
+
     /// The DEM time step.
     pub fn dt(&self) -> f64 {
         self.sim.world.dt

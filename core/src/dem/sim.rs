@@ -725,6 +725,8 @@ impl DemSim {
             + self.piece_bounds.bytes()
             + self.handovers.bytes()
             + self.world.clumps.len() * 200
+            + self.world.kinds.pair_lists().into_iter().map(pairs).sum::<usize>()
+            + self.world.kinds.memory_bytes()
     }
 
     /// Whether the world can be stepped: a time step within the contacts' stability bound, a

@@ -386,7 +386,7 @@ impl ConstitutiveLaw for DemRve {
             let report = self.step_own(index, &batch.dstrain[k], rve)?;
             self.record(
                 &report,
-                rve.rve.sphere_count(),
+                rve.rve.grain_count(),
                 &mut batch.stress[k],
                 &mut batch.state[k * STATE.len()..][..STATE.len()],
             );
@@ -441,7 +441,7 @@ impl PointObjects for DemRve {
             None => state.len() / STATE.len(),
         };
         let steps: f64 = state.chunks(STATE.len()).map(|st| st[state::DEM_STEPS]).sum();
-        vec![("rve_active", active as f64), ("rve_sphere_steps", steps * self.template.sphere_count() as f64)]
+        vec![("rve_active", active as f64), ("rve_sphere_steps", steps * self.template.grain_count() as f64)]
     }
     fn process_savings(&self) -> f64 {
         *self.shared_sphere_steps.lock().unwrap_or_else(|e| e.into_inner())
@@ -456,7 +456,7 @@ impl PointObjects for DemRve {
         ];
         if let Some(a) = &self.activation {
             let followed = a.lock().unwrap_or_else(|e| e.into_inner()).followed();
-            let skipped = followed.leader_dem_steps * self.template.sphere_count() as f64;
+            let skipped = followed.leader_dem_steps * self.template.grain_count() as f64;
             out.push(("rve_point_steps_followed".to_string(), followed.point_steps.into()));
             out.push(("rve_sphere_steps_followed".to_string(), skipped.into()));
         }
@@ -723,11 +723,11 @@ impl DemRve {
             Some(device) => self.step_on_device(device, &stepping, &strain)?,
             None => self.step_on_cpu(&shared.steppers, &strain)?,
         };
-        let spheres = self.template.sphere_count();
+        let grains = self.template.grain_count();
         let mut costs = vec![0.0; n];
         let mut report_of = vec![None; n];
         for (point, report, seconds) in &reports {
-            self.record(report, spheres, &mut batch.stress[*point], &mut batch.state[point * stride..][..stride]);
+            self.record(report, grains, &mut batch.stress[*point], &mut batch.state[point * stride..][..stride]);
             costs[*point] = *seconds;
             report_of[*point] = Some(report);
         }
@@ -736,8 +736,8 @@ impl DemRve {
             let report = report_of[keeper].ok_or_else(|| {
                 GraniteError::Other(format!("RVE of material point {point}: its keeper {keeper} did not step"))
             })?;
-            self.record(report, spheres, &mut batch.stress[point], &mut batch.state[point * stride..][..stride]);
-            spared += (report.steps as usize * spheres) as f64;
+            self.record(report, grains, &mut batch.stress[point], &mut batch.state[point * stride..][..stride]);
+            spared += (report.steps as usize * grains) as f64;
         }
         *self.shared_sphere_steps.lock().unwrap_or_else(|e| e.into_inner()) += spared;
         if self.device.is_some() {

@@ -21,7 +21,7 @@ use super::capsule::{along, dot, nearest_on, segment, sub};
 use super::potential::contact::{detect_settled, Detection, Placed, Pose, Solution};
 use super::potential::{solve_pairs, PotentialBody, FAMILY};
 use granite_core::ext::body::{BodyPairGeometry, KindBodies, PairFailure, Touch, WarmStarts};
-use granite_core::math::Vec3;
+use granite_core::math::{add3, sub3, Vec3};
 
 pub struct CapsulePotential;
 
@@ -79,7 +79,13 @@ fn meet(p: &Placed, (e0, e1, r): (Vec3, Vec3, f64), w: &mut [f64]) -> Result<Opt
     if dot(near, near) > (p.bounding_radius + r).powi(2) || p.clear_of(middle, 0.5 * length + r) {
         return Ok(None);
     }
-    let mut start = (w[6] == 1.0).then(|| Solution { point: [w[2], w[3], w[4]], lambda: w[5], depths: [w[7], w[8]] });
+    // The kept point is relative to the particle's centre: a pair moved whole (wrapped across a
+    // periodic cell) starts where it left off.
+    let mut start = (w[6] == 1.0).then(|| Solution {
+        point: add3(p.position, [w[2], w[3], w[4]]),
+        lambda: w[5],
+        depths: [w[7], w[8]],
+    });
     let mut at = |t: f64| -> Result<(f64, Detection), String> {
         let c = along(e0, d, t);
         let found = detect_settled(p, &Placed::sphere(c, r), start).map_err(|e| e.to_string())?;
@@ -149,7 +155,7 @@ fn meet(p: &Placed, (e0, e1, r): (Vec3, Vec3, f64), w: &mut [f64]) -> Result<Opt
     }
     let s = found.solution;
     w[..2].copy_from_slice(&[t, 1.0]);
-    w[2..5].copy_from_slice(&s.point);
+    w[2..5].copy_from_slice(&sub3(s.point, p.position));
     w[5] = s.lambda;
     w[6] = 1.0;
     w[7..9].copy_from_slice(&s.depths);

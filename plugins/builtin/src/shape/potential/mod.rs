@@ -16,7 +16,7 @@ use contact::{detect, detect_plane, Placed, Pose, Solution};
 use granite_core::ext::body::{
     Ball, BodyGeometry, BodyKindFactory, BodyShape, KindBodies, PairFailure, PlacedBodies, Plane, Touch, WarmStarts,
 };
-use granite_core::math::{sub3, Vec3};
+use granite_core::math::{add3, sub3, Vec3};
 use granite_core::params::{ParamMap, ParamSpec, Params};
 use granite_core::{GraniteError, Result};
 use rayon::prelude::*;
@@ -390,9 +390,15 @@ impl PlacedPotentials<'_> {
         {
             return Ok(None);
         }
-        let start = (w[4] == 1.0).then(|| Solution { point: [w[0], w[1], w[2]], lambda: w[3], depths: [w[5], w[6]] });
+        // The kept point is relative to `a`'s centre: a pair moved whole (wrapped across a
+        // periodic cell) starts where it left off.
+        let start = (w[4] == 1.0).then(|| Solution {
+            point: add3(a.position, [w[0], w[1], w[2]]),
+            lambda: w[3],
+            depths: [w[5], w[6]],
+        });
         let found = detect(a, b, start).map_err(|e| e.to_string())?;
-        w[..3].copy_from_slice(&found.solution.point);
+        w[..3].copy_from_slice(&sub3(found.solution.point, a.position));
         w[3] = found.solution.lambda;
         w[4] = 1.0;
         w[5..7].copy_from_slice(&found.solution.depths);
@@ -426,9 +432,9 @@ impl PlacedBodies for PlacedPotentials<'_> {
             if height > a.bounding_radius {
                 return Ok(None);
             }
-            let start = (w[4] == 1.0).then(|| [w[0], w[1], w[2]]);
+            let start = (w[4] == 1.0).then(|| add3(a.position, [w[0], w[1], w[2]]));
             let (deepest, found) = detect_plane(a, plane.point, normal, start).map_err(|e| e.to_string())?;
-            w[..3].copy_from_slice(&deepest);
+            w[..3].copy_from_slice(&sub3(deepest, a.position));
             w[4] = 1.0;
             Ok(found)
         })
@@ -450,6 +456,55 @@ impl PlacedBodies for PlacedPotentials<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A touching pair moved whole by a lattice vector of a periodic cell (what wrapping does)
+    /// goes on from its warm start as if it had not moved: the values it keeps do not depend on
+    /// where the pair is (a start kept in world coordinates would be the lattice vector away, a far
+    /// start that can take a solve past its step limit), and the touch is the same, moved.
+    #[test]
+    fn a_pair_moved_whole_goes_on_from_its_warm_start() {
+        use nalgebra::{Rotation3, Unit, Vector3};
+        let (r_s, r_clump) = (0.3101e-2, 0.5e-2);
+        let tetra = shape::PotentialShape::rounded_tetrahedron(r_s, r_clump, 2f64.sqrt() * r_s, 0.65).unwrap();
+        let turn = |angle: f64| {
+            Rotation3::from_axis_angle(&Unit::new_normalize(Vector3::new(1.0, 2.0, 3.0)), angle).into_inner()
+        };
+        let pose = |x: Vec3, angle: f64| Pose { position: x, rotation: turn(angle) };
+        let cell_vector = [0.3, -0.2, 0.1];
+        let moved = |x: Vec3| add3(x, cell_vector);
+        let (xa, xb) = ([0.0; 3], [8.4e-3, 1e-3, 0.0]);
+        let mut warm = [0.0; WARM];
+        let mut kept = [0.0; WARM];
+        let before = PlacedPotentials::meet(
+            &Placed::new(&tetra, &pose(xa, 0.3)),
+            &Placed::new(&tetra, &pose(xb, 1.0)),
+            &mut warm,
+        )
+        .unwrap()
+        .expect("the two overlap");
+        kept.copy_from_slice(&warm);
+        let after = PlacedPotentials::meet(
+            &Placed::new(&tetra, &pose(moved(xa), 0.3)),
+            &Placed::new(&tetra, &pose(moved(xb), 1.0)),
+            &mut warm,
+        )
+        .unwrap()
+        .expect("still overlapping");
+        for v in 0..WARM {
+            assert!(
+                (warm[v] - kept[v]).abs() < 1e-12,
+                "warm start {v}: {} after the move, {} before",
+                warm[v],
+                kept[v]
+            );
+        }
+        assert!((after.overlap - before.overlap).abs() < 1e-9 * before.overlap, "{after:?} against {before:?}");
+        let point = sub3(after.point, cell_vector);
+        for a in 0..3 {
+            assert!((point[a] - before.point[a]).abs() < 1e-12, "point {point:?} against {:?}", before.point);
+            assert!((after.normal[a] - before.normal[a]).abs() < 1e-9);
+        }
+    }
 
     /// A shape of planes is rebuilt from the parameters it gives back (what a saved state holds),
     /// and a gap in the numbering or a stray name is refused.
