@@ -305,6 +305,48 @@ fn a_contact_change_reaches_capsules_and_a_law_switch_runs_on() {
     assert!(get("after_switch").is_finite());
 }
 
+/// A contact change that keeps the law keeps the bodies' contacts' history, as the spheres':
+/// a capsule and a rounded box held on a 10° slope by static friction (their tangential springs
+/// carrying `m g sin 10°`) stay where they are when the friction is raised; contacts starting
+/// again would slide each by about that load over the tangential stiffness before holding again.
+#[test]
+fn a_contact_change_keeps_the_tangential_springs_of_bodies_at_rest() {
+    let (kt, rho, g, theta) = (0.5e6f64, 1000.0f64, 9.81f64, 10f64.to_radians());
+    let source = format!(
+        r#"
+        let sim = dem();
+        let m = sim.material(#{{ density: {rho} }});
+        sim.contact_law("linear", #{{ kn: 1e6, kt_ratio: 0.5, friction: 30.0 }});
+        sim.wall_plane(m, [0.0, 0.0, 0.0], [0.0, 0.0, 1.0]);
+        let cap = sim.capsule(m, [0.0, 0.0, 0.00999], #{{ radius: 0.01, length: 0.04, axis: [1.0, 0.0, 0.0] }});
+        let block = sim.potential(m, [0.0, 0.2, 0.00599], #{{ shape: "potential_box", hx: 0.01, hy: 0.01, hz: 0.004, r: 0.002 }});
+        sim.gravity([{gx}, 0.0, {gz}]);
+        sim.damping(0.5);
+        sim.dt(0.2 * sim.critical_dt());
+        sim.run_until(0.3);
+        let x0 = [sim.body_state(cap).position[0], sim.body_state(block).position[0]];
+        summary("capsule_mass", sim.body_state(cap).mass);
+        summary("block_mass", sim.body_state(block).mass);
+        summary("capsule_speed", sim.body_state(cap).velocity[0]);
+        sim.set_contact_params(#{{ friction: 35.0 }});
+        sim.run_until(0.35);
+        summary("capsule_moved", sim.body_state(cap).position[0] - x0[0]);
+        summary("block_moved", sim.body_state(block).position[0] - x0[1]);
+        "#,
+        gx = g * theta.sin(),
+        gz = -g * theta.cos()
+    );
+    let out = common::run_text("body_history_kept", &source);
+    let s: serde_json::Value = common::summary_of(&out);
+    let get = |k: &str| s[k].as_f64().unwrap();
+    for body in ["capsule", "block"] {
+        let slip = get(&format!("{body}_mass")) * g * theta.sin() / kt;
+        let moved = get(&format!("{body}_moved"));
+        assert!(moved.abs() < 0.01 * slip, "{body} moved {moved:e} m after the change (a reloading spring: {slip:e})");
+    }
+    assert!(get("capsule_speed").abs() < 1e-6, "at rest before the change: {s}");
+}
+
 /// Capsules placed into the floor, into one another and onto a sphere are said at the start of
 /// the run as deep overlaps, as spheres are: each overlap over the smaller radius (a capsule's
 /// is the radius of the sphere of its volume), deepest first.

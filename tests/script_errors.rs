@@ -419,11 +419,11 @@ fn a_bad_body_names_the_kind_the_parameter_and_the_line() {
     let e = run_err("body_kind", &format!("{head}sim.add_body(\"cube\", m, [0.0, 0.0, 0.0], #{{ side: 0.01 }});"), &[]);
     assert!(e.contains("line 3") && e.contains("cube") && e.contains("capsule"), "{e}");
     let e = run_err(
-        "capsule_in_cell",
-        &format!("{head}sim.periodic([0.1, 0.1, 0.1]);\nsim.capsule(m, [0.05, 0.05, 0.05], #{{ radius: 0.01, length: 0.02 }});"),
+        "capsule_length",
+        &format!("{head}sim.periodic([0.1, 0.1, 0.1]);\nsim.capsule(m, [0.05, 0.05, 0.05], #{{ radius: 0.01, length: -0.02 }});"),
         &[],
     );
-    assert!(e.contains("line 4") && e.contains("periodic"), "{e}");
+    assert!(e.contains("line 4") && e.contains("`length`") && e.contains(">= 0"), "{e}");
 }
 
 #[test]

@@ -128,6 +128,28 @@ impl PairList {
         (self.param_stride, self.history_stride) = (ps, hs);
     }
 
+    /// [`PairList::relayout`] for a list whose history rows end with `warm` values of a body
+    /// geometry's warm starts after the law's: the law's leading values and the warm starts
+    /// both stay, the law's part now `hs` values.
+    pub fn relayout_with_warm(&mut self, ps: usize, hs: usize, warm: usize) {
+        let (from, n) = (self.history_stride, self.len());
+        let own = from.saturating_sub(warm);
+        if own == hs || warm == 0 {
+            return self.relayout(ps, hs + warm);
+        }
+        let keep = own.min(hs);
+        let to = hs + warm;
+        let mut out = vec![0.0; n * to];
+        for k in 0..n {
+            let (row, old) = (&mut out[k * to..(k + 1) * to], &self.history[k * from..(k + 1) * from]);
+            row[..keep].copy_from_slice(&old[..keep]);
+            row[hs..].copy_from_slice(&old[own..]);
+        }
+        self.history = out;
+        self.history_stride = to;
+        self.relayout(ps, to);
+    }
+
     /// Drops the pairs of spheres whose `keep` flag is false and renumbers the others' spheres
     /// as `Spheres::retain` does (the order of the list is kept: renumbering keeps the order).
     /// `b` is a sphere index for sphere pairs (`spheres`), a wall index otherwise.

@@ -46,54 +46,76 @@ impl DemWorld {
         }
     }
 
-    /// Gives every candidate pair the law of its two materials now and sets its parameters again
-    /// from that law. A pair whose law keeps its kind (same name as in `old_laws`) keeps its
-    /// history; another starts with none. The pair lists are laid out again when the laws need
-    /// more values per pair.
+    /// Gives every candidate pair, of spheres and of bodies of plugin kinds alike, the law of its
+    /// two materials now and sets its parameters again from that law. A pair whose law keeps its
+    /// kind (same name and history as in `old_laws`) keeps its history (and a body geometry's warm
+    /// starts, which follow the law's values); another starts its law's history afresh. The pair
+    /// lists are laid out again when the laws need more values per pair.
     pub(crate) fn refresh_pair_laws(&mut self, old_laws: &[Arc<dyn ContactLaw>]) {
         let (ps, hs) = self.pair_strides();
-        let mut lists = [std::mem::take(&mut self.pairs), std::mem::take(&mut self.wall_pairs)];
-        for (list, wall) in lists.iter_mut().zip([false, true]) {
+        let warm = self.kinds.warm_values();
+        let k = &mut self.kinds;
+        let mut lists = [
+            std::mem::take(&mut self.pairs),
+            std::mem::take(&mut self.wall_pairs),
+            std::mem::take(&mut k.pairs),
+            std::mem::take(&mut k.wall_pairs),
+            std::mem::take(&mut k.sphere_pairs),
+        ];
+        let (s, k) = (&self.spheres, &self.kinds);
+        let sides = [
+            (&s.material, Other::Of(&s.material), 0),
+            (&s.material, Other::Walls, 0),
+            (&k.material, Other::Same, warm),
+            (&k.material, Other::Walls, warm),
+            (&k.material, Other::Of(&s.material), warm),
+        ];
+        let mut lost = false;
+        for (n, (list, &(first, other, warm))) in lists.iter_mut().zip(&sides).enumerate() {
             if list.is_empty() {
                 list.param_stride = ps;
-                list.history_stride = hs;
+                list.history_stride = hs + warm;
                 continue;
             }
-            list.relayout(ps, hs);
-            for k in 0..list.len() {
-                let (a, b) = (list.a[k] as usize, list.b[k] as usize);
-                let mb = if wall { self.walls[b].material } else { self.spheres.material[b] };
-                let Some(law) = self.law_for(self.spheres.material[a], mb) else {
+            list.relayout_with_warm(ps, hs, warm);
+            let hs_list = list.history_stride;
+            for p in 0..list.len() {
+                let (a, b) = (list.a[p] as usize, list.b[p] as usize);
+                let mb = match other {
+                    Other::Same => first[b],
+                    Other::Walls => self.walls[b].material,
+                    Other::Of(materials) => materials[b],
+                };
+                let Some(law) = self.law_for(first[a], mb) else {
                     // No law for this pair any more: the next rebuild says so.
-                    self.needs_rebuild = true;
+                    lost = true;
                     continue;
                 };
-                let same_kind = old_laws.get(list.law[k] as usize).is_some_and(|old| {
+                let same_kind = old_laws.get(list.law[p] as usize).is_some_and(|old| {
                     let new = &self.laws[law as usize];
                     old.name() == new.name() && old.history_count() == new.history_count()
                 });
-                list.law[k] = law;
-                let params = &mut list.params[k * ps..(k + 1) * ps];
+                list.law[p] = law;
+                let info = match n {
+                    0 => self.info_for(a, b, false),
+                    1 => self.info_for(a, b, true),
+                    _ => self.kind_info(a, b, other),
+                };
+                let params = &mut list.params[p * ps..(p + 1) * ps];
                 params.fill(0.0);
-                self.laws[law as usize].init_pair(&self.info_for(a, b, wall), params);
+                self.laws[law as usize].init_pair(&info, params);
                 if !same_kind {
-                    list.history[k * hs..(k + 1) * hs].fill(0.0);
-                    list.touching[k] = false;
+                    list.history[p * hs_list..p * hs_list + hs].fill(0.0);
+                    list.touching[p] = false;
                 }
             }
         }
-        [self.pairs, self.wall_pairs] = lists;
-        // The spare list is storage for the next rebuild: its layout is set there.
-        // The contacts of bodies of plugin kinds are found again at the next step with the laws as
-        // they are now (their law history and the geometry's warm starts start afresh): a list
-        // kept would hold the values of laws that are gone.
+        let [spheres, walls, bodies, body_walls, body_spheres] = lists;
+        (self.pairs, self.wall_pairs) = (spheres, walls);
         let k = &mut self.kinds;
-        for list in [&mut k.pairs, &mut k.wall_pairs, &mut k.sphere_pairs] {
-            if !list.is_empty() {
-                *list = Default::default();
-                self.needs_rebuild = true;
-            }
-        }
+        (k.pairs, k.wall_pairs, k.sphere_pairs) = (bodies, body_walls, body_spheres);
+        // The spare list is storage for the next rebuild: its layout is set there.
+        self.needs_rebuild |= lost;
     }
 
     /// The law of a pair of materials: its own, else the default one.
