@@ -51,6 +51,41 @@ fn crossed_capsules_and_a_capsule_and_a_sphere_overlap_and_push_as_the_law_says(
 
 #[test]
 fn a_capsule_rolls_down_an_incline_without_slip_at_the_rate_of_its_own_inertia() {
+    rolls_down(|m, _, normal| vec![Wall::new("incline", WallShape::Plane { normal }, [0.0; 3], m)]);
+}
+
+#[test]
+fn a_capsule_rolls_down_a_rectangle_as_down_a_plane() {
+    rolls_down(|m, down, _| {
+        let shape = WallShape::Rect { u: down, v: [0.0, 0.0, 1.0], half: [1.0, 1.0] };
+        vec![Wall::new("incline", shape, [0.0; 3], m)]
+    });
+}
+
+/// The incline a wall mesh: squares of 2 cm (the capsule's radius is 1 cm, its cylinder 4 cm
+/// long) each cut along a diagonal, one row of seams under the capsule's middle along the slope:
+/// the capsule rolls across some ten seams and diagonals, always over several triangles.
+#[test]
+fn a_capsule_rolls_down_a_wall_mesh_across_its_seams_as_down_a_plane() {
+    rolls_down(|m, down, _| {
+        let at = |s: f64, z: f64| [s * down[0], s * down[1], z];
+        let side = 0.02;
+        let mut triangles = Vec::new();
+        for i in -5..16 {
+            for j in -3..3 {
+                let (s0, z0) = (i as f64 * side, j as f64 * side);
+                let (s1, z1) = (s0 + side, z0 + side);
+                triangles.push([at(s0, z0), at(s1, z0), at(s1, z1)]);
+                triangles.push([at(s0, z0), at(s1, z1), at(s0, z1)]);
+            }
+        }
+        granite_core::dem::mesh_walls::mesh_walls(&triangles, "incline", m).unwrap()
+    });
+}
+
+/// A capsule lying across an incline (walls `incline(material, down, normal)` through the origin)
+/// rolls without slip at `g sin(theta) / (1 + I_axis / (m r^2))`.
+fn rolls_down(incline: impl Fn(u16, Vec3, Vec3) -> Vec<Wall>) {
     let (r, length, theta) = (0.01, 0.04, 15f64.to_radians());
     let g = 9.81;
     let kn = 1e5;
@@ -59,7 +94,9 @@ fn a_capsule_rolls_down_an_incline_without_slip_at_the_rate_of_its_own_inertia()
     // The incline through the origin, going down towards +x; the capsule's axis along z, across
     // the slope, resting at its equilibrium overlap.
     let (down, normal) = ([theta.cos(), -theta.sin(), 0.0], [theta.sin(), theta.cos(), 0.0]);
-    s.sim.world.add_wall(Wall::new("incline", WallShape::Plane { normal }, [0.0; 3], s.material));
+    for wall in incline(s.material, down, normal) {
+        s.sim.world.add_wall(wall);
+    }
     let shape = s.capsule(r, length);
     let mass = 2500.0 * shape.volume();
     let i_axis = 2500.0 * shape.inertia_per_density()[2];
@@ -303,6 +340,65 @@ fn a_contact_change_reaches_capsules_and_a_law_switch_runs_on() {
     assert!((get("capsule_spin") * radius - get("capsule_v")).abs() < 0.005 * rolling, "rolls without slip: {s}");
     assert!((get("sphere_v") - 5.0 / 7.0).abs() < 0.005, "sphere at {}", get("sphere_v"));
     assert!(get("after_switch").is_finite());
+}
+
+/// Capsules poured into a cylinder standing on a disk, and into the silo of
+/// scripts/dem/silo_outlet_15mm.stl (a wall mesh: four sides and a floor with a 15 mm hole,
+/// closed by a rectangle just under it, into which the 16 mm capsules dip): at rest the walls
+/// carry their weight, to 0.5 %, and no capsule has passed through a wall.
+#[test]
+fn capsules_settle_in_a_cylinder_on_a_disk_and_in_a_silo_of_triangles() {
+    let stl = common::script("dem/silo_outlet_15mm.stl");
+    let cases = [
+        (
+            "disk",
+            "let walls = [sim.wall_disk(m, [0.0, 0.0, 0.0], [0.0, 0.0, 1.0], 0.05)];
+        walls.push(sim.wall_cylinder(m, [0.0, 0.0, 0.0], [0.0, 0.0, 1.0], 0.05, 0.3));"
+                .to_string(),
+            ([-0.03, -0.03], [0.03, 0.03]),
+        ),
+        (
+            "silo",
+            format!(
+                "let walls = sim.wall_mesh(m, \"{}\", #{{ scale: 0.001 }});
+        walls.push(sim.wall_rect(m, [0.03, 0.03, -0.0001], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.03, 0.03]));",
+                stl.display()
+            ),
+            ([0.008, 0.008], [0.052, 0.052]),
+        ),
+    ];
+    for (name, walls, (lo, hi)) in cases {
+        let source = format!(
+            r#"
+        let sim = dem(#{{ seed: 5 }});
+        let m = sim.material(#{{ density: 2500.0 }});
+        sim.contact_law("linear", #{{ kn: 2e4, kt_ratio: 0.5, friction: 25.0 }});
+        sim.gravity([0.0, 0.0, -9.81]);
+        {walls}
+        sim.clump_cloud(m, [{}, {}, 0.01], [{}, {}, 0.13], #{{ count: 15, shape: "capsule", radius: 0.004, length: 0.008 }});
+        sim.damping(0.4);
+        sim.dt(0.2 * sim.critical_dt());
+        sim.run_until(1.5);
+        let weight = 0.0;
+        let lowest = 1.0;
+        for id in sim.body_ids() {{
+            let b = sim.body_state(id);
+            weight += 9.81 * b.mass;
+            lowest = min(lowest, b.position[2]);
+        }}
+        summary("weight", weight);
+        summary("carried", -sim.wall_force(walls)[2]);
+        summary("lowest", lowest);
+        "#,
+            lo[0], lo[1], hi[0], hi[1]
+        );
+        let out = common::run_text(&format!("capsules_in_{name}"), &source);
+        let s = common::summary_of(&out);
+        let get = |k: &str| s[k].as_f64().unwrap();
+        eprintln!("capsules in the {name}: the walls carry {} N of {} N", get("carried"), get("weight"));
+        assert!((get("carried") / get("weight") - 1.0).abs() < 0.005, "{name}: walls carry {s}");
+        assert!(get("lowest") > 0.0, "{name}: a capsule below the floor: {s}");
+    }
 }
 
 /// A contact change that keeps the law keeps the bodies' contacts' history, as the spheres':

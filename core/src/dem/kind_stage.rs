@@ -48,6 +48,7 @@ struct Found {
 /// the pairs of families.
 struct Geometries<'a> {
     bodies: &'a KindScene,
+    walls: &'a [Wall],
     images: Option<&'a Images>,
     placed: &'a [Box<dyn PlacedBodies + 'a>],
     meetings: &'a [Arc<dyn BodyPairGeometry>],
@@ -125,6 +126,9 @@ type Group = (u16, u16);
 
 const NO_FAMILY: u16 = u16::MAX;
 
+/// The second of a wall pair's group: a wall of a bounded shape (planes are [`NO_FAMILY`]).
+const BOUNDED_WALL: u16 = u16::MAX - 1;
+
 /// A list's warm starts: its history, values a pair, where the geometry's start and how many.
 type WarmRows<'h> = (&'h mut [f64], usize, usize, usize);
 
@@ -199,14 +203,31 @@ impl Geometries<'_> {
         Err(PairFailure { pair: 0, reason: format!("no geometry registered for {na} and {nb} bodies") })
     }
 
-    fn planes(
+    /// Bodies with walls `(i, wall)`: planes (a point and the normal towards the bodies' side)
+    /// and walls of bounded shapes, apart by the group's second.
+    fn walls(
         &self,
-        (fa, _): Group,
-        pairs: &[(u32, Plane)],
+        (fa, kind): Group,
+        pairs: &[(u32, u32)],
         warm: WarmStarts<'_>,
         out: &mut [Option<Touch>],
     ) -> std::result::Result<(), PairFailure> {
-        self.placed[fa as usize].planes(pairs, warm, out)
+        if kind == BOUNDED_WALL {
+            let bounded: Vec<(u32, &Wall)> = pairs.iter().map(|&(i, w)| (i, &self.walls[w as usize])).collect();
+            return self.placed[fa as usize].bounded_walls(&bounded, warm, out);
+        }
+        let planes: Vec<(u32, Plane)> = pairs
+            .iter()
+            .map(|&(i, w)| {
+                let wall = &self.walls[w as usize];
+                let normal = match wall.shape {
+                    WallShape::Plane { normal } => normal,
+                    _ => [0.0; 3],
+                };
+                (i, Plane { point: wall.position, normal })
+            })
+            .collect();
+        self.placed[fa as usize].planes(&planes, warm, out)
     }
 
     fn spheres(
@@ -251,7 +272,13 @@ impl BodyContacts {
             let placed = (0..families.len())
                 .map(|f| families[f].geometry.place(view_of(bodies, images.as_ref(), f as u16)))
                 .collect::<Result<Vec<_>>>()?;
-            let geometries = Geometries { bodies, images: images.as_ref(), placed: &placed, meetings: &meetings };
+            let geometries = Geometries {
+                bodies,
+                walls: around.walls,
+                images: images.as_ref(),
+                placed: &placed,
+                meetings: &meetings,
+            };
             for (list, &side) in lists.iter_mut().zip(&sides) {
                 found.push(Self::touching(&geometries, around, list, side, (own, warm))?);
             }
@@ -290,7 +317,13 @@ impl BodyContacts {
         let placed = (0..bodies.families.len())
             .map(|f| bodies.families[f].geometry.place(view_of(bodies, images.as_ref(), f as u16)))
             .collect::<Result<Vec<_>>>()?;
-        let geometries = Geometries { bodies, images: images.as_ref(), placed: &placed, meetings: &bodies.meetings };
+        let geometries = Geometries {
+            bodies,
+            walls: around.walls,
+            images: images.as_ref(),
+            placed: &placed,
+            meetings: &bodies.meetings,
+        };
         let lists =
             [(&bodies.pairs, Side::Bodies), (&bodies.wall_pairs, Side::Walls), (&bodies.sphere_pairs, Side::Spheres)];
         for (n, (list, side)) in lists.into_iter().enumerate() {
@@ -318,7 +351,16 @@ impl BodyContacts {
         let fam = &k.family;
         let groups: Vec<Group> = match side {
             Side::Bodies => list.a.iter().zip(&list.b).map(|(&a, &b)| (fam[a as usize], fam[b as usize])).collect(),
-            _ => list.a.iter().map(|&a| (fam[a as usize], NO_FAMILY)).collect(),
+            Side::Walls => list
+                .a
+                .iter()
+                .zip(&list.b)
+                .map(|(&a, &b)| {
+                    let plane = matches!(around.walls[b as usize].shape, WallShape::Plane { .. });
+                    (fam[a as usize], if plane { NO_FAMILY } else { BOUNDED_WALL })
+                })
+                .collect(),
+            Side::Spheres => list.a.iter().map(|&a| (fam[a as usize], NO_FAMILY)).collect(),
         };
         let done = match side {
             Side::Bodies => {
@@ -327,20 +369,8 @@ impl BodyContacts {
                 geometries.detect(&groups, &pairs, (&mut list.history, hs, own, warm), &mut out, Geometries::bodies)
             }
             Side::Walls => {
-                let pairs: Vec<(u32, Plane)> = list
-                    .a
-                    .iter()
-                    .zip(&list.b)
-                    .map(|(&a, &b)| {
-                        let wall = &around.walls[b as usize];
-                        let normal = match wall.shape {
-                            WallShape::Plane { normal } => normal,
-                            _ => [0.0; 3],
-                        };
-                        (a, Plane { point: wall.position, normal })
-                    })
-                    .collect();
-                geometries.detect(&groups, &pairs, (&mut list.history, hs, own, warm), &mut out, Geometries::planes)
+                let pairs: Vec<(u32, u32)> = list.a.iter().copied().zip(list.b.iter().copied()).collect();
+                geometries.detect(&groups, &pairs, (&mut list.history, hs, own, warm), &mut out, Geometries::walls)
             }
             Side::Spheres => {
                 let s = &around.spheres;

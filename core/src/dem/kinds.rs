@@ -450,12 +450,16 @@ impl DemWorld {
         if self.kinds.is_empty() {
             return Ok(());
         }
+        let planes_only: Vec<&str> =
+            self.kinds.families.iter().filter(|f| !f.geometry.meets_bounded_walls()).map(|f| f.name.as_str()).collect();
         if let Some(w) = self.walls.iter().find(|w| !matches!(w.shape, WallShape::Plane { .. })) {
-            let name = self.kinds.families.iter().map(|f| f.name.as_str()).collect::<Vec<_>>().join(" and ");
-            return Err(GraniteError::Setup(format!(
-                "wall \"{}\": {name} bodies meet plane walls (wall_plane, box_walls), spheres and one another",
-                w.name
-            )));
+            if !planes_only.is_empty() {
+                return Err(GraniteError::Setup(format!(
+                    "wall \"{}\": {} bodies meet plane walls (wall_plane, box_walls), spheres and one another",
+                    w.name,
+                    planes_only.join(" and ")
+                )));
+            }
         }
         let k = &self.kinds;
         let ns = self.spheres.len();

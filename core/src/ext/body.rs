@@ -2,7 +2,7 @@
 //! beside the engine's own spheres and clumps. A kind registers a factory that builds its shapes
 //! from parameters and the contact geometry of its pairs: with one another, with plane walls and
 //! with spheres, each called once per pair list (YADE's `Ig2` functors, without a virtual call per
-//! contact). The engine keeps the bodies (pose, velocity, mass properties), finds candidate pairs
+//! contact; a kind may also meet walls of bounded shapes). The engine keeps the bodies (pose, velocity, mass properties), finds candidate pairs
 //! from their bounding spheres, runs the registered contact laws on what the geometry found, sums
 //! the loads in pair order and moves the bodies (`dem::kinds`).
 //!
@@ -220,6 +220,11 @@ pub trait BodyGeometry: Send + Sync {
     fn warm_values(&self) -> usize {
         0
     }
+    /// Whether its bodies meet walls of bounded shapes ([`PlacedBodies::bounded_walls`]);
+    /// otherwise plane walls only, and a scene with another wall is refused before its first step.
+    fn meets_bounded_walls(&self) -> bool {
+        false
+    }
     /// The bodies where they are at this step's start, ready for the pair lists.
     fn place<'a>(&'a self, bodies: KindBodies<'a>) -> Result<Box<dyn PlacedBodies + 'a>>;
 }
@@ -241,6 +246,22 @@ pub trait PlacedBodies: Sync {
         warm: WarmStarts<'_>,
         out: &mut [Option<Touch>],
     ) -> std::result::Result<(), PairFailure>;
+    /// Bodies against walls of bounded shapes (rectangles, disks, cylinders, the triangles of a
+    /// wall mesh: `Wall::contact` gives a sphere's contact with any of them), `(i, wall)`; the
+    /// normal points from the body into the wall. Called only for a kind whose geometry says it
+    /// meets them ([`BodyGeometry::meets_bounded_walls`]).
+    fn bounded_walls(
+        &self,
+        pairs: &[(u32, &crate::dem::walls::Wall)],
+        warm: WarmStarts<'_>,
+        out: &mut [Option<Touch>],
+    ) -> std::result::Result<(), PairFailure> {
+        let _ = (warm, out);
+        Err(PairFailure {
+            pair: 0,
+            reason: format!("{} bounded walls met by a kind that meets planes only", pairs.len()),
+        })
+    }
     /// Bodies against spheres, `(i, sphere)`; the normal points from the body to the sphere.
     fn spheres(
         &self,

@@ -8,6 +8,7 @@
 //! ends' points weighed by their depths (a capsule lying flat bears at its middle, one tilting
 //! shifts its bearing continuously towards the end going down).
 
+use granite_core::dem::walls::Wall;
 use granite_core::error::{GraniteError, Result};
 use granite_core::ext::body::{
     Ball, BodyGeometry, BodyKindFactory, BodyShape, KindBodies, PairFailure, PlacedBodies, Plane, Touch, WarmStarts,
@@ -143,6 +144,9 @@ impl BodyShape for Capsule {
 struct CapsuleGeometry;
 
 impl BodyGeometry for CapsuleGeometry {
+    fn meets_bounded_walls(&self) -> bool {
+        true
+    }
     fn place<'a>(&'a self, bodies: KindBodies<'a>) -> Result<Box<dyn PlacedBodies + 'a>> {
         Ok(Box::new(PlacedCapsules { bodies }))
     }
@@ -306,6 +310,73 @@ impl PlacedBodies for PlacedCapsules<'_> {
         }
         Ok(())
     }
+
+    fn bounded_walls(
+        &self,
+        pairs: &[(u32, &Wall)],
+        _: WarmStarts<'_>,
+        out: &mut [Option<Touch>],
+    ) -> std::result::Result<(), PairFailure> {
+        let bodies = &self.bodies;
+        for (slot, &(i, wall)) in out.iter_mut().zip(pairs) {
+            *slot = wall_touch(segment(bodies, i as usize), wall);
+        }
+        Ok(())
+    }
+}
+
+/// Steps of the golden-section search along a capsule's axis: its bracket shrinks to 0.618^60,
+/// about 3e-13 of the axis.
+const GOLDEN_STEPS: usize = 60;
+
+/// The touch of the capsule of segment `[e0, e1]` and radius `r` with a wall of a bounded shape:
+/// that of the sphere of its axis which meets the wall most (the least gap `g(t)` of the sphere
+/// at `c(t)`, as `Wall::contact` gives a sphere's). For the flat shapes (rectangles, disks,
+/// triangles) the distance to the shape is convex along the axis, and a golden-section search
+/// finds its least value; the axis's two ends are compared with it, which covers a cylinder's
+/// inner face (its gap is least at an end). Where both ends press and the least gap is at an end
+/// (the axis lying on a face, as on a plane), the contact is the plane's: the overlap the deeper
+/// end's, the bearing point the ends' weighed by their depths. A triangle of a wall mesh meets
+/// the spheres of the axis by its own rules for shared edges and corners (a sphere a neighbour
+/// counts has no gap with it).
+fn wall_touch((e0, e1, r): (Vec3, Vec3, f64), wall: &Wall) -> Option<Touch> {
+    let d = sub(e1, e0);
+    let gap = |t: f64| wall.contact(along(e0, d, t), r, f64::INFINITY).map_or(f64::INFINITY, |c| c.gap);
+    let (g0, g1) = (gap(0.0), gap(1.0));
+    let ratio = 0.5 * (5f64.sqrt() - 1.0);
+    let (mut lo, mut hi) = (0.0, 1.0);
+    let (mut a, mut b) = (hi - ratio * (hi - lo), lo + ratio * (hi - lo));
+    let (mut ga, mut gb) = (gap(a), gap(b));
+    for _ in 0..GOLDEN_STEPS {
+        if ga <= gb {
+            (hi, b, gb) = (b, a, ga);
+            a = hi - ratio * (hi - lo);
+            ga = gap(a);
+        } else {
+            (lo, a, ga) = (a, b, gb);
+            b = lo + ratio * (hi - lo);
+            gb = gap(b);
+        }
+    }
+    let (inner, g_inner) = if ga <= gb { (a, ga) } else { (b, gb) };
+    let (mut t, mut least) = (inner, g_inner);
+    for (end, g) in [(0.0, g0), (1.0, g1)] {
+        if g < least {
+            (t, least) = (end, g);
+        }
+    }
+    if !(least < 0.0) {
+        return None;
+    }
+    let mut overlap = -least;
+    if g0 < 0.0 && g1 < 0.0 && g_inner >= g0.min(g1) - 1e-12 * r {
+        t = g1 / (g0 + g1);
+        overlap = -g0.min(g1);
+    }
+    let centre = along(e0, d, t);
+    let contact = wall.contact(centre, r, f64::INFINITY)?;
+    let n = contact.normal;
+    Some(Touch { normal: n, overlap, point: along(centre, n, r - 0.5 * overlap) })
 }
 
 #[cfg(test)]
