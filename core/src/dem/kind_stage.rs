@@ -208,23 +208,24 @@ impl Geometries<'_> {
     fn walls(
         &self,
         (fa, kind): Group,
-        pairs: &[(u32, u32)],
+        pairs: &[(u32, u32, u8)],
         warm: WarmStarts<'_>,
         out: &mut [Option<Touch>],
     ) -> std::result::Result<(), PairFailure> {
         if kind == BOUNDED_WALL {
-            let bounded: Vec<(u32, &Wall)> = pairs.iter().map(|&(i, w)| (i, &self.walls[w as usize])).collect();
+            let bounded: Vec<(u32, &Wall, u8)> =
+                pairs.iter().map(|&(i, w, part)| (i, &self.walls[w as usize], part)).collect();
             return self.placed[fa as usize].bounded_walls(&bounded, warm, out);
         }
         let planes: Vec<(u32, Plane)> = pairs
             .iter()
-            .map(|&(i, w)| {
+            .map(|&(i, w, part)| {
                 let wall = &self.walls[w as usize];
                 let normal = match wall.shape {
                     WallShape::Plane { normal } => normal,
                     _ => [0.0; 3],
                 };
-                (i, Plane { point: wall.position, normal })
+                (i, Plane { point: wall.position, normal, part })
             })
             .collect();
         self.placed[fa as usize].planes(&planes, warm, out)
@@ -369,7 +370,10 @@ impl BodyContacts {
                 geometries.detect(&groups, &pairs, (&mut list.history, hs, own, warm), &mut out, Geometries::bodies)
             }
             Side::Walls => {
-                let pairs: Vec<(u32, u32)> = list.a.iter().copied().zip(list.b.iter().copied()).collect();
+                // A body-wall pair's contact point of the body's manifold is its shift's first
+                // entry (walls have no images).
+                let pairs: Vec<(u32, u32, u8)> =
+                    (0..list.len()).map(|k| (list.a[k], list.b[k], list.shift[k][0] as u8)).collect();
                 geometries.detect(&groups, &pairs, (&mut list.history, hs, own, warm), &mut out, Geometries::walls)
             }
             Side::Spheres => {

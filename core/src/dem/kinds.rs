@@ -496,6 +496,17 @@ impl DemWorld {
         }
         let mut walls = wall_pairs(&k.x, &radii[ns..], &self.walls, skin);
         walls.iter_mut().for_each(|block| block.retain(|&(a, _, _)| !fixed[a as usize]));
+        // A body whose kind bears on a wall at several points gets a pair for each, numbered in
+        // the shift's first entry (a wall has no periodic image), which keeps the list's order.
+        let points: Vec<i32> = k.families.iter().map(|f| f.geometry.wall_points().max(1) as i32).collect();
+        if points.iter().any(|&p| p > 1) {
+            for block in walls.iter_mut() {
+                *block = block
+                    .iter()
+                    .flat_map(|&(a, w, _)| (0..points[k.family[a as usize] as usize]).map(move |p| (a, w, [p, 0, 0])))
+                    .collect();
+            }
+        }
         let strides = self.kind_strides();
         let mut lists = [
             std::mem::take(&mut self.kinds.pairs),

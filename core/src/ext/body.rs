@@ -124,11 +124,13 @@ pub struct Touch {
 }
 
 /// A plane wall as a geometry meets it: a point on it and its unit normal, pointing to the side
-/// the bodies live on.
+/// the bodies live on; `part`: which of the geometry's contact points with a wall this pair is
+/// (`0..BodyGeometry::wall_points()`).
 #[derive(Debug, Clone, Copy)]
 pub struct Plane {
     pub point: Vec3,
     pub normal: Vec3,
+    pub part: u8,
 }
 
 /// A sphere as a geometry meets it.
@@ -220,6 +222,12 @@ pub trait BodyGeometry: Send + Sync {
     fn warm_values(&self) -> usize {
         0
     }
+    /// Contact points a body of the kind may have with one wall (a capsule lying on a plane
+    /// bears on both ends): each body-wall candidate is that many pairs, `part` 0, 1, ..., each
+    /// with its own force and history (a contact manifold). One unless the kind says more.
+    fn wall_points(&self) -> usize {
+        1
+    }
     /// Whether its bodies meet walls of bounded shapes ([`PlacedBodies::bounded_walls`]);
     /// otherwise plane walls only, and a scene with another wall is refused before its first step.
     fn meets_bounded_walls(&self) -> bool {
@@ -249,10 +257,11 @@ pub trait PlacedBodies: Sync {
     /// Bodies against walls of bounded shapes (rectangles, disks, cylinders, the triangles of a
     /// wall mesh: `Wall::contact` gives a sphere's contact with any of them), `(i, wall)`; the
     /// normal points from the body into the wall. Called only for a kind whose geometry says it
-    /// meets them ([`BodyGeometry::meets_bounded_walls`]).
+    /// meets them ([`BodyGeometry::meets_bounded_walls`]); the third of a pair is its `part`, as
+    /// [`Plane::part`].
     fn bounded_walls(
         &self,
-        pairs: &[(u32, &crate::dem::walls::Wall)],
+        pairs: &[(u32, &crate::dem::walls::Wall, u8)],
         warm: WarmStarts<'_>,
         out: &mut [Option<Touch>],
     ) -> std::result::Result<(), PairFailure> {

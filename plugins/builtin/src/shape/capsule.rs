@@ -8,7 +8,8 @@
 //! ends' points weighed by their depths (a capsule lying flat bears at its middle, one tilting
 //! shifts its bearing continuously towards the end going down).
 
-use granite_core::dem::walls::Wall;
+use granite_core::dem::mesh_walls::closest_on_triangle;
+use granite_core::dem::walls::{Wall, WallShape};
 use granite_core::error::{GraniteError, Result};
 use granite_core::ext::body::{
     Ball, BodyGeometry, BodyKindFactory, BodyShape, KindBodies, PairFailure, PlacedBodies, Plane, Touch, WarmStarts,
@@ -147,6 +148,10 @@ impl BodyGeometry for CapsuleGeometry {
     fn meets_bounded_walls(&self) -> bool {
         true
     }
+    /// Two contact points with a wall: a capsule lying on it bears on both ends.
+    fn wall_points(&self) -> usize {
+        2
+    }
     fn place<'a>(&'a self, bodies: KindBodies<'a>) -> Result<Box<dyn PlacedBodies + 'a>> {
         Ok(Box::new(PlacedCapsules { bodies }))
     }
@@ -277,20 +282,25 @@ impl PlacedBodies for PlacedCapsules<'_> {
         let bodies = &self.bodies;
         for (slot, &(i, plane)) in out.iter_mut().zip(pairs) {
             let (e0, e1, r) = segment(bodies, i as usize);
+            // Part 0 bears on the first end, part 1 on the second: the spheres of the axis that
+            // go deepest into a plane are at its ends (the depth is linear along it). A capsule
+            // of no length is a sphere: one contact.
+            let end = match plane.part {
+                0 => e0,
+                _ if e0 == e1 => {
+                    *slot = None;
+                    continue;
+                }
+                _ => e1,
+            };
             let n = plane.normal;
-            let depth = |e: Vec3| r - dot(sub(e, plane.point), n);
-            let (d0, d1) = (depth(e0), depth(e1));
-            let overlap = d0.max(d1);
-            if !(overlap > 0.0) {
-                *slot = None;
-                continue;
-            }
-            // The bearing point on the segment: the ends weighed by how deep each goes.
-            let (w0, w1) = (d0.max(0.0), d1.max(0.0));
-            let t = w1 / (w0 + w1);
-            let on_segment = along(e0, sub(e1, e0), t);
+            let overlap = r - dot(sub(end, plane.point), n);
             let inward = n.map(|c| -c);
-            *slot = Some(Touch { normal: inward, overlap, point: along(on_segment, inward, r - 0.5 * overlap) });
+            *slot = (overlap > 0.0).then(|| Touch {
+                normal: inward,
+                overlap,
+                point: along(end, inward, r - 0.5 * overlap),
+            });
         }
         Ok(())
     }
@@ -313,36 +323,24 @@ impl PlacedBodies for PlacedCapsules<'_> {
 
     fn bounded_walls(
         &self,
-        pairs: &[(u32, &Wall)],
+        pairs: &[(u32, &Wall, u8)],
         _: WarmStarts<'_>,
         out: &mut [Option<Touch>],
     ) -> std::result::Result<(), PairFailure> {
         let bodies = &self.bodies;
-        for (slot, &(i, wall)) in out.iter_mut().zip(pairs) {
-            *slot = wall_touch(segment(bodies, i as usize), wall);
+        for (slot, &(i, wall, part)) in out.iter_mut().zip(pairs) {
+            *slot = wall_touch(segment(bodies, i as usize), wall, part);
         }
         Ok(())
     }
 }
 
-/// Steps of the golden-section search along a capsule's axis: its bracket shrinks to 0.618^60,
-/// about 3e-13 of the axis.
-const GOLDEN_STEPS: usize = 60;
+/// Steps of the golden-section search along a capsule's axis: its bracket shrinks to 0.618^40,
+/// about 4e-9 of the axis.
+const GOLDEN_STEPS: usize = 40;
 
-/// The touch of the capsule of segment `[e0, e1]` and radius `r` with a wall of a bounded shape:
-/// that of the sphere of its axis which meets the wall most (the least gap `g(t)` of the sphere
-/// at `c(t)`, as `Wall::contact` gives a sphere's). For the flat shapes (rectangles, disks,
-/// triangles) the distance to the shape is convex along the axis, and a golden-section search
-/// finds its least value; the axis's two ends are compared with it, which covers a cylinder's
-/// inner face (its gap is least at an end). Where both ends press and the least gap is at an end
-/// (the axis lying on a face, as on a plane), the contact is the plane's: the overlap the deeper
-/// end's, the bearing point the ends' weighed by their depths. A triangle of a wall mesh meets
-/// the spheres of the axis by its own rules for shared edges and corners (a sphere a neighbour
-/// counts has no gap with it).
-fn wall_touch((e0, e1, r): (Vec3, Vec3, f64), wall: &Wall) -> Option<Touch> {
-    let d = sub(e1, e0);
-    let gap = |t: f64| wall.contact(along(e0, d, t), r, f64::INFINITY).map_or(f64::INFINITY, |c| c.gap);
-    let (g0, g1) = (gap(0.0), gap(1.0));
+/// The least gap of `gap` on `[0, 1]` by a golden-section search: `(t, gap)`.
+fn golden_least(gap: &impl Fn(f64) -> f64) -> (f64, f64) {
     let ratio = 0.5 * (5f64.sqrt() - 1.0);
     let (mut lo, mut hi) = (0.0, 1.0);
     let (mut a, mut b) = (hi - ratio * (hi - lo), lo + ratio * (hi - lo));
@@ -358,24 +356,68 @@ fn wall_touch((e0, e1, r): (Vec3, Vec3, f64), wall: &Wall) -> Option<Touch> {
             gb = gap(b);
         }
     }
-    let (inner, g_inner) = if ga <= gb { (a, ga) } else { (b, gb) };
-    let (mut t, mut least) = (inner, g_inner);
-    for (end, g) in [(0.0, g0), (1.0, g1)] {
-        if g < least {
-            (t, least) = (end, g);
-        }
+    if ga <= gb {
+        (a, ga)
+    } else {
+        (b, gb)
     }
+}
+
+/// The touch of the capsule of segment `[e0, e1]` and radius `r` with a wall of a bounded shape,
+/// for its contact point `part`, from the spheres of its axis (the gap `g(t)` of the sphere at
+/// `c(t)`, as `Wall::contact` gives a sphere's). Where the gap rises or stays level inwards from
+/// both ends, the least is at an end: part 0 bears on the first end, part 1 on the second, each
+/// where it presses, as on a plane (a capsule lying on a face, or over two triangles of a flat
+/// mesh, bears on each with the end over it). Where the gap falls inwards (the axis across an
+/// edge), the sphere that meets the wall most is found by a golden-section search (the distance
+/// to a flat convex shape is convex along the axis) and is the part of its half of the axis; the
+/// other part is its end, where that presses. A triangle of a wall mesh meets the spheres by its
+/// own rules for shared edges and corners (a sphere a neighbour counts has no gap with it).
+fn wall_touch((e0, e1, r): (Vec3, Vec3, f64), wall: &Wall, part: u8) -> Option<Touch> {
+    let d = sub(e1, e0);
+    let gap = |t: f64| wall.contact(along(e0, d, t), r, f64::INFINITY).map_or(f64::INFINITY, |c| c.gap);
+    // No sphere of the axis is nearer the wall than the middle's by more than half the axis
+    // (a triangle's distance taken to the whole triangle: the gap leaves out the edges and
+    // corners its neighbours count).
+    let half = 0.5 * dot(d, d).sqrt();
+    let middle = along(e0, d, 0.5);
+    let middle_gap = match &wall.shape {
+        WallShape::Triangle { b, c, .. } => {
+            let (q, _) = closest_on_triangle(sub(middle, wall.position), [0.0; 3], *b, *c);
+            let off = sub(sub(middle, wall.position), q);
+            dot(off, off).sqrt() - r
+        }
+        _ => gap(0.5),
+    };
+    if middle_gap.is_finite() && middle_gap > half {
+        return None;
+    }
+    if part > 0 && d == [0.0; 3] {
+        // A capsule of no length is a sphere: one contact.
+        return None;
+    }
+    let (g0, g1) = (gap(0.0), gap(1.0));
+    // The gap rising (or level) inwards from both ends: least at the ends (convex or, for a
+    // cylinder's inner face, concave along the axis, or level along a face).
+    let (step, level) = (1e-6, 1e-12 * r);
+    let ends_least = gap(step) >= g0 - level && gap(1.0 - step) >= g1 - level;
+    let end = if part == 0 { (0.0, g0) } else { (1.0, g1) };
+    let (t, least) = if ends_least {
+        end
+    } else {
+        let (inner, g_inner) = golden_least(&gap);
+        if (inner < 0.5) == (part == 0) {
+            (inner, g_inner)
+        } else {
+            end
+        }
+    };
     if !(least < 0.0) {
         return None;
     }
-    let mut overlap = -least;
-    if g0 < 0.0 && g1 < 0.0 && g_inner >= g0.min(g1) - 1e-12 * r {
-        t = g1 / (g0 + g1);
-        overlap = -g0.min(g1);
-    }
     let centre = along(e0, d, t);
     let contact = wall.contact(centre, r, f64::INFINITY)?;
-    let n = contact.normal;
+    let (n, overlap) = (contact.normal, -contact.gap);
     Some(Touch { normal: n, overlap, point: along(centre, n, r - 0.5 * overlap) })
 }
 
