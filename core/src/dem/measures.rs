@@ -300,18 +300,8 @@ impl DemWorld {
                 };
                 let (xi, xj) = (b.x[p.a[c] as usize], centres[p.b[c] as usize]);
                 let l: Vec3 = std::array::from_fn(|a| xj[a] + image[a] - xi[a]);
-                let f = p.force[c];
-                for a in 0..3 {
-                    for d in 0..3 {
-                        s[3 * a + d] += f[a] * l[d];
-                    }
-                }
                 let kn = self.laws[p.law[c] as usize].normal_stiffness(&p.params[c * ps..(c + 1) * ps]);
-                if kn > 0.0 {
-                    for a in 0..3 {
-                        k[a] += kn * l[a] * l[a];
-                    }
-                }
+                add_contact_sums((&mut s, &mut k), p.force[c], l, kn);
             }
         }
         (s, k)
@@ -335,18 +325,8 @@ impl DemWorld {
             let (xi, xj) = (self.spheres.x[i], self.spheres.x[j]);
             // Spelled out: `array::map` stays a call here, once per contact.
             let l: Vec3 = [xj[0] + image[0] - xi[0], xj[1] + image[1] - xi[1], xj[2] + image[2] - xi[2]];
-            let f = p.force[c];
-            for a in 0..3 {
-                for b in 0..3 {
-                    s[3 * a + b] += f[a] * l[b];
-                }
-            }
             let kn = self.laws[p.law[c] as usize].normal_stiffness(&p.params[c * ps..(c + 1) * ps]);
-            if kn > 0.0 {
-                for a in 0..3 {
-                    k[a] += kn * l[a] * l[a];
-                }
-            }
+            add_contact_sums((&mut s, &mut k), p.force[c], l, kn);
         }
         (s, k)
     }
@@ -381,5 +361,21 @@ impl DemWorld {
         }
         let sym = |a: usize, b: usize| 0.5 * (s[3 * a + b] + s[3 * b + a]) / volume;
         [sym(0, 0), sym(1, 1), sym(2, 2), sym(0, 1), sym(1, 2), sym(0, 2)]
+    }
+}
+
+/// Adds one contact's share of the Love-Weber sum, `f_a l_b` (row-major), to `s`, and of the axis
+/// stiffness, `k_n l_a^2`, to `k`.
+#[inline(always)]
+fn add_contact_sums((s, k): (&mut [f64; 9], &mut [f64; 3]), f: Vec3, l: Vec3, kn: f64) {
+    for a in 0..3 {
+        for b in 0..3 {
+            s[3 * a + b] += f[a] * l[b];
+        }
+    }
+    if kn > 0.0 {
+        for a in 0..3 {
+            k[a] += kn * l[a] * l[a];
+        }
     }
 }
