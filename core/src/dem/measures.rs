@@ -325,8 +325,20 @@ impl DemWorld {
             let (xi, xj) = (self.spheres.x[i], self.spheres.x[j]);
             // Spelled out: `array::map` stays a call here, once per contact.
             let l: Vec3 = [xj[0] + image[0] - xi[0], xj[1] + image[1] - xi[1], xj[2] + image[2] - xi[2]];
+            // Spelled out rather than through `add_contact_sums`: the servo sums every step, and
+            // the call's arguments cost this loop 2.7 % more instructions.
+            let f = p.force[c];
+            for a in 0..3 {
+                for b in 0..3 {
+                    s[3 * a + b] += f[a] * l[b];
+                }
+            }
             let kn = self.laws[p.law[c] as usize].normal_stiffness(&p.params[c * ps..(c + 1) * ps]);
-            add_contact_sums((&mut s, &mut k), p.force[c], l, kn);
+            if kn > 0.0 {
+                for a in 0..3 {
+                    k[a] += kn * l[a] * l[a];
+                }
+            }
         }
         (s, k)
     }
