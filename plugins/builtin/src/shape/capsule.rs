@@ -153,7 +153,11 @@ impl BodyGeometry for CapsuleGeometry {
         2
     }
     fn place<'a>(&'a self, bodies: KindBodies<'a>) -> Result<Box<dyn PlacedBodies + 'a>> {
-        Ok(Box::new(PlacedCapsules { bodies }))
+        // Each capsule's axis turned into the world once a step, not once per pair.
+        let segments = (0..bodies.x.len())
+            .map(|i| if bodies.owns(i) { segment(&bodies, i) } else { ([0.0; 3], [0.0; 3], 0.0) })
+            .collect();
+        Ok(Box::new(PlacedCapsules { bodies, segments }))
     }
 }
 
@@ -161,6 +165,8 @@ impl BodyGeometry for CapsuleGeometry {
 /// a rotation, less than keeping it).
 struct PlacedCapsules<'a> {
     bodies: KindBodies<'a>,
+    /// Each body's segment (ends and radius, world frame), zeros for another family's.
+    segments: Vec<(Vec3, Vec3, f64)>,
 }
 
 /// The segment of capsule `i`: its ends and radius, in the world frame.
@@ -261,8 +267,8 @@ impl PlacedBodies for PlacedCapsules<'_> {
     ) -> std::result::Result<(), PairFailure> {
         let bodies = &self.bodies;
         for (slot, &(i, j)) in out.iter_mut().zip(pairs) {
-            let (a0, a1, ra) = segment(bodies, i as usize);
-            let (b0, b1, rb) = segment(bodies, j as usize);
+            let (a0, a1, ra) = self.segments[i as usize];
+            let (b0, b1, rb) = self.segments[j as usize];
             let (pa, pb) = closest_points(a0, a1, b0, b1);
             // Segments crossing each other: across both axes, towards the second body.
             let across = cross(sub(a1, a0), sub(b1, b0));
@@ -279,9 +285,8 @@ impl PlacedBodies for PlacedCapsules<'_> {
         _: WarmStarts<'_>,
         out: &mut [Option<Touch>],
     ) -> std::result::Result<(), PairFailure> {
-        let bodies = &self.bodies;
         for (slot, &(i, plane)) in out.iter_mut().zip(pairs) {
-            let (e0, e1, r) = segment(bodies, i as usize);
+            let (e0, e1, r) = self.segments[i as usize];
             // Part 0 bears on the first end, part 1 on the second: the spheres of the axis that
             // go deepest into a plane are at its ends (the depth is linear along it). A capsule
             // of no length is a sphere: one contact.
@@ -311,9 +316,8 @@ impl PlacedBodies for PlacedCapsules<'_> {
         _: WarmStarts<'_>,
         out: &mut [Option<Touch>],
     ) -> std::result::Result<(), PairFailure> {
-        let bodies = &self.bodies;
         for (slot, &(i, ball)) in out.iter_mut().zip(pairs) {
-            let (e0, e1, r) = segment(bodies, i as usize);
+            let (e0, e1, r) = self.segments[i as usize];
             let p = nearest_on(e0, e1, ball.centre);
             let fallback = unit_or_z(cross(sub(e1, e0), [1.0, 0.0, 0.0]));
             *slot = swept_touch(p, r, ball.centre, ball.radius, fallback);
@@ -327,9 +331,8 @@ impl PlacedBodies for PlacedCapsules<'_> {
         _: WarmStarts<'_>,
         out: &mut [Option<Touch>],
     ) -> std::result::Result<(), PairFailure> {
-        let bodies = &self.bodies;
         for (slot, &(i, wall, part)) in out.iter_mut().zip(pairs) {
-            *slot = wall_touch(segment(bodies, i as usize), wall, part);
+            *slot = wall_touch(self.segments[i as usize], wall, part);
         }
         Ok(())
     }
