@@ -309,7 +309,7 @@ fn rounded_boxes_in_a_thin_cell_step_as_in_a_thicker_one_when_sheared() {
     }
     // Each contact problem is solved to a tolerance (1e-8 of the potential's value), from the
     // pair's own last solution, and a copy in the thick cell may meet its neighbour from the other
-    // side: the two agree to what that tolerance leaves (1.5e-6 of a spin seen after 300 steps).
+    // side: the two agree to what that tolerance leaves (1.5e-6 of a spin after 300 steps).
     let n = boxes.len();
     let (kt, kk) = (&thin.sim.world.kinds, &thick_cell.sim.world.kinds);
     for i in 0..n {
@@ -317,7 +317,7 @@ fn rounded_boxes_in_a_thin_cell_step_as_in_a_thicker_one_when_sheared() {
             for (a, b) in [(kt.v[i], kk.v[c * n + i]), (kt.w[i], kk.w[c * n + i])] {
                 let d = (0..3).map(|q| (a[q] - b[q]).abs()).fold(0.0, f64::max);
                 let size = a.iter().map(|v| v.abs()).fold(0.0, f64::max);
-                assert!(d < 1e-4 * (1e-3 + size), "box {i} copy {c}: {a:?} against {b:?}");
+                assert!(d < 1e-5 * (1e-3 + size), "box {i} copy {c}: {a:?} against {b:?}");
             }
         }
     }

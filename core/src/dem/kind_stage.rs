@@ -250,6 +250,9 @@ enum Side {
     Spheres,
 }
 
+/// The bodies' lists in their order: body pairs, walls, spheres.
+const SIDES: [Side; 3] = [Side::Bodies, Side::Walls, Side::Spheres];
+
 impl BodyContacts {
     pub(crate) fn run(bodies: &mut KindScene, around: &Surroundings<'_>) -> Result<()> {
         bodies.force.iter_mut().for_each(|f| *f = [0.0; 3]);
@@ -258,39 +261,19 @@ impl BodyContacts {
         if bodies.families.is_empty() {
             return Ok(());
         }
-        let (families, meetings) = (bodies.families.clone(), bodies.meetings.clone());
-        let (own, warm) = (around.law_history, bodies.warm_values());
         let started = std::time::Instant::now();
         let mut lists = [
             std::mem::take(&mut bodies.pairs),
             std::mem::take(&mut bodies.wall_pairs),
             std::mem::take(&mut bodies.sphere_pairs),
         ];
-        let sides = [Side::Bodies, Side::Walls, Side::Spheres];
-        let mut found = Vec::with_capacity(3);
-        {
-            let images = Images::of(bodies, &lists[0], around.cell);
-            let placed = (0..families.len())
-                .map(|f| families[f].geometry.place(view_of(bodies, images.as_ref(), f as u16)))
-                .collect::<Result<Vec<_>>>()?;
-            let geometries = Geometries {
-                bodies,
-                walls: around.walls,
-                images: images.as_ref(),
-                placed: &placed,
-                meetings: &meetings,
-            };
-            for (list, &side) in lists.iter_mut().zip(&sides) {
-                found.push(Self::touching(&geometries, around, list, side, (own, warm))?);
-            }
-        }
+        let found = Self::touching_lists(bodies, around, &mut lists)?;
         let detected = std::time::Instant::now();
-        for (n, ((mut list, side), touching)) in lists.into_iter().zip(sides).zip(found).enumerate() {
+        for (n, ((mut list, side), (touching, offsets))) in lists.into_iter().zip(SIDES).zip(found).enumerate() {
             bodies.touches[n] = touching.iter().map(|f| (f.law, f.point)).collect();
             let points: Vec<Vec3> = touching.iter().map(|f| f.point).collect();
             let contacts: Vec<LawContact> = touching.into_iter().map(|f| f.law).collect();
             let (force, moment) = laws_in_pair_order(around.laws, &mut list, &contacts, around.dt);
-            let offsets = image_offsets(&list, around.cell);
             let loads = (&force[..], &moment[..], &offsets[..]);
             Self::sum_loads(bodies, around.spheres, &mut list, (&contacts, &points), loads, side);
             let slot = match side {
@@ -313,8 +296,27 @@ impl BodyContacts {
         if bodies.families.is_empty() {
             return Ok(out);
         }
+        let mut lists = [bodies.pairs.clone(), bodies.wall_pairs.clone(), bodies.sphere_pairs.clone()];
+        for (n, (found, _)) in Self::touching_lists(bodies, around, &mut lists)?.into_iter().enumerate() {
+            out[n] = found.into_iter().map(|f| (f.law.slot, f.law.overlap)).collect();
+        }
+        Ok(out)
+    }
+
+    /// The touching pairs of a list, from one call of each geometry on its share of it (the
+    /// whole list for a scene of one family); pairs found apart start their law's history again at
+    /// their next touch. `(own, warm)`: the law's history values a pair, and the geometry's after
+    /// them.
+    /// The touching pairs of the three lists (body pairs, walls, spheres), the bodies placed once
+    /// by each family's geometry (with the images the body pairs meet), and each list's image
+    /// offsets of its pairs' second members.
+    fn touching_lists(
+        bodies: &KindScene,
+        around: &Surroundings<'_>,
+        lists: &mut [PairList; 3],
+    ) -> Result<Vec<(Vec<Found>, Vec<Vec3>)>> {
         let (own, warm) = (around.law_history, bodies.warm_values());
-        let images = Images::of(bodies, &bodies.pairs, around.cell);
+        let images = Images::of(bodies, &lists[0], around.cell);
         let placed = (0..bodies.families.len())
             .map(|f| bodies.families[f].geometry.place(view_of(bodies, images.as_ref(), f as u16)))
             .collect::<Result<Vec<_>>>()?;
@@ -325,30 +327,27 @@ impl BodyContacts {
             placed: &placed,
             meetings: &bodies.meetings,
         };
-        let lists =
-            [(&bodies.pairs, Side::Bodies), (&bodies.wall_pairs, Side::Walls), (&bodies.sphere_pairs, Side::Spheres)];
-        for (n, (list, side)) in lists.into_iter().enumerate() {
-            let found = Self::touching(&geometries, around, &mut list.clone(), side, (own, warm))?;
-            out[n] = found.into_iter().map(|f| (f.law.slot, f.law.overlap)).collect();
-        }
-        Ok(out)
+        lists
+            .iter_mut()
+            .zip(SIDES)
+            .map(|(list, side)| {
+                let offsets = image_offsets(list, around.cell);
+                Ok((Self::touching(&geometries, around, list, side, (own, warm), &offsets)?, offsets))
+            })
+            .collect()
     }
 
-    /// The touching pairs of a list, from one call of each geometry on its share of it (the
-    /// whole list for a scene of one family); pairs found apart start their law's history again at
-    /// their next touch. `(own, warm)`: the law's history values a pair, and the geometry's after
-    /// them.
     fn touching(
         geometries: &Geometries<'_>,
         around: &Surroundings<'_>,
         list: &mut PairList,
         side: Side,
         (own, warm): (usize, usize),
+        offsets: &[Vec3],
     ) -> Result<Vec<Found>> {
         let k = geometries.bodies;
         let mut out = vec![None; list.len()];
         let hs = list.history_stride;
-        let offsets = image_offsets(list, around.cell);
         let fam = &k.family;
         let groups: Vec<Group> = match side {
             Side::Bodies => list.a.iter().zip(&list.b).map(|(&a, &b)| (fam[a as usize], fam[b as usize])).collect(),
