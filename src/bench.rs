@@ -291,7 +291,7 @@ pub fn dem(counts: &[usize], steps: usize, threads: &[usize], repeat: usize) -> 
             }
             Ok((
                 t.elapsed().as_secs_f64(),
-                (sim.world.spheres.len(), sim.rebuilds - before, sim.world.pairs.touching_count()),
+                (sim.world.spheres.len(), sim.rebuilds - before, sim.world.contacts.spheres.touching_count()),
             ))
         })?;
         let mut base = None;
@@ -325,7 +325,7 @@ pub fn dem(counts: &[usize], steps: usize, threads: &[usize], repeat: usize) -> 
         for _ in 0..steps {
             sim.step()?;
         }
-        Ok((t.elapsed().as_secs_f64(), sim.world.pairs.touching_count()))
+        Ok((t.elapsed().as_secs_f64(), sim.world.contacts.spheres.touching_count()))
     })?;
     let mut base = None;
     for Timed { threads: n, best, worst, out: contacts } in timed {
@@ -841,7 +841,7 @@ pub fn potential(count: usize, steps: usize, repeat: usize) -> Result<()> {
         }
         let per = |secs: f64| secs / (count * steps) as f64 * 1e6;
         for (k, (label, heap)) in heaps.iter().enumerate() {
-            let contacts = heap.world.pairs.touching_count() + heap.world.wall_pairs.touching_count() + heap.world.kinds.contact_count();
+            let contacts = heap.world.contacts.touching_count();
             granite_core::outln!(
                 "{label:<20} {:>7.3} us a grain-step ({:.3})  {} contacts at the start, {:.2} a grain",
                 per(times[k].0),

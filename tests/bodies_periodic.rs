@@ -62,12 +62,12 @@ fn thin_and_thick_cells_agree(l: Matrix3<f64>) {
         thin.sim.step().unwrap();
         thick.sim.step().unwrap();
         if step == 0 {
-            let p = thin.sim.world.kinds.pair_lists()[0];
+            let p = &thin.sim.world.contacts.bodies;
             assert!(
                 (0..p.len()).any(|k| p.touching[k] && p.a[k] == p.b[k]),
                 "no capsule touches its own image: the test checks nothing there"
             );
-            let sp = thin.sim.world.kinds.pair_lists()[2];
+            let sp = &thin.sim.world.contacts.body_spheres;
             assert!(
                 (0..sp.len()).any(|k| sp.touching[k] && sp.shift[k] != [0; 3]),
                 "no capsule touches a sphere's image: the test checks nothing there"
@@ -82,7 +82,7 @@ fn thin_and_thick_cells_agree(l: Matrix3<f64>) {
         assert!((st[a] - sk[a]).abs() < 1e-6 * scale, "sigma[{a}]: thin cell {}, thick cell {}", st[a], sk[a]);
     }
     let (kt, kk) = (&thin.sim.world.kinds, &thick.sim.world.kinds);
-    assert_eq!(4 * kt.contact_count(), kk.contact_count());
+    assert_eq!(4 * thin.sim.world.contacts.body_touching_count(), thick.sim.world.contacts.body_touching_count());
     let close = |a: Vec3, b: Vec3, what: &str| {
         let d = (0..3).map(|q| (a[q] - b[q]).abs()).fold(0.0, f64::max);
         let size = a.iter().map(|v| v.abs()).fold(0.0, f64::max);
@@ -241,7 +241,7 @@ fn capsules_in_a_sheared_cell_resume_from_a_saved_state_bit_for_bit() {
     let mut l = Matrix3::zeros();
     l[(0, 1)] = 50.0;
     let (straight, written, resumed) = common::straight_and_resumed(|| packing(1, l).0.sim, 200, "capsules_cell_state");
-    let crossing = written.world.kinds.pair_lists()[0].shift.iter().filter(|s| **s != [0; 3]).count();
+    let crossing = written.world.contacts.bodies.shift.iter().filter(|s| **s != [0; 3]).count();
     assert!(crossing > 0, "no pair across the cell's faces when saved: the test checks nothing there");
     let (a, b) = (&straight.world.kinds, &resumed.world.kinds);
     assert_eq!(a.x, b.x);
@@ -293,7 +293,7 @@ fn rounded_boxes_in_a_thin_cell_step_as_in_a_thicker_one_when_sheared() {
         thin.sim.step().unwrap();
         thick_cell.sim.step().unwrap();
         if step == 0 {
-            let p = thin.sim.world.kinds.pair_lists()[0];
+            let p = &thin.sim.world.contacts.bodies;
             assert!(
                 (0..p.len()).any(|k| p.touching[k] && p.a[k] == p.b[k]),
                 "no box touches its own image: the test checks nothing there"

@@ -56,7 +56,7 @@ fn a_capsule_meets_a_k_one_particle_as_it_meets_a_sphere() {
             s.sim.world.set_dt(1e-9).unwrap();
             s.sim.step().unwrap();
             let k = &s.sim.world.kinds;
-            assert_eq!(k.contact_count(), 1, "ball at {centre:?}");
+            assert_eq!(s.sim.world.contacts.body_touching_count(), 1, "ball at {centre:?}");
             (k.force[0], k.torque[0])
         };
         let ((f, t), (f_sphere, t_sphere)) = (forces(true), forces(false));
@@ -103,7 +103,7 @@ fn a_capsule_lying_across_a_rounded_box_carries_its_weight_in_the_spring() {
     let weight = k.mass[1] * g;
     let lift = k.force[1][2];
     eprintln!("capsule on a rounded box: lift {lift:.6e} N, weight {weight:.6e} N, at {:?}", k.x[1]);
-    assert_eq!(k.contact_count(), 1);
+    assert_eq!(s.sim.world.contacts.body_touching_count(), 1);
     assert!((lift / weight - 1.0).abs() < 1e-5, "the box lifts {lift} N of a weight of {weight} N");
     let level = (k.q[1] * Vector3::z())[2];
     assert!(level.abs() < 1e-3, "the capsule lies level: its axis rises by {level}");
@@ -144,7 +144,7 @@ fn a_spinning_capsule_struck_by_a_particle_rebounds_as_from_a_sphere() {
             while steps < 200_000 {
                 s.sim.step().unwrap();
                 steps += 1;
-                let touching = s.sim.world.kinds.contact_count() > 0;
+                let touching = s.sim.world.contacts.body_touching_count() > 0;
                 touched += touching as usize;
                 if touched > 0 && !touching {
                     break;
@@ -199,13 +199,14 @@ fn a_saved_state_with_capsules_and_potential_particles_resumes_bit_for_bit() {
         s.sim
     };
     let (straight, written, resumed) = common::straight_and_resumed(build, 3000, "families_state");
-    let k = &written.world.kinds;
-    let mixed = k.touching_body_pairs().filter(|&(a, b)| k.family[a] != k.family[b]).count();
+    let (k, p) = (&written.world.kinds, &written.world.contacts.bodies);
+    let touching = (0..p.len()).filter(|&c| p.touching[c]).map(|c| (p.a[c] as usize, p.b[c] as usize));
+    let mixed = touching.filter(|&(a, b)| k.family[a] != k.family[b]).count();
     assert!(mixed >= 3, "every capsule rests on its block when the state is written ({mixed} capsule-block contacts)");
     let (a, b) = (&straight.world.kinds, &resumed.world.kinds);
     assert!(a.x == b.x && a.v == b.v && a.w == b.w && a.q == b.q, "the resumed bodies parted from the straight run");
     assert!(straight.world.spheres.x == resumed.world.spheres.x);
-    assert_eq!(a.contact_count(), b.contact_count());
+    assert_eq!(straight.world.contacts.body_touching_count(), resumed.world.contacts.body_touching_count());
 }
 
 /// Bodies of a family join a scene of another only where a geometry of their pair is registered:

@@ -25,7 +25,7 @@ fn crossed_capsules_and_a_capsule_and_a_sphere_overlap_and_push_as_the_law_says(
     s.sim.world.set_dt(1e-8).unwrap();
     s.sim.step().unwrap();
     let k = &s.sim.world.kinds;
-    assert_eq!(k.contact_count(), 2);
+    assert_eq!(s.sim.world.contacts.body_touching_count(), 2);
     let push = kn * overlap;
     // The first capsule: pushed down by the second, up by the sphere: its two forces cancel along z.
     let expect = |got: Vec3, want: Vec3, what: &str| {
@@ -163,7 +163,7 @@ fn capsules_bouncing_in_a_frictionless_elastic_box_keep_their_energy() {
     let mut touching_before = false;
     for _ in 0..(1.0 / dt) as u64 {
         s.sim.step().unwrap();
-        let touching = s.sim.world.kinds.contact_count() > 0;
+        let touching = s.sim.world.contacts.body_touching_count() > 0;
         if touching_before && !touching {
             collisions += 1;
         }
@@ -251,12 +251,12 @@ fn a_saved_state_with_capsules_resumes_bit_for_bit() {
         s
     };
     let (straight, written, resumed) = common::straight_and_resumed(|| build().sim, 2000, "capsules_state");
-    let contacts = written.world.kinds.contact_count();
+    let contacts = written.world.contacts.body_touching_count();
     assert!(contacts >= 10, "the saved state has {contacts} contacts");
     let (a, b) = (&straight.world.kinds, &resumed.world.kinds);
     assert!(a.x == b.x && a.v == b.v && a.w == b.w && a.q == b.q, "the resumed bodies parted from the straight run");
     assert!(straight.world.spheres.x == resumed.world.spheres.x && straight.world.spheres.v == resumed.world.spheres.v);
-    assert_eq!(a.contact_count(), b.contact_count());
+    assert_eq!(straight.world.contacts.body_touching_count(), resumed.world.contacts.body_touching_count());
 }
 
 /// A fixed capsule is a moving container part: it keeps the velocity and spin a script gives it,
@@ -413,7 +413,7 @@ fn capsules_settle_in_a_cylinder_on_a_disk_and_in_a_silo_of_triangles() {
 /// ends.
 #[test]
 fn a_capsule_dropped_flat_keeps_its_energy_and_rests_on_both_ends() {
-    use granite_core::dem::kinds::Touched;
+    use granite_core::dem::inspect::Member;
     let (r, length, g) = (0.01, 0.04, 9.81);
     for tilt in [0.003, 0.01, 0.05, 0.2] {
         let mut s = scene(1000.0, &[("kn", 1e5), ("kt_ratio", 0.5), ("friction", 0.0)]);
@@ -437,7 +437,7 @@ fn a_capsule_dropped_flat_keeps_its_energy_and_rests_on_both_ends() {
         let (mut touched, mut most) = (false, 0usize);
         loop {
             s.sim.step().unwrap();
-            let n = s.sim.world.kinds.contact_count();
+            let n = s.sim.world.contacts.body_touching_count();
             most = most.max(n);
             touched |= n > 0;
             if touched && n == 0 {
@@ -475,11 +475,10 @@ fn a_capsule_dropped_flat_keeps_its_energy_and_rests_on_both_ends() {
     let ends: Vec<f64> = s
         .sim
         .world
-        .kinds
-        .contacts_of(0)
+        .body_contacts_of(0)
         .into_iter()
-        .filter(|(with, _)| matches!(with, Touched::Wall(0)))
-        .map(|(_, f)| f[2])
+        .filter(|c| c.other == Member::Wall(0))
+        .map(|c| c.force[2])
         .collect();
     assert_eq!(ends.len(), 2, "two contacts at rest: {ends:?}");
     for f in &ends {

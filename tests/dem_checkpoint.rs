@@ -11,7 +11,7 @@ fn saved_state_resumes_bit_for_bit() {
     let path = dir.join("state.json");
     sim.save(&path).unwrap();
     let mut resumed = granite_core::dem::DemSim::load(&path, &granite::registry()).unwrap();
-    assert!(sim.world.pairs.touching_count() > 500, "the checkpoint must hold contacts with history");
+    assert!(sim.world.contacts.spheres.touching_count() > 500, "the checkpoint must hold contacts with history");
     for _ in 0..400 {
         sim.step().unwrap();
         resumed.step().unwrap();
@@ -21,7 +21,7 @@ fn saved_state_resumes_bit_for_bit() {
             && sim.world.spheres.v == resumed.world.spheres.v
             && sim.world.spheres.w == resumed.world.spheres.w
     );
-    assert_eq!(sim.world.pairs.history, resumed.world.pairs.history);
+    assert_eq!(sim.world.contacts.spheres.history, resumed.world.contacts.spheres.history);
     assert_eq!(sim.world.time.to_bits(), resumed.world.time.to_bits());
 }
 
@@ -36,8 +36,8 @@ fn inconsistent_state_files_are_refused_with_the_reason() {
     let dir = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("target/test-out/dem_checkpoint_bad");
     std::fs::create_dir_all(&dir).unwrap();
     let good = sim.to_json().unwrap();
-    assert!(!good["pairs"]["a"].as_array().unwrap().is_empty(), "the state must hold pairs");
-    let (n, laws, materials) = (sim.world.spheres.len(), sim.world.laws.len(), sim.world.materials.len());
+    assert!(!good["contacts"]["spheres"]["a"].as_array().unwrap().is_empty(), "the state must hold pairs");
+    let (n, laws, materials) = (sim.world.spheres.len(), sim.world.contacts.laws.len(), sim.world.materials.len());
     type Edit = fn(&mut serde_json::Value);
     let (id_3, id_5, id_7) = (sim.world.spheres.id[3], sim.world.spheres.id[5], sim.world.spheres.id[7]);
     let edits: [(&str, Edit, String); 12] = [
@@ -52,13 +52,17 @@ fn inconsistent_state_files_are_refused_with_the_reason() {
         ),
         // Two spheres under one id: one would be reported, moved or erased as the other.
         ("repeated id", |s| s["spheres"]["id"][1] = s["spheres"]["id"][0].clone(), "two spheres have id".into()),
-        ("pair index", |s| s["pairs"]["b"][0] = 99_999.into(), format!("an index beyond the {n} spheres")),
+        (
+            "pair index",
+            |s| s["contacts"]["spheres"]["b"][0] = 99_999.into(),
+            format!("an index beyond the {n} spheres"),
+        ),
         (
             // The force sums' order rests on pairs stored under their larger index.
             "pair orientation",
             |s| {
-                let (a, b) = (s["pairs"]["a"][0].clone(), s["pairs"]["b"][0].clone());
-                (s["pairs"]["a"][0], s["pairs"]["b"][0]) = (b, a);
+                let (a, b) = (s["contacts"]["spheres"]["a"][0].clone(), s["contacts"]["spheres"]["b"][0].clone());
+                (s["contacts"]["spheres"]["a"][0], s["contacts"]["spheres"]["b"][0]) = (b, a);
             },
             "pair 0 has a first sphere below its second".into(),
         ),
@@ -66,8 +70,8 @@ fn inconsistent_state_files_are_refused_with_the_reason() {
             // A sphere meets only its own images (a thin cell), never itself.
             "sphere with itself",
             |s| {
-                s["pairs"]["b"][0] = s["pairs"]["a"][0].clone();
-                s["pairs"]["shift"][0] = serde_json::json!([0, 0, 0]);
+                s["contacts"]["spheres"]["b"][0] = s["contacts"]["spheres"]["a"][0].clone();
+                s["contacts"]["spheres"]["shift"][0] = serde_json::json!([0, 0, 0]);
             },
             "or is a sphere with itself".into(),
         ),
@@ -76,8 +80,12 @@ fn inconsistent_state_files_are_refused_with_the_reason() {
             |s| drop(s["spheres"]["radius"].as_array_mut().unwrap().pop()),
             format!("`radius` has {} entries, `x` {n}", n - 1),
         ),
-        ("short history", |s| drop(s["pairs"]["history"].as_array_mut().unwrap().pop()), "history values for".into()),
-        ("contact law", |s| s["pairs"]["law"][0] = 7.into(), format!("contact law 7 of {laws}")),
+        (
+            "short history",
+            |s| drop(s["contacts"]["spheres"]["history"].as_array_mut().unwrap().pop()),
+            "history values for".into(),
+        ),
+        ("contact law", |s| s["contacts"]["spheres"]["law"][0] = 7.into(), format!("contact law 7 of {laws}")),
         (
             "material",
             |s| s["spheres"]["material"][3] = 2.into(),
@@ -110,10 +118,10 @@ fn a_state_with_fewer_values_a_pair_is_widened() {
     for _ in 0..1500 {
         sim.step().unwrap();
     }
-    assert!(sim.world.pairs.touching_count() > 50, "the state must hold touching contacts");
+    assert!(sim.world.contacts.spheres.touching_count() > 50, "the state must hold touching contacts");
     let mut json = sim.to_json().unwrap();
-    for list in ["pairs", "wall_pairs"] {
-        let l = &mut json[list];
+    for list in ["spheres", "sphere_walls"] {
+        let l = &mut json["contacts"][list];
         assert_eq!(l["param_stride"], 5);
         // The layout of the earlier law: e_star, g_star, r_star, mu (no damping).
         let old: Vec<serde_json::Value> =
@@ -122,7 +130,7 @@ fn a_state_with_fewer_values_a_pair_is_widened() {
         l["param_stride"] = serde_json::Value::from(4);
     }
     let mut resumed = granite_core::dem::DemSim::from_json(json, &granite::registry()).unwrap();
-    assert_eq!(resumed.world.pairs.param_stride, 5);
+    assert_eq!(resumed.world.contacts.spheres.param_stride, 5);
     for _ in 0..300 {
         sim.step().unwrap();
         resumed.step().unwrap();

@@ -68,7 +68,7 @@ fn clump_collision_conserves_linear_momentum() {
     let mut touched = false;
     for _ in 0..20_000 {
         s.step().unwrap();
-        touched |= s.world.pairs.touching_count() > 0;
+        touched |= s.world.contacts.spheres.touching_count() > 0;
     }
     assert!(touched, "the clumps must collide");
     let p1 = p(&s);

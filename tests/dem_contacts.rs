@@ -43,7 +43,7 @@ fn collide(law: &str, law_params: &[(&str, f64)], against_wall: bool, speed: f64
     }
     let m1 = sim.world.spheres.mass[0];
     let m_eff = if against_wall { m1 } else { 0.5 * m1 };
-    let kn = sim.world.laws[0].max_normal_stiffness(&granite_core::ext::PairInfo {
+    let kn = sim.world.contacts.laws[0].max_normal_stiffness(&granite_core::ext::PairInfo {
         radius: [r, if against_wall { f64::INFINITY } else { r }],
         mass: [m1, if against_wall { f64::INFINITY } else { m1 }],
         seed: 0,
@@ -60,9 +60,9 @@ fn collide(law: &str, law_params: &[(&str, f64)], against_wall: bool, speed: f64
     for _ in 0..2_000_000 {
         sim.step().unwrap();
         let touching = if against_wall {
-            sim.world.wall_pairs.force.iter().any(|f| f[0] != 0.0)
+            sim.world.contacts.sphere_walls.force.iter().any(|f| f[0] != 0.0)
         } else {
-            sim.world.pairs.force.iter().any(|f| f[0] != 0.0)
+            sim.world.contacts.spheres.force.iter().any(|f| f[0] != 0.0)
         };
         if touching {
             started = true;
@@ -270,7 +270,7 @@ fn different_laws_in_one_chunk_keep_their_own_restitution() {
     let mut touched = false;
     for _ in 0..2_000_000 {
         sim.step().unwrap();
-        let touching = sim.world.pairs.touching.iter().any(|&t| t);
+        let touching = sim.world.contacts.spheres.touching.iter().any(|&t| t);
         touched |= touching;
         if touched && !touching {
             break;

@@ -10,7 +10,7 @@ fn deposit(threads: usize) -> (Vec<[f64; 3]>, Vec<[f64; 3]>, usize) {
         for _ in 0..1500 {
             sim.step().unwrap();
         }
-        (sim.world.spheres.x.clone(), sim.world.spheres.w.clone(), sim.world.pairs.touching_count())
+        (sim.world.spheres.x.clone(), sim.world.spheres.w.clone(), sim.world.contacts.spheres.touching_count())
     })
 }
 
@@ -77,7 +77,7 @@ fn sheared_periodic(threads: usize, sequential: bool, servo: bool) -> (Vec<[f64;
             let l = sim.world.cell.as_ref().unwrap().velocity_gradient;
             assert!((0..3).all(|a| l[(a, a)] != 0.0), "the servo does not move the cell: {l}");
         }
-        (sim.world.spheres.x.clone(), sim.world.spheres.w.clone(), sim.world.pairs.touching_count())
+        (sim.world.spheres.x.clone(), sim.world.spheres.w.clone(), sim.world.contacts.spheres.touching_count())
     })
 }
 
@@ -169,7 +169,7 @@ fn falling_clumps(threads: usize, sequential: bool) -> (Vec<[f64; 3]>, Vec<[f64;
         for _ in 0..1500 {
             sim.step().unwrap();
         }
-        (sim.world.spheres.x.clone(), sim.world.spheres.w.clone(), sim.world.pairs.touching_count())
+        (sim.world.spheres.x.clone(), sim.world.spheres.w.clone(), sim.world.contacts.spheres.touching_count())
     })
 }
 

@@ -260,10 +260,10 @@ fn a_saved_state_with_a_moving_box_of_triangles_resumes_bit_for_bit() {
         sim
     };
     let (straight, written, resumed) = straight_and_resumed(build, 1500, "mesh_walls_state");
-    let touching = written.world.wall_pairs.touching_count();
+    let touching = written.world.contacts.sphere_walls.touching_count();
     assert!(touching >= 5, "the saved state has {touching} wall contacts");
     let (a, b) = (&straight.world, &resumed.world);
     assert!(a.spheres.x == b.spheres.x && a.spheres.v == b.spheres.v && a.spheres.w == b.spheres.w);
-    assert_eq!(a.wall_pairs.history, b.wall_pairs.history);
+    assert_eq!(a.contacts.sphere_walls.history, b.contacts.sphere_walls.history);
     assert!(a.walls.iter().zip(&b.walls).all(|(p, q)| p.position == q.position && p.shape == q.shape));
 }

@@ -171,7 +171,7 @@ fn love_weber_stress_of_a_cubic_packing() {
         // pushes with kn delta over the branch d: sigma_xx = -kn delta d / d^3 (compression
         // negative).
         let expected = -kn * delta / (d * d);
-        assert_eq!(sim.world.pairs.touching_count(), 3 * n * n * n, "{n} spheres a side");
+        assert_eq!(sim.world.contacts.spheres.touching_count(), 3 * n * n * n, "{n} spheres a side");
         let s = sim.world.love_weber_stress(sim.world.cell_volume().unwrap());
         for a in 0..3 {
             assert!(
@@ -238,8 +238,8 @@ fn thin_and_thick_cells_agree(l: nalgebra::Matrix3<f64>, update: CellUpdate) {
         thick_sim.step().unwrap();
         if step == 0 {
             assert!(
-                (0..thin.world.pairs.len())
-                    .any(|k| thin.world.pairs.touching[k] && thin.world.pairs.a[k] == thin.world.pairs.b[k]),
+                (0..thin.world.contacts.spheres.len()).any(|k| thin.world.contacts.spheres.touching[k]
+                    && thin.world.contacts.spheres.a[k] == thin.world.contacts.spheres.b[k]),
                 "no sphere touches its own image: the test checks nothing there"
             );
         }
@@ -252,7 +252,7 @@ fn thin_and_thick_cells_agree(l: nalgebra::Matrix3<f64>, update: CellUpdate) {
         assert!((st[a] - sk[a]).abs() < 1e-6 * scale, "sigma[{a}]: thin cell {}, thick cell {}", st[a], sk[a]);
     }
     // Contacts: three copies of each in the thick cell.
-    assert_eq!(3 * thin.world.pairs.touching_count(), thick_sim.world.pairs.touching_count());
+    assert_eq!(3 * thin.world.contacts.spheres.touching_count(), thick_sim.world.contacts.spheres.touching_count());
     let n = spheres.len();
     for i in 0..n {
         for c in 0..3 {
@@ -318,7 +318,7 @@ fn flipping_keeps_every_contact() {
     }
     sim.world.needs_rebuild_for_tests();
     sim.step().unwrap();
-    let before = sim.world.pairs.touching_count();
+    let before = sim.world.contacts.spheres.touching_count();
     let volume = sim.world.cell_volume().unwrap();
     let stress_before = sim.world.love_weber_stress(volume);
     assert!(before > 0);
@@ -329,7 +329,7 @@ fn flipping_keeps_every_contact() {
     }
     assert_eq!(sim.world.cell.as_ref().unwrap().flips, flips + 1, "the cell should have flipped once");
     assert_eq!(sim.world.spheres.len(), n * n * n);
-    assert_eq!(sim.world.pairs.touching_count(), before, "contacts lost or created by the flip");
+    assert_eq!(sim.world.contacts.spheres.touching_count(), before, "contacts lost or created by the flip");
     let stress_after = sim.world.love_weber_stress(sim.world.cell_volume().unwrap());
     for a in 0..6 {
         assert!(

@@ -234,7 +234,9 @@ impl LawConstants {
         if sim.world.gravity != [0.0; 3] || sim.world.cell_control.is_some() {
             return refuse("has gravity or a cell servo");
         }
-        let [law] = &sim.world.laws[..] else { return refuse("has several contact laws (the device runs one)") };
+        let [law] = &sim.world.contacts.laws[..] else {
+            return refuse("has several contact laws (the device runs one)");
+        };
         let form = match law.device_form() {
             Ok(form) => form,
             Err(why) => return refuse(&format!("uses contact law \"{}\", which {why}", law.name())),
@@ -333,7 +335,9 @@ fn buffer_bytes(rves: usize, spheres: usize, pairs: usize, history_stride: usize
 pub fn rooms(rves: &[DemSim], least: &[usize]) -> Vec<usize> {
     rves.iter()
         .enumerate()
-        .map(|(r, sim)| room_for(sim.world.spheres.len(), sim.world.pairs.len(), least.get(r).copied().unwrap_or(0)))
+        .map(|(r, sim)| {
+            room_for(sim.world.spheres.len(), sim.world.contacts.spheres.len(), least.get(r).copied().unwrap_or(0))
+        })
         .collect()
 }
 
@@ -448,7 +452,7 @@ impl Layout {
                 }
             }
             let s = &sim.world.spheres;
-            let list = &sim.world.pairs;
+            let list = &sim.world.contacts.spheres;
             let room = self.pair_first[r + 1] - self.pair_first[r];
             if list.len() > room {
                 return Err(GraniteError::Other(format!("RVE {r}: {} pairs in room for {room}", list.len())));
@@ -566,8 +570,13 @@ impl Layout {
             // merge sets them.
             let half = rec[Rec::Half as usize] as usize;
             let (ps, hs) = sim.world.pair_strides();
-            let law =
-                sim.world.laws.first().cloned().ok_or_else(|| GraniteError::Other("an RVE without a law".into()))?;
+            let law = sim
+                .world
+                .contacts
+                .laws
+                .first()
+                .cloned()
+                .ok_or_else(|| GraniteError::Other("an RVE without a law".into()))?;
             let mut list = PairList { param_stride: ps, history_stride: hs, ..Default::default() };
             let kept = hs.min(self.history_stride - 1);
             for a in 0..n {
@@ -592,7 +601,7 @@ impl Layout {
                     list.force.push([f[0], f[1], f[2]]);
                 }
             }
-            sim.world.pairs = list;
+            sim.world.contacts.spheres = list;
         }
         Ok(())
     }

@@ -234,8 +234,8 @@ impl Simulation for DemScene {
         self.dem.world.walls = s.walls;
         self.dem.world.time = s.time;
         self.dem.world.step = s.step;
-        self.dem.world.pairs = Default::default();
-        self.dem.world.wall_pairs = Default::default();
+        self.dem.world.contacts.spheres = Default::default();
+        self.dem.world.contacts.sphere_walls = Default::default();
         let _ = self.dem.rebuild_candidates();
     }
     fn save_state(&self, path: &std::path::Path, run: &RunContext) -> Result<()> {

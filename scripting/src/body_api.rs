@@ -159,25 +159,24 @@ fn register_motion(engine: &mut Engine) {
     engine.register_fn("body_contacts", |s: &mut DemHandle, id: i64| contacts(s, id));
 }
 
-/// A body's touching contacts as maps: what it touches and the force it takes.
+/// A body's touching contacts as maps, seen from it: what it touches (`with`, `id`, `kind`) and
+/// the contact as `sim.contacts()` shows it (force on this body).
 fn contacts(s: &mut DemHandle, id: i64) -> RhaiResult<rhai::Array> {
-    use granite_core::dem::kinds::Touched;
+    use granite_core::dem::inspect::Member;
     let i = index_of(s, id)?;
     let st = s.lock();
-    let world = &st.sim.dem.world;
-    let k = &world.kinds;
-    let array = |v: Vec3| Dynamic::from(v.iter().map(|c| Dynamic::from(*c)).collect::<rhai::Array>());
-    let list = k.contacts_of(i).into_iter().map(|(touched, force)| {
-        let mut map = Map::new();
-        let (with, other, kind) = match touched {
-            Touched::Body(j) => ("body", k.id[j] as i64, k.kind_name(j).to_string()),
-            Touched::Wall(w) => ("wall", w as i64, world.walls[w].name.clone()),
-            Touched::Sphere(j) => ("sphere", world.spheres.id[j] as i64, "sphere".to_string()),
+    let dem = &st.sim.dem;
+    let world = &dem.world;
+    let list = world.body_contacts_of(i).into_iter().map(|c| {
+        let mut map = super::dem_console::contact_map(dem, &c);
+        let (with, other, kind) = match c.other {
+            Member::Body(j) => ("body", world.kinds.id[j] as i64, world.kinds.kind_name(j).to_string()),
+            Member::Wall(w) => ("wall", w as i64, world.walls[w].name.clone()),
+            Member::Sphere(j) => ("sphere", world.spheres.id[j] as i64, "sphere".to_string()),
         };
         map.insert("with".into(), Dynamic::from(with.to_string()));
         map.insert("id".into(), Dynamic::from(other));
         map.insert("kind".into(), Dynamic::from(kind));
-        map.insert("force".into(), array(force));
         Dynamic::from(map)
     });
     Ok(list.collect())

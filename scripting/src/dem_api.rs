@@ -655,7 +655,7 @@ pub(super) fn register(engine: &mut Engine, ctx: &Arc<ScriptContext>) {
             err(if dem.world.spheres.is_empty() {
                 "critical_dt(): no spheres yet: the limit comes from their masses and their contacts' stiffness"
                     .to_string()
-            } else if dem.world.laws.is_empty() {
+            } else if dem.world.contacts.laws.is_empty() {
                 "critical_dt(): no contact law yet: call sim.contact_law(name, #{ ... }) first".to_string()
             } else {
                 "critical_dt(): the contact laws give the spheres' materials no stiffness (set_contact_law between \

@@ -6,7 +6,7 @@ use super::convert::elastic_from;
 use super::convert::{api_options, err, finite, get, integer, number, string, vector, OrRhai, RhaiResult};
 use super::dem_api::{DemHandle, DemMaterialHandle};
 use granite_core::dem::bodies::{dofs_name, parse_dofs, SphereEdit};
-use granite_core::dem::inspect::{ContactView, Other};
+use granite_core::dem::inspect::{ContactView, Member};
 use granite_core::dem::particles::FREE;
 use granite_core::dem::DemSim;
 use granite_core::error::GraniteError;
@@ -50,17 +50,24 @@ fn body_map(dem: &DemSim, i: usize) -> Map {
     m
 }
 
-/// A contact as scripts see it.
-fn contact_map(dem: &DemSim, c: &ContactView) -> Map {
+/// A contact as scripts see it: the first member's id and kind (`id1`, `kind1`: "sphere" or a
+/// body's kind), the other's (`id2`, `kind2`) or its wall's index (`wall`), and the contact.
+pub(crate) fn contact_map(dem: &DemSim, c: &ContactView) -> Map {
     let mut m = Map::new();
-    m.insert("id1".into(), Dynamic::from(dem.world.spheres.id[c.sphere] as i64));
-    match c.other {
-        Other::Sphere(j) => {
-            m.insert("id2".into(), Dynamic::from(dem.world.spheres.id[j] as i64));
+    let w = &dem.world;
+    let grain = |member: Member| match member {
+        Member::Sphere(i) => Some((w.spheres.id[i] as i64, "sphere".to_string())),
+        Member::Body(i) => Some((w.kinds.id[i] as i64, w.kinds.kind_name(i).to_string())),
+        Member::Wall(_) => None,
+    };
+    for (member, id, kind) in [(c.first, "id1", "kind1"), (c.other, "id2", "kind2")] {
+        if let Some((number, name)) = grain(member) {
+            m.insert(id.into(), Dynamic::from(number));
+            m.insert(kind.into(), Dynamic::from(name));
         }
-        Other::Wall(w) => {
-            m.insert("wall".into(), Dynamic::from(w as i64));
-        }
+    }
+    if let Member::Wall(index) = c.other {
+        m.insert("wall".into(), Dynamic::from(index as i64));
     }
     if c.shift != [0; 3] {
         m.insert("image".into(), Dynamic::from(c.shift.iter().map(|&s| Dynamic::from(s as i64)).collect::<Array>()));
@@ -71,7 +78,7 @@ fn contact_map(dem: &DemSim, c: &ContactView) -> Map {
     m.insert("force".into(), vec3(c.force));
     m.insert("normal_force".into(), Dynamic::from(c.normal_force));
     m.insert("shear_force".into(), vec3(c.shear_force));
-    if let Some(law) = dem.world.laws.get(c.law as usize) {
+    if let Some(law) = dem.world.contacts.laws.get(c.law as usize) {
         m.insert("law".into(), Dynamic::from(law.name().to_string()));
         let names = law.pair_param_names();
         let mut params = Map::new();
@@ -131,7 +138,7 @@ impl DemHandle {
                 None => "no default contact law: call contact_law(\"name\", #{ ... }) first",
             });
         };
-        let law = &dem.world.laws[idx as usize];
+        let law = &dem.world.contacts.laws[idx as usize];
         let params = law.params().iter().filter(|(_, v)| !v.is_nan()).map(|(k, v)| (k.to_string(), v)).collect();
         Ok((law.name().to_string(), params))
     }

@@ -162,7 +162,7 @@ impl DemWorld {
         }
         if new_material || resized || edit.mass.is_some() {
             // Contact parameters depend on the materials and the radii: set them again.
-            let laws = self.laws.clone();
+            let laws = self.contacts.laws.clone();
             self.refresh_pair_laws(&laws);
             self.recheck_time_step();
         }

@@ -1,42 +1,68 @@
-//! Contacts as a user inspects them between two steps (YADE's `O.interactions`): geometry of the
-//! present positions, forces of the last step, the law and its values for the pair.
+//! Contacts as a user inspects them between two steps (YADE's `O.interactions`), of every
+//! pairing in the contact set: forces of the last step, the law and its values for the pair, and
+//! the geometry: of the present positions for spheres (computed again, as YADE does), of the last
+//! step for bodies of plugin kinds (their plugin's geometry found it then).
 
+use crate::dem::contact_set::{MemberKind, Pairing};
 use crate::dem::contact_stage::branch;
 use crate::dem::kind_stage::{BodyContacts, Surroundings};
 use crate::dem::sim::DemWorld;
 use crate::math::Vec3;
 
-/// The other body of a contact.
+/// A member of a contact: a sphere, a wall or a body of a plugin kind, by index.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub enum Other {
-    /// A sphere, by index.
+pub enum Member {
     Sphere(usize),
-    /// A wall, by index.
     Wall(usize),
+    Body(usize),
 }
 
-/// One touching contact. `normal` points from the first sphere towards the other body; `force` is
-/// the force on the first sphere (the other gets its opposite).
+impl Member {
+    fn of(kind: MemberKind, index: usize) -> Member {
+        match kind {
+            MemberKind::Sphere => Member::Sphere(index),
+            MemberKind::Wall => Member::Wall(index),
+            MemberKind::Body => Member::Body(index),
+        }
+    }
+}
+
+/// One touching contact. `normal` points from the first member towards the other; `force` is
+/// the force on the first member (the other gets its opposite).
 #[derive(Debug, Clone)]
 pub struct ContactView {
-    /// Index of the first sphere.
-    pub sphere: usize,
-    pub other: Other,
-    /// Periodic image of the other sphere (zero without a periodic cell).
+    /// The list the contact is in.
+    pub pairing: Pairing,
+    /// A sphere or a body.
+    pub first: Member,
+    pub other: Member,
+    /// Periodic image of the other member (zero without a periodic cell; for a body on a wall
+    /// at several points, the point's number in its first entry).
     pub shift: [i32; 3],
     pub point: Vec3,
     pub normal: Vec3,
-    /// Positive when the bodies overlap.
+    /// Positive when the members overlap.
     pub overlap: f64,
     pub force: Vec3,
-    /// Normal force, positive in compression (the bodies pushed apart): `-force . normal`.
+    /// Normal force, positive in compression (the members pushed apart): `-force . normal`.
     pub normal_force: f64,
     /// Part of `force` in the contact plane.
     pub shear_force: Vec3,
-    /// Index of the contact law in `DemSim::laws`.
+    /// Index of the contact law in the contact set's `laws`.
     pub law: u16,
     /// The law's values for this pair (`ContactLaw::init_pair`).
     pub params: Vec<f64>,
+}
+
+impl ContactView {
+    /// The same contact seen from its other member.
+    fn turned(mut self) -> ContactView {
+        std::mem::swap(&mut self.first, &mut self.other);
+        self.normal = self.normal.map(|n| -n);
+        self.force = self.force.map(|f| -f);
+        self.shear_force = self.shear_force.map(|f| -f);
+        self
+    }
 }
 
 fn dot(a: Vec3, b: Vec3) -> f64 {
@@ -44,60 +70,65 @@ fn dot(a: Vec3, b: Vec3) -> f64 {
 }
 
 impl DemWorld {
-    /// Every contact touching in the last step: sphere pairs in list order, then wall contacts.
+    /// Every contact touching in the last step, list by list in [`Pairing::ALL`]'s order
+    /// (sphere pairs, sphere-wall, body pairs, body-wall, body-sphere), each in pair order.
     pub fn touching_contacts(&self) -> Vec<ContactView> {
         let mut out = Vec::new();
-        for k in 0..self.pairs.len() {
-            if self.pairs.touching[k] {
-                out.push(self.sphere_contact(k));
-            }
-        }
-        for k in 0..self.wall_pairs.len() {
-            if self.wall_pairs.touching[k] {
-                out.push(self.wall_contact(k));
+        for (pairing, list) in self.contacts.lists() {
+            match pairing.body_list() {
+                None => out.extend((0..list.len()).filter(|&k| list.touching[k]).map(|k| self.sphere_view(pairing, k))),
+                Some(n) => out.extend(
+                    self.contacts.body_touches[n]
+                        .iter()
+                        .map(|&(c, point)| self.view(pairing, c.slot, point, c.normal, c.overlap)),
+                ),
             }
         }
         out
     }
 
-    /// The touching contact between spheres `i` and `j` (indices), if any.
+    /// The touching contact between spheres `i` and `j` (indices), if any, seen from `i`.
     pub fn contact_between(&self, i: usize, j: usize) -> Option<ContactView> {
         let (a, b) = (i.max(j) as u32, i.min(j) as u32);
-        let p = &self.pairs;
+        let p = &self.contacts.spheres;
         let start = crate::math::partition_index(0..p.len(), |k| (p.a[k], p.b[k]) < (a, b));
         (start..p.len()).take_while(|&k| (p.a[k], p.b[k]) == (a, b)).find(|&k| p.touching[k]).map(|k| {
-            let mut c = self.sphere_contact(k);
-            if c.sphere != i {
-                // Seen from sphere i: the other side of the same contact.
-                c.sphere = i;
-                c.other = Other::Sphere(j);
-                c.normal = c.normal.map(|n| -n);
-                c.force = c.force.map(|f| -f);
-                c.shear_force = c.shear_force.map(|f| -f);
+            let c = self.sphere_view(Pairing::SphereSphere, k);
+            if c.first == Member::Sphere(i) {
+                c
+            } else {
+                c.turned()
             }
-            c
         })
     }
 
     /// The touching contact between sphere `i` and wall `w`, if any.
     pub fn wall_contact_of(&self, i: usize, w: usize) -> Option<ContactView> {
-        let p = &self.wall_pairs;
+        let p = &self.contacts.sphere_walls;
         (0..p.len())
             .find(|&k| p.touching[k] && p.a[k] as usize == i && p.b[k] as usize == w)
-            .map(|k| self.wall_contact(k))
+            .map(|k| self.sphere_view(Pairing::SphereWall, k))
     }
 
-    fn view(&self, list_is_walls: bool, k: usize, point: Vec3, normal: Vec3, overlap: f64) -> ContactView {
-        let p = if list_is_walls { &self.wall_pairs } else { &self.pairs };
+    /// The touching contacts of body `i` (with bodies, walls and spheres), each seen from it.
+    pub fn body_contacts_of(&self, i: usize) -> Vec<ContactView> {
+        let me = Member::Body(i);
+        let contacts = self.touching_contacts().into_iter().filter(|c| c.first == me || c.other == me);
+        contacts.map(|c| if c.first == me { c } else { c.turned() }).collect()
+    }
+
+    fn view(&self, pairing: Pairing, k: usize, point: Vec3, normal: Vec3, overlap: f64) -> ContactView {
+        let p = self.contacts.list(pairing);
         let force = p.force[k];
         let fn_along = dot(force, normal);
         let shear_force = [0, 1, 2].map(|a| force[a] - fn_along * normal[a]);
         let law = p.law[k];
-        let count = self.laws.get(law as usize).map_or(0, |l| l.param_count());
+        let count = self.contacts.laws.get(law as usize).map_or(0, |l| l.param_count());
         let ps = p.param_stride;
         ContactView {
-            sphere: p.a[k] as usize,
-            other: if list_is_walls { Other::Wall(p.b[k] as usize) } else { Other::Sphere(p.b[k] as usize) },
+            pairing,
+            first: Member::of(pairing.first(), p.a[k] as usize),
+            other: Member::of(pairing.second(), p.b[k] as usize),
             shift: p.shift[k],
             point,
             normal,
@@ -110,35 +141,35 @@ impl DemWorld {
         }
     }
 
+    /// A contact of a sphere list, its geometry from where the spheres are now.
+    fn sphere_view(&self, pairing: Pairing, k: usize) -> ContactView {
+        let s = &self.spheres;
+        if pairing == Pairing::SphereSphere {
+            let (n, overlap, la, _) = self.pair_geometry(&s.x, k);
+            let i = self.contacts.spheres.a[k] as usize;
+            let point = [0, 1, 2].map(|a| s.x[i][a] + la * n[a]);
+            return self.view(pairing, k, point, n, overlap);
+        }
+        let p = &self.contacts.sphere_walls;
+        let (i, w) = (p.a[k] as usize, p.b[k] as usize);
+        match self.walls[w].contact(s.x[i], s.radius[i], f64::INFINITY) {
+            Some(g) => self.view(pairing, k, g.point, g.normal, -g.gap),
+            None => self.view(pairing, k, s.x[i], [0.0; 3], f64::NAN),
+        }
+    }
+
     /// The geometry of sphere pair `k` at positions `x`, as the contact stage makes it: unit
     /// normal from the first sphere to the second, overlap, and the lever arms `(la, lb)` from each
     /// centre to the contact point.
     pub(crate) fn pair_geometry(&self, x: &[Vec3], k: usize) -> (Vec3, f64, f64, f64) {
-        let (i, j) = (self.pairs.a[k] as usize, self.pairs.b[k] as usize);
+        let (i, j) = (self.contacts.spheres.a[k] as usize, self.contacts.spheres.b[k] as usize);
         let r = &self.spheres.radius;
-        let d = branch(x, i, j, self.pairs.shift[k], self.cell.as_ref());
+        let d = branch(x, i, j, self.contacts.spheres.shift[k], self.cell.as_ref());
         let dist = dot(d, d).sqrt();
         let n = if dist > 0.0 { d.map(|c| c / dist) } else { [0.0; 3] };
         let overlap = r[i] + r[j] - dist;
         let la = r[i] - 0.5 * overlap;
         (n, overlap, la, dist - la)
-    }
-
-    fn sphere_contact(&self, k: usize) -> ContactView {
-        let x = &self.spheres.x;
-        let (n, overlap, la, _) = self.pair_geometry(x, k);
-        let i = self.pairs.a[k] as usize;
-        let point = [0, 1, 2].map(|a| x[i][a] + la * n[a]);
-        self.view(false, k, point, n, overlap)
-    }
-
-    fn wall_contact(&self, k: usize) -> ContactView {
-        let (i, w) = (self.wall_pairs.a[k] as usize, self.wall_pairs.b[k] as usize);
-        let s = &self.spheres;
-        match self.walls[w].contact(s.x[i], s.radius[i], f64::INFINITY) {
-            Some(g) => self.view(true, k, g.point, g.normal, -g.gap),
-            None => self.view(true, k, s.x[i], [0.0; 3], f64::NAN),
-        }
     }
 
     /// Pairs of spheres, bodies of plugin kinds and walls whose overlap exceeds `fraction` of the
@@ -149,16 +180,16 @@ impl DemWorld {
     pub fn deep_overlaps(&self, fraction: f64, most: usize) -> Vec<(String, f64)> {
         let s = &self.spheres;
         let mut found: Vec<(String, f64)> = Vec::new();
-        for k in 0..self.pairs.len() {
-            let (i, j) = (self.pairs.a[k] as usize, self.pairs.b[k] as usize);
+        for k in 0..self.contacts.spheres.len() {
+            let (i, j) = (self.contacts.spheres.a[k] as usize, self.contacts.spheres.b[k] as usize);
             let (_, overlap, _, _) = self.pair_geometry(&s.x, k);
             let depth = overlap / s.radius[i].min(s.radius[j]);
             if depth > fraction {
                 found.push((format!("spheres {} and {}", s.id[i], s.id[j]), depth));
             }
         }
-        for k in 0..self.wall_pairs.len() {
-            let (i, w) = (self.wall_pairs.a[k] as usize, self.wall_pairs.b[k] as usize);
+        for k in 0..self.contacts.sphere_walls.len() {
+            let (i, w) = (self.contacts.sphere_walls.a[k] as usize, self.contacts.sphere_walls.b[k] as usize);
             if let Some(g) = self.walls[w].contact(s.x[i], s.radius[i], f64::INFINITY) {
                 let depth = -g.gap / s.radius[i];
                 if depth > fraction {
@@ -179,17 +210,18 @@ impl DemWorld {
         let around = Surroundings {
             spheres: &self.spheres,
             walls: &self.walls,
-            laws: &self.laws,
+            laws: &self.contacts.laws,
             cell: self.cell.as_ref(),
             law_history: self.pair_strides().1,
             dt: self.dt,
             step: self.step,
             time: self.time,
         };
-        let Ok(lists) = BodyContacts::overlaps(k, &around) else { return Vec::new() };
+        let Ok(lists) = BodyContacts::overlaps(k, &self.contacts, &around) else { return Vec::new() };
         let body = |i: usize| format!("{} {}", k.kind_name(i), k.id[i]);
         let mut found = Vec::new();
-        for (n, (list, touching)) in [&k.pairs, &k.wall_pairs, &k.sphere_pairs].into_iter().zip(lists).enumerate() {
+        let c = &self.contacts;
+        for (n, (list, touching)) in [&c.bodies, &c.body_walls, &c.body_spheres].into_iter().zip(lists).enumerate() {
             for (pair, overlap) in touching {
                 let (i, j) = (list.a[pair] as usize, list.b[pair] as usize);
                 let (what, radius) = match n {
@@ -214,8 +246,8 @@ impl DemWorld {
     pub fn fabric_tensor(&self) -> [[f64; 3]; 3] {
         let mut f = [[0.0; 3]; 3];
         let mut count = 0usize;
-        for k in 0..self.pairs.len() {
-            if !self.pairs.touching[k] {
+        for k in 0..self.contacts.spheres.len() {
+            if !self.contacts.spheres.touching[k] {
                 continue;
             }
             let n = self.pair_geometry(&self.spheres.x, k).0;

@@ -4,6 +4,7 @@
 //! the scene through `DemSim`: what they read of it is [`Surroundings`].
 
 use crate::dem::cell::PeriodicCell;
+use crate::dem::contact_set::ContactSet;
 use crate::dem::contacts::PairList;
 use crate::dem::kinds::KindScene;
 use crate::dem::motion::RigidMotion;
@@ -254,7 +255,14 @@ enum Side {
 const SIDES: [Side; 3] = [Side::Bodies, Side::Walls, Side::Spheres];
 
 impl BodyContacts {
-    pub(crate) fn run(bodies: &mut KindScene, around: &Surroundings<'_>) -> Result<()> {
+    /// Settles the bodies' contacts in their three lists (body pairs, walls, spheres: forces,
+    /// history, `touches`) and sums their loads.
+    pub(crate) fn run(
+        bodies: &mut KindScene,
+        lists: &mut [PairList; 3],
+        touches: &mut [Vec<(LawContact, Vec3)>; 3],
+        around: &Surroundings<'_>,
+    ) -> Result<()> {
         bodies.force.iter_mut().for_each(|f| *f = [0.0; 3]);
         bodies.torque.iter_mut().for_each(|t| *t = [0.0; 3]);
         bodies.sphere_loads.clear();
@@ -262,26 +270,15 @@ impl BodyContacts {
             return Ok(());
         }
         let started = std::time::Instant::now();
-        let mut lists = [
-            std::mem::take(&mut bodies.pairs),
-            std::mem::take(&mut bodies.wall_pairs),
-            std::mem::take(&mut bodies.sphere_pairs),
-        ];
-        let found = Self::touching_lists(bodies, around, &mut lists)?;
+        let found = Self::touching_lists(bodies, around, lists)?;
         let detected = std::time::Instant::now();
-        for (n, ((mut list, side), (touching, offsets))) in lists.into_iter().zip(SIDES).zip(found).enumerate() {
-            bodies.touches[n] = touching.iter().map(|f| (f.law, f.point)).collect();
+        for (n, ((list, side), (touching, offsets))) in lists.iter_mut().zip(SIDES).zip(found).enumerate() {
+            touches[n] = touching.iter().map(|f| (f.law, f.point)).collect();
             let points: Vec<Vec3> = touching.iter().map(|f| f.point).collect();
             let contacts: Vec<LawContact> = touching.into_iter().map(|f| f.law).collect();
-            let (force, moment) = laws_in_pair_order(around.laws, &mut list, &contacts, around.dt);
+            let (force, moment) = laws_in_pair_order(around.laws, list, &contacts, around.dt);
             let loads = (&force[..], &moment[..], &offsets[..]);
-            Self::sum_loads(bodies, around.spheres, &mut list, (&contacts, &points), loads, side);
-            let slot = match side {
-                Side::Bodies => &mut bodies.pairs,
-                Side::Walls => &mut bodies.wall_pairs,
-                Side::Spheres => &mut bodies.sphere_pairs,
-            };
-            *slot = list;
+            Self::sum_loads(bodies, around.spheres, list, (&contacts, &points), loads, side);
         }
         bodies.seconds[0] += (detected - started).as_secs_f64();
         bodies.seconds[1] += detected.elapsed().as_secs_f64();
@@ -291,22 +288,22 @@ impl BodyContacts {
     /// The overlaps of the bodies' touching candidate pairs as a step would find them now, list
     /// by list (body pairs, walls, spheres): `(pair, overlap)`. Runs the geometries alone, on
     /// copies of the lists: the scene is left as it is.
-    pub(crate) fn overlaps(bodies: &KindScene, around: &Surroundings<'_>) -> Result<[Vec<(usize, f64)>; 3]> {
+    pub(crate) fn overlaps(
+        bodies: &KindScene,
+        contacts: &ContactSet,
+        around: &Surroundings<'_>,
+    ) -> Result<[Vec<(usize, f64)>; 3]> {
         let mut out: [Vec<(usize, f64)>; 3] = Default::default();
         if bodies.families.is_empty() {
             return Ok(out);
         }
-        let mut lists = [bodies.pairs.clone(), bodies.wall_pairs.clone(), bodies.sphere_pairs.clone()];
+        let mut lists = [contacts.bodies.clone(), contacts.body_walls.clone(), contacts.body_spheres.clone()];
         for (n, (found, _)) in Self::touching_lists(bodies, around, &mut lists)?.into_iter().enumerate() {
             out[n] = found.into_iter().map(|f| (f.law.slot, f.law.overlap)).collect();
         }
         Ok(out)
     }
 
-    /// The touching pairs of a list, from one call of each geometry on its share of it (the
-    /// whole list for a scene of one family); pairs found apart start their law's history again at
-    /// their next touch. `(own, warm)`: the law's history values a pair, and the geometry's after
-    /// them.
     /// The touching pairs of the three lists (body pairs, walls, spheres), the bodies placed once
     /// by each family's geometry (with the images the body pairs meet), and each list's image
     /// offsets of its pairs' second members.
@@ -337,6 +334,10 @@ impl BodyContacts {
             .collect()
     }
 
+    /// The touching pairs of a list, from one call of each geometry on its share of it (the
+    /// whole list for a scene of one family); pairs found apart start their law's history again at
+    /// their next touch. `(own, warm)`: the law's history values a pair, and the geometry's after
+    /// them.
     fn touching(
         geometries: &Geometries<'_>,
         around: &Surroundings<'_>,

@@ -9,7 +9,6 @@ use crate::dem::broad_phase::{periodic_sphere_pairs, sphere_pairs, wall_pairs, C
 use crate::dem::contacts::PairList;
 use crate::dem::pairing::{Other, PairBodies};
 use crate::dem::picture::{rigid_picture, RigidBodies};
-use crate::dem::rigid::LawContact;
 use crate::dem::sim::DemWorld;
 use crate::dem::walls::WallShape;
 use crate::error::{GraniteError, Result};
@@ -74,16 +73,10 @@ pub struct KindScene {
     pub fixed: Vec<bool>,
     pub force: Vec<Vec3>,
     pub torque: Vec<Vec3>,
-    pub(crate) pairs: PairList,
-    pub(crate) wall_pairs: PairList,
-    /// Pairs (body, sphere).
-    pub(crate) sphere_pairs: PairList,
+    /// Positions when the candidate lists were last built.
     pub(crate) x_at_build: Vec<Vec3>,
     /// Loads on spheres from this step's contacts (sphere, force, torque), in pair order.
     pub(crate) sphere_loads: Vec<(u32, Vec3, Vec3)>,
-    /// This step's touching contacts by list (body pairs, walls, spheres), in pair order, with
-    /// their contact points: what the energy tracker and the measures read of them.
-    pub(crate) touches: [Vec<(LawContact, Vec3)>; 3],
     /// Seconds the contacts spent in the geometry and in the laws (with the sums) since the
     /// simulation began: what `granite bench potential` reports.
     pub seconds: [f64; 2],
@@ -107,12 +100,6 @@ impl KindScene {
         (3.0 * self.shapes[self.shape[i] as usize].volume() / (4.0 * std::f64::consts::PI)).cbrt()
     }
 
-    /// The candidate lists (body pairs, body-wall, body-sphere) with their last step's touching
-    /// contacts.
-    pub(crate) fn lists(&self) -> [(&PairList, &[(LawContact, Vec3)]); 3] {
-        [(&self.pairs, &self.touches[0]), (&self.wall_pairs, &self.touches[1]), (&self.sphere_pairs, &self.touches[2])]
-    }
-
     /// Bytes of the bodies' own state (their lists apart).
     pub fn memory_bytes(&self) -> usize {
         let per_body = std::mem::size_of::<u16>() * 2
@@ -123,45 +110,6 @@ impl KindScene {
             + std::mem::size_of::<f64>()
             + 1;
         self.x.capacity() * per_body + self.values.capacity() * std::mem::size_of::<f64>()
-    }
-
-    /// The candidate lists, to read: body pairs, body-wall and body-sphere pairs.
-    pub fn pair_lists(&self) -> [&PairList; 3] {
-        [&self.pairs, &self.wall_pairs, &self.sphere_pairs]
-    }
-
-    /// The pairs of bodies touching one another, `(i, j)`.
-    pub fn touching_body_pairs(&self) -> impl Iterator<Item = (usize, usize)> + '_ {
-        let p = &self.pairs;
-        (0..p.len()).filter(|&k| p.touching[k]).map(|k| (p.a[k] as usize, p.b[k] as usize))
-    }
-
-    /// The touching contacts of body `i`: what it touches, and the force it takes from it (the
-    /// last step's), in list order: bodies, walls, spheres.
-    pub fn contacts_of(&self, i: usize) -> Vec<(Touched, Vec3)> {
-        let mut out = Vec::new();
-        let p = &self.pairs;
-        for k in (0..p.len()).filter(|&k| p.touching[k]) {
-            let (a, b, f) = (p.a[k] as usize, p.b[k] as usize, p.force[k]);
-            if a == i {
-                out.push((Touched::Body(b), f));
-            } else if b == i {
-                out.push((Touched::Body(a), f.map(|c| -c)));
-            }
-        }
-        for (list, side) in
-            [(&self.wall_pairs, Touched::Wall as fn(usize) -> Touched), (&self.sphere_pairs, Touched::Sphere)]
-        {
-            for k in (0..list.len()).filter(|&k| list.touching[k] && list.a[k] as usize == i) {
-                out.push((side(list.b[k] as usize), list.force[k]));
-            }
-        }
-        out
-    }
-
-    /// Touching contacts of the bodies (with one another, walls and spheres).
-    pub fn contact_count(&self) -> usize {
-        self.pairs.touching_count() + self.wall_pairs.touching_count() + self.sphere_pairs.touching_count()
     }
 
     /// The bodies as family `own`'s geometry reads them.
@@ -262,8 +210,7 @@ impl KindScene {
         out
     }
 
-    /// Keeps the bodies whose flag is true, in order; the pairs between those that stay keep
-    /// their history.
+    /// Keeps the bodies whose flag is true, in order (their lists are the contact set's).
     pub(crate) fn retain(&mut self, keep: &[bool]) {
         use crate::mpm::points::{retain_by as kept, retain_strided};
         retain_strided(&mut self.values, self.stride, keep);
@@ -281,10 +228,6 @@ impl KindScene {
         kept(&mut self.force, keep);
         kept(&mut self.torque, keep);
         kept(&mut self.x_at_build, keep);
-        self.pairs.retain_spheres(keep, true);
-        self.wall_pairs.retain_spheres(keep, false);
-        self.sphere_pairs.retain_spheres(keep, false);
-        self.touches = Default::default();
         if self.is_empty() {
             self.forget_families();
         }
@@ -297,12 +240,6 @@ impl KindScene {
         } else {
             self.mass[i]
         }
-    }
-
-    /// The history of the lists (body pairs, walls, spheres): what the energy tracker compares a
-    /// step's with.
-    pub(crate) fn histories(&self) -> [Vec<f64>; 3] {
-        [self.pairs.history.clone(), self.wall_pairs.history.clone(), self.sphere_pairs.history.clone()]
     }
 
     /// Kinetic energy of the free bodies (translation and rotation).
@@ -318,14 +255,6 @@ impl KindScene {
             })
             .sum()
     }
-}
-
-/// What a body touches ([`KindScene::contacts_of`]): a body, a wall or a sphere, by index.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub enum Touched {
-    Body(usize),
-    Wall(usize),
-    Sphere(usize),
 }
 
 /// A body of a kind to add ([`DemWorld::add_body`]).
@@ -412,6 +341,11 @@ impl DemWorld {
     /// Removes the bodies whose flag is false; the pairs of those that stay keep their history.
     pub fn remove_bodies(&mut self, keep: &[bool]) {
         self.kinds.retain(keep);
+        let c = &mut self.contacts;
+        c.bodies.retain_spheres(keep, true);
+        c.body_walls.retain_spheres(keep, false);
+        c.body_spheres.retain_spheres(keep, false);
+        c.body_touches = Default::default();
         self.needs_rebuild = true;
     }
 
@@ -508,11 +442,7 @@ impl DemWorld {
             }
         }
         let strides = self.kind_strides();
-        let mut lists = [
-            std::mem::take(&mut self.kinds.pairs),
-            std::mem::take(&mut self.kinds.wall_pairs),
-            std::mem::take(&mut self.kinds.sphere_pairs),
-        ];
+        let mut lists = self.contacts.take_body_lists();
         let mut missing = None;
         for (list, (candidates, other)) in lists.iter_mut().zip([
             (&bodies, Other::Same),
@@ -526,7 +456,7 @@ impl DemWorld {
             });
             missing = missing.or(none);
         }
-        [self.kinds.pairs, self.kinds.wall_pairs, self.kinds.sphere_pairs] = lists;
+        self.contacts.put_body_lists(lists);
         if let Some(pair) = missing {
             return Err(self.missing_law(pair));
         }

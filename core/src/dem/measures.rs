@@ -1,6 +1,7 @@
 //! Measures of a DEM state: energies, unbalanced force, coordination (thesis 5.14), Love-Weber
 //! stress (4.7), global stress with gravity (appendix A, eq. .14).
 
+use crate::dem::contact_set::{MemberKind, Pairing};
 use crate::dem::contacts::PairList;
 use crate::dem::sim::DemWorld;
 use crate::math::{Vec3, Voigt};
@@ -61,18 +62,34 @@ impl DemWorld {
         overlap.max(0.0)
     }
 
+    /// The touching pairs of a list with their overlaps: the spheres' found again where they are,
+    /// the bodies' as their last step found them.
+    pub(crate) fn touching_overlaps(&self, pairing: Pairing) -> Vec<(usize, f64)> {
+        let list = self.contacts.list(pairing);
+        let touching = (0..list.len()).filter(|&k| list.touching[k]);
+        match pairing.body_list() {
+            None => touching.map(|k| (k, self.overlap_of(list, k, pairing == Pairing::SphereWall))).collect(),
+            Some(n) => {
+                let touches = &self.contacts.body_touches[n];
+                let overlap =
+                    |k: usize| touches.binary_search_by_key(&k, |(c, _)| c.slot).map_or(0.0, |t| touches[t].0.overlap);
+                touching.map(|k| (k, overlap(k))).collect()
+            }
+        }
+    }
+
     /// Contacts per sphere (sphere-sphere and sphere-wall), in sphere order.
     pub fn contact_counts(&self) -> Vec<u32> {
         let mut count = vec![0u32; self.spheres.len()];
-        for k in 0..self.pairs.len() {
-            if self.pairs.touching[k] {
-                count[self.pairs.a[k] as usize] += 1;
-                count[self.pairs.b[k] as usize] += 1;
+        for k in 0..self.contacts.spheres.len() {
+            if self.contacts.spheres.touching[k] {
+                count[self.contacts.spheres.a[k] as usize] += 1;
+                count[self.contacts.spheres.b[k] as usize] += 1;
             }
         }
-        for k in 0..self.wall_pairs.len() {
-            if self.wall_pairs.touching[k] {
-                count[self.wall_pairs.a[k] as usize] += 1;
+        for k in 0..self.contacts.sphere_walls.len() {
+            if self.contacts.sphere_walls.touching[k] {
+                count[self.contacts.sphere_walls.a[k] as usize] += 1;
             }
         }
         count
@@ -83,9 +100,9 @@ impl DemWorld {
     pub fn grain_contact_counts(&self) -> Vec<u32> {
         let mut count = self.contact_counts();
         let ns = count.len();
-        let k = &self.kinds;
-        count.resize(ns + k.len(), 0);
-        for (list, second) in [(&k.pairs, Some(ns)), (&k.wall_pairs, None), (&k.sphere_pairs, Some(0))] {
+        count.resize(ns + self.kinds.len(), 0);
+        let c = &self.contacts;
+        for (list, second) in [(&c.bodies, Some(ns)), (&c.body_walls, None), (&c.body_spheres, Some(0))] {
             for c in (0..list.len()).filter(|&c| list.touching[c]) {
                 count[ns + list.a[c] as usize] += 1;
                 if let Some(first) = second {
@@ -159,41 +176,18 @@ impl DemWorld {
         }
         let mut contact_force = 0.0;
         let mut touching = 0usize;
-        for (list, wall) in [(&self.pairs, false), (&self.wall_pairs, true)] {
+        for (pairing, list) in self.contacts.lists() {
             let (ps, hs) = (list.param_stride, list.history_stride);
-            for k in 0..list.len() {
-                if !list.touching[k] {
-                    continue;
-                }
+            for (k, overlap) in self.touching_overlaps(pairing) {
                 let f = list.force[k];
                 contact_force += (f[0] * f[0] + f[1] * f[1] + f[2] * f[2]).sqrt();
                 touching += 1;
-                if wall {
+                if pairing.second() == MemberKind::Wall {
                     d.wall_contacts += 1;
                 } else {
                     d.contacts += 1;
                 }
-                let law = &self.laws[list.law[k] as usize];
-                d.elastic_energy += law.elastic_energy(
-                    self.overlap_of(list, k, wall),
-                    &list.params[k * ps..(k + 1) * ps],
-                    &list.history[k * hs..(k + 1) * hs],
-                );
-            }
-        }
-        for (n, (list, touches)) in self.kinds.lists().into_iter().enumerate() {
-            let (ps, hs) = (list.param_stride, list.history_stride);
-            for k in (0..list.len()).filter(|&k| list.touching[k]) {
-                let f = list.force[k];
-                contact_force += (f[0] * f[0] + f[1] * f[1] + f[2] * f[2]).sqrt();
-                touching += 1;
-                if n == 1 {
-                    d.wall_contacts += 1;
-                } else {
-                    d.contacts += 1;
-                }
-                let law = &self.laws[list.law[k] as usize];
-                let overlap = touches.binary_search_by_key(&k, |(c, _)| c.slot).map_or(0.0, |t| touches[t].0.overlap);
+                let law = &self.contacts.laws[list.law[k] as usize];
                 d.elastic_energy += law.elastic_energy(
                     overlap,
                     &list.params[k * ps..(k + 1) * ps],
@@ -218,7 +212,13 @@ impl DemWorld {
         let k = &self.kinds;
         let n = self.spheres.len() + k.len();
         let counts = self.grain_contact_counts();
-        let contacts = self.pairs.touching_count() + k.pairs.touching_count() + k.sphere_pairs.touching_count();
+        let contacts = self
+            .contacts
+            .lists()
+            .iter()
+            .filter(|(p, _)| p.second() != MemberKind::Wall)
+            .map(|(_, l)| l.touching_count())
+            .sum();
         let rattlers = counts.iter().filter(|&&c| c == 1).count();
         let floaters = counts.iter().filter(|&&c| c == 0).count();
         // Eq. 5.14 with N_contacts counted per particle end: each contact has two ends.
@@ -255,7 +255,7 @@ impl DemWorld {
         // thread count. The servo needs them every step; when the step runs in parallel, so do
         // the runs, keeping both cores busy instead of leaving one to fall asleep while the
         // other sums alone.
-        let len = self.pairs.len();
+        let len = self.contacts.spheres.len();
         let per = len.div_ceil(STRESS_LANES).max(1);
         let lanes: Vec<std::ops::Range<usize>> =
             (0..STRESS_LANES).map(|t| (t * per).min(len)..((t + 1) * per).min(len)).collect();
@@ -290,8 +290,8 @@ impl DemWorld {
     fn body_pair_sums(&self) -> ([f64; 9], [f64; 3]) {
         let mut s = [0.0; 9];
         let mut k = [0.0; 3];
-        let b = &self.kinds;
-        for (p, centres) in [(&b.pairs, &b.x), (&b.sphere_pairs, &self.spheres.x)] {
+        let (b, c) = (&self.kinds, &self.contacts);
+        for (p, centres) in [(&c.bodies, &b.x), (&c.body_spheres, &self.spheres.x)] {
             let ps = p.param_stride;
             for c in (0..p.len()).filter(|&c| p.touching[c]) {
                 let image = match &self.cell {
@@ -300,7 +300,7 @@ impl DemWorld {
                 };
                 let (xi, xj) = (b.x[p.a[c] as usize], centres[p.b[c] as usize]);
                 let l: Vec3 = std::array::from_fn(|a| xj[a] + image[a] - xi[a]);
-                let kn = self.laws[p.law[c] as usize].normal_stiffness(&p.params[c * ps..(c + 1) * ps]);
+                let kn = self.contacts.laws[p.law[c] as usize].normal_stiffness(&p.params[c * ps..(c + 1) * ps]);
                 add_contact_sums((&mut s, &mut k), p.force[c], l, kn);
             }
         }
@@ -311,7 +311,7 @@ impl DemWorld {
     fn pair_sums(&self, range: std::ops::Range<usize>) -> ([f64; 9], [f64; 3]) {
         let mut s = [0.0; 9];
         let mut k = [0.0; 3];
-        let p = &self.pairs;
+        let p = &self.contacts.spheres;
         let ps = p.param_stride;
         for c in range {
             if !p.touching[c] {
@@ -333,7 +333,7 @@ impl DemWorld {
                     s[3 * a + b] += f[a] * l[b];
                 }
             }
-            let kn = self.laws[p.law[c] as usize].normal_stiffness(&p.params[c * ps..(c + 1) * ps]);
+            let kn = self.contacts.laws[p.law[c] as usize].normal_stiffness(&p.params[c * ps..(c + 1) * ps]);
             if kn > 0.0 {
                 for a in 0..3 {
                     k[a] += kn * l[a] * l[a];
@@ -347,7 +347,7 @@ impl DemWorld {
     /// on the particles at their contact points plus `m g x` of every particle, over `volume`.
     pub fn global_stress_with_gravity(&self, volume: f64) -> Voigt {
         let mut s = [0.0; 9];
-        let p = &self.wall_pairs;
+        let p = &self.contacts.sphere_walls;
         for k in 0..p.len() {
             if !p.touching[k] {
                 continue;

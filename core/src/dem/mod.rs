@@ -8,6 +8,7 @@ pub mod bodies;
 pub mod broad_phase;
 pub mod cell;
 pub mod clump;
+pub mod contact_set;
 pub mod contact_stage;
 pub mod contacts;
 pub mod delaunay;

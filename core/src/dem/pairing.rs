@@ -5,6 +5,7 @@
 //! laws themselves (`ext::ContactLaw`) are apart from it.
 
 use crate::dem::broad_phase::Candidate;
+use crate::dem::contact_set::{MemberKind, Pairing};
 use crate::dem::contacts::PairList;
 use crate::dem::sim::DemWorld;
 use crate::error::GraniteError;
@@ -31,18 +32,17 @@ pub(crate) enum Other<'a> {
 }
 
 impl DemWorld {
-    /// Values per pair (parameters, history) the pair lists are laid out for: the most any law
-    /// keeps (at least one of each), so that pairs of different laws share one list.
+    /// Values per pair (parameters, history) the pair lists are laid out for (see
+    /// [`ContactSet::pair_strides`]).
     pub fn pair_strides(&self) -> (usize, usize) {
-        let most = |count: fn(&Arc<dyn ContactLaw>) -> usize| self.laws.iter().map(count).max().unwrap_or(0).max(1);
-        (most(|l| l.param_count()), most(|l| l.history_count()))
+        self.contacts.pair_strides()
     }
 
     /// The law index a key uses: a material pair's own law or, with None, the default law.
     pub fn law_index(&self, pair: Option<(u16, u16)>) -> Option<u16> {
         match pair {
             Some((a, b)) => self.law_for(a, b),
-            None => self.default_law,
+            None => self.contacts.default_law,
         }
     }
 
@@ -54,24 +54,11 @@ impl DemWorld {
     pub(crate) fn refresh_pair_laws(&mut self, old_laws: &[Arc<dyn ContactLaw>]) {
         let (ps, hs) = self.pair_strides();
         let warm = self.kinds.warm_values();
-        let k = &mut self.kinds;
-        let mut lists = [
-            std::mem::take(&mut self.pairs),
-            std::mem::take(&mut self.wall_pairs),
-            std::mem::take(&mut k.pairs),
-            std::mem::take(&mut k.wall_pairs),
-            std::mem::take(&mut k.sphere_pairs),
-        ];
-        let (s, k) = (&self.spheres, &self.kinds);
-        let sides = [
-            (&s.material, Other::Of(&s.material), 0),
-            (&s.material, Other::Walls, 0),
-            (&k.material, Other::Same, warm),
-            (&k.material, Other::Walls, warm),
-            (&k.material, Other::Of(&s.material), warm),
-        ];
+        let mut lists = self.contacts.take_lists();
         let mut lost = false;
-        for (n, (list, &(first, other, warm))) in lists.iter_mut().zip(&sides).enumerate() {
+        for (list, pairing) in lists.iter_mut().zip(Pairing::ALL) {
+            // Body lists keep their geometry's warm starts after the law's values.
+            let warm = if pairing.first() == MemberKind::Body { warm } else { 0 };
             if list.is_empty() {
                 list.param_stride = ps;
                 list.history_stride = hs + warm;
@@ -81,46 +68,56 @@ impl DemWorld {
             let hs_list = list.history_stride;
             for p in 0..list.len() {
                 let (a, b) = (list.a[p] as usize, list.b[p] as usize);
-                let mb = match other {
-                    Other::Same => first[b],
-                    Other::Walls => self.walls[b].material,
-                    Other::Of(materials) => materials[b],
-                };
-                let Some(law) = self.law_for(first[a], mb) else {
+                let (ma, mb) = self.pair_materials(pairing, a, b);
+                let Some(law) = self.law_for(ma, mb) else {
                     // No law for this pair any more: the next rebuild says so.
                     lost = true;
                     continue;
                 };
                 let same_kind = old_laws.get(list.law[p] as usize).is_some_and(|old| {
-                    let new = &self.laws[law as usize];
+                    let new = &self.contacts.laws[law as usize];
                     old.name() == new.name() && old.history_count() == new.history_count()
                 });
                 list.law[p] = law;
-                let info = match n {
-                    0 => self.info_for(a, b, false),
-                    1 => self.info_for(a, b, true),
-                    _ => self.kind_info(a, b, other),
-                };
+                let info = self.pairing_info(pairing, a, b);
                 let params = &mut list.params[p * ps..(p + 1) * ps];
                 params.fill(0.0);
-                self.laws[law as usize].init_pair(&info, params);
+                self.contacts.laws[law as usize].init_pair(&info, params);
                 if !same_kind {
                     list.history[p * hs_list..p * hs_list + hs].fill(0.0);
                     list.touching[p] = false;
                 }
             }
         }
-        let [spheres, walls, bodies, body_walls, body_spheres] = lists;
-        (self.pairs, self.wall_pairs) = (spheres, walls);
-        let k = &mut self.kinds;
-        (k.pairs, k.wall_pairs, k.sphere_pairs) = (bodies, body_walls, body_spheres);
+        self.contacts.put_lists(lists);
         // The spare list is storage for the next rebuild: its layout is set there.
         self.needs_rebuild |= lost;
     }
 
+    /// The materials of the two members of pair `(a, b)` of a list of `pairing`.
+    pub(crate) fn pair_materials(&self, pairing: Pairing, a: usize, b: usize) -> (u16, u16) {
+        let of = |kind: MemberKind, i: usize| match kind {
+            MemberKind::Sphere => self.spheres.material[i],
+            MemberKind::Wall => self.walls[i].material,
+            MemberKind::Body => self.kinds.material[i],
+        };
+        (of(pairing.first(), a), of(pairing.second(), b))
+    }
+
+    /// What the law of pair `(a, b)` of a list of `pairing` sets its parameters from.
+    pub(crate) fn pairing_info(&self, pairing: Pairing, a: usize, b: usize) -> PairInfo {
+        match pairing {
+            Pairing::SphereSphere => self.info_for(a, b, false),
+            Pairing::SphereWall => self.info_for(a, b, true),
+            Pairing::BodyBody => self.kind_info(a, b, Other::Same),
+            Pairing::BodyWall => self.kind_info(a, b, Other::Walls),
+            Pairing::BodySphere => self.kind_info(a, b, Other::Of(&self.spheres.material)),
+        }
+    }
+
     /// The law of a pair of materials: its own, else the default one.
     pub fn law_for(&self, a: u16, b: u16) -> Option<u16> {
-        self.law_of.get(&(a.min(b), a.max(b))).copied().or(self.default_law)
+        self.contacts.law_for(a, b)
     }
 
     /// [`PairList::merge`] with each new pair given the law of its bodies' materials and its
@@ -148,7 +145,7 @@ impl DemWorld {
             let pair = materials(a, b);
             let Some(l) = self.law_for(pair.0, pair.1) else { return false };
             *law = l;
-            self.laws[l as usize].init_pair(&info(a, b), params);
+            self.contacts.laws[l as usize].init_pair(&info(a, b), params);
             true
         });
         missing.map(|(a, b)| materials(a as usize, b as usize))

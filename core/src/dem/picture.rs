@@ -1,7 +1,7 @@
 //! What a DEM frame shows in ParaView besides the spheres: the walls as surfaces and the contact
 //! network (force chains) as lines.
 
-use crate::dem::inspect::Other;
+use crate::dem::inspect::Member;
 use crate::dem::sim::DemWorld;
 use crate::dem::walls::WallShape;
 use crate::io::vtk::{Field, PolyData};
@@ -104,11 +104,11 @@ impl DemWorld {
         p
     }
 
-    /// The contacts touching in the last step as lines: between the two spheres' centres (the
-    /// other one's periodic image where the pair crosses the cell), or from a sphere's centre to
-    /// its contact point on a wall. Cell data: `normal_force` (compression positive),
-    /// `shear_force` (its magnitude), `force` (on the first sphere), `id1`, `id2` (-1 for a wall),
-    /// `wall` (-1 for a sphere pair), `overlap`.
+    /// The contacts touching in the last step as lines: between the two centres (a sphere's or
+    /// a body's of a plugin kind; the other one's periodic image where the pair crosses the
+    /// cell), or from a centre to its contact point on a wall. Cell data: `normal_force`
+    /// (compression positive), `shear_force` (its magnitude), `force` (on the first member),
+    /// `id1`, `id2` (-1 for a wall), `wall` (-1 for a pair of grains), `overlap`.
     pub fn contacts_picture(&self) -> PolyData {
         let mut p = PolyData::default();
         let contacts = self.touching_contacts();
@@ -116,24 +116,31 @@ impl DemWorld {
         let (mut fn_, mut ft, mut force, mut overlap) =
             (Vec::with_capacity(n), Vec::with_capacity(n), Vec::with_capacity(3 * n), Vec::with_capacity(n));
         let (mut id1, mut id2, mut wall) = (Vec::with_capacity(n), Vec::with_capacity(n), Vec::with_capacity(n));
-        let s = &self.spheres;
+        let (s, k) = (&self.spheres, &self.kinds);
+        // A grain's centre and id.
+        let grain = |m: Member| match m {
+            Member::Sphere(i) => Some((s.x[i], s.id[i] as i64)),
+            Member::Body(i) => Some((k.x[i], k.id[i] as i64)),
+            Member::Wall(_) => None,
+        };
         for c in &contacts {
-            let from = s.x[c.sphere];
-            let to = match c.other {
-                Other::Sphere(j) => {
+            let Some((from, first_id)) = grain(c.first) else { continue };
+            let to = match (c.other, grain(c.other)) {
+                (_, Some((centre, id))) => {
                     let image = match (&self.cell, c.shift) {
                         (Some(cell), shift) if shift != [0; 3] => cell.shift_vector(shift),
                         _ => [0.0; 3],
                     };
-                    id2.push(s.id[j] as i64);
+                    id2.push(id);
                     wall.push(-1);
-                    [0, 1, 2].map(|a| s.x[j][a] + image[a])
+                    [0, 1, 2].map(|a| centre[a] + image[a])
                 }
-                Other::Wall(w) => {
+                (Member::Wall(w), None) => {
                     id2.push(-1);
                     wall.push(w as i64);
                     c.point
                 }
+                _ => continue,
             };
             let first = p.points.len() as u32;
             p.points.push(from);
@@ -143,7 +150,7 @@ impl DemWorld {
             ft.push((c.shear_force.iter().map(|f| f * f).sum::<f64>()).sqrt());
             force.extend(c.force);
             overlap.push(c.overlap);
-            id1.push(s.id[c.sphere] as i64);
+            id1.push(first_id);
         }
         p.cell_fields = vec![
             Field::float("normal_force", 1, fn_),

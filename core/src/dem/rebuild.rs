@@ -40,7 +40,10 @@ impl Rebuild {
         }
         world.wrap_into_cell(self.skin)?;
         // Renumbering would leave the bodies' pairs with spheres pointing at others.
-        if world.pairs.is_empty() && world.wall_pairs.is_empty() && world.kinds.sphere_pairs.is_empty() {
+        if world.contacts.spheres.is_empty()
+            && world.contacts.sphere_walls.is_empty()
+            && world.contacts.body_spheres.is_empty()
+        {
             world.order_spheres_in_space(self.skin);
         }
         let w = &*world;
@@ -58,8 +61,8 @@ impl Rebuild {
                 });
             }
         }
-        let mut pairs = std::mem::take(&mut world.pairs);
-        let mut wall_list = std::mem::take(&mut world.wall_pairs);
+        let mut pairs = std::mem::take(&mut world.contacts.spheres);
+        let mut wall_list = std::mem::take(&mut world.contacts.sphere_walls);
         let w = &*world;
         let s = &w.spheres;
         let strides = (p_stride, h_stride);
@@ -77,8 +80,8 @@ impl Rebuild {
             (merge_spheres(), find_and_merge_walls())
         };
         let missing = missing_walls.or(missing_spheres);
-        world.pairs = pairs;
-        world.wall_pairs = wall_list;
+        world.contacts.spheres = pairs;
+        world.contacts.sphere_walls = wall_list;
         if let Some(pair) = missing {
             return Err(world.missing_law(pair));
         }
@@ -130,8 +133,8 @@ impl DemWorld {
             *x = sub(*x, cell.shift_vector(*k));
         }
         // A pair's second body or sphere is seen through the image that keeps it where it was.
-        let k = &mut self.kinds;
-        for (list, second) in [(&mut k.pairs, &body_offsets), (&mut k.sphere_pairs, &offsets)] {
+        let c = &mut self.contacts;
+        for (list, second) in [(&mut c.bodies, &body_offsets), (&mut c.body_spheres, &offsets)] {
             for i in 0..list.len() {
                 let (ka, kb) = (body_offsets[list.a[i] as usize], second[list.b[i] as usize]);
                 for a in 0..3 {
@@ -148,7 +151,7 @@ impl DemWorld {
             let v = cell.shift_vector(*k);
             *x = sub(*x, v);
         }
-        let p = &mut self.pairs;
+        let p = &mut self.contacts.spheres;
         for i in 0..p.len() {
             let (ka, kb) = (offsets[p.a[i] as usize], offsets[p.b[i] as usize]);
             for a in 0..3 {

@@ -27,7 +27,7 @@ impl Rve {
             return Err(GraniteError::Setup(format!("{owner}: the `rve` must have a periodic cell")));
         }
         let grains = sim.world.spheres.len() + sim.world.kinds.len();
-        if grains == 0 || sim.world.dt <= 0.0 || sim.world.laws.is_empty() {
+        if grains == 0 || sim.world.dt <= 0.0 || sim.world.contacts.laws.is_empty() {
             return Err(GraniteError::Setup(format!(
                 "{owner}: the `rve` needs grains (spheres or bodies), a contact law and a time step"
             )));
@@ -181,7 +181,7 @@ impl Rve {
         let s = &sim.world.spheres;
         let counts = sim.world.contact_counts();
         let mut particle_p = vec![0.0; s.len()];
-        let p = &sim.world.pairs;
+        let p = &sim.world.contacts.spheres;
         for c in 0..p.len() {
             if !p.touching[c] {
                 continue;

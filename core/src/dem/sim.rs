@@ -9,7 +9,6 @@ use crate::error::{GraniteError, Result};
 pub use crate::ext::contact::Elastic;
 use crate::ext::{ContactLaw, PairInfo};
 use crate::math::{add3, scale3, Vec3};
-use std::collections::HashMap;
 use std::sync::Arc;
 
 #[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
@@ -32,10 +31,6 @@ pub struct DemWorld {
     pub clumps: Clumps,
     pub walls: Vec<Wall>,
     pub materials: Vec<DemMaterial>,
-    /// Contact laws; `law_of` maps a material pair to one of them, `default_law` covers the rest.
-    pub laws: Vec<Arc<dyn ContactLaw>>,
-    pub law_of: HashMap<(u16, u16), u16>,
-    pub default_law: Option<u16>,
     pub gravity: Vec3,
     /// A periodic cell, or None for an open domain. Sphere velocities are then the fluctuations
     /// around the cell's affine field `L x`.
@@ -50,14 +45,13 @@ pub struct DemWorld {
     pub time: f64,
     pub step: u64,
     pub seed: u64,
-    /// The sphere–sphere and sphere–wall contacts (candidate pairs with their law, parameters
-    /// and history).
-    pub pairs: PairList,
-    pub wall_pairs: PairList,
+    /// The contact laws and every candidate pair (of spheres, bodies of plugin kinds and walls)
+    /// with its law, parameters and history.
+    pub contacts: crate::dem::contact_set::ContactSet,
     /// Lasting external loads on single spheres, by id (see `bodies.rs`).
     pub external: Vec<crate::dem::particles::ExternalLoad>,
-    /// Bodies of a plugin kind (potential particles, capsules, ...), their candidate lists and
-    /// loads for the spheres (see `dem::kinds`).
+    /// Bodies of a plugin kind (potential particles, capsules, ...) and their loads for the
+    /// spheres (see `dem::kinds`).
     pub kinds: crate::dem::kinds::KindScene,
     pub events: Vec<String>,
     pub(crate) next_id: u64,
@@ -202,9 +196,6 @@ impl DemWorld {
             clumps: Clumps::default(),
             walls: Vec::new(),
             materials: Vec::new(),
-            laws: Vec::new(),
-            law_of: HashMap::new(),
-            default_law: None,
             gravity: [0.0; 3],
             cell: None,
             cell_control: None,
@@ -214,8 +205,7 @@ impl DemWorld {
             time: 0.0,
             step: 0,
             seed: 0,
-            pairs: PairList::default(),
-            wall_pairs: PairList::default(),
+            contacts: Default::default(),
             external: Vec::new(),
             kinds: Default::default(),
             events: Vec::new(),
@@ -252,7 +242,7 @@ impl DemWorld {
             .get_mut(m as usize)
             .ok_or_else(|| GraniteError::Setup(format!("no material with index {m}")))?;
         material.elastic = elastic;
-        let laws = self.laws.clone();
+        let laws = self.contacts.laws.clone();
         self.refresh_pair_laws(&laws);
         self.recheck_time_step();
         Ok(())
@@ -282,34 +272,36 @@ impl DemWorld {
                 law.name()
             )));
         }
-        let old_laws = self.laws.clone();
+        let old_laws = self.contacts.laws.clone();
         let key = pair.map(|(a, b)| (a.min(b), a.max(b)));
         let current = match key {
-            Some(k) => self.law_of.get(&k).copied(),
-            None => self.default_law,
+            Some(k) => self.contacts.law_of.get(&k).copied(),
+            None => self.contacts.default_law,
         };
-        let users =
-            |idx: u16| self.law_of.values().filter(|&&v| v == idx).count() + usize::from(self.default_law == Some(idx));
+        let users = |idx: u16| {
+            self.contacts.law_of.values().filter(|&&v| v == idx).count()
+                + usize::from(self.contacts.default_law == Some(idx))
+        };
         // A law of this key alone is replaced where it is; one shared (split off by a change of
         // one pair's parameters) stays for the others.
         let idx = match current {
             Some(idx) if users(idx) == 1 => {
-                self.laws[idx as usize] = Arc::from(law);
+                self.contacts.laws[idx as usize] = Arc::from(law);
                 idx
             }
             _ => {
-                if self.laws.len() >= u16::MAX as usize {
+                if self.contacts.laws.len() >= u16::MAX as usize {
                     return Err(GraniteError::Setup("too many contact laws".into()));
                 }
-                self.laws.push(Arc::from(law));
-                (self.laws.len() - 1) as u16
+                self.contacts.laws.push(Arc::from(law));
+                (self.contacts.laws.len() - 1) as u16
             }
         };
         match key {
             Some(k) => {
-                self.law_of.insert(k, idx);
+                self.contacts.law_of.insert(k, idx);
             }
-            None => self.default_law = Some(idx),
+            None => self.contacts.default_law = Some(idx),
         }
         self.refresh_pair_laws(&old_laws);
         self.recheck_time_step();
@@ -356,7 +348,10 @@ impl DemWorld {
     pub fn set_cell(&mut self, cell: Option<PeriodicCell>) {
         self.cell_reference = cell.as_ref().map(|c| c.h);
         self.cell = cell;
-        self.pairs = PairList::default();
+        // Pairs with an image are keyed by a shift of the old cell.
+        for list in [&mut self.contacts.spheres, &mut self.contacts.bodies, &mut self.contacts.body_spheres] {
+            *list = PairList::default();
+        }
         self.needs_rebuild = true;
     }
 
@@ -506,11 +501,11 @@ impl DemWorld {
         self.external.retain(|l| !gone.contains(&l.id));
         self.spheres.retain(&keep);
         // Contacts between spheres that stay keep their history.
-        self.pairs.retain_spheres(&keep, true);
-        self.wall_pairs.retain_spheres(&keep, false);
+        self.contacts.spheres.retain_spheres(&keep, true);
+        self.contacts.sphere_walls.retain_spheres(&keep, false);
         // The bodies' pairs with spheres name them by index: found again at the next rebuild,
         // their contacts starting afresh.
-        self.kinds.sphere_pairs = Default::default();
+        self.contacts.body_spheres = Default::default();
         self.needs_rebuild = true;
     }
 
@@ -519,7 +514,7 @@ impl DemWorld {
     /// every step, where it was a serial pass of 8 us in a step of the 10k-sphere deposition
     /// that any number of threads waited for. Zero for a wall index out of range.
     pub fn wall_force(&self, w: usize) -> Vec3 {
-        [&self.wall_pairs, self.kinds.lists()[1].0].into_iter().fold([0.0; 3], |sum, pairs| {
+        [&self.contacts.sphere_walls, &self.contacts.body_walls].into_iter().fold([0.0; 3], |sum, pairs| {
             pairs
                 .b
                 .iter()
@@ -532,7 +527,7 @@ impl DemWorld {
     /// [`DemWorld::wall_force`] of every wall, in one pass over the pairs.
     pub fn wall_forces(&self) -> Vec<Vec3> {
         let mut forces = vec![[0.0; 3]; self.walls.len()];
-        for pairs in [&self.wall_pairs, self.kinds.lists()[1].0] {
+        for pairs in [&self.contacts.sphere_walls, &self.contacts.body_walls] {
             for (&b, f) in pairs.b.iter().zip(&pairs.force) {
                 if let Some(sum) = forces.get_mut(b as usize) {
                     *sum = add3(*sum, scale3(*f, -1.0));
@@ -556,14 +551,14 @@ impl DemWorld {
             let arm = crate::math::sub3(point, about);
             torque = add3(torque, crate::math::cross3(arm, scale3(f, -1.0)));
         };
-        let p = &self.wall_pairs;
+        let p = &self.contacts.sphere_walls;
         for k in (0..p.len()).filter(|&k| p.touching[k] && on[p.b[k] as usize]) {
             let (i, w) = (p.a[k] as usize, p.b[k] as usize);
             if let Some(c) = self.walls[w].contact(self.spheres.x[i], self.spheres.radius[i], f64::INFINITY) {
                 add(c.point, p.force[k]);
             }
         }
-        let (list, touches) = self.kinds.lists()[1];
+        let (list, touches) = (&self.contacts.body_walls, &self.contacts.body_touches[1]);
         for &(c, point) in touches {
             if on[list.b[c.slot] as usize] {
                 add(point, list.force[c.slot]);
@@ -579,7 +574,7 @@ impl DemWorld {
         let mut best: Option<f64> = None;
         let mut consider = |law: Option<u16>, info: PairInfo| {
             if let Some(l) = law {
-                let k = self.laws[l as usize].max_normal_stiffness(&info);
+                let k = self.contacts.laws[l as usize].max_normal_stiffness(&info);
                 if k > 0.0 {
                     let dt = (info.effective_mass() / k).sqrt();
                     best = Some(best.map_or(dt, |b: f64| b.min(dt)));
@@ -664,7 +659,7 @@ impl DemWorld {
             for (b, r2) in others {
                 let Some(law) = self.law_for(a, b) else { continue };
                 let info = PairInfo { radius: [1.0, r2], mass: [1.0, r2], seed: 0, elastic: [elastic(a), elastic(b)] };
-                let law = &self.laws[law as usize];
+                let law = &self.contacts.laws[law as usize];
                 law.check_pair(&info).map_err(|why| {
                     GraniteError::Setup(format!(
                         "contact law `{}` between materials \"{}\" and \"{}\"{}: {why}",
@@ -681,7 +676,7 @@ impl DemWorld {
 
     pub fn validate(&self) -> Result<()> {
         crate::params::require_time_step(self.dt)?;
-        if !self.spheres.is_empty() && self.laws.is_empty() {
+        if !self.spheres.is_empty() && self.contacts.laws.is_empty() {
             return Err(GraniteError::Setup("no contact law: call contact_law(...) before running".into()));
         }
         self.check_pairs_of_materials()?;
@@ -714,18 +709,13 @@ impl DemSim {
             + std::mem::size_of::<u16>()
             + std::mem::size_of::<u8>()
             + std::mem::size_of::<u32>();
-        let pairs = |p: &PairList| {
-            p.a.capacity() * (2 * 4 + 12 + 2 + 1 + 24) + (p.params.capacity() + p.history.capacity()) * 8
-        };
         s.x.capacity() * per_sphere
             + self.built.x.capacity() * 24
-            + pairs(&self.world.pairs)
-            + pairs(&self.spare_pairs)
-            + pairs(&self.world.wall_pairs)
+            + self.world.contacts.memory_bytes()
+            + crate::dem::contact_set::list_bytes(&self.spare_pairs)
             + self.piece_bounds.bytes()
             + self.handovers.bytes()
             + self.world.clumps.len() * 200
-            + self.world.kinds.pair_lists().into_iter().map(pairs).sum::<usize>()
             + self.world.kinds.memory_bytes()
     }
 

@@ -213,7 +213,7 @@ impl DemWorld {
             Vector3::from(x)
         };
         let mut springs = Vec::new();
-        let p = &self.pairs;
+        let p = &self.contacts.spheres;
         for c in 0..p.len() {
             if !p.touching[c] {
                 continue;
@@ -228,7 +228,7 @@ impl DemWorld {
             let normal = l / distance;
             let params = &p.params[c * p.param_stride..(c + 1) * p.param_stride];
             let overlap = s.radius[i] + s.radius[j] - distance;
-            let (kn, kt) = self.laws[p.law[c] as usize].tangent_stiffness(overlap, params);
+            let (kn, kt) = self.contacts.laws[p.law[c] as usize].tangent_stiffness(overlap, params);
             if !(kn > 0.0) {
                 continue;
             }
@@ -242,7 +242,7 @@ impl DemWorld {
                 arm_j: point - image - centre(j),
             });
         }
-        let w = &self.wall_pairs;
+        let w = &self.contacts.sphere_walls;
         for c in 0..w.len() {
             if !w.touching[c] {
                 continue;
@@ -252,7 +252,7 @@ impl DemWorld {
                 continue;
             };
             let params = &w.params[c * w.param_stride..(c + 1) * w.param_stride];
-            let (kn, kt) = self.laws[w.law[c] as usize].tangent_stiffness(-contact.gap, params);
+            let (kn, kt) = self.contacts.laws[w.law[c] as usize].tangent_stiffness(-contact.gap, params);
             if kn > 0.0 {
                 springs.push(Spring {
                     i: body(i) as u32,

@@ -3,6 +3,7 @@
 
 use crate::dem::cell::{CellControl, PeriodicCell};
 use crate::dem::clump::Clumps;
+use crate::dem::contact_set::ContactSet;
 use crate::dem::contacts::PairList;
 use crate::dem::particles::Spheres;
 use crate::dem::sim::{DemMaterial, DemSim};
@@ -15,16 +16,19 @@ use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
 const FORMAT: &str = "granite-dem-state";
+/// 7: the contacts as one record (`contacts`: the law table and the five lists), in place of
+///    `laws`, `law_of`, `default_law`, `pairs`, `wall_pairs` and the bodies' three lists.
 /// 6: bodies of several families (their families and each body's).
 /// 5: bodies of plugin kinds (capsules, ...).
 /// 4: a stress-controlled cell keeps its servo's integral part.
 /// 3: the file is an envelope (`io::checkpoint_file`: writer, CRC-32) around the state of 2.
 /// 2: a pair of spheres is stored under its larger index (`a > b`); 1 stored it under the smaller.
 /// Bump it whenever `DemState` changes, and read the older ones through an upgrade path.
-const VERSION: u32 = 6;
-/// The oldest version read: 2, whose state is 6's less what was added since: external loads and
+const VERSION: u32 = 7;
+/// The oldest version read: 2, whose state is 7's less what was added since: external loads and
 /// the energy tracker (none), the servo's integral part (zero: the servo learns it again within a
-/// few of its relaxation times), bodies of plugin kinds (none), their families (one).
+/// few of its relaxation times), bodies of plugin kinds (none), their families (one); and with its
+/// contacts in the fields before 7's record (see [`Legacy`]).
 const OLDEST: u32 = 2;
 
 /// A contact law by registry name and parameters (rebuilt from the registry on load).
@@ -59,10 +63,69 @@ struct BodiesRecord {
     w: Vec<Vec3>,
     q: Vec<nalgebra::UnitQuaternion<f64>>,
     fixed: Vec<bool>,
+    /// Before version 7: the bodies' lists (body pairs, walls, spheres).
+    #[serde(default, skip_serializing)]
     pairs: PairList,
+    #[serde(default, skip_serializing)]
     wall_pairs: PairList,
+    #[serde(default, skip_serializing)]
     sphere_pairs: PairList,
     x_at_build: Vec<Vec3>,
+}
+
+/// The contact set ([`ContactSet`]): the law table, laws by registry name and parameters, and the
+/// five candidate lists.
+#[derive(Serialize, Deserialize)]
+struct ContactsRecord {
+    laws: Vec<LawRecord>,
+    law_of: Vec<((u16, u16), u16)>,
+    default_law: Option<u16>,
+    spheres: PairList,
+    sphere_walls: PairList,
+    bodies: PairList,
+    body_walls: PairList,
+    body_spheres: PairList,
+}
+
+impl ContactsRecord {
+    fn of(c: &ContactSet) -> ContactsRecord {
+        let mut law_of: Vec<((u16, u16), u16)> = c.law_of.iter().map(|(k, v)| (*k, *v)).collect();
+        law_of.sort();
+        let laws = c
+            .laws
+            .iter()
+            .map(|l| LawRecord {
+                name: l.name().to_string(),
+                params: l.params().iter().filter(|(_, v)| !v.is_nan()).map(|(k, v)| (k.to_string(), v)).collect(),
+            })
+            .collect();
+        ContactsRecord {
+            laws,
+            law_of,
+            default_law: c.default_law,
+            spheres: c.spheres.clone(),
+            sphere_walls: c.sphere_walls.clone(),
+            bodies: c.bodies.clone(),
+            body_walls: c.body_walls.clone(),
+            body_spheres: c.body_spheres.clone(),
+        }
+    }
+
+    /// The contact set of the record, its laws made by `build_law`.
+    fn into_set(self, build_law: &LawBuilder) -> Result<ContactSet> {
+        let laws = self.laws.iter().enumerate().map(|(k, law)| build_law(k, law)).collect::<Result<Vec<_>>>()?;
+        Ok(ContactSet {
+            laws,
+            law_of: self.law_of.into_iter().collect(),
+            default_law: self.default_law,
+            spheres: self.spheres,
+            sphere_walls: self.sphere_walls,
+            bodies: self.bodies,
+            body_walls: self.body_walls,
+            body_spheres: self.body_spheres,
+            body_touches: Default::default(),
+        })
+    }
 }
 
 #[derive(Serialize, Deserialize)]
@@ -73,9 +136,20 @@ pub(crate) struct DemState {
     clumps: Clumps,
     walls: Vec<Wall>,
     materials: Vec<DemMaterial>,
+    /// From version 7; older states kept their contacts in the five fields below and the
+    /// bodies' record.
+    #[serde(default)]
+    contacts: Option<ContactsRecord>,
+    #[serde(default, skip_serializing)]
     laws: Vec<LawRecord>,
+    #[serde(default, skip_serializing)]
     law_of: Vec<((u16, u16), u16)>,
+    #[serde(default, skip_serializing)]
     default_law: Option<u16>,
+    #[serde(default, skip_serializing)]
+    pairs: PairList,
+    #[serde(default, skip_serializing)]
+    wall_pairs: PairList,
     gravity: Vec3,
     cell: Option<PeriodicCell>,
     cell_control: Option<CellControl>,
@@ -86,8 +160,6 @@ pub(crate) struct DemState {
     step: u64,
     skin: f64,
     seed: u64,
-    pairs: PairList,
-    wall_pairs: PairList,
     x_at_build: Vec<Vec3>,
     walls_at_build: Vec<Vec3>,
     h_at_build: Option<nalgebra::Matrix3<f64>>,
@@ -103,8 +175,6 @@ pub(crate) struct DemState {
 
 impl DemSim {
     fn to_state(&self) -> DemState {
-        let mut law_of: Vec<((u16, u16), u16)> = self.world.law_of.iter().map(|(k, v)| (*k, *v)).collect();
-        law_of.sort();
         DemState {
             format: FORMAT.into(),
             version: VERSION,
@@ -112,17 +182,12 @@ impl DemSim {
             clumps: self.world.clumps.clone(),
             walls: self.world.walls.clone(),
             materials: self.world.materials.clone(),
-            laws: self
-                .world
-                .laws
-                .iter()
-                .map(|l| LawRecord {
-                    name: l.name().to_string(),
-                    params: l.params().iter().filter(|(_, v)| !v.is_nan()).map(|(k, v)| (k.to_string(), v)).collect(),
-                })
-                .collect(),
-            law_of,
-            default_law: self.world.default_law,
+            contacts: Some(ContactsRecord::of(&self.world.contacts)),
+            laws: Vec::new(),
+            law_of: Vec::new(),
+            default_law: None,
+            pairs: PairList::default(),
+            wall_pairs: PairList::default(),
             gravity: self.world.gravity,
             cell: self.world.cell.clone(),
             cell_control: self.world.cell_control.clone(),
@@ -133,8 +198,6 @@ impl DemSim {
             step: self.world.step,
             skin: self.skin,
             seed: self.world.seed,
-            pairs: self.world.pairs.clone(),
-            wall_pairs: self.world.wall_pairs.clone(),
             x_at_build: self.built.x.clone(),
             walls_at_build: self.built.walls.clone(),
             h_at_build: self.built.h,
@@ -166,15 +229,15 @@ impl DemSim {
             w: k.w.clone(),
             q: k.q.clone(),
             fixed: k.fixed.clone(),
-            pairs: k.pairs.clone(),
-            wall_pairs: k.wall_pairs.clone(),
-            sphere_pairs: k.sphere_pairs.clone(),
+            pairs: PairList::default(),
+            wall_pairs: PairList::default(),
+            sphere_pairs: PairList::default(),
             x_at_build: k.x_at_build.clone(),
         })
     }
 
     /// The bodies of a saved state, their kind and shapes rebuilt from `registry`.
-    fn restore_bodies(&mut self, record: BodiesRecord, registry: Option<&dyn ContactLawSource>) -> Result<()> {
+    fn restore_bodies(&mut self, mut record: BodiesRecord, registry: Option<&dyn ContactLawSource>) -> Result<()> {
         let Some(registry) = registry else {
             return Err(GraniteError::Other(format!("a state with {} bodies moved without a registry", record.kind)));
         };
@@ -230,8 +293,18 @@ impl DemSim {
             (record.shape, record.id, record.material, record.x, record.v, record.w, record.q, record.fixed);
         k.force = vec![[0.0; 3]; n];
         k.torque = vec![[0.0; 3]; n];
-        (k.pairs, k.wall_pairs, k.sphere_pairs, k.x_at_build) =
-            (record.pairs, record.wall_pairs, record.sphere_pairs, record.x_at_build);
+        k.x_at_build = record.x_at_build;
+        // A state before version 7 kept the bodies' lists here.
+        let c = &mut self.world.contacts;
+        for (list, old) in [
+            (&mut c.bodies, &mut record.pairs),
+            (&mut c.body_walls, &mut record.wall_pairs),
+            (&mut c.body_spheres, &mut record.sphere_pairs),
+        ] {
+            if !old.is_empty() {
+                *list = std::mem::take(old);
+            }
+        }
         Ok(())
     }
 
@@ -251,7 +324,7 @@ impl DemSim {
     pub fn from_json_like(value: serde_json::Value, like: &DemSim) -> Result<DemSim> {
         let st: DemState = serde_json::from_value(value).map_err(|e| GraniteError::Other(format!("DEM state: {e}")))?;
         let laws = |k: usize, record: &LawRecord| -> Result<std::sync::Arc<dyn crate::ext::ContactLaw>> {
-            match like.world.laws.get(k) {
+            match like.world.contacts.laws.get(k) {
                 Some(law) if law.name() == record.name => Ok(law.clone()),
                 _ => Err(GraniteError::Other(format!(
                     "DEM state: contact law {k} is `{}`, not one of the sample it was copied from",
@@ -321,15 +394,26 @@ impl DemSim {
             )));
         }
         let mut sim = DemSim::new();
-        for (k, law) in st.laws.iter().enumerate() {
-            sim.world.laws.push(build_law(k, law)?);
-        }
+        sim.world.contacts = match st.contacts {
+            Some(record) => record.into_set(build_law)?,
+            None => {
+                let record = ContactsRecord {
+                    laws: st.laws,
+                    law_of: st.law_of,
+                    default_law: st.default_law,
+                    spheres: st.pairs,
+                    sphere_walls: st.wall_pairs,
+                    bodies: PairList::default(),
+                    body_walls: PairList::default(),
+                    body_spheres: PairList::default(),
+                };
+                record.into_set(build_law)?
+            }
+        };
         sim.world.spheres = st.spheres;
         sim.world.clumps = st.clumps;
         sim.world.walls = st.walls;
         sim.world.materials = st.materials;
-        sim.world.law_of = st.law_of.into_iter().collect();
-        sim.world.default_law = st.default_law;
         sim.world.gravity = st.gravity;
         sim.world.cell = st.cell;
         sim.world.cell_control = st.cell_control;
@@ -340,8 +424,6 @@ impl DemSim {
         sim.world.step = st.step;
         sim.skin = st.skin;
         sim.world.seed = st.seed;
-        sim.world.pairs = st.pairs;
-        sim.world.wall_pairs = st.wall_pairs;
         sim.built.x = st.x_at_build;
         sim.built.walls = st.walls_at_build;
         sim.built.h = st.h_at_build;
@@ -372,8 +454,9 @@ impl DemSim {
         // Reading grows arrays by doubling; copies hold just their contents (a loaded RVE is the
         // template of every material point's copy, so its reported memory should be theirs).
         sim.world.spheres = sim.world.spheres.clone();
-        sim.world.pairs = sim.world.pairs.clone();
-        sim.world.wall_pairs = sim.world.wall_pairs.clone();
+        for list in [&mut sim.world.contacts.spheres, &mut sim.world.contacts.sphere_walls] {
+            *list = list.clone();
+        }
         sim.built.x = sim.built.x.clone();
         Ok(sim)
     }
@@ -394,7 +477,7 @@ fn from_registry(
 /// else is left for `check_consistent` to name.
 fn widen_pair_layout(sim: &mut DemSim) {
     let (ps, hs) = sim.world.pair_strides();
-    let (spheres, walls, laws) = (sim.world.spheres.len(), sim.world.walls.len(), sim.world.laws.len());
+    let (spheres, walls, laws) = (sim.world.spheres.len(), sim.world.walls.len(), sim.world.contacts.laws.len());
     let sound = |list: &crate::dem::contacts::PairList, others: usize| {
         let m = list.len();
         [list.b.len(), list.shift.len(), list.law.len(), list.touching.len(), list.force.len()].iter().all(|&l| l == m)
@@ -406,12 +489,12 @@ fn widen_pair_layout(sim: &mut DemSim) {
             && list.law.iter().all(|&l| (l as usize) < laws)
     };
     let narrow = |list: &crate::dem::contacts::PairList| list.param_stride < ps || list.history_stride < hs;
-    if (narrow(&sim.world.pairs) || narrow(&sim.world.wall_pairs))
-        && sound(&sim.world.pairs, spheres)
-        && sound(&sim.world.wall_pairs, walls)
+    if (narrow(&sim.world.contacts.spheres) || narrow(&sim.world.contacts.sphere_walls))
+        && sound(&sim.world.contacts.spheres, spheres)
+        && sound(&sim.world.contacts.sphere_walls, walls)
         && sim.world.spheres.material.iter().all(|&m| (m as usize) < sim.world.materials.len())
     {
-        let laws = sim.world.laws.clone();
+        let laws = sim.world.contacts.laws.clone();
         sim.world.refresh_pair_laws(&laws);
     }
 }
@@ -494,17 +577,10 @@ fn check_consistent(sim: &DemSim) -> std::result::Result<(), String> {
             return Err("a clump has a mass or inertia that is not finite and > 0".into());
         }
     }
-    let laws = sim.world.laws.len();
-    if sim.world.default_law.is_some_and(|l| l as usize >= laws)
-        || sim.world.law_of.values().any(|&l| l as usize >= laws)
-    {
-        return Err(format!("a material pair uses a contact law beyond the {laws} saved"));
-    }
     let nb = sim.world.kinds.len();
     let mut ids = s.id.clone();
     ids.extend(&sim.world.kinds.id);
     crate::loaded::unique_ids("spheres and bodies", &ids)?;
-    let k = &sim.world.kinds;
     let walls = sim.world.walls.len();
     for (i, wall) in sim.world.walls.iter().enumerate() {
         wall.check_loaded().map_err(|e| format!("wall {i} (\"{}\"): {e}", wall.name))?;
@@ -517,57 +593,7 @@ fn check_consistent(sim: &DemSim) -> std::result::Result<(), String> {
             ));
         }
     }
-    let (of_spheres, of_bodies) =
-        (format!("the {n} spheres or {walls} walls"), format!("the {nb} bodies, {n} spheres or {walls} walls"));
-    for (name, list, firsts, others, beyond) in [
-        ("pairs", &sim.world.pairs, n, n, &of_spheres),
-        ("wall pairs", &sim.world.wall_pairs, n, walls, &of_spheres),
-        ("body pairs", &k.pairs, nb, nb, &of_bodies),
-        ("body-wall pairs", &k.wall_pairs, nb, walls, &of_bodies),
-        ("body-sphere pairs", &k.sphere_pairs, nb, n, &of_bodies),
-    ] {
-        let m = list.len();
-        let lengths = [
-            ("b", list.b.len()),
-            ("shift", list.shift.len()),
-            ("law", list.law.len()),
-            ("touching", list.touching.len()),
-            ("force", list.force.len()),
-        ];
-        same_length(name, "a", m, &lengths)?;
-        if list.a.iter().any(|&i| i as usize >= firsts) || list.b.iter().any(|&j| j as usize >= others) {
-            return Err(format!("{name}: an index beyond {beyond}"));
-        }
-        if let Some(&l) = list.law.iter().find(|&&l| l as usize >= laws) {
-            return Err(format!("{name}: contact law {l} of {laws}"));
-        }
-        let (ps, hs) = (list.param_stride, list.history_stride);
-        if list
-            .law
-            .iter()
-            .any(|&l| sim.world.laws[l as usize].param_count() > ps || sim.world.laws[l as usize].history_count() > hs)
-        {
-            return Err(format!("{name}: {ps} parameters and {hs} history values a pair, fewer than a law keeps"));
-        }
-        if list.params.len() != m * ps || list.history.len() != m * hs {
-            return Err(format!(
-                "{name}: {} parameters and {} history values for {m} pairs of {ps} and {hs}",
-                list.params.len(),
-                list.history.len()
-            ));
-        }
-        let key = |k: usize| (list.a[k], list.b[k], list.shift[k]);
-        if (1..m).any(|k| key(k - 1) >= key(k)) {
-            return Err(format!("{name}: not sorted by (first, second, image) without repeats"));
-        }
-    }
-    // The force sums' order rests on it (see `step::write_back`).
-    // A sphere meets its own image in a thin cell (under a positive shift when found, under any
-    // after a flip until the next rebuild).
-    let p = &sim.world.pairs;
-    if let Some(k) = (0..p.len()).find(|&k| p.a[k] < p.b[k] || (p.a[k] == p.b[k] && p.shift[k] == [0; 3])) {
-        return Err(format!("pairs: pair {k} has a first sphere below its second, or is a sphere with itself"));
-    }
+    sim.world.contacts.check(n, walls, nb)?;
     same_length("the positions at the last list build", "spheres", n, &[("x_at_build", sim.built.x.len())])?;
     same_length(
         "the wall positions at the last list build",

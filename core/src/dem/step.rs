@@ -57,30 +57,38 @@ impl DemSim {
         let mut energy_before = None;
         // Bodies of a plugin kind meet spheres where they all are at the step's start: their
         // reactions join the spheres' loads before the spheres move.
-        let kind_history = (tracking && !world.kinds.is_empty()).then(|| world.kinds.histories());
+        let histories = tracking.then(|| world.contacts.histories());
         if !world.kinds.is_empty() {
+            let c = &mut world.contacts;
+            let mut lists = c.take_body_lists();
             let around = Surroundings {
                 spheres: &world.spheres,
                 walls: &world.walls,
-                laws: &world.laws,
+                laws: &c.laws,
                 cell: world.cell.as_ref(),
-                law_history: world.pair_strides().1,
+                law_history: c.pair_strides().1,
                 dt: world.dt,
                 step: world.step,
                 time: world.time,
             };
-            if let Err(e) = BodyContacts::run(&mut world.kinds, &around) {
+            let settled = BodyContacts::run(&mut world.kinds, &mut lists, &mut c.body_touches, &around);
+            c.put_body_lists(lists);
+            if let Err(e) = settled {
                 world.needs_rebuild = true;
                 return Err(e);
             }
         }
         let sphere_loads = !world.kinds.sphere_loads.is_empty();
         let mut moved = if parallel && !check && world.external.is_empty() && !tracking && !sphere_loads {
-            let around =
-                SphereSurroundings { walls: &world.walls, laws: &world.laws, dt: world.dt, cell: world.cell.as_ref() };
+            let around = SphereSurroundings {
+                walls: &world.walls,
+                laws: &world.contacts.laws,
+                dt: world.dt,
+                cell: world.cell.as_ref(),
+            };
             ContactsAndMotion::run(
                 &mut world.spheres,
-                (&mut world.pairs, &mut world.wall_pairs),
+                (&mut world.contacts.spheres, &mut world.contacts.sphere_walls),
                 (piece_bounds, handovers),
                 &around,
                 (&built.x, rebuilds),
@@ -93,16 +101,23 @@ impl DemSim {
             // External loads on single spheres and the energy tracker (a console's experiments,
             // not production runs) work between the contact stage and the motion, so they take
             // this path too.
-            let history = tracking.then(|| (world.pairs.history.clone(), world.wall_pairs.history.clone()));
-            let around =
-                SphereSurroundings { walls: &world.walls, laws: &world.laws, dt: world.dt, cell: world.cell.as_ref() };
-            SphereContacts::run(&mut world.spheres, (&mut world.pairs, &mut world.wall_pairs), &around);
+            let around = SphereSurroundings {
+                walls: &world.walls,
+                laws: &world.contacts.laws,
+                dt: world.dt,
+                cell: world.cell.as_ref(),
+            };
+            SphereContacts::run(
+                &mut world.spheres,
+                (&mut world.contacts.spheres, &mut world.contacts.sphere_walls),
+                &around,
+            );
             ExternalLoads::run(&mut world.external, &mut world.spheres);
             SphereReactions::run(&world.kinds, &mut world.spheres);
             if check {
                 world.check_time_step(stop_on_unstable_dt)?;
             }
-            energy_before = history.map(|history| EnergyBooking::before_motion(&*world, history, kind_history));
+            energy_before = histories.map(|history| EnergyBooking::before_motion(&*world, history));
             integrate(&mut world.spheres, &built.x, &motion)
         };
         if deformed.is_some() {
@@ -155,8 +170,8 @@ impl DemSim {
                 // A sphere's pair with its own image (a thin cell) may come out under the
                 // negative shift; the rebuild that follows finds it under the positive one, as a
                 // new contact.
-                let k = &mut world.kinds;
-                for list in [&mut world.pairs, &mut k.pairs, &mut k.sphere_pairs] {
+                let c = &mut world.contacts;
+                for list in [&mut c.spheres, &mut c.bodies, &mut c.body_spheres] {
                     for s in list.shift.iter_mut() {
                         *s = shift_after_flip(&m, *s);
                     }
@@ -191,8 +206,8 @@ impl DemSim {
             self.spare_pairs = PairList::default();
             self.piece_bounds = PieceBounds::default();
             self.handovers = Handovers::default();
-            self.world.pairs.shrink_to_fit();
-            self.world.wall_pairs.shrink_to_fit();
+            self.world.contacts.spheres.shrink_to_fit();
+            self.world.contacts.sphere_walls.shrink_to_fit();
         }
     }
 }
@@ -428,7 +443,13 @@ mod tests {
                     shares_cut_for
                         .insert(sim.piece_bounds.shares.iter().map(|s| (s * 100.0).round() as i64).collect::<Vec<_>>());
                 }
-                (sim.world.spheres.x, sim.world.spheres.w, sim.world.pairs.touching_count(), cuts.len(), shares_cut_for)
+                (
+                    sim.world.spheres.x,
+                    sim.world.spheres.w,
+                    sim.world.contacts.spheres.touching_count(),
+                    cuts.len(),
+                    shares_cut_for,
+                )
             })
         };
         let one = run(1, &[0.5]);

@@ -2,6 +2,7 @@
 //! exchanges once everything has moved.
 
 use super::EnergyTracker;
+use crate::dem::contact_set::{MemberKind, Pairing};
 use crate::dem::particles::{dof, FREE};
 use crate::dem::sim::{DemSim, DemWorld};
 use crate::error::{GraniteError, Result};
@@ -15,12 +16,23 @@ pub(crate) struct BeforeMotion {
     w: Vec<Vec3>,
     /// Clumps: centre, velocity, angular velocity and inertia tensor in the world frame.
     clumps: Vec<(Vec3, Vec3, Vec3, nalgebra::Matrix3<f64>)>,
-    /// History of the sphere pairs and of the wall pairs before the contact stage.
-    history: (Vec<f64>, Vec<f64>),
-    /// Bodies of a plugin kind, as clumps; and the history of their lists (body pairs, walls,
-    /// spheres) before their contacts.
+    /// The history of each list of the contact set before the step's contacts.
+    history: [Vec<f64>; 5],
+    /// Bodies of a plugin kind, as clumps.
     bodies: Vec<(Vec3, Vec3, Vec3, nalgebra::Matrix3<f64>)>,
-    body_history: [Vec<f64>; 3],
+}
+
+/// A touching contact as the booking reads it: its pair, its geometry and the relative motion
+/// of the second member's contact point with respect to the first's at the contact stage and
+/// over the step (the mean of before and after the motion), and the wall's velocity for a wall.
+struct Booked {
+    slot: usize,
+    normal: Vec3,
+    overlap: f64,
+    rel_velocity: Vec3,
+    mean_rel_velocity: Vec3,
+    rel_spin: Vec3,
+    wall_velocity: Option<Vec3>,
 }
 
 fn dot(a: Vec3, b: Vec3) -> f64 {
@@ -75,7 +87,7 @@ impl DemSim {
                 w.name
             )));
         }
-        if let Some(law) = self.world.laws.iter().find(|l| !l.tracks_dissipation()) {
+        if let Some(law) = self.world.contacts.laws.iter().find(|l| !l.tracks_dissipation()) {
             return Err(GraniteError::Setup(format!(
                 "contact law `{}` does not account for its losses: energy cannot be tracked with it",
                 law.name()
@@ -93,11 +105,8 @@ pub(crate) struct EnergyBooking;
 
 impl EnergyBooking {
     /// What the tracker keeps of a step before its motion (called after the contact stage).
-    pub(crate) fn before_motion(
-        world: &DemWorld,
-        history: (Vec<f64>, Vec<f64>),
-        body_history: Option<[Vec<f64>; 3]>,
-    ) -> BeforeMotion {
+    /// `history`: each list's before the step's contacts (see [`ContactSet::histories`]).
+    pub(crate) fn before_motion(world: &DemWorld, history: [Vec<f64>; 5]) -> BeforeMotion {
         let s = &world.spheres;
         let rigid = |x: &[Vec3], v: &[Vec3], w: &[Vec3], q: &[nalgebra::UnitQuaternion<f64>], inertia: &[Vec3]| {
             (0..x.len())
@@ -116,66 +125,94 @@ impl EnergyBooking {
             clumps: rigid(&cl.x, &cl.v, &cl.w, &cl.q, &cl.inertia),
             history,
             bodies: rigid(&k.x, &k.v, &k.w, &k.q, &k.inertia),
-            body_history: body_history.unwrap_or_default(),
         }
     }
 
     /// Contact energies of the step, at the positions its forces came from: the elastic energy,
-    /// what each contact dissipated, and the work of moving walls.
+    /// what each contact dissipated, and the work of moving walls; one pass over every list of
+    /// the contact set.
     fn contact_energies(world: &DemWorld, b: &BeforeMotion) -> (f64, f64, f64, f64) {
-        let s = &world.spheres;
         let (mut elastic, mut friction, mut viscous, mut walls) = (0.0, 0.0, 0.0, 0.0);
-        let mean = |i: usize| {
-            ([0, 1, 2].map(|a| 0.5 * (b.v[i][a] + s.v[i][a])), [0, 1, 2].map(|a| 0.5 * (b.w[i][a] + s.w[i][a])))
-        };
-        let mut add = |law: u16, normal: Vec3, overlap: f64, rel: (Vec3, Vec3, Vec3), k: usize, wall: bool| {
-            let list = if wall { &world.wall_pairs } else { &world.pairs };
-            let before = if wall { &b.history.1 } else { &b.history.0 };
+        for ((pairing, list), before) in world.contacts.lists().into_iter().zip(&b.history) {
             let (ps, hs) = (list.param_stride, list.history_stride);
-            let law = &world.laws[law as usize];
-            let params = &list.params[k * ps..(k + 1) * ps];
-            let after = &list.history[k * hs..(k + 1) * hs];
-            elastic += law.elastic_energy(overlap, params, after);
-            let step = ContactStep {
-                normal,
-                overlap,
-                rel_velocity: rel.0,
-                mean_rel_velocity: rel.1,
-                rel_spin: rel.2,
-                dt: world.dt,
-                params,
-                history_before: &before[k * hs..(k + 1) * hs],
-                history_after: after,
-                force: list.force[k],
+            let booked = match pairing {
+                Pairing::SphereSphere => Self::sphere_pairs(world, b),
+                Pairing::SphereWall => Self::sphere_walls(world, b),
+                _ => Self::body_contacts(world, b, pairing),
             };
-            let (f, v) = law.dissipation(&step);
-            friction += f;
-            viscous += v;
-        };
-        // The geometry the contact stage used (see `sphere_contacts` and `wall_contacts`), with
-        // the velocities it used and the step's mean ones.
-        for k in 0..world.pairs.len() {
-            if !world.pairs.touching[k] {
-                continue;
+            for c in booked {
+                let k = c.slot;
+                let law = &world.contacts.laws[list.law[k] as usize];
+                let params = &list.params[k * ps..(k + 1) * ps];
+                let after = &list.history[k * hs..(k + 1) * hs];
+                elastic += law.elastic_energy(c.overlap, params, after);
+                // A pair new to the lists since the step began has no history before it.
+                let Some(history_before) = before.get(k * hs..(k + 1) * hs) else { continue };
+                let step = ContactStep {
+                    normal: c.normal,
+                    overlap: c.overlap,
+                    rel_velocity: c.rel_velocity,
+                    mean_rel_velocity: c.mean_rel_velocity,
+                    rel_spin: c.rel_spin,
+                    dt: world.dt,
+                    params,
+                    history_before,
+                    history_after: after,
+                    force: list.force[k],
+                };
+                let (f, v) = law.dissipation(&step);
+                friction += f;
+                viscous += v;
+                // A moving wall works on the grain through the contact.
+                if let Some(velocity) = c.wall_velocity {
+                    walls += dot(list.force[k], velocity) * world.dt;
+                }
             }
-            let (i, j) = (world.pairs.a[k] as usize, world.pairs.b[k] as usize);
-            let (n, overlap, la, lb) = world.pair_geometry(&b.x, k);
-            let relative = |vi: Vec3, wi: Vec3, vj: Vec3, wj: Vec3| {
-                let spins = [0, 1, 2].map(|a| la * wi[a] + lb * wj[a]);
-                let c = cross(spins, n);
-                [0, 1, 2].map(|a| (vj[a] - vi[a]) - c[a])
-            };
-            let ((vi, wi), (vj, wj)) = (mean(i), mean(j));
-            let spin = [0, 1, 2].map(|a| b.w[j][a] - b.w[i][a]);
-            let rel = (relative(b.v[i], b.w[i], b.v[j], b.w[j]), relative(vi, wi, vj, wj), spin);
-            add(world.pairs.law[k], n, overlap, rel, k, false);
         }
-        for k in 0..world.wall_pairs.len() {
-            if !world.wall_pairs.touching[k] {
-                continue;
-            }
-            let (i, w) = (world.wall_pairs.a[k] as usize, world.wall_pairs.b[k] as usize);
-            let wall = &world.walls[w];
+        (elastic, friction, viscous, walls)
+    }
+
+    /// The step's mean velocity and spin of sphere `i`.
+    fn sphere_mean(world: &DemWorld, b: &BeforeMotion, i: usize) -> (Vec3, Vec3) {
+        let s = &world.spheres;
+        ([0, 1, 2].map(|a| 0.5 * (b.v[i][a] + s.v[i][a])), [0, 1, 2].map(|a| 0.5 * (b.w[i][a] + s.w[i][a])))
+    }
+
+    /// The touching sphere pairs with the geometry the contact stage used (see
+    /// `sphere_contacts`), at the velocities it used and the step's mean ones.
+    fn sphere_pairs(world: &DemWorld, b: &BeforeMotion) -> Vec<Booked> {
+        let p = &world.contacts.spheres;
+        (0..p.len())
+            .filter(|&k| p.touching[k])
+            .map(|k| {
+                let (i, j) = (p.a[k] as usize, p.b[k] as usize);
+                let (n, overlap, la, lb) = world.pair_geometry(&b.x, k);
+                let relative = |vi: Vec3, wi: Vec3, vj: Vec3, wj: Vec3| {
+                    let spins = [0, 1, 2].map(|a| la * wi[a] + lb * wj[a]);
+                    let c = cross(spins, n);
+                    [0, 1, 2].map(|a| (vj[a] - vi[a]) - c[a])
+                };
+                let ((vi, wi), (vj, wj)) = (Self::sphere_mean(world, b, i), Self::sphere_mean(world, b, j));
+                Booked {
+                    slot: k,
+                    normal: n,
+                    overlap,
+                    rel_velocity: relative(b.v[i], b.w[i], b.v[j], b.w[j]),
+                    mean_rel_velocity: relative(vi, wi, vj, wj),
+                    rel_spin: [0, 1, 2].map(|a| b.w[j][a] - b.w[i][a]),
+                    wall_velocity: None,
+                }
+            })
+            .collect()
+    }
+
+    /// The touching sphere-wall pairs with the geometry the contact stage used (see
+    /// `wall_contacts`).
+    fn sphere_walls(world: &DemWorld, b: &BeforeMotion) -> Vec<Booked> {
+        let (p, s) = (&world.contacts.sphere_walls, &world.spheres);
+        let mut out = Vec::new();
+        for k in (0..p.len()).filter(|&k| p.touching[k]) {
+            let (i, wall) = (p.a[k] as usize, &world.walls[p.b[k] as usize]);
             // The wall as it was at the contact stage (it has moved since by v dt): the same
             // geometry as the sphere moved on by v dt against the wall where it is now.
             let shift = wall.velocity.map(|c| c * world.dt);
@@ -186,29 +223,26 @@ impl EnergyBooking {
                 let spin = cross(w, arm);
                 [0, 1, 2].map(|a| wall.velocity[a] - (v[a] + spin[a]))
             };
-            let (vm, wm) = mean(i);
-            let spin = b.w[i].map(|c| -c);
-            add(
-                world.wall_pairs.law[k],
-                geo.normal,
-                -geo.gap,
-                (relative(b.v[i], b.w[i]), relative(vm, wm), spin),
-                k,
-                true,
-            );
-            // A moving wall works on the sphere through the contact.
-            walls += dot(world.wall_pairs.force[k], wall.velocity) * world.dt;
+            let (vm, wm) = Self::sphere_mean(world, b, i);
+            out.push(Booked {
+                slot: k,
+                normal: geo.normal,
+                overlap: -geo.gap,
+                rel_velocity: relative(b.v[i], b.w[i]),
+                mean_rel_velocity: relative(vm, wm),
+                rel_spin: b.w[i].map(|c| -c),
+                wall_velocity: Some(wall.velocity),
+            });
         }
-        let (e, f, v, w) = Self::body_contact_energies(world, b);
-        (elastic + e, friction + f, viscous + v, walls + w)
+        out
     }
 
-    /// The contact energies of the bodies of a plugin kind (with one another, walls and
-    /// spheres), from the contacts their step found: elastic energy, losses, and the work of
-    /// moving walls on them.
-    fn body_contact_energies(world: &DemWorld, b: &BeforeMotion) -> (f64, f64, f64, f64) {
+    /// The touching contacts of a body list as the bodies' stage found them (their geometry is
+    /// the plugin's), with the mean velocities of their points over the step.
+    fn body_contacts(world: &DemWorld, b: &BeforeMotion, pairing: Pairing) -> Vec<Booked> {
         let (k, s) = (&world.kinds, &world.spheres);
-        let (mut elastic, mut friction, mut viscous, mut walls) = (0.0, 0.0, 0.0, 0.0);
+        let list = world.contacts.list(pairing);
+        let Some(n) = pairing.body_list() else { return Vec::new() };
         // A body's or a sphere's velocity at `point` over the step: the mean of before and after.
         let mean_at = |(x, v0, w0): (Vec3, Vec3, Vec3), (v1, w1): (Vec3, Vec3), point: Vec3| {
             let arm = [0, 1, 2].map(|a| point[a] - x[a]);
@@ -220,44 +254,28 @@ impl EnergyBooking {
             let (x, v, w, _) = b.bodies[i];
             mean_at((x, v, w), (k.v[i], k.w[i]), point)
         };
-        for (n, (list, touches)) in k.lists().into_iter().enumerate() {
-            let (ps, hs) = (list.param_stride, list.history_stride);
-            let before = &b.body_history[n];
-            for &(c, point) in touches {
-                let slot = c.slot;
-                let (i, j) = (list.a[slot] as usize, list.b[slot] as usize);
-                let second = match n {
-                    0 => body(j, point),
-                    1 => world.walls[j].velocity,
-                    _ => mean_at((b.x[j], b.v[j], b.w[j]), (s.v[j], s.w[j]), point),
+        let touches = &world.contacts.body_touches[n];
+        touches
+            .iter()
+            .map(|&(c, point)| {
+                let (i, j) = (list.a[c.slot] as usize, list.b[c.slot] as usize);
+                let second = match pairing.second() {
+                    MemberKind::Body => body(j, point),
+                    MemberKind::Wall => world.walls[j].velocity,
+                    MemberKind::Sphere => mean_at((b.x[j], b.v[j], b.w[j]), (s.v[j], s.w[j]), point),
                 };
                 let first = body(i, point);
-                let law = &world.laws[list.law[slot] as usize];
-                let params = &list.params[slot * ps..(slot + 1) * ps];
-                let after = &list.history[slot * hs..(slot + 1) * hs];
-                elastic += law.elastic_energy(c.overlap, params, after);
-                let Some(history_before) = before.get(slot * hs..(slot + 1) * hs) else { continue };
-                let step = ContactStep {
+                Booked {
+                    slot: c.slot,
                     normal: c.normal,
                     overlap: c.overlap,
                     rel_velocity: c.rel_velocity,
                     mean_rel_velocity: [0, 1, 2].map(|a| second[a] - first[a]),
                     rel_spin: c.rel_spin,
-                    dt: world.dt,
-                    params,
-                    history_before,
-                    history_after: after,
-                    force: list.force[slot],
-                };
-                let (f, v) = law.dissipation(&step);
-                friction += f;
-                viscous += v;
-                if n == 1 {
-                    walls += dot(list.force[slot], world.walls[j].velocity) * world.dt;
+                    wall_velocity: (pairing.second() == MemberKind::Wall).then(|| world.walls[j].velocity),
                 }
-            }
-        }
-        (elastic, friction, viscous, walls)
+            })
+            .collect()
     }
 
     /// Closes a tracked step after the motion.
