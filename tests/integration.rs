@@ -51,6 +51,7 @@ mod mpmxdem_adaptive;
 mod mpmxdem_scripts;
 mod plugins;
 mod potential_particles;
+mod potential_walls;
 mod repl;
 mod repl_terminal;
 mod script_background;

@@ -124,7 +124,7 @@ impl Placed {
         self.planes.iter().any(|&(n, d)| dot3(n, centre) - d > self.standoff + radius)
     }
 
-    fn value_gradient(&self, x: Vec3) -> (f64, Vector3<f64>) {
+    pub(crate) fn value_gradient(&self, x: Vec3) -> (f64, Vector3<f64>) {
         let (f, g, _) = potential::<true, false>(&self.planes, self.sphere_centre, self.weights, x);
         (f, Vector3::new(g[0], g[1], g[2]))
     }
@@ -381,7 +381,7 @@ fn first_guess(a: &Placed, b: &Placed) -> Solution {
 /// last step's distance, or 0). Along a ray `f` is a convex piecewise quadratic, negative at the
 /// start: Newton from a point where `f` increases lands beyond the root, then comes back to it
 /// from above, each step inside the bracket.
-fn along_ray(p: &Placed, from: Vec3, u: Vec3, reach: f64, guess: f64) -> f64 {
+pub(crate) fn along_ray(p: &Placed, from: Vec3, u: Vec3, reach: f64, guess: f64) -> f64 {
     let at = |t: f64| [from[0] + t * u[0], from[1] + t * u[1], from[2] + t * u[2]];
     let (mut lo, mut hi) = (0.0, reach.max(f64::MIN_POSITIVE));
     let mut t = if guess > 0.0 && guess < hi { guess } else { 0.0 };

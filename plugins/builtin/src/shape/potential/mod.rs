@@ -11,8 +11,10 @@
 
 pub mod contact;
 pub mod shape;
+pub mod walls;
 
 use contact::{detect, detect_plane, Placed, Pose, Solution};
+use granite_core::dem::walls::Wall;
 use granite_core::ext::body::{
     Ball, BodyGeometry, BodyKindFactory, BodyShape, KindBodies, PairFailure, PlacedBodies, Plane, Touch, WarmStarts,
 };
@@ -322,6 +324,10 @@ impl BodyGeometry for PotentialGeometry {
         WARM
     }
 
+    fn meets_bounded_walls(&self) -> bool {
+        true
+    }
+
     fn place<'a>(&'a self, bodies: KindBodies<'a>) -> Result<Box<dyn PlacedBodies + 'a>> {
         // Where other families meet these, their shapes are among the scene's: only the shapes
         // of this family's bodies are read.
@@ -438,6 +444,16 @@ impl PlacedBodies for PlacedPotentials<'_> {
             w[4] = 1.0;
             Ok(found)
         })
+    }
+
+    fn bounded_walls(
+        &self,
+        pairs: &[(u32, &Wall, u8)],
+        warm: WarmStarts<'_>,
+        out: &mut [Option<Touch>],
+    ) -> std::result::Result<(), PairFailure> {
+        let placed = self.placed.get();
+        solve_pairs(pairs, warm, out, |&(i, wall, _), _| walls::bounded_wall_touch(&placed[i as usize], wall))
     }
 
     fn spheres(
