@@ -214,3 +214,41 @@ fn a_fifo_or_a_device_is_not_loaded() {
         assert!(e.contains(kind) && e.contains("not a regular file") && e.contains("line 1"), "{load}: {e}");
     }
 }
+
+/// A DEM state of version 6 (the bodies' contact lists in a record of their own, before the one
+/// contact set), written by granite f762650: a capsule and a rounded box held on a 10° slope by
+/// static friction, a sphere resting against the box's uphill face (the scene of
+/// `a_contact_change_keeps_the_tangential_springs_of_bodies_at_rest`, run 0.5 s to rest).
+/// Loaded, they stay where they are: their contacts' tangential springs came through; contacts
+/// starting afresh would slide each body by about `m g sin 10° / k_t` first.
+#[test]
+fn a_state_of_version_6_keeps_its_bodies_contacts() {
+    let (kt, g, theta) = (0.5e6f64, 9.81f64, 10f64.to_radians());
+    let path = common::root().join("tests").join("checkpoints").join("dem_state_v6.json");
+    let source = format!(
+        r#"
+        let sim = dem_load({:?});
+        let cap = 0;
+        let block = 1;
+        let x0 = [sim.body_state(cap).position[0], sim.body_state(block).position[0]];
+        summary("contacts", sim.contacts().filter(|c| c.kind1 != "sphere").len());
+        summary("with_sphere", sim.contacts().filter(|c| c.kind1 != "sphere" && c.kind2 == "sphere").len());
+        sim.run_until(sim.time + 0.05);
+        summary("capsule_moved", sim.body_state(cap).position[0] - x0[0]);
+        summary("block_moved", sim.body_state(block).position[0] - x0[1]);
+        summary("capsule_mass", sim.body_state(cap).mass);
+        summary("block_mass", sim.body_state(block).mass);
+        "#,
+        path.to_str().unwrap()
+    );
+    let dir = run("ckpt_dem_v6_bodies", &source).unwrap();
+    let s = common::summary_of(&dir);
+    let get = |k: &str| s[k].as_f64().unwrap();
+    // The capsule on its two ends, the box on its face and against the sphere.
+    assert!(get("contacts") >= 4.0 && get("with_sphere") == 1.0, "{s}");
+    for body in ["capsule", "block"] {
+        let slip = get(&format!("{body}_mass")) * g * theta.sin() / kt;
+        let moved = get(&format!("{body}_moved"));
+        assert!(moved.abs() < 0.01 * slip, "{body} moved {moved:e} m after loading (a reloading spring: {slip:e})");
+    }
+}

@@ -87,8 +87,8 @@ pub struct ContactSet {
     pub body_spheres: PairList,
     /// The touching contacts the bodies' stage found in the last step in each body list (body
     /// pairs, walls, spheres), in pair order, with their contact points: what the energy
-    /// booking, the measures and inspection read of them (a body's geometry is the plugin's,
-    /// so it is kept rather than computed again).
+    /// booking and the measures read of them (a body's geometry is its plugin's, so the step's
+    /// is kept rather than computed again).
     pub(crate) body_touches: [Vec<(LawContact, Vec3)>; 3],
 }
 

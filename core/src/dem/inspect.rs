@@ -1,7 +1,7 @@
 //! Contacts as a user inspects them between two steps (YADE's `O.interactions`), of every
-//! pairing in the contact set: forces of the last step, the law and its values for the pair, and
-//! the geometry: of the present positions for spheres (computed again, as YADE does), of the last
-//! step for bodies of plugin kinds (their plugin's geometry found it then).
+//! pairing in the contact set: those touching in the last step, with its forces, the law and its
+//! values for the pair, and the geometry of the present positions (found again: a sphere pair's
+//! from the centres, a body's by its kind's geometry).
 
 use crate::dem::contact_set::{MemberKind, Pairing};
 use crate::dem::contact_stage::branch;
@@ -71,20 +71,45 @@ fn dot(a: Vec3, b: Vec3) -> f64 {
 
 impl DemWorld {
     /// Every contact touching in the last step, list by list in [`Pairing::ALL`]'s order
-    /// (sphere pairs, sphere-wall, body pairs, body-wall, body-sphere), each in pair order.
+    /// (sphere pairs, sphere-wall, body pairs, body-wall, body-sphere), each in pair order, with
+    /// its geometry where the members are now (a body's by its kind's geometry).
     pub fn touching_contacts(&self) -> Vec<ContactView> {
         let mut out = Vec::new();
+        let bodies = self.body_touches_now();
         for (pairing, list) in self.contacts.lists() {
             match pairing.body_list() {
                 None => out.extend((0..list.len()).filter(|&k| list.touching[k]).map(|k| self.sphere_view(pairing, k))),
                 Some(n) => out.extend(
-                    self.contacts.body_touches[n]
+                    bodies[n]
                         .iter()
+                        .filter(|(c, _)| list.touching[c.slot])
                         .map(|&(c, point)| self.view(pairing, c.slot, point, c.normal, c.overlap)),
                 ),
             }
         }
         out
+    }
+
+    /// The bodies' touches where they are now, by their geometries (the last step's where a
+    /// geometry fails now: the next step says why).
+    fn body_touches_now(&self) -> [Vec<(crate::dem::rigid::LawContact, Vec3)>; 3] {
+        let around = self.surroundings();
+        BodyContacts::touches_now(&self.kinds, &self.contacts, &around)
+            .unwrap_or_else(|_| self.contacts.body_touches.clone())
+    }
+
+    /// What the bodies' geometries read besides the bodies.
+    fn surroundings(&self) -> Surroundings<'_> {
+        Surroundings {
+            spheres: &self.spheres,
+            walls: &self.walls,
+            laws: &self.contacts.laws,
+            cell: self.cell.as_ref(),
+            law_history: self.pair_strides().1,
+            dt: self.dt,
+            step: self.step,
+            time: self.time,
+        }
     }
 
     /// The touching contact between spheres `i` and `j` (indices), if any, seen from `i`.
@@ -207,22 +232,14 @@ impl DemWorld {
     /// the step reports why).
     fn deep_body_overlaps(&self, fraction: f64) -> Vec<(String, f64)> {
         let k = &self.kinds;
-        let around = Surroundings {
-            spheres: &self.spheres,
-            walls: &self.walls,
-            laws: &self.contacts.laws,
-            cell: self.cell.as_ref(),
-            law_history: self.pair_strides().1,
-            dt: self.dt,
-            step: self.step,
-            time: self.time,
-        };
-        let Ok(lists) = BodyContacts::overlaps(k, &self.contacts, &around) else { return Vec::new() };
+        let around = self.surroundings();
+        let Ok(lists) = BodyContacts::touches_now(k, &self.contacts, &around) else { return Vec::new() };
         let body = |i: usize| format!("{} {}", k.kind_name(i), k.id[i]);
         let mut found = Vec::new();
         let c = &self.contacts;
         for (n, (list, touching)) in [&c.bodies, &c.body_walls, &c.body_spheres].into_iter().zip(lists).enumerate() {
-            for (pair, overlap) in touching {
+            for (contact, _) in touching {
+                let (pair, overlap) = (contact.slot, contact.overlap);
                 let (i, j) = (list.a[pair] as usize, list.b[pair] as usize);
                 let (what, radius) = match n {
                     0 => (format!("{} and {}", body(i), body(j)), k.equivalent_radius(i).min(k.equivalent_radius(j))),

@@ -285,21 +285,21 @@ impl BodyContacts {
         Ok(())
     }
 
-    /// The overlaps of the bodies' touching candidate pairs as a step would find them now, list
-    /// by list (body pairs, walls, spheres): `(pair, overlap)`. Runs the geometries alone, on
-    /// copies of the lists: the scene is left as it is.
-    pub(crate) fn overlaps(
+    /// The bodies' touching candidate pairs as a step would find them now, list by list (body
+    /// pairs, walls, spheres), with their contact points. Runs the geometries alone, on copies of
+    /// the lists: the scene is left as it is.
+    pub(crate) fn touches_now(
         bodies: &KindScene,
         contacts: &ContactSet,
         around: &Surroundings<'_>,
-    ) -> Result<[Vec<(usize, f64)>; 3]> {
-        let mut out: [Vec<(usize, f64)>; 3] = Default::default();
+    ) -> Result<[Vec<(LawContact, Vec3)>; 3]> {
+        let mut out: [Vec<(LawContact, Vec3)>; 3] = Default::default();
         if bodies.families.is_empty() {
             return Ok(out);
         }
         let mut lists = [contacts.bodies.clone(), contacts.body_walls.clone(), contacts.body_spheres.clone()];
         for (n, (found, _)) in Self::touching_lists(bodies, around, &mut lists)?.into_iter().enumerate() {
-            out[n] = found.into_iter().map(|f| (f.law.slot, f.law.overlap)).collect();
+            out[n] = found.into_iter().map(|f| (f.law, f.point)).collect();
         }
         Ok(out)
     }
