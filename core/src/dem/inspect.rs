@@ -1,7 +1,8 @@
 //! Contacts as a user inspects them between two steps (YADE's `O.interactions`), of every
 //! pairing in the contact set: those touching in the last step, with its forces, the law and its
-//! values for the pair, and the geometry of the present positions (found again: a sphere pair's
-//! from the centres, a body's by its kind's geometry).
+//! values for the pair, and their geometry: a sphere pair's of the present positions (found again
+//! from the centres), a body's as its kind's geometry found it in the last step (found again
+//! where the bodies are in a state loaded before its first step).
 
 use crate::dem::contact_set::{MemberKind, Pairing};
 use crate::dem::contact_stage::branch;
@@ -71,11 +72,10 @@ fn dot(a: Vec3, b: Vec3) -> f64 {
 
 impl DemWorld {
     /// Every contact touching in the last step, list by list in [`Pairing::ALL`]'s order
-    /// (sphere pairs, sphere-wall, body pairs, body-wall, body-sphere), each in pair order, with
-    /// its geometry where the members are now (a body's by its kind's geometry).
+    /// (sphere pairs, sphere-wall, body pairs, body-wall, body-sphere), each in pair order.
     pub fn touching_contacts(&self) -> Vec<ContactView> {
         let mut out = Vec::new();
-        let bodies = self.body_touches_now();
+        let bodies = self.body_touches();
         for (pairing, list) in self.contacts.lists() {
             match pairing.body_list() {
                 None => out.extend((0..list.len()).filter(|&k| list.touching[k]).map(|k| self.sphere_view(pairing, k))),
@@ -90,12 +90,16 @@ impl DemWorld {
         out
     }
 
-    /// The bodies' touches where they are now, by their geometries (the last step's where a
-    /// geometry fails now: the next step says why).
-    fn body_touches_now(&self) -> [Vec<(crate::dem::rigid::LawContact, Vec3)>; 3] {
+    /// The bodies' touches of the last step, or, in a state loaded before its first step (whose
+    /// touches are not saved), found again by their geometries where the bodies are.
+    fn body_touches(&self) -> [Vec<(crate::dem::rigid::LawContact, Vec3)>; 3] {
+        let c = &self.contacts;
+        let lists = [&c.bodies, &c.body_walls, &c.body_spheres];
+        if (0..3).all(|n| c.body_touches[n].len() == lists[n].touching_count()) {
+            return c.body_touches.clone();
+        }
         let around = self.surroundings();
-        BodyContacts::touches_now(&self.kinds, &self.contacts, &around)
-            .unwrap_or_else(|_| self.contacts.body_touches.clone())
+        BodyContacts::touches_now(&self.kinds, c, &around).unwrap_or_else(|_| c.body_touches.clone())
     }
 
     /// What the bodies' geometries read besides the bodies.
