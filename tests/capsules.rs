@@ -352,54 +352,9 @@ fn a_contact_change_reaches_capsules_and_a_law_switch_runs_on() {
 /// carry their weight, to 0.5 %, and no capsule has passed through a wall.
 #[test]
 fn capsules_settle_in_a_cylinder_on_a_disk_and_in_a_silo_of_triangles() {
-    let stl = common::script("dem/silo_outlet_15mm.stl");
-    let cases = [
-        (
-            "disk",
-            "let walls = [sim.wall_disk(m, [0.0, 0.0, 0.0], [0.0, 0.0, 1.0], 0.05)];
-        walls.push(sim.wall_cylinder(m, [0.0, 0.0, 0.0], [0.0, 0.0, 1.0], 0.05, 0.3));"
-                .to_string(),
-            ([-0.03, -0.03], [0.03, 0.03]),
-        ),
-        (
-            "silo",
-            format!(
-                "let walls = sim.wall_mesh(m, \"{}\", #{{ scale: 0.001 }});
-        walls.push(sim.wall_rect(m, [0.03, 0.03, -0.0001], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.03, 0.03]));",
-                stl.display()
-            ),
-            ([0.008, 0.008], [0.052, 0.052]),
-        ),
-    ];
-    for (name, walls, (lo, hi)) in cases {
-        let source = format!(
-            r#"
-        let sim = dem(#{{ seed: 5 }});
-        let m = sim.material(#{{ density: 2500.0 }});
-        sim.contact_law("linear", #{{ kn: 2e4, kt_ratio: 0.5, friction: 25.0 }});
-        sim.gravity([0.0, 0.0, -9.81]);
-        {walls}
-        sim.clump_cloud(m, [{}, {}, 0.01], [{}, {}, 0.13], #{{ count: 15, shape: "capsule", radius: 0.004, length: 0.008 }});
-        sim.damping(0.4);
-        sim.dt(0.2 * sim.critical_dt());
-        sim.run_until(2.0);
-        let weight = 0.0;
-        let lowest = 1.0;
-        for id in sim.body_ids() {{
-            let b = sim.body_state(id);
-            weight += 9.81 * b.mass;
-            lowest = min(lowest, b.position[2]);
-        }}
-        summary("weight", weight);
-        summary("carried", -sim.wall_force(walls)[2]);
-        summary("lowest", lowest);
-        "#,
-            lo[0], lo[1], hi[0], hi[1]
-        );
-        let out = common::run_text(&format!("capsules_in_{name}"), &source);
-        let s = common::summary_of(&out);
+    let cloud = r#"count: 15, shape: "capsule", radius: 0.004, length: 0.008"#;
+    for (name, s) in common::bodies::poured_into_containers("capsules", cloud, 2.0) {
         let get = |k: &str| s[k].as_f64().unwrap();
-        eprintln!("capsules in the {name}: the walls carry {} N of {} N", get("carried"), get("weight"));
         assert!((get("carried") / get("weight") - 1.0).abs() < 0.005, "{name}: walls carry {s}");
         assert!(get("lowest") > 0.0, "{name}: a capsule below the floor: {s}");
     }

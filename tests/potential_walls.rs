@@ -138,55 +138,9 @@ fn a_rounded_box_over_a_rectangles_edge_tips_off_only_past_its_middle() {
 /// through a wall.
 #[test]
 fn rounded_boxes_settle_in_a_cylinder_on_a_disk_and_in_a_silo_of_triangles() {
-    let stl = common::script("dem/silo_outlet_15mm.stl");
-    let cases = [
-        (
-            "disk",
-            "let walls = [sim.wall_disk(m, [0.0, 0.0, 0.0], [0.0, 0.0, 1.0], 0.05)];
-        walls.push(sim.wall_cylinder(m, [0.0, 0.0, 0.0], [0.0, 0.0, 1.0], 0.05, 0.3));"
-                .to_string(),
-            ([-0.03, -0.03], [0.03, 0.03]),
-        ),
-        (
-            "silo",
-            format!(
-                "let walls = sim.wall_mesh(m, \"{}\", #{{ scale: 0.001 }});
-        walls.push(sim.wall_rect(m, [0.03, 0.03, -0.0001], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.03, 0.03]));",
-                stl.display()
-            ),
-            ([0.008, 0.008], [0.052, 0.052]),
-        ),
-    ];
-    for (name, walls, (lo, hi)) in cases {
-        let source = format!(
-            r#"
-        let sim = dem(#{{ seed: 5 }});
-        let m = sim.material(#{{ density: 2500.0 }});
-        sim.contact_law("linear", #{{ kn: 2e4, kt_ratio: 0.5, friction: 25.0 }});
-        sim.gravity([0.0, 0.0, -9.81]);
-        {walls}
-        sim.clump_cloud(m, [{}, {}, 0.01], [{}, {}, 0.13], #{{ count: 12, shape: "potential_box", hx: 0.004, hy: 0.003, hz: 0.002, r: 0.0015, k: 0.2 }});
-        sim.damping(0.4);
-        sim.dt(0.2 * sim.critical_dt());
-        sim.run_until(1.5);
-        let weight = 0.0;
-        let lowest = 1.0;
-        for id in sim.body_ids() {{
-            let b = sim.body_state(id);
-            weight += 9.81 * b.mass;
-            lowest = min(lowest, b.position[2]);
-        }}
-        summary("weight", weight);
-        summary("carried", -sim.wall_force(walls)[2]);
-        summary("lowest", lowest);
-        summary("wall_contacts", sim.contacts().filter(|c| c.kind1 != "sphere" && "wall" in c).len());
-        "#,
-            lo[0], lo[1], hi[0], hi[1]
-        );
-        let out = common::run_text(&format!("potential_in_{name}"), &source);
-        let s = common::summary_of(&out);
+    let cloud = r#"count: 12, shape: "potential_box", hx: 0.004, hy: 0.003, hz: 0.002, r: 0.0015, k: 0.2"#;
+    for (name, s) in common::bodies::poured_into_containers("potential", cloud, 1.5) {
         let get = |k: &str| s[k].as_f64().unwrap();
-        eprintln!("rounded boxes in the {name}: the walls carry {} N of {} N ({s})", get("carried"), get("weight"));
         assert!((get("carried") / get("weight") - 1.0).abs() < 0.005, "{name}: walls carry {s}");
         assert!(get("lowest") > 0.0, "{name}: a box below the floor: {s}");
         assert!(get("wall_contacts") >= 3.0, "{name}: {s}");

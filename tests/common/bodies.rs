@@ -79,3 +79,63 @@ impl Scene {
 pub fn along(axis: [f64; 3]) -> UnitQuaternion<f64> {
     UnitQuaternion::rotation_between(&Vector3::z(), &Vector3::from(axis)).unwrap()
 }
+
+/// Grains of a body kind (`cloud`: the options of `clump_cloud` after `count`) poured into a
+/// cylinder standing on a disk, and into the silo of scripts/dem/silo_outlet_15mm.stl (a wall
+/// mesh: four sides and a floor with a 15 mm hole, closed by a rectangle just under it), let
+/// settle for `time` s: for each container its name and summary, with `weight` (the grains'),
+/// `carried` (by the walls), `lowest` (the lowest centre) and `wall_contacts`.
+pub fn poured_into_containers(what: &str, cloud: &str, time: f64) -> Vec<(&'static str, serde_json::Value)> {
+    let stl = super::script("dem/silo_outlet_15mm.stl");
+    let cases = [
+        (
+            "disk",
+            "let walls = [sim.wall_disk(m, [0.0, 0.0, 0.0], [0.0, 0.0, 1.0], 0.05)];
+        walls.push(sim.wall_cylinder(m, [0.0, 0.0, 0.0], [0.0, 0.0, 1.0], 0.05, 0.3));"
+                .to_string(),
+            ([-0.03, -0.03], [0.03, 0.03]),
+        ),
+        (
+            "silo",
+            format!(
+                "let walls = sim.wall_mesh(m, \"{}\", #{{ scale: 0.001 }});
+        walls.push(sim.wall_rect(m, [0.03, 0.03, -0.0001], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.03, 0.03]));",
+                stl.display()
+            ),
+            ([0.008, 0.008], [0.052, 0.052]),
+        ),
+    ];
+    let mut out = Vec::new();
+    for (name, walls, (lo, hi)) in cases {
+        let source = format!(
+            r#"
+        let sim = dem(#{{ seed: 5 }});
+        let m = sim.material(#{{ density: 2500.0 }});
+        sim.contact_law("linear", #{{ kn: 2e4, kt_ratio: 0.5, friction: 25.0 }});
+        sim.gravity([0.0, 0.0, -9.81]);
+        {walls}
+        sim.clump_cloud(m, [{}, {}, 0.01], [{}, {}, 0.13], #{{ {cloud} }});
+        sim.damping(0.4);
+        sim.dt(0.2 * sim.critical_dt());
+        sim.run_until({time});
+        let weight = 0.0;
+        let lowest = 1.0;
+        for id in sim.body_ids() {{
+            let b = sim.body_state(id);
+            weight += 9.81 * b.mass;
+            lowest = min(lowest, b.position[2]);
+        }}
+        summary("weight", weight);
+        summary("carried", -sim.wall_force(walls)[2]);
+        summary("lowest", lowest);
+        summary("wall_contacts", sim.contacts().filter(|c| c.kind1 != "sphere" && "wall" in c).len());
+        "#,
+            lo[0], lo[1], hi[0], hi[1]
+        );
+        let dir = super::run_text(&format!("{what}_in_{name}"), &source);
+        let s = super::summary_of(&dir);
+        eprintln!("{what} in the {name}: {s}");
+        out.push((name, s));
+    }
+    out
+}

@@ -79,13 +79,13 @@ impl DemSim {
             }
         }
         let sphere_loads = !world.kinds.sphere_loads.is_empty();
+        let around = SphereSurroundings {
+            walls: &world.walls,
+            laws: &world.contacts.laws,
+            dt: world.dt,
+            cell: world.cell.as_ref(),
+        };
         let mut moved = if parallel && !check && world.external.is_empty() && !tracking && !sphere_loads {
-            let around = SphereSurroundings {
-                walls: &world.walls,
-                laws: &world.contacts.laws,
-                dt: world.dt,
-                cell: world.cell.as_ref(),
-            };
             ContactsAndMotion::run(
                 &mut world.spheres,
                 (&mut world.contacts.spheres, &mut world.contacts.sphere_walls),
@@ -101,12 +101,6 @@ impl DemSim {
             // External loads on single spheres and the energy tracker (a console's experiments,
             // not production runs) work between the contact stage and the motion, so they take
             // this path too.
-            let around = SphereSurroundings {
-                walls: &world.walls,
-                laws: &world.contacts.laws,
-                dt: world.dt,
-                cell: world.cell.as_ref(),
-            };
             SphereContacts::run(
                 &mut world.spheres,
                 (&mut world.contacts.spheres, &mut world.contacts.sphere_walls),

@@ -8,6 +8,7 @@
 //! ends' points weighed by their depths (a capsule lying flat bears at its middle, one tilting
 //! shifts its bearing continuously towards the end going down).
 
+use super::golden_least;
 use granite_core::dem::mesh_walls::closest_on_triangle;
 use granite_core::dem::walls::{Wall, WallShape};
 use granite_core::error::{GraniteError, Result};
@@ -342,30 +343,6 @@ impl PlacedBodies for PlacedCapsules<'_> {
 /// about 4e-9 of the axis.
 const GOLDEN_STEPS: usize = 40;
 
-/// The least gap of `gap` on `[0, 1]` by a golden-section search: `(t, gap)`.
-fn golden_least(gap: &impl Fn(f64) -> f64) -> (f64, f64) {
-    let ratio = 0.5 * (5f64.sqrt() - 1.0);
-    let (mut lo, mut hi) = (0.0, 1.0);
-    let (mut a, mut b) = (hi - ratio * (hi - lo), lo + ratio * (hi - lo));
-    let (mut ga, mut gb) = (gap(a), gap(b));
-    for _ in 0..GOLDEN_STEPS {
-        if ga <= gb {
-            (hi, b, gb) = (b, a, ga);
-            a = hi - ratio * (hi - lo);
-            ga = gap(a);
-        } else {
-            (lo, a, ga) = (a, b, gb);
-            b = lo + ratio * (hi - lo);
-            gb = gap(b);
-        }
-    }
-    if ga <= gb {
-        (a, ga)
-    } else {
-        (b, gb)
-    }
-}
-
 /// The touch of the capsule of segment `[e0, e1]` and radius `r` with a wall of a bounded shape,
 /// for its contact point `part`, from the spheres of its axis (the gap `g(t)` of the sphere at
 /// `c(t)`, as `Wall::contact` gives a sphere's). Where the gap rises or stays level inwards from
@@ -408,7 +385,7 @@ fn wall_touch((e0, e1, r): (Vec3, Vec3, f64), wall: &Wall, part: u8) -> Option<T
     let (t, least) = if ends_least {
         end
     } else {
-        let (inner, g_inner) = golden_least(&gap);
+        let (inner, g_inner) = golden_least(&gap, (0.0, 1.0), GOLDEN_STEPS);
         if (inner < 0.5) == (part == 0) {
             (inner, g_inner)
         } else {

@@ -92,3 +92,27 @@ impl ShapeModelFactory for TetraFactory {
         Ok(Box::new(Shape { name: "tetra", members, params }))
     }
 }
+
+/// The least of `g` on `[lo, hi]` by a golden-section search of `steps` steps (the bracket
+/// shrinks by 0.618 a step), for a function with one least there: `(t, g(t))`.
+pub(crate) fn golden_least(g: &impl Fn(f64) -> f64, (mut lo, mut hi): (f64, f64), steps: usize) -> (f64, f64) {
+    let ratio = 0.5 * (5f64.sqrt() - 1.0);
+    let (mut a, mut b) = (hi - ratio * (hi - lo), lo + ratio * (hi - lo));
+    let (mut ga, mut gb) = (g(a), g(b));
+    for _ in 0..steps {
+        if ga <= gb {
+            (hi, b, gb) = (b, a, ga);
+            a = hi - ratio * (hi - lo);
+            ga = g(a);
+        } else {
+            (lo, a, ga) = (a, b, gb);
+            b = lo + ratio * (hi - lo);
+            gb = g(b);
+        }
+    }
+    if ga <= gb {
+        (a, ga)
+    } else {
+        (b, gb)
+    }
+}

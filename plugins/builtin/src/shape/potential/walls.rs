@@ -25,6 +25,7 @@
 //!   nearest the particle's centre, then, where that leaves the shell's length, a search along
 //!   the rim it crossed; the touch is that of a boundary point.
 
+use super::super::golden_least;
 use super::contact::{along_ray, detect_plane, Placed};
 use granite_core::dem::mesh_walls::{closest_on_triangle, feature, FacetRing};
 use granite_core::dem::walls::{Wall, WallShape};
@@ -56,24 +57,11 @@ fn basis(n: Vec3) -> [Vec3; 2] {
     [u, cross3(n, u)]
 }
 
-/// The least of `g` on `[lo, hi]` by a golden-section search: `(t, g(t))`.
-fn golden_least(g: impl Fn(f64) -> f64, (mut lo, mut hi): (f64, f64)) -> (f64, f64) {
-    let ratio = 0.5 * (5f64.sqrt() - 1.0);
-    let (mut a, mut b) = (hi - ratio * (hi - lo), lo + ratio * (hi - lo));
-    let (mut ga, mut gb) = (g(a), g(b));
-    for _ in 0..GOLDEN_STEPS {
-        if ga <= gb {
-            (hi, b, gb) = (b, a, ga);
-            a = hi - ratio * (hi - lo);
-            ga = g(a);
-        } else {
-            (lo, a, ga) = (a, b, gb);
-            b = lo + ratio * (hi - lo);
-            gb = g(b);
-        }
-    }
-    // The ends too: the least of a convex function on a segment may be at one of them.
-    [(lo, g(lo)), (hi, g(hi)), (a, ga), (b, gb)].into_iter().min_by(|x, y| x.1.total_cmp(&y.1)).unwrap_or((a, ga))
+/// The least of `g` on `[lo, hi]` by a golden-section search, its ends included (the least of a
+/// convex function on a segment may be at one of them): `(t, g(t))`.
+fn least_on(g: impl Fn(f64) -> f64, (lo, hi): (f64, f64)) -> (f64, f64) {
+    let inner = golden_least(&g, (lo, hi), GOLDEN_STEPS);
+    [(lo, g(lo)), (hi, g(hi)), inner].into_iter().min_by(|x, y| x.1.total_cmp(&y.1)).unwrap_or(inner)
 }
 
 /// Newton's method with backtracking on a function of two variables given with its gradient and
@@ -193,7 +181,7 @@ impl Flat {
                 .map(|k| {
                     let (a, b) = (corners[k], corners[(k + 1) % corners.len()]);
                     let d = sub3(b, a);
-                    let (t, value) = golden_least(|t| f(at(a, d, t)), (0.0, 1.0));
+                    let (t, value) = least_on(|t| f(at(a, d, t)), (0.0, 1.0));
                     (at(a, d, t), value)
                 })
                 .min_by(|x, y| x.1.total_cmp(&y.1))
@@ -203,7 +191,7 @@ impl Flat {
                 let towards = least[1].atan2(least[0]);
                 let rim = |phi: f64| self.point_of(Vector2::new(r * phi.cos(), r * phi.sin()));
                 let quarter = 0.5 * std::f64::consts::PI;
-                let (phi, value) = golden_least(|phi| f(rim(phi)), (towards - quarter, towards + quarter));
+                let (phi, value) = least_on(|phi| f(rim(phi)), (towards - quarter, towards + quarter));
                 (rim(phi), value)
             }
         };
@@ -339,7 +327,7 @@ fn shell_touch(p: &Placed, base: Vec3, (axis, radius, length): (Vec3, f64, f64))
         let z = least[1].clamp(0.0, length);
         // Along the rim it crossed, within the particle's angular reach of where it crossed.
         let reach = (2.0 * p.bounding_radius / radius).min(std::f64::consts::PI);
-        let (theta, _) = golden_least(|t| p.value(shell(t, z)), (least[0] - reach, least[0] + reach));
+        let (theta, _) = least_on(|t| p.value(shell(t, z)), (least[0] - reach, least[0] + reach));
         shell(theta, z)
     };
     boundary_touch(p, w)
