@@ -1,9 +1,9 @@
 //! Bodies of plugin kinds (`ext::body`: capsules, potential particles, ...) in a DEM simulation:
-//! their storage and set-up, and their candidate lists (with one another, plane walls and
-//! spheres, from their bounding spheres, across the faces of a periodic cell too), rebuilt with
-//! the spheres'. Bodies of several families
-//! meet where a plugin registers the geometry of their pair (`BodyPairGeometry`). Their part of a
-//! step is `kind_stage.rs`.
+//! their storage and set-up, and the building of their candidate lists (with one another, walls
+//! and spheres, from their bounding spheres, across the faces of a periodic cell too; kept in the
+//! contact set), rebuilt with the spheres'. Bodies of several families meet where a plugin
+//! registers the geometry of their pair (`BodyPairGeometry`). Their part of a step is
+//! `kind_stage.rs`.
 
 use crate::dem::broad_phase::{periodic_sphere_pairs, sphere_pairs, wall_pairs, Candidate};
 use crate::dem::contacts::PairList;
