@@ -51,7 +51,8 @@ fn body_map(dem: &DemSim, i: usize) -> Map {
 }
 
 /// A contact as scripts see it: the first member's id and kind (`id1`, `kind1`: "sphere" or a
-/// body's kind), the other's (`id2`, `kind2`) or its wall's index (`wall`), and the contact.
+/// body's kind), the other's (`id2`, `kind2`) or its wall's index (`wall`), which of a body's
+/// contact points with it this is (`part`), and the contact.
 pub(crate) fn contact_map(dem: &DemSim, c: &ContactView) -> Map {
     let mut m = Map::new();
     let w = &dem.world;
@@ -68,6 +69,9 @@ pub(crate) fn contact_map(dem: &DemSim, c: &ContactView) -> Map {
     }
     if let Member::Wall(index) = c.other {
         m.insert("wall".into(), Dynamic::from(index as i64));
+    }
+    if let Member::Body(_) = c.first {
+        m.insert("part".into(), Dynamic::from(c.part as i64));
     }
     if c.shift != [0; 3] {
         m.insert("image".into(), Dynamic::from(c.shift.iter().map(|&s| Dynamic::from(s as i64)).collect::<Array>()));

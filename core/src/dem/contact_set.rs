@@ -200,6 +200,9 @@ impl ContactSet {
                 ("force", list.force.len()),
             ];
             same_length(name, "a", m, &lengths)?;
+            if !list.part.is_empty() {
+                same_length(name, "a", m, &[("part", list.part.len())])?;
+            }
             let (firsts, others) = (count(pairing.first()), count(pairing.second()));
             if list.a.iter().any(|&i| i as usize >= firsts) || list.b.iter().any(|&j| j as usize >= others) {
                 return Err(format!("{name}: an index beyond {beyond}"));
@@ -222,9 +225,8 @@ impl ContactSet {
                     list.history.len()
                 ));
             }
-            let key = |k: usize| (list.a[k], list.b[k], list.shift[k]);
-            if (1..m).any(|k| key(k - 1) >= key(k)) {
-                return Err(format!("{name}: not sorted by (first, second, image) without repeats"));
+            if (1..m).any(|k| list.key_of(k - 1) >= list.key_of(k)) {
+                return Err(format!("{name}: not sorted by (first, second, image, point) without repeats"));
             }
         }
         // The force sums' order rests on it (see `step::write_back`). A sphere meets its own image

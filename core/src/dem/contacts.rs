@@ -9,11 +9,38 @@ use rayon::prelude::*;
 pub const MAX_PARAMS: usize = 16;
 pub const MAX_HISTORY: usize = 16;
 
+/// What a pair of a list is known by: its two members, the periodic image of the second, and
+/// which of several contact points of the two it is (a body meeting a wall or another body at
+/// several points: a contact manifold).
+pub trait PairKey: Copy + Send + Sync {
+    /// Whether the list's pairs have contact points apart (`PairList::part`).
+    const PARTED: bool;
+    fn key(&self) -> (u32, u32, [i32; 3], u8);
+}
+
+impl PairKey for Candidate {
+    const PARTED: bool = false;
+    #[inline(always)]
+    fn key(&self) -> (u32, u32, [i32; 3], u8) {
+        (self.0, self.1, self.2, 0)
+    }
+}
+
+/// A candidate pair and its contact point.
+impl PairKey for (Candidate, u8) {
+    const PARTED: bool = true;
+    #[inline(always)]
+    fn key(&self) -> (u32, u32, [i32; 3], u8) {
+        (self.0 .0, self.0 .1, self.0 .2, self.1)
+    }
+}
+
 /// One piece of a new list's entries, written by [`PairList::merge_block`].
 struct Merged<'a> {
     a: &'a mut [u32],
     b: &'a mut [u32],
     shift: &'a mut [[i32; 3]],
+    part: &'a mut [u8],
     law: &'a mut [u16],
     params: &'a mut [f64],
     history: &'a mut [f64],
@@ -28,6 +55,11 @@ pub struct PairList {
     pub b: Vec<u32>,
     /// Periodic image of `b` this pair involves (`x_b + h shift`); zero without a periodic cell.
     pub shift: Vec<[i32; 3]>,
+    /// Which of the contact points of its two members a pair is, in a list whose pairs have
+    /// several (a body's kind meeting walls or its own kind at several points); empty in a list
+    /// of one point a pair (spheres), all of whose pairs are point 0.
+    #[serde(default)]
+    pub part: Vec<u8>,
     /// Contact law of the pair (index into the simulation's law table).
     pub law: Vec<u16>,
     pub param_stride: usize,
@@ -51,6 +83,10 @@ impl<'a> Merged<'a> {
             a: front(&mut rest.a, len),
             b: front(&mut rest.b, len),
             shift: front(&mut rest.shift, len),
+            part: {
+                let parted = if rest.part.is_empty() { 0 } else { len };
+                front(&mut rest.part, parted)
+            },
             law: front(&mut rest.law, len),
             params: front(&mut rest.params, len * ps),
             history: front(&mut rest.history, len * hs),
@@ -69,11 +105,24 @@ impl PairList {
         self.a.is_empty()
     }
 
-    /// Re-sorts the pairs by `(a, b, shift)` after their shifts changed (wrapping, flipping).
+    /// The contact point pair `k` is (see `part`).
+    #[inline(always)]
+    pub fn part_of(&self, k: usize) -> u8 {
+        self.part.get(k).copied().unwrap_or(0)
+    }
+
+    /// What pair `k` is known by: members, image, contact point.
+    #[inline(always)]
+    pub fn key_of(&self, k: usize) -> (u32, u32, [i32; 3], u8) {
+        (self.a[k], self.b[k], self.shift[k], self.part_of(k))
+    }
+
+    /// Re-sorts the pairs by `(a, b, shift, part)` after their shifts changed (wrapping,
+    /// flipping).
     pub fn resort(&mut self) {
         let n = self.len();
         let mut order: Vec<usize> = (0..n).collect();
-        order.sort_by_key(|&k| (self.a[k], self.b[k], self.shift[k]));
+        order.sort_by_key(|&k| self.key_of(k));
         if order.iter().enumerate().all(|(i, &k)| i == k) {
             return;
         }
@@ -89,6 +138,9 @@ impl PairList {
         self.a = permute(&self.a, &order);
         self.b = permute(&self.b, &order);
         self.shift = permute(&self.shift, &order);
+        if !self.part.is_empty() {
+            self.part = permute(&self.part, &order);
+        }
         self.law = permute(&self.law, &order);
         self.touching = permute(&self.touching, &order);
         self.force = permute(&self.force, &order);
@@ -101,6 +153,7 @@ impl PairList {
         self.a.shrink_to_fit();
         self.b.shrink_to_fit();
         self.shift.shrink_to_fit();
+        self.part.shrink_to_fit();
         self.law.shrink_to_fit();
         self.params.shrink_to_fit();
         self.history.shrink_to_fit();
@@ -166,6 +219,9 @@ impl PairList {
             self.a[kept] = new_index[a];
             self.b[kept] = if spheres { new_index[b] } else { b as u32 };
             self.shift[kept] = self.shift[k];
+            if !self.part.is_empty() {
+                self.part[kept] = self.part[k];
+            }
             self.law[kept] = self.law[k];
             self.touching[kept] = self.touching[k];
             self.force[kept] = self.force[k];
@@ -176,6 +232,7 @@ impl PairList {
         self.a.truncate(kept);
         self.b.truncate(kept);
         self.shift.truncate(kept);
+        self.part.truncate(if self.part.is_empty() { 0 } else { kept });
         self.law.truncate(kept);
         self.touching.truncate(kept);
         self.force.truncate(kept);
@@ -195,10 +252,10 @@ impl PairList {
     /// instead of faulting in fresh pages every time). In `parallel`, the pieces are merged on the
     /// pool's workers: each pair's entry depends only on the pair and on the old list, so the list
     /// is the same on any number of threads and for any cut into pieces.
-    pub fn merge(
+    pub fn merge<K: PairKey>(
         &mut self,
         spare: &mut PairList,
-        pieces: &[&[Candidate]],
+        pieces: &[&[K]],
         strides: (usize, usize),
         parallel: bool,
         init: impl Fn(u32, u32, &mut u16, &mut [f64]) -> bool + Sync,
@@ -211,6 +268,7 @@ impl PairList {
         next.a.resize(n, 0);
         next.b.resize(n, 0);
         next.shift.resize(n, [0; 3]);
+        next.part.resize(if K::PARTED { n } else { 0 }, 0);
         next.law.resize(n, 0);
         next.params.resize(n * param_stride, 0.0);
         next.history.resize(n * history_stride, 0.0);
@@ -221,6 +279,7 @@ impl PairList {
             a: &mut next.a,
             b: &mut next.b,
             shift: &mut next.shift,
+            part: &mut next.part,
             law: &mut next.law,
             params: &mut next.params,
             history: &mut next.history,
@@ -230,7 +289,7 @@ impl PairList {
         let outs: Vec<Merged<'_>> =
             pieces.iter().map(|piece| Merged::cut_front(&mut rest, piece.len(), strides)).collect();
         let old: &PairList = self;
-        let merge = |(piece, out): (&&[Candidate], Merged<'_>)| old.merge_block(piece, out, strides, &init);
+        let merge = |(piece, out): (&&[K], Merged<'_>)| old.merge_block(piece, out, strides, &init);
         let missing = if parallel {
             pieces.par_iter().zip(outs).map(merge).reduce(|| None, |first, later| first.or(later))
         } else {
@@ -242,29 +301,34 @@ impl PairList {
 
     /// Writes the entries of `pairs` (a run of the sorted new list) into `out`, from the old
     /// list (`self`) where a pair is in it.
-    fn merge_block(
+    fn merge_block<K: PairKey>(
         &self,
-        pairs: &[Candidate],
+        pairs: &[K],
         out: Merged<'_>,
         (ps, hs): (usize, usize),
         init: &impl Fn(u32, u32, &mut u16, &mut [f64]) -> bool,
     ) -> Option<(u32, u32)> {
         let same_layout = self.param_stride == ps && self.history_stride == hs;
-        let key = |k: usize| (self.a[k], self.b[k], self.shift[k]);
+        let key = |k: usize| self.key_of(k);
         // The first old pair not before this run's first pair.
-        let mut old = pairs.first().map_or(0, |first| crate::math::partition_index(0..self.len(), |k| key(k) < *first));
+        let mut old =
+            pairs.first().map_or(0, |first| crate::math::partition_index(0..self.len(), |k| key(k) < first.key()));
         let mut missing = None;
-        for (k, &(a, b, shift)) in pairs.iter().enumerate() {
-            while old < self.len() && key(old) < (a, b, shift) {
+        for (k, pair) in pairs.iter().enumerate() {
+            let (a, b, shift, part) = pair.key();
+            while old < self.len() && key(old) < (a, b, shift, part) {
                 old += 1;
             }
             (out.a[k], out.b[k], out.shift[k]) = (a, b, shift);
+            if K::PARTED {
+                out.part[k] = part;
+            }
             // Forces are recomputed every step; a kept pair keeps its force until then, so that
             // what is measured between two steps (the cell's stress, a saved state) does not
             // depend on whether the list was rebuilt (`sim.skin`) since the last one.
             out.force[k] = [0.0; 3];
             let (params, history) = (&mut out.params[k * ps..(k + 1) * ps], &mut out.history[k * hs..(k + 1) * hs]);
-            if same_layout && old < self.len() && key(old) == (a, b, shift) {
+            if same_layout && old < self.len() && key(old) == (a, b, shift, part) {
                 out.law[k] = self.law[old];
                 params.copy_from_slice(&self.params[old * ps..(old + 1) * ps]);
                 history.copy_from_slice(&self.history[old * hs..(old + 1) * hs]);

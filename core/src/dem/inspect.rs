@@ -37,9 +37,11 @@ pub struct ContactView {
     /// A sphere or a body.
     pub first: Member,
     pub other: Member,
-    /// Periodic image of the other member (zero without a periodic cell; for a body on a wall
-    /// at several points, the point's number in its first entry).
+    /// Periodic image of the other member (zero without a periodic cell).
     pub shift: [i32; 3],
+    /// Which of the pair's contact points this is, where its members meet at several (a
+    /// capsule's two ends on a wall); 0 otherwise.
+    pub part: u8,
     pub point: Vec3,
     pub normal: Vec3,
     /// Positive when the members overlap.
@@ -159,6 +161,7 @@ impl DemWorld {
             first: Member::of(pairing.first(), p.a[k] as usize),
             other: Member::of(pairing.second(), p.b[k] as usize),
             shift: p.shift[k],
+            part: p.part_of(k),
             point,
             normal,
             overlap,

@@ -172,12 +172,12 @@ impl Geometries<'_> {
         Ok(())
     }
 
-    /// Bodies with bodies: their family's geometry, or the geometry of their two families (its
-    /// normals turned where it takes them the other way round).
+    /// Bodies with bodies, `(i, j, part)`: their family's geometry, or the geometry of their two
+    /// families (one point a pair; its normals turned where it takes them the other way round).
     fn bodies(
         &self,
         (fa, fb): Group,
-        pairs: &[(u32, u32)],
+        pairs: &[(u32, u32, u8)],
         warm: WarmStarts<'_>,
         out: &mut [Option<Touch>],
     ) -> std::result::Result<(), PairFailure> {
@@ -189,9 +189,12 @@ impl Geometries<'_> {
         let view = |f: u16| view_of(k, self.images, f);
         for m in self.meetings {
             match m.families() {
-                [a, b] if a == na && b == nb => return m.pairs(view(fa), view(fb), pairs, warm, out),
+                [a, b] if a == na && b == nb => {
+                    let pairs: Vec<(u32, u32)> = pairs.iter().map(|&(i, j, _)| (i, j)).collect();
+                    return m.pairs(view(fa), view(fb), &pairs, warm, out);
+                }
                 [a, b] if a == nb && b == na => {
-                    let turned: Vec<(u32, u32)> = pairs.iter().map(|&(i, j)| (j, i)).collect();
+                    let turned: Vec<(u32, u32)> = pairs.iter().map(|&(i, j, _)| (j, i)).collect();
                     m.pairs(view(fb), view(fa), &turned, warm, out)?;
                     for t in out.iter_mut().flatten() {
                         t.normal = t.normal.map(|c| -c);
@@ -366,14 +369,11 @@ impl BodyContacts {
         let done = match side {
             Side::Bodies => {
                 let second = geometries.images.map_or(&list.b[..], |m| &m.second[..]);
-                let pairs: Vec<(u32, u32)> = list.a.iter().copied().zip(second.iter().copied()).collect();
+                let pairs: Vec<(u32, u32, u8)> = (0..list.len()).map(|k| (list.a[k], second[k], list.part_of(k))).collect();
                 geometries.detect(&groups, &pairs, (&mut list.history, hs, own, warm), &mut out, Geometries::bodies)
             }
             Side::Walls => {
-                // A body-wall pair's contact point of the body's manifold is its shift's first
-                // entry (walls have no images).
-                let pairs: Vec<(u32, u32, u8)> =
-                    (0..list.len()).map(|k| (list.a[k], list.b[k], list.shift[k][0] as u8)).collect();
+                let pairs: Vec<(u32, u32, u8)> = (0..list.len()).map(|k| (list.a[k], list.b[k], list.part_of(k))).collect();
                 geometries.detect(&groups, &pairs, (&mut list.history, hs, own, warm), &mut out, Geometries::walls)
             }
             Side::Spheres => {

@@ -6,7 +6,7 @@
 //! `kind_stage.rs`.
 
 use crate::dem::broad_phase::{periodic_sphere_pairs, sphere_pairs, wall_pairs, Candidate};
-use crate::dem::contacts::PairList;
+use crate::dem::contacts::{PairKey, PairList};
 use crate::dem::pairing::{Other, PairBodies};
 use crate::dem::picture::{rigid_picture, RigidBodies};
 use crate::dem::sim::DemWorld;
@@ -430,38 +430,47 @@ impl DemWorld {
         }
         let mut walls = wall_pairs(&k.x, &radii[ns..], &self.walls, skin);
         walls.iter_mut().for_each(|block| block.retain(|&(a, _, _)| !fixed[a as usize]));
-        // A body whose kind bears on a wall at several points gets a pair for each, numbered in
-        // the shift's first entry (a wall has no periodic image), which keeps the list's order.
-        let points: Vec<i32> = k.families.iter().map(|f| f.geometry.wall_points().max(1) as i32).collect();
-        if points.iter().any(|&p| p > 1) {
-            for block in walls.iter_mut() {
-                *block = block
-                    .iter()
-                    .flat_map(|&(a, w, _)| (0..points[k.family[a as usize] as usize]).map(move |p| (a, w, [p, 0, 0])))
-                    .collect();
-            }
-        }
+        // A body whose kind bears on a wall, or on a body of its own family, at several points
+        // gets a pair for each (a contact manifold), numbered in the pair's `part`.
+        let points = |count: fn(&KindInUse) -> usize| -> Vec<u8> {
+            k.families.iter().map(|f| count(f).clamp(1, u8::MAX as usize) as u8).collect()
+        };
+        let (wall_points, body_points) = (points(|f| f.geometry.wall_points()), points(|f| f.geometry.body_points()));
+        let family = &k.family;
+        let parted = |blocks: Vec<Vec<Candidate>>, parts: &dyn Fn(&Candidate) -> u8| -> Vec<Vec<(Candidate, u8)>> {
+            blocks.into_iter().map(|block| block.into_iter().flat_map(|c| (0..parts(&c)).map(move |p| (c, p))).collect()).collect()
+        };
+        let bodies = parted(bodies, &|&(i, j, _)| {
+            let (fi, fj) = (family[i as usize], family[j as usize]);
+            if fi == fj { body_points[fi as usize] } else { 1 }
+        });
+        let walls = parted(walls, &|&(i, _, _)| wall_points[family[i as usize] as usize]);
         let strides = self.kind_strides();
         let mut lists = self.contacts.take_body_lists();
-        let mut missing = None;
-        for (list, (candidates, other)) in lists.iter_mut().zip([
-            (&bodies, Other::Same),
-            (&walls, Other::Walls),
-            (&spheres, Other::Of(&self.spheres.material)),
-        ]) {
-            let pieces: Vec<&[Candidate]> = candidates.iter().map(|b| &b[..]).collect();
-            let owners = PairBodies { material: &self.kinds.material, other, parallel: false };
-            let none = self.merge_with_laws(list, &mut PairList::default(), &pieces, strides, owners, |a, b| {
-                self.kind_info(a, b, other)
-            });
-            missing = missing.or(none);
-        }
+        let [body_list, wall_list, sphere_list] = &mut lists;
+        let missing = self
+            .merge_kind_list(body_list, &bodies, strides, Other::Same)
+            .or(self.merge_kind_list(wall_list, &walls, strides, Other::Walls))
+            .or(self.merge_kind_list(sphere_list, &spheres, strides, Other::Of(&self.spheres.material)));
         self.contacts.put_body_lists(lists);
         if let Some(pair) = missing {
             return Err(self.missing_law(pair));
         }
         self.kinds.x_at_build = self.kinds.x.clone();
         Ok(())
+    }
+
+    /// [`DemWorld::merge_with_laws`] of one of the bodies' lists, its candidates in blocks.
+    fn merge_kind_list<K: PairKey>(
+        &self,
+        list: &mut PairList,
+        candidates: &[Vec<K>],
+        strides: (usize, usize),
+        other: Other<'_>,
+    ) -> Option<(u16, u16)> {
+        let pieces: Vec<&[K]> = candidates.iter().map(|b| &b[..]).collect();
+        let owners = PairBodies { material: &self.kinds.material, other, parallel: false };
+        self.merge_with_laws(list, &mut PairList::default(), &pieces, strides, owners, |a, b| self.kind_info(a, b, other))
     }
 
     /// Values per pair of the bodies' lists: the laws' then the geometry's warm starts.

@@ -4,9 +4,8 @@
 //! into a list with their law and parameters. Geometry (`contact_stage.rs`, a body kind's) and the
 //! laws themselves (`ext::ContactLaw`) are apart from it.
 
-use crate::dem::broad_phase::Candidate;
 use crate::dem::contact_set::{MemberKind, Pairing};
-use crate::dem::contacts::PairList;
+use crate::dem::contacts::{PairKey, PairList};
 use crate::dem::sim::DemWorld;
 use crate::error::GraniteError;
 use crate::ext::{ContactLaw, PairInfo};
@@ -122,11 +121,11 @@ impl DemWorld {
 
     /// [`PairList::merge`] with each new pair given the law of its bodies' materials and its
     /// parameters from `info`; returns a pair of materials without a contact law, if it met one.
-    pub(crate) fn merge_with_laws(
+    pub(crate) fn merge_with_laws<K: PairKey>(
         &self,
         list: &mut PairList,
         spare: &mut PairList,
-        pieces: &[&[Candidate]],
+        pieces: &[&[K]],
         strides: (usize, usize),
         bodies: PairBodies<'_>,
         info: impl Fn(usize, usize) -> crate::ext::PairInfo + Sync,

@@ -305,6 +305,13 @@ impl DemSim {
                 *list = std::mem::take(old);
             }
         }
+        // Before version 7 a body-wall pair's contact point was numbered in its shift's first
+        // entry (walls have no images); it is its `part` now.
+        let walls = &mut c.body_walls;
+        if walls.part.is_empty() && !walls.is_empty() {
+            walls.part = walls.shift.iter().map(|s| s[0].clamp(0, u8::MAX as i32) as u8).collect();
+            walls.shift.iter_mut().for_each(|s| *s = [0; 3]);
+        }
         Ok(())
     }
 

@@ -228,6 +228,13 @@ pub trait BodyGeometry: Send + Sync {
     fn wall_points(&self) -> usize {
         1
     }
+    /// Contact points a body of the kind may have with another of its family (two capsules
+    /// side by side bear at both ends of their overlap): each candidate pair of them is that many
+    /// pairs, `part` 0, 1, ..., each with its own force and history. One unless the kind says
+    /// more; a pair of two families (a `BodyPairGeometry`) has one.
+    fn body_points(&self) -> usize {
+        1
+    }
     /// Whether its bodies meet walls of bounded shapes ([`PlacedBodies::bounded_walls`]);
     /// otherwise plane walls only, and a scene with another wall is refused before its first step.
     fn meets_bounded_walls(&self) -> bool {
@@ -240,10 +247,11 @@ pub trait BodyGeometry: Send + Sync {
 /// A kind's bodies placed for a step. Each call takes a whole pair list and fills `out` (as long
 /// as the list): a touch, or None where the two are apart; `warm` holds the list's warm starts.
 pub trait PlacedBodies: Sync {
-    /// Pairs of bodies of this kind, `(i, j)`; the normal points from `i` to `j`.
+    /// Pairs of bodies of this kind, `(i, j, part)`; the normal points from `i` to `j`; `part`
+    /// is which of the kind's [`BodyGeometry::body_points`] the pair is.
     fn pairs(
         &self,
-        pairs: &[(u32, u32)],
+        pairs: &[(u32, u32, u8)],
         warm: WarmStarts<'_>,
         out: &mut [Option<Touch>],
     ) -> std::result::Result<(), PairFailure>;

@@ -150,6 +150,10 @@ impl BodyGeometry for CapsuleGeometry {
         true
     }
     /// Two contact points with a wall: a capsule lying on it bears on both ends.
+    fn body_points(&self) -> usize {
+        2
+    }
+
     fn wall_points(&self) -> usize {
         2
     }
@@ -262,20 +266,18 @@ fn unit_or_z(v: Vec3) -> Vec3 {
 impl PlacedBodies for PlacedCapsules<'_> {
     fn pairs(
         &self,
-        pairs: &[(u32, u32)],
+        pairs: &[(u32, u32, u8)],
         _: WarmStarts<'_>,
         out: &mut [Option<Touch>],
     ) -> std::result::Result<(), PairFailure> {
         let bodies = &self.bodies;
-        for (slot, &(i, j)) in out.iter_mut().zip(pairs) {
-            let (a0, a1, ra) = self.segments[i as usize];
-            let (b0, b1, rb) = self.segments[j as usize];
-            let (pa, pb) = closest_points(a0, a1, b0, b1);
+        for (slot, &(i, j, part)) in out.iter_mut().zip(pairs) {
+            let (a, b) = (self.segments[i as usize], self.segments[j as usize]);
             // Segments crossing each other: across both axes, towards the second body.
-            let across = cross(sub(a1, a0), sub(b1, b0));
+            let across = cross(sub(a.1, a.0), sub(b.1, b.0));
             let towards = sub(bodies.x[j as usize], bodies.x[i as usize]);
             let fallback = unit_or_z(if dot(across, towards) < 0.0 { across.map(|c| -c) } else { across });
-            *slot = swept_touch(pa, ra, pb, rb, fallback);
+            *slot = pair_touch(a, b, part, fallback);
         }
         Ok(())
     }
@@ -336,6 +338,72 @@ impl PlacedBodies for PlacedCapsules<'_> {
             *slot = wall_touch(self.segments[i as usize], wall, part);
         }
         Ok(())
+    }
+}
+
+/// The touch of capsules `a` and `b` (segment ends and radius each) for their contact point
+/// `part`, the same whichever capsule is first (a capsule and its periodic image are found under
+/// one order, the same two in a larger cell under either). One contact is the deepest: at the
+/// closest points of the two axes, or, for parallel axes, at the deeper end of their overlap.
+/// The other is the end of the overlap farthest from it, where it presses: an end sphere of one
+/// capsule that lies along the other's axis (its foot on the other's segment), against the other
+/// capsule. So two capsules lying along each other bear at both ends of their overlap, each force
+/// that of a point of one body (the pair's forces derive from an energy), and crossed capsules
+/// meet at their closest points. Part 0 is the contact lower along `a`'s axis, part 1 the upper,
+/// so that each keeps its history as the capsules move. `fallback` is the normal where the axes
+/// meet.
+fn pair_touch(a: (Vec3, Vec3, f64), b: (Vec3, Vec3, f64), part: u8, fallback: Vec3) -> Option<Touch> {
+    let ((a0, a1, ra), (b0, b1, rb)) = (a, b);
+    let (da, db) = (sub(a1, a0), sub(b1, b0));
+    let (aa, bb) = (dot(da, da), dot(db, db));
+    // A contact: a point of `a`'s axis, one of `b`'s, and their touch.
+    type Contact = (Vec3, Vec3, Option<Touch>);
+    let contact = |pa: Vec3, pb: Vec3| -> Contact { (pa, pb, swept_touch(pa, ra, pb, rb, fallback)) };
+    let (pa, pb) = closest_points(a0, a1, b0, b1);
+    if aa == 0.0 || bb == 0.0 {
+        // A capsule of no length is a sphere: one contact.
+        return if part == 0 { contact(pa, pb).2 } else { None };
+    }
+    // The end spheres lying along the other capsule's axis, against it.
+    let foot = |p: Vec3, (e0, d, dd): (Vec3, Vec3, f64)| (0.0..=1.0).contains(&(dot(sub(p, e0), d) / dd));
+    let mut ends: Vec<Contact> = Vec::with_capacity(4);
+    for e in [a0, a1] {
+        if foot(e, (b0, db, bb)) {
+            ends.push(contact(e, nearest_on(b0, b1, e)));
+        }
+    }
+    for e in [b0, b1] {
+        if foot(e, (a0, da, aa)) {
+            ends.push(contact(nearest_on(a0, a1, e), e));
+        }
+    }
+    let gap = |c: &Contact| {
+        let d = sub(c.1, c.0);
+        dot(d, d)
+    };
+    let across = cross(da, db);
+    let parallel = dot(across, across) <= 1e-24 * aa * bb;
+    let deepest = match ends.iter().min_by(|x, y| gap(x).total_cmp(&gap(y))) {
+        Some(&end) if parallel => end,
+        _ => contact(pa, pb),
+    };
+    let middle = |c: &Contact| along(c.0, sub(c.1, c.0), 0.5);
+    let apart = |c: &Contact| {
+        let d = sub(middle(c), middle(&deepest));
+        dot(d, d)
+    };
+    // The other end of the overlap: the end sphere farthest from the deepest contact (an end
+    // found twice, where the two capsules' ends meet, counts once).
+    let reach = 1e-12 * (aa + bb);
+    let other = ends.iter().filter(|c| apart(c) > reach).max_by(|x, y| apart(x).total_cmp(&apart(y)));
+    let Some(&other) = other else {
+        return if part == 0 { deepest.2 } else { None };
+    };
+    let (lower, upper) = if dot(da, deepest.0) <= dot(da, other.0) { (deepest, other) } else { (other, deepest) };
+    if part == 0 {
+        lower.2
+    } else {
+        upper.2
     }
 }
 

@@ -415,12 +415,12 @@ impl PlacedPotentials<'_> {
 impl PlacedBodies for PlacedPotentials<'_> {
     fn pairs(
         &self,
-        pairs: &[(u32, u32)],
+        pairs: &[(u32, u32, u8)],
         warm: WarmStarts<'_>,
         out: &mut [Option<Touch>],
     ) -> std::result::Result<(), PairFailure> {
         let placed = self.placed.get();
-        solve_pairs(pairs, warm, out, |&(i, j), w| Self::meet(&placed[i as usize], &placed[j as usize], w))
+        solve_pairs(pairs, warm, out, |&(i, j, _), w| Self::meet(&placed[i as usize], &placed[j as usize], w))
     }
 
     fn planes(
