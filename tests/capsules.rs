@@ -398,7 +398,11 @@ fn a_capsule_dropped_flat_on_another_keeps_its_energy_and_rests_on_both_ends() {
 
 /// A capsule (radius 1 cm, cylinder 4 cm) dropped from `height` onto what `floor` adds (a member
 /// whose top is at z = 0), along x, tilted about y: see the two tests above.
-fn dropped_flat(floor: impl Fn(&mut common::bodies::Scene) -> granite_core::dem::inspect::Member, height: f64, on: &str) {
+fn dropped_flat(
+    floor: impl Fn(&mut common::bodies::Scene) -> granite_core::dem::inspect::Member,
+    height: f64,
+    on: &str,
+) {
     let (r, length, g) = (0.01, 0.04, 9.81);
     for tilt in [0.003, 0.01, 0.05, 0.2] {
         let mut s = scene(1000.0, &[("kn", 1e5), ("kt_ratio", 0.5), ("friction", 0.0)]);

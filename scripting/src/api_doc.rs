@@ -172,7 +172,7 @@ pub static API: &[ApiDoc] = &[
     f("DemSim", "torques", &["sim.torques()"], NONE, "every sphere's torque of the last step"),
     f("DemSim", "radii", &["sim.radii()"], NONE, "every sphere's radius"),
     f("DemSim", "contact_counts", &["sim.contact_counts()"], NONE, "every sphere's number of touching contacts"),
-    f("DemSim", "contacts", &["sim.contacts()"], NONE, "every touching contact, of spheres, bodies and walls: id1, kind1, id2, kind2 (or wall), point, normal, overlap, force, normal_force, shear_force, law, params"),
+    f("DemSim", "contacts", &["sim.contacts()"], NONE, "every touching contact, of spheres, bodies and walls: id1, kind1, id2, kind2 (or wall), part (a body's contact point), point, normal, overlap, force, normal_force, shear_force, law, params"),
     f("DemSim", "contact", &["sim.contact(id1, id2)"], NONE, "the contact of two spheres, or ()"),
     f("DemSim", "wall_contact", &["sim.wall_contact(id, wall)"], NONE, "the contact of a sphere with a wall, or ()"),
     f("DemSim", "track_energy", &["sim.track_energy(on)"], NONE, "tracks the energy balance from the next step on (series columns energy_*)"),

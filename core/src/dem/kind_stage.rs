@@ -369,11 +369,13 @@ impl BodyContacts {
         let done = match side {
             Side::Bodies => {
                 let second = geometries.images.map_or(&list.b[..], |m| &m.second[..]);
-                let pairs: Vec<(u32, u32, u8)> = (0..list.len()).map(|k| (list.a[k], second[k], list.part_of(k))).collect();
+                let pairs: Vec<(u32, u32, u8)> =
+                    (0..list.len()).map(|k| (list.a[k], second[k], list.part_of(k))).collect();
                 geometries.detect(&groups, &pairs, (&mut list.history, hs, own, warm), &mut out, Geometries::bodies)
             }
             Side::Walls => {
-                let pairs: Vec<(u32, u32, u8)> = (0..list.len()).map(|k| (list.a[k], list.b[k], list.part_of(k))).collect();
+                let pairs: Vec<(u32, u32, u8)> =
+                    (0..list.len()).map(|k| (list.a[k], list.b[k], list.part_of(k))).collect();
                 geometries.detect(&groups, &pairs, (&mut list.history, hs, own, warm), &mut out, Geometries::walls)
             }
             Side::Spheres => {

@@ -438,11 +438,18 @@ impl DemWorld {
         let (wall_points, body_points) = (points(|f| f.geometry.wall_points()), points(|f| f.geometry.body_points()));
         let family = &k.family;
         let parted = |blocks: Vec<Vec<Candidate>>, parts: &dyn Fn(&Candidate) -> u8| -> Vec<Vec<(Candidate, u8)>> {
-            blocks.into_iter().map(|block| block.into_iter().flat_map(|c| (0..parts(&c)).map(move |p| (c, p))).collect()).collect()
+            blocks
+                .into_iter()
+                .map(|block| block.into_iter().flat_map(|c| (0..parts(&c)).map(move |p| (c, p))).collect())
+                .collect()
         };
         let bodies = parted(bodies, &|&(i, j, _)| {
             let (fi, fj) = (family[i as usize], family[j as usize]);
-            if fi == fj { body_points[fi as usize] } else { 1 }
+            if fi == fj {
+                body_points[fi as usize]
+            } else {
+                1
+            }
         });
         let walls = parted(walls, &|&(i, _, _)| wall_points[family[i as usize] as usize]);
         let strides = self.kind_strides();
@@ -470,7 +477,9 @@ impl DemWorld {
     ) -> Option<(u16, u16)> {
         let pieces: Vec<&[K]> = candidates.iter().map(|b| &b[..]).collect();
         let owners = PairBodies { material: &self.kinds.material, other, parallel: false };
-        self.merge_with_laws(list, &mut PairList::default(), &pieces, strides, owners, |a, b| self.kind_info(a, b, other))
+        self.merge_with_laws(list, &mut PairList::default(), &pieces, strides, owners, |a, b| {
+            self.kind_info(a, b, other)
+        })
     }
 
     /// Values per pair of the bodies' lists: the laws' then the geometry's warm starts.
