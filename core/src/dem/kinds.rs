@@ -460,6 +460,8 @@ impl DemWorld {
             .or(self.merge_kind_list(wall_list, &walls, strides, Other::Walls))
             .or(self.merge_kind_list(sphere_list, &spheres, strides, Other::Of(&self.spheres.material)));
         self.contacts.put_body_lists(lists);
+        // The last step's touches name pairs by their place in the lists as they were.
+        self.contacts.body_touches = Default::default();
         if let Some(pair) = missing {
             return Err(self.missing_law(pair));
         }
