@@ -131,3 +131,55 @@ fn the_small_column_collapses_and_runs_to_its_end() {
         .count();
     assert!(thin > 0, "no RVE went thinner than twice its reach: the run did not need thin cells");
 }
+
+/// The column study (`column_study.rhai`) stopped after a few hundredths of a second of its
+/// collapse and given again resumes from its checkpoint and ends where a run straight through
+/// ends, bit for bit; its series holds the RVE columns over the collapse (every point's RVE in
+/// contact at the start, the mean coordination and pressure those of the prepared RVE's order),
+/// and it draws its pictures.
+#[test]
+fn the_column_study_resumes_where_it_stopped() {
+    let prep = run(
+        "mpmxdem/prepare_rve.rhai",
+        "mpmxdem_study_rve",
+        &[("count", "150"), ("p_init", "250"), ("vertical_axis", "1")],
+        2,
+    )
+    .unwrap();
+    let rve = prep.out_dir.join("rve.json");
+    let rve = rve.to_str().unwrap();
+    let sets = |max_time: &'static str| {
+        vec![
+            ("rve", rve),
+            ("settle_time", "0.02"),
+            ("max_time", max_time),
+            ("series_every", "50"),
+            ("checkpoint_every", "100"),
+        ]
+    };
+    let straight = run("mpmxdem/column_study.rhai", "mpmxdem_study_straight", &sets("0.06"), 2).unwrap();
+    // The same folder twice: a first sitting to 0.03 s, resumed to 0.06 s.
+    let first = run("mpmxdem/column_study.rhai", "mpmxdem_study_resumed", &sets("0.03"), 2).unwrap();
+    let resumed = granite::run(
+        &common::script("mpmxdem/column_study.rhai"),
+        common::sets(&sets("0.06")),
+        Some(first.out_dir.clone()),
+        true,
+        Some(2),
+    )
+    .unwrap();
+    let points = |d: &std::path::Path| std::fs::read_to_string(d.join("final_points.csv")).unwrap();
+    assert_eq!(points(&straight.out_dir), points(&resumed.out_dir), "the resumed study parted from the straight one");
+    let (h, rows) = read_csv(&resumed.out_dir.join("series_runout.csv"));
+    let (h0, rows0) = read_csv(&straight.out_dir.join("series_runout.csv"));
+    assert_eq!((h.clone(), rows.len()), (h0, rows0.len()), "the resumed series has the straight one's rows");
+    let first_row = &rows[0];
+    assert_eq!(first_row[column(&h, "no_contact_fraction")], 0.0, "every RVE in contact at the release");
+    let z = first_row[column(&h, "coordination_mean")];
+    assert!(z > 3.0 && z < 7.0, "mean coordination {z}");
+    let p = first_row[column(&h, "pressure_mean")];
+    assert!(p > 0.0 && p.is_finite(), "mean RVE pressure {p} Pa (compression positive)");
+    for picture in ["kinetic_energy.png", "lx.png", "deviatoric_strain.png", "coordination.png", "mean_stress.png"] {
+        assert!(resumed.out_dir.join(picture).exists(), "{picture} not drawn");
+    }
+}

@@ -57,6 +57,34 @@ pub enum Driven {
     PointLoad(usize),
 }
 
+impl MpmScene {
+    /// The laws' state variables by name, a value per point (zero for points whose law lacks
+    /// that variable): points lie material after material.
+    fn state_columns(&self) -> Vec<(&'static str, Vec<f64>)> {
+        let sim = &self.mpm;
+        let n = sim.points.len();
+        let mut columns: Vec<(&'static str, Vec<f64>)> = Vec::new();
+        let mut start = 0;
+        for m in &sim.materials {
+            let names = m.law.state_names();
+            for (k, name) in names.iter().enumerate() {
+                let idx = match columns.iter().position(|(c, _)| c == name) {
+                    Some(i) => i,
+                    None => {
+                        columns.push((name, vec![0.0; n]));
+                        columns.len() - 1
+                    }
+                };
+                for j in 0..m.count {
+                    columns[idx].1[start + j] = m.state[j * names.len() + k];
+                }
+            }
+            start += m.count;
+        }
+        columns
+    }
+}
+
 impl Simulation for MpmScene {
     type Snapshot = Snapshot;
 
@@ -127,7 +155,6 @@ impl Simulation for MpmScene {
     fn vtk_frame(&self) -> (Vec<Vec3>, Vec<Field>) {
         let sim = &self.mpm;
         let p = &sim.points;
-        let n = p.len();
         let field = Field::float;
         let mut fields = vec![
             Field::int("id", p.id.iter().map(|&i| i as i64)),
@@ -140,30 +167,19 @@ impl Simulation for MpmScene {
             field("deviatoric_strain", 1, p.strain.iter().map(deviatoric_strain_norm).collect()),
             field("volume", 1, p.volume.clone()),
         ];
-        // Law state variables by name (zero for points whose law lacks that variable).
-        let mut start = 0;
-        for m in &sim.materials {
-            let names = m.law.state_names();
-            for (k, name) in names.iter().enumerate() {
-                let idx = match fields.iter().position(|f| f.name == *name) {
-                    Some(i) => i,
-                    None => {
-                        fields.push(field(name, 1, vec![0.0; n]));
-                        fields.len() - 1
-                    }
-                };
-                for j in 0..m.count {
-                    fields[idx].values[start + j] = m.state[j * names.len() + k];
-                }
-            }
-            start += m.count;
-        }
+        fields.extend(self.state_columns().into_iter().map(|(name, values)| field(name, 1, values)));
         (p.x.clone(), fields)
     }
     fn write_points(&self, path: &Path) -> Result<()> {
         const HEADER: &str = "id,material,x,y,z,vx,vy,vz,sxx,syy,szz,sxy,syz,sxz,exx,eyy,ezz,gxy,gyz,gxz,p,q,\
                               deviatoric_strain,volume,mass";
         let p = &self.mpm.points;
+        // The laws' state variables after the fixed columns (an RVE's void ratio, coordination...).
+        let states = self.state_columns();
+        let header: String = std::iter::once(HEADER.to_string())
+            .chain(states.iter().map(|(name, _)| name.to_string()))
+            .collect::<Vec<_>>()
+            .join(",");
         let rows = (0..p.len()).map(|i| {
             let (mean, q) = p_q(&p.stress[i]);
             let mut row = vec![p.id[i] as f64, p.material[i] as f64];
@@ -172,10 +188,12 @@ impl Simulation for MpmScene {
             row.extend(p.stress[i]);
             row.extend(p.strain[i]);
             row.extend([mean, q, deviatoric_strain_norm(&p.strain[i]), p.volume[i], p.mass[i]]);
+            row.extend(states.iter().map(|(_, values)| values[i]));
             row
         });
-        crate::output::write_table(path, HEADER, rows)
+        crate::output::write_table(path, &header, rows)
     }
+
     fn diagnostics(&self) -> Vec<(&'static str, f64)> {
         let sim = &self.mpm;
         let d = sim.diagnostics();

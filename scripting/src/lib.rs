@@ -548,6 +548,35 @@ fn build_engine(ctx: &Arc<ScriptContext>) -> Engine {
         granite_core::comm::agree(c.comm(), 0, drawn).map_err(convert::to_rhai)?;
         Ok(dir.join(out).display().to_string())
     });
+    let c = ctx.clone();
+    engine.register_fn(
+        "plot_field",
+        move |csv: &str, x: &str, y: &str, value: &str, out: &str| -> RhaiResult<String> {
+            output::check_script_file("plot_field", out).or_else(err)?;
+            output::check_read_file("plot_field", csv).or_else(err)?;
+            let dir = &c.options.out_dir;
+            let drawn = if c.writes_files() {
+                crate::plot::plot_field(&dir.join(csv), (x, y), value, dir.join(out)).map(|_| ())
+            } else {
+                Ok(())
+            };
+            granite_core::comm::agree(c.comm(), 0, drawn).map_err(convert::to_rhai)?;
+            Ok(dir.join(out).display().to_string())
+        },
+    );
+    let c = ctx.clone();
+    engine.register_fn("exists", move |file: &str| -> RhaiResult<bool> {
+        output::check_read_file("exists", file).or_else(err)?;
+        let path = c.options.out_dir.join(file);
+        // A checkpoint whose newest copy was lost still has the one before (`durable`).
+        Ok(path.is_file() || granite_core::io::durable::previous_path(&path).is_file())
+    });
+    let c = ctx.clone();
+    engine.register_fn("read_column", move |csv: &str, column: &str| -> RhaiResult<rhai::Array> {
+        output::check_read_file("read_column", csv).or_else(err)?;
+        let values = crate::plot::read_column(&c.options.out_dir.join(csv), column).map_err(convert::to_rhai)?;
+        Ok(values.into_iter().map(Dynamic::from).collect())
+    });
     mpm_api::register(&mut engine, ctx);
     dem_api::register(&mut engine, ctx);
     dem_console::register(&mut engine);

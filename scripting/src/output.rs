@@ -6,6 +6,24 @@
 /// the files the run itself writes there. Outputs stay in the output folder so that the folder
 /// holds the whole run (to copy, resume, compare in a batch) and a script cannot overwrite files
 /// elsewhere with the user's rights.
+/// A file of the output folder a script reads (a checkpoint to resume from, a series): a relative
+/// path without `..`.
+pub fn check_read_file(call: &str, file: &str) -> std::result::Result<(), String> {
+    use std::path::Component;
+    let path = std::path::Path::new(file);
+    let inside = !file.trim().is_empty()
+        && path.components().all(|c| matches!(c, Component::Normal(_) | Component::CurDir))
+        && path.file_name().is_some();
+    if inside {
+        Ok(())
+    } else {
+        Err(format!(
+            "{call}(\"{file}\"): a script reads files of its output folder: give a relative path without `..` \
+             (e.g. \"series.csv\" or \"checkpoints/ck.json\")"
+        ))
+    }
+}
+
 pub fn check_script_file(call: &str, file: &str) -> std::result::Result<(), String> {
     use std::path::Component;
     let path = std::path::Path::new(file);

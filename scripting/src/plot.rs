@@ -14,6 +14,17 @@ fn read_csv(path: &Path) -> Result<(Vec<String>, Vec<Vec<f64>>)> {
     Ok((header, rows))
 }
 
+/// One column of a CSV with a header row, by name (non-numbers as NaN).
+pub fn read_column(csv: &Path, column: &str) -> Result<Vec<f64>> {
+    let (header, rows) = read_csv(csv)?;
+    let k = header.iter().position(|h| h == column).ok_or_else(|| GraniteError::Unknown {
+        kind: format!("column of {}", csv.display()),
+        name: column.into(),
+        known: header.join(", "),
+    })?;
+    Ok(rows.iter().map(|r| r.get(k).copied().unwrap_or(f64::NAN)).collect())
+}
+
 /// The unit of an output column of granite's series files, for axis labels ("" for a count or a
 /// ratio; None for a column granite does not write, e.g. a script's own).
 pub fn unit_of(column: &str) -> Option<&'static str> {
@@ -31,7 +42,7 @@ pub fn unit_of(column: &str) -> Option<&'static str> {
         | "volumetric_strain"
         | "max_deviatoric_strain"
         | "inertial_number" => "1",
-        "max_height" | "max_x" | "lx" | "runout" => "m",
+        "max_height" | "max_x" | "lx" | "runout" | "x" | "y" | "z" => "m",
         "p" | "q" | "mean_stress" | "deviatoric_stress" => "Pa",
         _ if c.ends_with("_energy") || c.starts_with("energy_") || c == "boundary_work" => "J (2D MPM: J/m)",
         _ if c.starts_with("angular_momentum_") => "kg m^2/s (2D MPM: kg m/s)",
@@ -140,6 +151,150 @@ pub fn plot(csv: &Path, x: &str, ys: &[String], out: Option<PathBuf>) -> Result<
         figure.draw(root, 1).map_err(|e| err(&e))?;
     }
     Ok(out)
+}
+
+/// A field over points: each row of a CSV (`write_points`' file) drawn at `(x, y)` as a dot
+/// coloured by `value` (viridis, its range on a colour bar), the axes at one scale, into an SVG,
+/// or a PNG when `out` ends in `.png`; returns the file written. For the deviatoric strain,
+/// coordination or mean stress of a column's points, as the thesis's figures 5.14-5.15 show them.
+pub fn plot_field(csv: &Path, (x, y): (&str, &str), value: &str, out: PathBuf) -> Result<PathBuf> {
+    let (header, rows) = read_csv(csv)?;
+    let col = |name: &str| {
+        header.iter().position(|h| h == name).ok_or_else(|| GraniteError::Unknown {
+            kind: format!("column of {}", csv.display()),
+            name: name.into(),
+            known: header.join(", "),
+        })
+    };
+    let (xi, yi, vi) = (col(x)?, col(y)?, col(value)?);
+    let dots: Vec<(f64, f64, f64)> = rows
+        .iter()
+        .filter_map(|r| Some((*r.get(xi)?, *r.get(yi)?, *r.get(vi)?)))
+        .filter(|(a, b, c)| a.is_finite() && b.is_finite() && c.is_finite())
+        .collect();
+    if dots.is_empty() {
+        return Err(GraniteError::Setup(format!("no finite values of {x}, {y}, {value} in {}", csv.display())));
+    }
+    let bound = |f: fn(&(f64, f64, f64)) -> f64| {
+        dots.iter().map(f).fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| (lo.min(v), hi.max(v)))
+    };
+    let ((x0, x1), (y0, y1), (v0, v1)) = (bound(|d| d.0), bound(|d| d.1), bound(|d| d.2));
+    // The axes at one scale, a margin of a twentieth of the larger side around the points.
+    let side = (x1 - x0).max(y1 - y0).max(f64::MIN_POSITIVE);
+    let pad = 0.05 * side;
+    let (x_range, y_range) = ((x0 - pad, x1 + pad), (y0 - pad, y1 + pad));
+    let png = match out.extension().and_then(|e| e.to_str()).map(|e| e.to_ascii_lowercase()).as_deref() {
+        Some("png") => true,
+        Some("svg") => false,
+        _ => return Err(GraniteError::Setup(format!("plot_field {}: name the file .svg or .png", out.display()))),
+    };
+    let width = 900u32;
+    let plot_width = f64::from(width - 260);
+    let height =
+        (plot_width * (y_range.1 - y_range.0) / (x_range.1 - x_range.0)).round().clamp(150.0, 1200.0) as u32 + 130;
+    // A dot as wide as the points' mean spacing.
+    let spacing = ((x1 - x0).max(pad) * (y1 - y0).max(pad) / dots.len() as f64).sqrt();
+    let dot = (0.5 * spacing / (x_range.1 - x_range.0) * plot_width).clamp(1.5, 30.0);
+    let field = Field {
+        x,
+        y,
+        value,
+        dots: &dots,
+        x_range,
+        y_range,
+        value_range: (v0, v1.max(v0 + v0.abs().max(1.0) * 1e-12)),
+        dot,
+    };
+    let err = |e: &dyn std::fmt::Display| GraniteError::Other(format!("plot_field {}: {e}", out.display()));
+    embedded_font()?;
+    if png {
+        let root = BitMapBackend::new(&out, (2 * width, 2 * height)).into_drawing_area();
+        field.draw(root, 2).map_err(|e| err(&e))?;
+    } else {
+        let root = SVGBackend::new(&out, (width, height)).into_drawing_area();
+        field.draw(root, 1).map_err(|e| err(&e))?;
+    }
+    Ok(out)
+}
+
+/// The viridis colour map at `t` in [0, 1] (its ends and three stops between, blended).
+fn viridis(t: f64) -> RGBColor {
+    const STOPS: [(f64, f64, f64); 5] =
+        [(68.0, 1.0, 84.0), (59.0, 82.0, 139.0), (33.0, 145.0, 140.0), (94.0, 201.0, 98.0), (253.0, 231.0, 37.0)];
+    let t = if t.is_finite() { t.clamp(0.0, 1.0) } else { 0.0 } * (STOPS.len() - 1) as f64;
+    let k = (t.floor() as usize).min(STOPS.len() - 2);
+    let f = t - k as f64;
+    let (a, b) = (STOPS[k], STOPS[k + 1]);
+    let mix = |p: f64, q: f64| (p + f * (q - p)).round() as u8;
+    RGBColor(mix(a.0, b.0), mix(a.1, b.1), mix(a.2, b.2))
+}
+
+/// What a field plot shows.
+struct Field<'a> {
+    x: &'a str,
+    y: &'a str,
+    value: &'a str,
+    dots: &'a [(f64, f64, f64)],
+    x_range: (f64, f64),
+    y_range: (f64, f64),
+    value_range: (f64, f64),
+    /// Dot radius in pixels of the SVG.
+    dot: f64,
+}
+
+impl Field<'_> {
+    fn draw<DB: DrawingBackend>(
+        &self,
+        root: DrawingArea<DB, plotters::coord::Shift>,
+        scale: u32,
+    ) -> std::result::Result<(), String> {
+        let e = |e: DrawingAreaErrorKind<DB::ErrorType>| e.to_string();
+        let px = |v: u32| v * scale;
+        let (v0, v1) = self.value_range;
+        let unit =
+            |c: &str| unit_of(c).filter(|u| *u != "1" && *u != "count").map(|u| format!(" [{u}]")).unwrap_or_default();
+        root.fill(&WHITE).map_err(e)?;
+        let root = root.titled(&format!("{}{}", self.value, unit(self.value)), (FONT, px(20))).map_err(e)?;
+        let (plot_area, bar_area) = root.split_horizontally(root.dim_in_pixel().0 - px(140));
+        let mut chart = ChartBuilder::on(&plot_area)
+            .margin(px(12))
+            .x_label_area_size(px(40))
+            .y_label_area_size(px(70))
+            .build_cartesian_2d(self.x_range.0..self.x_range.1, self.y_range.0..self.y_range.1)
+            .map_err(e)?;
+        chart
+            .configure_mesh()
+            .disable_mesh()
+            .label_style((FONT, px(12)))
+            .axis_desc_style((FONT, px(14)))
+            .x_desc(format!("{}{}", self.x, unit(self.x)))
+            .y_desc(format!("{}{}", self.y, unit(self.y)))
+            .draw()
+            .map_err(e)?;
+        let radius = (self.dot * f64::from(scale)).round().max(1.0) as i32;
+        chart
+            .draw_series(
+                self.dots.iter().map(|&(a, b, v)| Circle::new((a, b), radius, viridis((v - v0) / (v1 - v0)).filled())),
+            )
+            .map_err(e)?;
+        // The colour bar: the value's range, bottom to top.
+        let mut bar = ChartBuilder::on(&bar_area)
+            .margin_top(px(12))
+            .margin_bottom(px(52))
+            .margin_right(px(60))
+            .y_label_area_size(px(0))
+            .right_y_label_area_size(px(60))
+            .build_cartesian_2d(0.0..1.0, v0..v1)
+            .map_err(e)?;
+        bar.configure_mesh().disable_mesh().disable_x_axis().label_style((FONT, px(11))).draw().map_err(e)?;
+        let bands = 64;
+        bar.draw_series((0..bands).map(|k| {
+            let (lo, hi) = (k as f64 / bands as f64, (k + 1) as f64 / bands as f64);
+            Rectangle::new([(0.0, v0 + lo * (v1 - v0)), (1.0, v0 + hi * (v1 - v0))], viridis(0.5 * (lo + hi)).filled())
+        }))
+        .map_err(e)?;
+        root.present().map_err(e)
+    }
 }
 
 /// The name the plots' text is drawn in: a font built into granite (DejaVu Sans), so that a PNG
