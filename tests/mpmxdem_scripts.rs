@@ -183,3 +183,35 @@ fn the_column_study_resumes_where_it_stopped() {
         assert!(resumed.out_dir.join(picture).exists(), "{picture} not drawn");
     }
 }
+
+/// The FLIP column study at 0.2 m cells comes to rest by its deposit: its kinetic energy stays
+/// near 1 % of its peak (FLIP's undamped velocity noise) while its front stops, which the study
+/// takes for rest once the front has moved less than 1 mm over a second; the RVEs without
+/// contact left in the deposit (the thesis's clouds) are counted. About 20 minutes of one core:
+/// `cargo test --release --test integration mpmxdem_scripts:: -- --ignored`.
+#[test]
+#[ignore = "a long run: about 20 minutes of one core"]
+fn the_flip_column_study_comes_to_rest_by_its_deposit() {
+    let prep = run(
+        "mpmxdem/prepare_rve.rhai",
+        "mpmxdem_rest_rve",
+        &[("count", "150"), ("p_init", "250"), ("vertical_axis", "1")],
+        2,
+    )
+    .unwrap();
+    let rve = prep.out_dir.join("rve.json");
+    let study = run(
+        "mpmxdem/column_study.rhai",
+        "mpmxdem_rest_flip",
+        &[("rve", rve.to_str().unwrap()), ("scheme", "flip"), ("max_time", "8")],
+        2,
+    )
+    .unwrap();
+    let s = summary_of(&study.out_dir);
+    assert_eq!(s["rest_by"], "deposit", "{s}");
+    let after = summary_f64(&study, "time_after_release");
+    assert!(after < 8.0, "at rest {after} s after the release");
+    // Well past its peak, and its front at least a column's width beyond the foot.
+    assert!(summary_f64(&study, "final_kinetic_energy") < 0.02 * summary_f64(&study, "peak_kinetic_energy"));
+    assert!(summary_f64(&study, "final_normalised_runout") >= 1.0, "{s}");
+}
