@@ -186,11 +186,11 @@ fn the_column_study_resumes_where_it_stopped() {
 
 /// The FLIP column study at 0.2 m cells comes to rest by its deposit: its kinetic energy stays
 /// near 1 % of its peak (FLIP's undamped velocity noise) while its front stops, which the study
-/// takes for rest once the front has moved less than 1 mm over a second; the RVEs without
-/// contact left in the deposit (the thesis's clouds) are counted. About 20 minutes of one core:
+/// takes for rest once the front has moved less than 1 mm over a second, well past the peak and
+/// with the front a column's width beyond the foot. About 15 minutes of one core:
 /// `cargo test --release --test integration mpmxdem_scripts:: -- --ignored`.
 #[test]
-#[ignore = "a long run: about 20 minutes of one core"]
+#[ignore = "a long run: about 15 minutes of one core"]
 fn the_flip_column_study_comes_to_rest_by_its_deposit() {
     let prep = run(
         "mpmxdem/prepare_rve.rhai",
