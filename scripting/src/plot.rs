@@ -127,30 +127,46 @@ pub fn plot(csv: &Path, x: &str, ys: &[String], out: Option<PathBuf>) -> Result<
         x1 = x0 + 1.0;
     }
     let out = out.unwrap_or_else(|| csv.with_file_name(format!("plot_{}.svg", ys.join("_"))));
-    let png = match out.extension().and_then(|e| e.to_str()).map(|e| e.to_ascii_lowercase()).as_deref() {
-        Some("png") => true,
-        Some("svg") | None => false,
-        Some(other) => {
-            return Err(GraniteError::Setup(format!(
-                "plot {}: `.{other}` is not an image format granite writes; name the file .svg or .png",
-                out.display()
-            )))
-        }
-    };
+    let png = is_png("plot", &out)?;
     let height = 120 + 380 * panels.len() as u32;
     let figure = Figure { x, ys, xs: &xs, rows: &rows, yi: &yi, panels: &panels, ranges: &ranges, x_range: (x0, x1) };
-    let err = |e: &dyn std::fmt::Display| GraniteError::Other(format!("plot {}: {e}", out.display()));
+    render("plot", &figure, &out, png, (900, height))?;
+    Ok(out)
+}
+
+/// Whether `out` names a PNG (else an SVG; no extension: SVG); another extension is refused.
+fn is_png(call: &str, out: &Path) -> Result<bool> {
+    match out.extension().and_then(|e| e.to_str()).map(|e| e.to_ascii_lowercase()).as_deref() {
+        Some("png") => Ok(true),
+        Some("svg") | None => Ok(false),
+        Some(other) => Err(GraniteError::Setup(format!(
+            "{call} {}: `.{other}` is not an image format granite writes; name the file .svg or .png",
+            out.display()
+        ))),
+    }
+}
+
+/// A picture that draws itself on any backend; `scale` multiplies sizes (text, margins, lines)
+/// for a bitmap drawn larger than the SVG.
+trait Picture {
+    fn draw<DB: DrawingBackend>(
+        &self,
+        root: DrawingArea<DB, plotters::coord::Shift>,
+        scale: u32,
+    ) -> std::result::Result<(), String>;
+}
+
+/// Draws `picture` into `out`: an SVG of `size`, or a PNG twice as large in pixels (lines and
+/// labels stay sharp on a screen).
+fn render(call: &str, picture: &impl Picture, out: &Path, png: bool, (width, height): (u32, u32)) -> Result<()> {
+    let err = |e: String| GraniteError::Other(format!("{call} {}: {e}", out.display()));
     // Text is measured with the embedded font for either format.
     embedded_font()?;
     if png {
-        // Twice the SVG's size in pixels: lines and labels stay sharp on a screen.
-        let root = BitMapBackend::new(&out, (1800, 2 * height)).into_drawing_area();
-        figure.draw(root, 2).map_err(|e| err(&e))?;
+        picture.draw(BitMapBackend::new(out, (2 * width, 2 * height)).into_drawing_area(), 2).map_err(err)
     } else {
-        let root = SVGBackend::new(&out, (900, height)).into_drawing_area();
-        figure.draw(root, 1).map_err(|e| err(&e))?;
+        picture.draw(SVGBackend::new(out, (width, height)).into_drawing_area(), 1).map_err(err)
     }
-    Ok(out)
 }
 
 /// A field over points: each row of a CSV (`write_points`' file) drawn at `(x, y)` as a dot
@@ -183,11 +199,7 @@ pub fn plot_field(csv: &Path, (x, y): (&str, &str), value: &str, out: PathBuf) -
     let side = (x1 - x0).max(y1 - y0).max(f64::MIN_POSITIVE);
     let pad = 0.05 * side;
     let (x_range, y_range) = ((x0 - pad, x1 + pad), (y0 - pad, y1 + pad));
-    let png = match out.extension().and_then(|e| e.to_str()).map(|e| e.to_ascii_lowercase()).as_deref() {
-        Some("png") => true,
-        Some("svg") => false,
-        _ => return Err(GraniteError::Setup(format!("plot_field {}: name the file .svg or .png", out.display()))),
-    };
+    let png = is_png("plot_field", &out)?;
     let width = 900u32;
     let plot_width = f64::from(width - 260);
     let height =
@@ -205,15 +217,7 @@ pub fn plot_field(csv: &Path, (x, y): (&str, &str), value: &str, out: PathBuf) -
         value_range: (v0, v1.max(v0 + v0.abs().max(1.0) * 1e-12)),
         dot,
     };
-    let err = |e: &dyn std::fmt::Display| GraniteError::Other(format!("plot_field {}: {e}", out.display()));
-    embedded_font()?;
-    if png {
-        let root = BitMapBackend::new(&out, (2 * width, 2 * height)).into_drawing_area();
-        field.draw(root, 2).map_err(|e| err(&e))?;
-    } else {
-        let root = SVGBackend::new(&out, (width, height)).into_drawing_area();
-        field.draw(root, 1).map_err(|e| err(&e))?;
-    }
+    render("plot_field", &field, &out, png, (width, height))?;
     Ok(out)
 }
 
@@ -242,7 +246,7 @@ struct Field<'a> {
     dot: f64,
 }
 
-impl Field<'_> {
+impl Picture for Field<'_> {
     fn draw<DB: DrawingBackend>(
         &self,
         root: DrawingArea<DB, plotters::coord::Shift>,
@@ -328,9 +332,7 @@ struct Figure<'a> {
     x_range: (f64, f64),
 }
 
-impl Figure<'_> {
-    /// Draws on any backend; `scale` multiplies sizes (text, margins, lines) for a bitmap drawn
-    /// larger than the SVG.
+impl Picture for Figure<'_> {
     fn draw<DB: DrawingBackend>(
         &self,
         root: DrawingArea<DB, plotters::coord::Shift>,
