@@ -19,11 +19,7 @@ fn packing(copies: usize, l: Matrix3<f64>) -> (Scene, usize) {
     let shape = s.capsule(r, length);
     let (dx, dz, thick) = (1.9 * (r + 0.5 * length), 1.9 * r, 1.6 * r);
     let (nx, nz) = (3, 4);
-    let mut seed = 7u64;
-    let mut next = || {
-        seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-        (seed >> 11) as f64 / (1u64 << 53) as f64
-    };
+    let mut next = common::uniform_stream(7);
     let mut capsules: Vec<(Vec3, UnitQuaternion<f64>)> = Vec::new();
     for i in 0..nx {
         for k in 0..nz {
@@ -138,11 +134,7 @@ fn capsules_of_no_length_step_as_spheres_in_a_sheared_and_stretched_cell() {
     // images through the bodies' stages as one of spheres does through the spheres'.
     let r = 0.01;
     let l = Matrix3::new(20.0, 30.0, 0.0, 0.0, -10.0, 5.0, 0.0, 0.0, -10.0);
-    let mut seed = 3u64;
-    let mut next = || {
-        seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-        (seed >> 11) as f64 / (1u64 << 53) as f64
-    };
+    let mut next = common::uniform_stream(3);
     let (n, spacing) = (3usize, 1.85 * r);
     let grains: Vec<(Vec3, f64)> = (0..n * n * n)
         .map(|c| {
@@ -259,11 +251,7 @@ fn capsules_in_a_sheared_cell_resume_from_a_saved_state_bit_for_bit() {
 fn rounded_boxes_in_a_thin_cell_step_as_in_a_thicker_one_when_sheared() {
     let (half, kn) = (0.01, 1e5);
     let (nx, nz, gap, thick) = (3, 3, 1.9 * half, 1.7 * half);
-    let mut seed = 11u64;
-    let mut next = || {
-        seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-        (seed >> 11) as f64 / (1u64 << 53) as f64
-    };
+    let mut next = common::uniform_stream(11);
     let mut boxes: Vec<(Vec3, UnitQuaternion<f64>)> = Vec::new();
     for i in 0..nx {
         for k in 0..nz {

@@ -198,11 +198,7 @@ fn thin_and_thick_cells_agree(l: nalgebra::Matrix3<f64>, update: CellUpdate) {
     let (r0, kn) = (0.01, 1e5);
     let spacing = 1.9 * r0;
     let (nx, nz, thick) = (4, 4, 1.6 * r0);
-    let mut seed = 99u64;
-    let mut next = || {
-        seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-        (seed >> 11) as f64 / (1u64 << 53) as f64
-    };
+    let mut next = crate::common::uniform_stream(99);
     let mut spheres = Vec::new();
     for i in 0..nx {
         for k in 0..nz {

@@ -10,11 +10,7 @@ fn heap(alpha_deg: f64, axisymmetric: bool) -> (Vec<[f64; 3]>, Heap, f64) {
     let slope = alpha_deg.to_radians().tan();
     let (w, depth): (f64, f64) = (0.1, 0.06);
     let mut pts = Vec::new();
-    let mut s = 7u64;
-    let mut rand = || {
-        s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-        (s >> 11) as f64 / (1u64 << 53) as f64
-    };
+    let mut rand = crate::common::uniform_stream(7);
     let top = w * slope;
     let samples = (2.0 * w * 2.0 * w * top / (0.5 * d).powi(3)) as usize;
     for _ in 0..samples {

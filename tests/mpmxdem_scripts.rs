@@ -90,14 +90,7 @@ fn an_rve_of_capsules_runs_the_one_cell_triaxial() {
 #[test]
 #[ignore = "a long run: about 5 minutes of one core"]
 fn the_small_column_collapses_and_runs_to_its_end() {
-    let prep = run(
-        "mpmxdem/prepare_rve.rhai",
-        "mpmxdem_column_rve",
-        &[("count", "150"), ("p_init", "250"), ("vertical_axis", "1")],
-        2,
-    )
-    .unwrap();
-    let rve = prep.out_dir.join("rve.json");
+    let rve = column_rve("mpmxdem_column_rve");
     let collapse_run = run(
         "mpmxdem/column_collapse.rhai",
         "mpmxdem_column",
@@ -139,14 +132,7 @@ fn the_small_column_collapses_and_runs_to_its_end() {
 /// and it draws its pictures.
 #[test]
 fn the_column_study_resumes_where_it_stopped() {
-    let prep = run(
-        "mpmxdem/prepare_rve.rhai",
-        "mpmxdem_study_rve",
-        &[("count", "150"), ("p_init", "250"), ("vertical_axis", "1")],
-        2,
-    )
-    .unwrap();
-    let rve = prep.out_dir.join("rve.json");
+    let rve = column_rve("mpmxdem_study_rve");
     let rve = rve.to_str().unwrap();
     let sets = |max_time: &'static str| {
         vec![
@@ -192,14 +178,7 @@ fn the_column_study_resumes_where_it_stopped() {
 #[test]
 #[ignore = "a long run: about 15 minutes of one core"]
 fn the_flip_column_study_comes_to_rest_by_its_deposit() {
-    let prep = run(
-        "mpmxdem/prepare_rve.rhai",
-        "mpmxdem_rest_rve",
-        &[("count", "150"), ("p_init", "250"), ("vertical_axis", "1")],
-        2,
-    )
-    .unwrap();
-    let rve = prep.out_dir.join("rve.json");
+    let rve = column_rve("mpmxdem_rest_rve");
     let study = run(
         "mpmxdem/column_study.rhai",
         "mpmxdem_rest_flip",
@@ -214,4 +193,11 @@ fn the_flip_column_study_comes_to_rest_by_its_deposit() {
     // Well past its peak, and its front at least a column's width beyond the foot.
     assert!(summary_f64(&study, "final_kinetic_energy") < 0.02 * summary_f64(&study, "peak_kinetic_energy"));
     assert!(summary_f64(&study, "final_normalised_runout") >= 1.0, "{s}");
+}
+
+/// The RVE of the column (thesis 5.4): 150 spheres prepared at 250 Pa, vertical axis y, in the
+/// output folder `name`; its file.
+fn column_rve(name: &str) -> std::path::PathBuf {
+    let args = [("count", "150"), ("p_init", "250"), ("vertical_axis", "1")];
+    run("mpmxdem/prepare_rve.rhai", name, &args, 2).unwrap().out_dir.join("rve.json")
 }

@@ -286,3 +286,12 @@ pub fn can_mount_tmpfs() -> bool {
     }
     can
 }
+
+/// Numbers uniform in [0, 1) from `seed` (a 64-bit linear congruential generator, its top 53
+/// bits): placements that vary but repeat from run to run.
+pub fn uniform_stream(mut seed: u64) -> impl FnMut() -> f64 {
+    move || {
+        seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        (seed >> 11) as f64 / (1u64 << 53) as f64
+    }
+}

@@ -7,8 +7,10 @@
 use crate::dem::contact_set::{MemberKind, Pairing};
 use crate::dem::contact_stage::branch;
 use crate::dem::kind_stage::{BodyContacts, Surroundings};
+use crate::dem::rigid::LawContact;
 use crate::dem::sim::DemWorld;
 use crate::math::Vec3;
+use std::borrow::Cow;
 
 /// A member of a contact: a sphere, a wall or a body of a plugin kind, by index.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -76,9 +78,15 @@ impl DemWorld {
     /// Every contact touching in the last step, list by list in [`Pairing::ALL`]'s order
     /// (sphere pairs, sphere-wall, body pairs, body-wall, body-sphere), each in pair order.
     pub fn touching_contacts(&self) -> Vec<ContactView> {
+        self.touching_of(&Pairing::ALL)
+    }
+
+    /// The contacts touching in the last step of the lists of `pairings`, in their order.
+    fn touching_of(&self, pairings: &[Pairing]) -> Vec<ContactView> {
         let mut out = Vec::new();
         let bodies = self.body_touches();
-        for (pairing, list) in self.contacts.lists() {
+        for &pairing in pairings {
+            let list = self.contacts.list(pairing);
             match pairing.body_list() {
                 None => out.extend((0..list.len()).filter(|&k| list.touching[k]).map(|k| self.sphere_view(pairing, k))),
                 Some(n) => out.extend(
@@ -94,14 +102,14 @@ impl DemWorld {
 
     /// The bodies' touches of the last step, or, in a state loaded before its first step (whose
     /// touches are not saved), found again by their geometries where the bodies are.
-    fn body_touches(&self) -> [Vec<(crate::dem::rigid::LawContact, Vec3)>; 3] {
+    fn body_touches(&self) -> Cow<'_, [Vec<(LawContact, Vec3)>; 3]> {
         let c = &self.contacts;
         let lists = [&c.bodies, &c.body_walls, &c.body_spheres];
         if (0..3).all(|n| c.body_touches[n].len() == lists[n].touching_count()) {
-            return c.body_touches.clone();
+            return Cow::Borrowed(&c.body_touches);
         }
         let around = self.surroundings();
-        BodyContacts::touches_now(&self.kinds, c, &around).unwrap_or_else(|_| c.body_touches.clone())
+        BodyContacts::touches_now(&self.kinds, c, &around).map_or(Cow::Borrowed(&c.body_touches), Cow::Owned)
     }
 
     /// What the bodies' geometries read besides the bodies.
@@ -144,7 +152,8 @@ impl DemWorld {
     /// The touching contacts of body `i` (with bodies, walls and spheres), each seen from it.
     pub fn body_contacts_of(&self, i: usize) -> Vec<ContactView> {
         let me = Member::Body(i);
-        let contacts = self.touching_contacts().into_iter().filter(|c| c.first == me || c.other == me);
+        let lists = [Pairing::BodyBody, Pairing::BodyWall, Pairing::BodySphere];
+        let contacts = self.touching_of(&lists).into_iter().filter(|c| c.first == me || c.other == me);
         contacts.map(|c| if c.first == me { c } else { c.turned() }).collect()
     }
 

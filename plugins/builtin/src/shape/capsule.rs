@@ -271,13 +271,23 @@ impl PlacedBodies for PlacedCapsules<'_> {
         out: &mut [Option<Touch>],
     ) -> std::result::Result<(), PairFailure> {
         let bodies = &self.bodies;
+        // A pair's contact points are consecutive entries: both are found at its first.
+        let mut last: Option<((u32, u32), PairTouches)> = None;
         for (slot, &(i, j, part)) in out.iter_mut().zip(pairs) {
-            let (a, b) = (self.segments[i as usize], self.segments[j as usize]);
-            // Segments crossing each other: across both axes, towards the second body.
-            let across = cross(sub(a.1, a.0), sub(b.1, b.0));
-            let towards = sub(bodies.x[j as usize], bodies.x[i as usize]);
-            let fallback = unit_or_z(if dot(across, towards) < 0.0 { across.map(|c| -c) } else { across });
-            *slot = pair_touch(a, b, part, fallback);
+            let touches = match last {
+                Some((pair, touches)) if pair == (i, j) => touches,
+                _ => {
+                    let (a, b) = (self.segments[i as usize], self.segments[j as usize]);
+                    // Segments crossing each other: across both axes, towards the second body.
+                    let across = cross(sub(a.1, a.0), sub(b.1, b.0));
+                    let towards = sub(bodies.x[j as usize], bodies.x[i as usize]);
+                    let fallback = unit_or_z(if dot(across, towards) < 0.0 { across.map(|c| -c) } else { across });
+                    let touches = pair_touches(a, b, fallback);
+                    last = Some(((i, j), touches));
+                    touches
+                }
+            };
+            *slot = touches.get(part as usize).copied().flatten();
         }
         Ok(())
     }
@@ -341,8 +351,11 @@ impl PlacedBodies for PlacedCapsules<'_> {
     }
 }
 
-/// The touch of capsules `a` and `b` (segment ends and radius each) for their contact point
-/// `part`, the same whichever capsule is first (a capsule and its periodic image are found under
+/// A capsule pair's touches at its two contact points (parts 0 and 1).
+type PairTouches = [Option<Touch>; 2];
+
+/// The touches of capsules `a` and `b` (segment ends and radius each) at their two contact points
+/// (parts 0 and 1), the same whichever capsule is first (a capsule and its periodic image are found under
 /// one order, the same two in a larger cell under either). One contact is the deepest: at the
 /// closest points of the two axes, or, for parallel axes, at the deeper end of their overlap.
 /// The other is the end of the overlap farthest from it, where it presses: an end sphere of one
@@ -352,58 +365,51 @@ impl PlacedBodies for PlacedCapsules<'_> {
 /// meet at their closest points. Part 0 is the contact lower along `a`'s axis, part 1 the upper,
 /// so that each keeps its history as the capsules move. `fallback` is the normal where the axes
 /// meet.
-fn pair_touch(a: (Vec3, Vec3, f64), b: (Vec3, Vec3, f64), part: u8, fallback: Vec3) -> Option<Touch> {
+fn pair_touches(a: (Vec3, Vec3, f64), b: (Vec3, Vec3, f64), fallback: Vec3) -> PairTouches {
     let ((a0, a1, ra), (b0, b1, rb)) = (a, b);
     let (da, db) = (sub(a1, a0), sub(b1, b0));
     let (aa, bb) = (dot(da, da), dot(db, db));
-    // A contact: a point of `a`'s axis, one of `b`'s, and their touch.
-    type Contact = (Vec3, Vec3, Option<Touch>);
-    let contact = |pa: Vec3, pb: Vec3| -> Contact { (pa, pb, swept_touch(pa, ra, pb, rb, fallback)) };
-    let (pa, pb) = closest_points(a0, a1, b0, b1);
+    // A contact as a point of `a`'s axis and one of `b`'s; its touch where it is chosen.
+    let touch = |(pa, pb): (Vec3, Vec3)| swept_touch(pa, ra, pb, rb, fallback);
+    let closest = closest_points(a0, a1, b0, b1);
     if aa == 0.0 || bb == 0.0 {
         // A capsule of no length is a sphere: one contact.
-        return if part == 0 { contact(pa, pb).2 } else { None };
+        return [touch(closest), None];
     }
     // The end spheres lying along the other capsule's axis, against it.
     let foot = |p: Vec3, (e0, d, dd): (Vec3, Vec3, f64)| (0.0..=1.0).contains(&(dot(sub(p, e0), d) / dd));
-    let mut ends: Vec<Contact> = Vec::with_capacity(4);
-    for e in [a0, a1] {
-        if foot(e, (b0, db, bb)) {
-            ends.push(contact(e, nearest_on(b0, b1, e)));
-        }
-    }
-    for e in [b0, b1] {
-        if foot(e, (a0, da, aa)) {
-            ends.push(contact(nearest_on(a0, a1, e), e));
-        }
-    }
-    let gap = |c: &Contact| {
-        let d = sub(c.1, c.0);
+    let candidates = [
+        (foot(a0, (b0, db, bb)), (a0, nearest_on(b0, b1, a0))),
+        (foot(a1, (b0, db, bb)), (a1, nearest_on(b0, b1, a1))),
+        (foot(b0, (a0, da, aa)), (nearest_on(a0, a1, b0), b0)),
+        (foot(b1, (a0, da, aa)), (nearest_on(a0, a1, b1), b1)),
+    ];
+    let ends = || candidates.iter().filter(|(on, _)| *on).map(|&(_, c)| c);
+    let gap = |(pa, pb): &(Vec3, Vec3)| {
+        let d = sub(*pb, *pa);
         dot(d, d)
     };
     let across = cross(da, db);
     let parallel = dot(across, across) <= 1e-24 * aa * bb;
-    let deepest = match ends.iter().min_by(|x, y| gap(x).total_cmp(&gap(y))) {
-        Some(&end) if parallel => end,
-        _ => contact(pa, pb),
+    let deepest = match ends().min_by(|x, y| gap(x).total_cmp(&gap(y))) {
+        Some(end) if parallel => end,
+        _ => closest,
     };
-    let middle = |c: &Contact| along(c.0, sub(c.1, c.0), 0.5);
-    let apart = |c: &Contact| {
+    let middle = |(pa, pb): &(Vec3, Vec3)| along(*pa, sub(*pb, *pa), 0.5);
+    let apart = |c: &(Vec3, Vec3)| {
         let d = sub(middle(c), middle(&deepest));
         dot(d, d)
     };
     // The other end of the overlap: the end sphere farthest from the deepest contact (an end
     // found twice, where the two capsules' ends meet, counts once).
     let reach = 1e-12 * (aa + bb);
-    let other = ends.iter().filter(|c| apart(c) > reach).max_by(|x, y| apart(x).total_cmp(&apart(y)));
-    let Some(&other) = other else {
-        return if part == 0 { deepest.2 } else { None };
+    let Some(other) = ends().filter(|c| apart(c) > reach).max_by(|x, y| apart(x).total_cmp(&apart(y))) else {
+        return [touch(deepest), None];
     };
-    let (lower, upper) = if dot(da, deepest.0) <= dot(da, other.0) { (deepest, other) } else { (other, deepest) };
-    if part == 0 {
-        lower.2
+    if dot(da, deepest.0) <= dot(da, other.0) {
+        [touch(deepest), touch(other)]
     } else {
-        upper.2
+        [touch(other), touch(deepest)]
     }
 }
 

@@ -106,7 +106,8 @@ fn boundary_touch(p: &Placed, w: Vec3) -> Option<Touch> {
 /// A flat wall's region: a convex polygon (corners counter-clockwise about the normal, world
 /// frame) or a disk about the plane's origin.
 enum Region {
-    Polygon(Vec<Vec3>),
+    /// Up to four corners, the first `count` of the array (no allocation per contact).
+    Polygon([Vec3; 4], usize),
     Disk(f64),
 }
 
@@ -133,7 +134,7 @@ impl Flat {
     fn triangle(a: Vec3, b: Vec3, c: Vec3) -> Flat {
         let (ab, ac) = (sub3(b, a), sub3(c, a));
         let normal = unit(cross3(ab, ac));
-        Flat { origin: a, normal, e: [unit(ab), unit(cross3(normal, ab))], region: Region::Polygon(vec![a, b, c]) }
+        Flat { origin: a, normal, e: [unit(ab), unit(cross3(normal, ab))], region: Region::Polygon([a, b, c, c], 3) }
     }
 
     fn point_of(&self, u: Vector2<f64>) -> Vec3 {
@@ -162,9 +163,9 @@ impl Flat {
         };
         let least = newton_least(value, self.in_plane(p.position), 1e-13 * p.bounding_radius);
         let margin = match &self.region {
-            Region::Polygon(corners) => (0..corners.len())
+            Region::Polygon(corners, count) => (0..*count)
                 .map(|k| {
-                    let (a, b) = (self.in_plane(corners[k]), self.in_plane(corners[(k + 1) % corners.len()]));
+                    let (a, b) = (self.in_plane(corners[k]), self.in_plane(corners[(k + 1) % count]));
                     let (edge, to) = (b - a, least - a);
                     (edge[0] * to[1] - edge[1] * to[0]) / edge.norm()
                 })
@@ -177,9 +178,9 @@ impl Flat {
         }
         let f = |w: Vec3| p.value(w);
         let (point, value) = match &self.region {
-            Region::Polygon(corners) => (0..corners.len())
+            Region::Polygon(corners, count) => (0..*count)
                 .map(|k| {
-                    let (a, b) = (corners[k], corners[(k + 1) % corners.len()]);
+                    let (a, b) = (corners[k], corners[(k + 1) % count]);
                     let d = sub3(b, a);
                     let (t, value) = least_on(|t| f(at(a, d, t)), (0.0, 1.0));
                     (at(a, d, t), value)
@@ -226,8 +227,8 @@ pub fn bounded_wall_touch(p: &Placed, wall: &Wall) -> std::result::Result<Option
         WallShape::Triangle { b, c, .. } => Flat::triangle(o, at(o, *b, 1.0), at(o, *c, 1.0)),
         WallShape::Rect { u, v, half } => {
             let corner = |su: f64, sv: f64| at(at(o, *u, su * half[0]), *v, sv * half[1]);
-            let corners = vec![corner(-1.0, -1.0), corner(1.0, -1.0), corner(1.0, 1.0), corner(-1.0, 1.0)];
-            Flat { origin: o, normal: unit(cross3(*u, *v)), e: [*u, *v], region: Region::Polygon(corners) }
+            let corners = [corner(-1.0, -1.0), corner(1.0, -1.0), corner(1.0, 1.0), corner(-1.0, 1.0)];
+            Flat { origin: o, normal: unit(cross3(*u, *v)), e: [*u, *v], region: Region::Polygon(corners, 4) }
         }
         WallShape::Disk { normal, radius } => {
             Flat { origin: o, normal: *normal, e: basis(*normal), region: Region::Disk(*radius) }
@@ -258,7 +259,7 @@ pub fn bounded_wall_touch(p: &Placed, wall: &Wall) -> std::result::Result<Option
 /// owner, and only where no neighbour sharing it holds a lower value of the potential (as a
 /// sphere meets a shared feature only where no neighbour is closer).
 fn counts_here(p: &Placed, flat: &Flat, ring: &FacetRing, least: &Least) -> bool {
-    let Region::Polygon(corners) = &flat.region else { return true };
+    let Region::Polygon(corners, _) = &flat.region else { return true };
     // The edges the least lies on, within the solve's reach of their lines; two: their corner.
     let reach = BOUNDARY_REACH * p.bounding_radius;
     let on_edge = |k: usize| {
