@@ -1,0 +1,80 @@
+"""granite.run from Python: summaries, series and frames reach numpy; errors become exceptions."""
+
+import math
+
+import numpy as np
+import pytest
+
+import granite
+
+
+def test_the_vibrating_bar_keeps_its_period_and_energy(scripts, tmp_path):
+    # An elastic bar in its first mode: period 4 L / c = 10 s (scripts/mpm/vibrating_bar.rhai).
+    run = granite.run(scripts / "mpm" / "vibrating_bar.rhai", params={"shape_functions": "bspline2", "cells": 25},
+                      out=tmp_path / "bar", threads=2)
+    assert run.summary["status"] == "ok"
+    assert math.isclose(run.summary["period"], run.summary["period_exact"], rel_tol=0.01)
+    series = run.series
+    time = np.asarray(series["time"], dtype=float)
+    total = np.asarray(series["total_energy"], dtype=float)
+    assert time[-1] == pytest.approx(2 * run.summary["period_exact"], rel=0.02)
+    # Energy kept over two periods: the summary's end value (B-splines at 50 cells: 1.3e-5), and
+    # every row of the series within the points' quadrature of the strain energy, O((pi h / 2L)^2)
+    # = 4e-3 at 25 cells.
+    assert abs(run.summary["energy_change_ratio"]) < 1e-3
+    assert np.max(np.abs(total - total[0])) < 1e-2 * total[0]
+    assert run.provenance["parameters"]["cells"] == 25
+
+
+def test_frames_of_points_follow_the_bars_mode(scripts, tmp_path):
+    run = granite.run(scripts / "mpm" / "vibrating_bar.rhai", params={"periods": 1.0, "shape_functions": "bspline2"},
+                      out=tmp_path / "bar")
+    first = run.points(0)
+    n = len(first["position"])
+    assert first["position"].shape == (n, 3) and first["stress"].shape == (n, 6)
+    # u(x, t) = (v0 / w) sin(k x) sin(w t), k = pi / 2L, w = c k: L = 25 m, c = 10 m/s, v0 = 0.1 m/s,
+    # E = 100 Pa, so stress E v0 / c cos(k x) sin(w t) (tension positive) and velocity
+    # v0 sin(k x) cos(w t).
+    k, w, v0, sigma0 = np.pi / 50.0, np.pi * 10.0 / 50.0, 0.1, 100.0 * 0.1 / 10.0
+    x = first["position"][:, 0]
+    np.testing.assert_allclose(first["velocity"][:, 0], v0 * np.sin(k * x), atol=1e-12)
+    assert np.all(first["stress"] == 0.0)
+    # The frame nearest a quarter period: the velocity has gone into strain.
+    times = np.array([t for t, _ in run.frames()])
+    quarter = int(np.argmin(np.abs(times - 2.5)))
+    frame = run.points(quarter)
+    x = frame["position"][:, 0]
+    t = times[quarter]
+    # 25 cells: the points' stress carries the transfer's noise, largest at the fixed end (4 %).
+    stress_error = frame["stress"][:, 0] - sigma0 * np.cos(k * x) * np.sin(w * t)
+    velocity_error = frame["velocity"][:, 0] - v0 * np.sin(k * x) * np.cos(w * t)
+    assert np.sqrt(np.mean(stress_error ** 2)) < 0.02 * sigma0 and np.max(np.abs(stress_error)) < 0.05 * sigma0
+    assert np.sqrt(np.mean(velocity_error ** 2)) < 0.02 * v0 and np.max(np.abs(velocity_error)) < 0.05 * v0
+    assert len(run.vtk_frames) == len(times)
+
+
+def test_a_script_error_names_its_line(tmp_path):
+    script = tmp_path / "broken.rhai"
+    script.write_text("let sim = mpm(#{ dim: 2, origin: [0.0, 0.0], cell: 1.0, cells: [4, 4] });\n"
+                      "let x = 1;\n"
+                      "sim.no_such_call(x);\n")
+    with pytest.raises(granite.ScriptError) as caught:
+        granite.run(script, out=tmp_path / "out")
+    assert caught.value.file == "broken.rhai"
+    assert caught.value.line == 3
+    assert "no_such_call" in caught.value.message
+
+
+def test_an_unknown_parameter_is_refused_with_the_closest_names(scripts, tmp_path):
+    with pytest.raises(granite.GraniteError) as caught:
+        granite.run(scripts / "mpm" / "vibrating_bar.rhai", params={"cels": 10}, out=tmp_path / "out")
+    assert "cels" in str(caught.value) and "cells" in str(caught.value)
+
+
+def test_params_lists_what_a_script_declares(scripts):
+    declared = granite.params(scripts / "mpm" / "vibrating_bar.rhai", cells=50)
+    assert declared["cells"]["value"] == "50"
+    assert declared["cells"]["allowed"] == ">= 4"
+    assert declared["shape_functions"]["value"] == "linear"
+    with pytest.raises(granite.GraniteError):
+        granite.params(scripts / "mpm" / "vibrating_bar.rhai", cells=2)
