@@ -6,10 +6,15 @@ pandas DataFrames.
     run.summary["final_normalised_runout"]
     run.series            # series.csv as a DataFrame (a numpy structured array without pandas)
 
+    sim = granite.load("scene.rhai")          # a live session: step, inspect, change
+    sim.run_steps(100)
+    sim.array("position")                     # (n, 3) numpy array
+
 The scripts stay granite's way of setting a simulation up; docs/python.md is the reference.
 """
 
 from ._native import GraniteError, __version__
 from ._run import Run, ScriptError, params, run
+from ._session import Session, Simulation, Value, load
 
-__all__ = ["GraniteError", "Run", "ScriptError", "__version__", "params", "run"]
+__all__ = ["GraniteError", "Run", "ScriptError", "Session", "Simulation", "Value", "__version__", "load", "params", "run"]

@@ -2,11 +2,15 @@
 //! `granite run` does and hands back where its outputs went and its summary; the Python half
 //! (python/granite/) reads those into numpy and pandas.
 
+use granite_script::repl::ReplSession;
 use pyo3::create_exception;
 use pyo3::exceptions::PyException;
 use pyo3::prelude::*;
+use pyo3::types::{PyBool, PyBytes, PyDict, PyFloat, PyInt, PyList, PyString, PyTuple};
+use rhai::{Array, Dynamic, Map};
 use std::path::PathBuf;
-use std::sync::atomic::{AtomicI32, Ordering};
+use std::sync::atomic::{AtomicI32, AtomicU64, Ordering};
+use std::sync::Mutex;
 
 create_exception!(
     _native,
@@ -51,15 +55,18 @@ fn request_stop() {
     STOP.store(SIGINT, Ordering::SeqCst);
 }
 
-/// The parameters a script declares before its first simulation: (name, value as text, its
-/// type, what its limits allow, the comment of its line), values from `overrides` checked as a
-/// run checks them.
+/// A declared parameter: name, value as text, its type, what its limits allow, the comment of
+/// its line.
+type Declaration = (String, String, String, String, String);
+
+/// The parameters a script declares before its first simulation, values from `overrides`
+/// checked as a run checks them.
 #[pyfunction]
 #[pyo3(signature = (script, overrides=Vec::new()))]
 fn params(
     script: PathBuf,
     overrides: Vec<(String, String)>,
-) -> PyResult<Vec<(String, String, String, String, String)>> {
+) -> PyResult<Vec<Declaration>> {
     let options = granite_script::RunOptions { overrides, quiet: true, ..Default::default() };
     let declared = granite_script::list_params(&script, granite::registry(), options)
         .map_err(|e| GraniteError::new_err(e.to_string()))?;
@@ -69,9 +76,194 @@ fn params(
         .collect())
 }
 
+/// A value of a session that Python holds by name: a simulation, a material, a wall... kept in
+/// the session as the variable `variable` and handed back to calls by it.
+#[pyclass(frozen)]
+struct Stored {
+    #[pyo3(get)]
+    variable: String,
+    #[pyo3(get)]
+    kind: String,
+}
+
+/// A live session: a script's variables and simulations kept between calls, as in `granite repl`.
+#[pyclass(frozen)]
+struct Session {
+    inner: Mutex<ReplSession>,
+    /// Pauses the session's runs at their next step (Ctrl-C), without its lock.
+    pause: Box<dyn Fn() + Send + Sync>,
+    pool: rayon::ThreadPool,
+    /// Numbers the values stored for Python.
+    stored: AtomicU64,
+}
+
+#[pymethods]
+impl Session {
+    #[new]
+    #[pyo3(signature = (overrides, out, threads=None, quiet=true))]
+    fn new(overrides: Vec<(String, String)>, out: PathBuf, threads: Option<usize>, quiet: bool) -> PyResult<Session> {
+        let options = granite_script::RunOptions {
+            program: format!("granite {} (Python)", env!("CARGO_PKG_VERSION")),
+            out_dir: out,
+            overrides,
+            quiet,
+            stop_signal: Some(&STOP),
+            ..Default::default()
+        };
+        let session =
+            ReplSession::new(granite::registry(), options).map_err(|e| GraniteError::new_err(e.to_string()))?;
+        let pause = session.pause_handle();
+        let mut pool = rayon::ThreadPoolBuilder::new();
+        if let Some(n) = threads {
+            pool = pool.num_threads(n);
+        }
+        let pool = pool.build().map_err(|e| GraniteError::new_err(format!("thread pool: {e}")))?;
+        Ok(Session { inner: Mutex::new(session), pause: Box::new(pause), pool, stored: AtomicU64::new(0) })
+    }
+
+    /// Evaluates script code in the session without holding the GIL; returns its value (plain
+    /// values converted, others stored and returned as `Stored`).
+    fn eval(&self, py: Python<'_>, code: &str) -> PyResult<Py<PyAny>> {
+        STOP.store(0, Ordering::SeqCst);
+        let value = py.detach(|| self.pool.install(|| self.lock().eval_value(code))).map_err(GraniteError::new_err)?;
+        self.to_python(py, value)
+    }
+
+    /// Sets a variable of the session to a Python value.
+    fn set(&self, name: &str, value: &Bound<'_, PyAny>) -> PyResult<()> {
+        let value = self.to_dynamic(value)?;
+        self.lock().set_variable(name, value);
+        Ok(())
+    }
+
+    /// One array of the simulation held in `variable`: its values as bytes (f64, native order)
+    /// and its number of columns.
+    fn array(&self, py: Python<'_>, variable: &str, name: &str) -> PyResult<(Py<PyBytes>, usize)> {
+        let sim = self.variable(variable)?;
+        let table = py
+            .detach(|| granite_script::arrays::array(&sim, name))
+            .map_err(|e| GraniteError::new_err(e.to_string()))?;
+        let bytes: Vec<u8> = table.values.iter().flat_map(|v| v.to_ne_bytes()).collect();
+        Ok((PyBytes::new(py, &bytes).unbind(), table.columns))
+    }
+
+    /// The arrays the value in `variable` offers (None: not a simulation).
+    fn array_names(&self, variable: &str) -> PyResult<Option<Vec<String>>> {
+        Ok(granite_script::arrays::names(&self.variable(variable)?))
+    }
+
+    /// The session's variables and their types.
+    fn variables(&self) -> Vec<(String, String)> {
+        self.lock().variables()
+    }
+
+    /// Refuses parameters given that no `param(...)` declared.
+    fn check_overrides(&self) -> PyResult<()> {
+        self.lock().check_overrides().map_err(GraniteError::new_err)
+    }
+
+    /// Pauses every run of the session at its next step and stops the code being evaluated
+    /// (Ctrl-C); the state is kept.
+    fn interrupt(&self) {
+        (self.pause)();
+    }
+
+    /// Pauses the runs still going in the background and waits for them.
+    fn finish(&self) {
+        self.lock().finish();
+    }
+}
+
+impl Session {
+    fn lock(&self) -> std::sync::MutexGuard<'_, ReplSession> {
+        self.inner.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    fn variable(&self, name: &str) -> PyResult<Dynamic> {
+        self.lock().variable(name).ok_or_else(|| GraniteError::new_err(format!("the session has no variable `{name}`")))
+    }
+
+    fn to_python(&self, py: Python<'_>, value: Dynamic) -> PyResult<Py<PyAny>> {
+        if value.is_unit() {
+            return Ok(py.None());
+        }
+        if let Some(b) = value.clone().try_cast::<bool>() {
+            return Ok(PyBool::new(py, b).to_owned().into_any().unbind());
+        }
+        if let Some(i) = value.clone().try_cast::<rhai::INT>() {
+            return Ok(i.into_pyobject(py)?.into_any().unbind());
+        }
+        if let Some(f) = value.clone().try_cast::<rhai::FLOAT>() {
+            return Ok(PyFloat::new(py, f).into_any().unbind());
+        }
+        if value.is_string() {
+            return Ok(PyString::new(py, &value.to_string()).into_any().unbind());
+        }
+        if value.is_array() {
+            let items =
+                value.cast::<Array>().into_iter().map(|v| self.to_python(py, v)).collect::<PyResult<Vec<_>>>()?;
+            return Ok(PyList::new(py, items)?.into_any().unbind());
+        }
+        if value.is_map() {
+            let dict = PyDict::new(py);
+            for (k, v) in value.cast::<Map>() {
+                dict.set_item(k.as_str(), self.to_python(py, v)?)?;
+            }
+            return Ok(dict.into_any().unbind());
+        }
+        let variable = format!("__python_{}", self.stored.fetch_add(1, Ordering::SeqCst));
+        let mut session = self.lock();
+        let kind = session.type_name(&value);
+        session.set_variable(&variable, value);
+        Ok(Py::new(py, Stored { variable, kind })?.into_any())
+    }
+
+    fn to_dynamic(&self, value: &Bound<'_, PyAny>) -> PyResult<Dynamic> {
+        if value.is_none() {
+            return Ok(Dynamic::UNIT);
+        }
+        if let Ok(stored) = value.extract::<PyRef<'_, Stored>>() {
+            return self.variable(&stored.variable);
+        }
+        if value.is_instance_of::<PyBool>() {
+            return Ok(Dynamic::from(value.extract::<bool>()?));
+        }
+        if value.is_instance_of::<PyInt>() {
+            return Ok(Dynamic::from(value.extract::<rhai::INT>()?));
+        }
+        if value.is_instance_of::<PyFloat>() {
+            return Ok(Dynamic::from(value.extract::<rhai::FLOAT>()?));
+        }
+        if value.is_instance_of::<PyString>() {
+            return Ok(Dynamic::from(value.extract::<String>()?));
+        }
+        if let Ok(dict) = value.cast::<PyDict>() {
+            let mut map = Map::new();
+            for (k, v) in dict.iter() {
+                map.insert(k.str()?.to_string().into(), self.to_dynamic(&v)?);
+            }
+            return Ok(Dynamic::from_map(map));
+        }
+        if value.is_instance_of::<PyList>() || value.is_instance_of::<PyTuple>() {
+            let items = value.try_iter()?.map(|v| self.to_dynamic(&v?)).collect::<PyResult<Array>>()?;
+            return Ok(Dynamic::from_array(items));
+        }
+        // numpy arrays and scalars: as their lists and Python numbers.
+        if value.hasattr("tolist")? {
+            return self.to_dynamic(&value.call_method0("tolist")?);
+        }
+        Err(GraniteError::new_err(format!(
+            "a {} cannot go into a script: numbers, booleans, strings, lists, dicts, numpy arrays and values of the session can",
+            value.get_type().name()?
+        )))
+    }
+}
+
 #[pymodule]
 fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(run, m)?)?;
+    m.add_class::<Session>()?;
+    m.add_class::<Stored>()?;
     m.add_function(wrap_pyfunction!(request_stop, m)?)?;
     m.add_function(wrap_pyfunction!(params, m)?)?;
     m.add("GraniteError", m.py().get_type::<GraniteError>())?;

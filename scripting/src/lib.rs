@@ -8,6 +8,7 @@
 #![allow(clippy::needless_range_loop, clippy::neg_cmp_op_on_partial_ord)]
 
 pub mod api_doc;
+pub mod arrays;
 mod body_api;
 pub mod convert;
 mod data_memory;

@@ -54,13 +54,7 @@ impl ReplSession {
                 return Outcome::Error(format!("syntax error: {at}{}", e.err_type()));
             }
         };
-        let with_functions = self.functions.merge(&ast);
-        *self.ctx.ast.lock().unwrap() = Some(Arc::new(with_functions.clone()));
-        super::INTERRUPTIBLE_SINCE.set(Some(self.ctx.pause_requests()));
-        let result = self.engine.eval_ast_with_scope::<Dynamic>(&mut self.scope, &with_functions);
-        super::INTERRUPTIBLE_SINCE.set(None);
-        self.functions = self.functions.merge(&ast.clone_functions_only());
-        match result {
+        match self.run_ast(ast) {
             Ok(v) if v.is_unit() => Outcome::Value(None),
             Ok(v) => Outcome::Value(Some(show(&v))),
             Err(e) if matches!(*e, rhai::EvalAltResult::ErrorTerminated(..)) => {
@@ -68,6 +62,49 @@ impl ReplSession {
             }
             Err(e) => Outcome::Error(describe(&e, &self.engine)),
         }
+    }
+
+    /// Evaluates one complete input and hands back its value (for bindings that convert values
+    /// themselves); an error or an interruption as the message `eval` gives.
+    pub fn eval_value(&mut self, input: &str) -> std::result::Result<Dynamic, String> {
+        let ast = self.engine.compile_with_scope(&self.scope, input).map_err(|e| {
+            let at = e.position().line().map(|l| format!("line {l}: ")).unwrap_or_default();
+            format!("syntax error: {at}{}", e.err_type())
+        })?;
+        self.run_ast(ast).map_err(|e| describe(&e, &self.engine))
+    }
+
+    /// Runs a compiled input with the functions defined so far, Ctrl-C able to stop it, and keeps
+    /// the functions it defines.
+    fn run_ast(&mut self, ast: AST) -> std::result::Result<Dynamic, Box<rhai::EvalAltResult>> {
+        let with_functions = self.functions.merge(&ast);
+        *self.ctx.ast.lock().unwrap() = Some(Arc::new(with_functions.clone()));
+        super::INTERRUPTIBLE_SINCE.set(Some(self.ctx.pause_requests()));
+        let result = self.engine.eval_ast_with_scope::<Dynamic>(&mut self.scope, &with_functions);
+        super::INTERRUPTIBLE_SINCE.set(None);
+        self.functions = self.functions.merge(&ast.clone_functions_only());
+        result
+    }
+
+    /// Sets a variable of the session (a new one, or a new value for one it has).
+    pub fn set_variable(&mut self, name: &str, value: Dynamic) {
+        self.scope.set_value(name.to_string(), value);
+    }
+
+    /// A variable's value, if the session has it.
+    pub fn variable(&self, name: &str) -> Option<Dynamic> {
+        self.scope.get_value::<Dynamic>(name)
+    }
+
+    /// A value's type as scripts name it (`DemSim`, `Material`, `map`...).
+    pub fn type_name(&self, value: &Dynamic) -> String {
+        self.engine.map_type_name(value.type_name()).to_string()
+    }
+
+    /// Refuses `--set` names that no `param(...)` evaluated so far declared (as a run does at
+    /// its end), with the closest declared names.
+    pub fn check_overrides(&self) -> std::result::Result<(), String> {
+        self.ctx.check_overrides().map_err(|e| describe(&e, &self.engine))
     }
 
     /// The script API's calls whose name, forms or documentation contain `filter` (all for an

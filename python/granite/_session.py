@@ -1,0 +1,227 @@
+"""`granite.load`: a script's simulations kept alive in Python, to run, inspect and change."""
+
+import pathlib
+import threading
+
+import numpy as np
+
+from . import _native
+from ._run import _overrides, _raised
+
+# The script types of simulations (their arrays: spheres or material points).
+_SIMULATIONS = ("DemSim", "MpmSim")
+
+
+def load(script, params=None, out=None, threads=None, quiet=True):
+    """Runs a script in a live session and returns it: its simulations stay, to be stepped,
+    inspected and changed from Python (`Session`).
+
+    params, threads, quiet: as for `granite.run`; out: the session's output folder (default
+    out/<script stem>/), each simulation writing into its own simN/ folder of it. The script's
+    own runs, if it has any, run here as they would in `granite run`.
+    """
+    script = pathlib.Path(script)
+    folder = pathlib.Path(out) if out is not None else pathlib.Path("out") / script.stem
+    session = Session(_native.Session(_overrides(params), str(folder), threads, quiet))
+    session.eval(script.read_text(), name=script.name)
+    try:
+        session._native.check_overrides()
+    except _native.GraniteError as error:
+        raise _raised(error) from None
+    return session
+
+
+class Session:
+    """A live session: the variables a script made, and code evaluated among them.
+
+    With exactly one simulation, the session stands for it: `run_steps`, `run_time`, `call`,
+    `array`, `time` and `step` go to that simulation; `session["name"]` is any variable of the
+    session (a simulation as a `Simulation`).
+    """
+
+    def __init__(self, native):
+        self._native = native
+
+    def eval(self, code, name="<python>"):
+        """Evaluates script code in the session (variables and functions are kept), as a REPL
+        input; returns its value. Errors raise ScriptError (the line within `code`)."""
+        value = _interruptible(self._native, lambda: self._native.eval(code), name)
+        return _wrapped(self, value)
+
+    @property
+    def variables(self):
+        """{name: script type} of the session's variables."""
+        return {name: kind for name, kind in self._native.variables() if not name.startswith("__python_")}
+
+    @property
+    def simulations(self):
+        """{variable name: Simulation} of the session's DEM and MPM simulations."""
+        return {name: Simulation(self, name) for name, kind in self.variables.items() if kind in _SIMULATIONS}
+
+    def __getitem__(self, name):
+        if name not in self.variables:
+            raise KeyError(f"the session has no variable `{name}`; it has: {', '.join(self.variables)}")
+        if self.variables[name] in _SIMULATIONS:
+            return Simulation(self, name)
+        return self.eval(name)
+
+    def _only(self):
+        sims = self.simulations
+        if len(sims) != 1:
+            raise _native.GraniteError(
+                f"the session has {len(sims)} simulations ({', '.join(sims) or 'none'}): pick one, session[\"name\"]")
+        return next(iter(sims.values()))
+
+    def run_steps(self, n):
+        return self._only().run_steps(n)
+
+    def run_time(self, duration):
+        return self._only().run_time(duration)
+
+    def call(self, method, *args):
+        return self._only().call(method, *args)
+
+    def array(self, name):
+        return self._only().array(name)
+
+    @property
+    def time(self):
+        return self._only().time
+
+    @property
+    def step(self):
+        return self._only().step
+
+    def close(self):
+        """Pauses any run still going in the background and waits for it."""
+        self._native.finish()
+
+
+class Simulation:
+    """A DEM or MPM simulation of a session, by its variable's name."""
+
+    def __init__(self, session, variable):
+        self.session = session
+        self.variable = variable
+
+    def __repr__(self):
+        return f"Simulation({self.variable!r}: {self.session.eval(self.variable + '.to_string()')})"
+
+    def call(self, method, *args):
+        """Calls one of the simulation's script functions, `sim.method(args...)`, with Python
+        values (numbers, strings, lists, dicts, numpy arrays, values the session handed back):
+        the same checks and errors as in a script. Returns its value."""
+        names = []
+        for k, arg in enumerate(args):
+            name = f"__python_arg{k}"
+            self.session._native.set(name, arg._stored if isinstance(arg, Value) else arg)
+            names.append(name)
+        return self.session.eval(f"{self.variable}.{method}({', '.join(names)})")
+
+    def get(self, prop):
+        """A property of the simulation (`time`, `step`, `dt`, ...)."""
+        return self.session.eval(f"{self.variable}.{prop}")
+
+    def run_steps(self, n):
+        """Runs n steps (Ctrl-C pauses at the next step, state kept, and raises KeyboardInterrupt)."""
+        return self.call("run_steps", int(n))
+
+    def run_time(self, duration):
+        """Runs for `duration` seconds of simulated time."""
+        return self.call("run_until", self.time + float(duration))
+
+    @property
+    def time(self):
+        return self.get("time")
+
+    @property
+    def step(self):
+        return self.get("step")
+
+    @property
+    def array_names(self):
+        """The arrays `array` gives: the spheres' (DEM) or the material points' and their laws'
+        state variables (MPM)."""
+        return self.session._native.array_names(self.variable)
+
+    def array(self, name):
+        """One array of the spheres (DEM: position, velocity, radius, force, ...) or material
+        points (MPM: position, velocity, stress, strain, volume, a state variable, ...): a numpy
+        array of one row per sphere or point, (n,) or (n, components); a copy."""
+        data, columns = self.session._native.array(self.variable, name)
+        values = np.frombuffer(data, dtype=np.float64).copy()
+        return values.reshape(-1, columns) if columns > 1 else values
+
+    def arrays(self):
+        """Every array, {name: array}."""
+        return {name: self.array(name) for name in self.array_names}
+
+    def contacts(self):
+        """The DEM simulation's contacts as {column: numpy array} (`sim.contacts()` of the script)."""
+        rows = self.call("contacts")
+        if not rows:
+            return {}
+        columns = {}
+        for key in rows[0]:
+            values = [row.get(key) for row in rows]
+            try:
+                columns[key] = np.array(values, dtype=float)
+            except (TypeError, ValueError):
+                columns[key] = np.array(values, dtype=object)
+        return columns
+
+
+class Value:
+    """A value of the session Python cannot hold itself (a material, a wall, a mesh...): passed
+    back into calls as it is."""
+
+    def __init__(self, session, stored):
+        self.session = session
+        self._stored = stored
+
+    @property
+    def kind(self):
+        return self._stored.kind
+
+    def __repr__(self):
+        return f"Value({self.kind}: {self.session.eval(self._stored.variable + '.to_string()')})"
+
+
+def _wrapped(session, value):
+    if isinstance(value, _native.Stored):
+        if value.kind in _SIMULATIONS:
+            return Simulation(session, value.variable)
+        return Value(session, value)
+    if isinstance(value, list):
+        return [_wrapped(session, v) for v in value]
+    if isinstance(value, dict):
+        return {k: _wrapped(session, v) for k, v in value.items()}
+    return value
+
+
+def _interruptible(native, work, name):
+    """Runs `work` (native code, GIL released) on a thread of its own so that Ctrl-C here pauses
+    the session's runs; errors become ScriptError naming `name`."""
+    result = {}
+
+    def target():
+        try:
+            result["value"] = work()
+        except BaseException as error:
+            result["error"] = error
+
+    worker = threading.Thread(target=target, name="granite session", daemon=True)
+    worker.start()
+    try:
+        while worker.is_alive():
+            worker.join(0.1)
+    except KeyboardInterrupt:
+        native.interrupt()
+        worker.join()
+        raise
+    if "error" in result:
+        error = result["error"]
+        if isinstance(error, _native.GraniteError) and str(error).startswith("line "):
+            error = _native.GraniteError(f"{name}: {error}")
+        raise _raised(error) from None
+    return result["value"]
