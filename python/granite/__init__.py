@@ -14,7 +14,12 @@ The scripts stay granite's way of setting a simulation up; docs/python.md is the
 """
 
 from ._native import GraniteError, __version__
+from . import plot
+from ._batch import batch
 from ._run import Run, ScriptError, params, run
 from ._session import Session, Simulation, Value, load
 
-__all__ = ["GraniteError", "Run", "ScriptError", "Session", "Simulation", "Value", "__version__", "load", "params", "run"]
+__all__ = [
+    "GraniteError", "Run", "ScriptError", "Session", "Simulation", "Value", "__version__", "batch", "load", "params",
+    "plot", "run",
+]

@@ -14,3 +14,10 @@ def read_csv(path):
     if pandas is not None:
         return pandas.read_csv(path)
     return np.genfromtxt(path, delimiter=",", names=True, dtype=None, encoding="utf-8")
+
+
+def frame(rows):
+    """A list of dicts as a DataFrame with pandas, else as it is."""
+    if pandas is not None:
+        return pandas.DataFrame(rows)
+    return rows
