@@ -59,11 +59,13 @@ pub struct RunRequest {
     pub comm: Option<granite_core::comm::Comm>,
     /// A flag a signal handler sets (see [`signals`]): the run stops cleanly at its next step.
     pub stop_signal: Option<&'static std::sync::atomic::AtomicI32>,
+    /// Where the runs also tell their progress (an observer on another thread).
+    pub progress: Option<std::sync::Arc<granite_run::ProgressProbe>>,
 }
 
 /// [`run`] with everything `granite run` takes.
 pub fn run_request(script: &Path, request: RunRequest) -> Result<RunReport> {
-    let RunRequest { overrides, out_dir, quiet, threads, plugins, comm, stop_signal } = request;
+    let RunRequest { overrides, out_dir, quiet, threads, plugins, comm, stop_signal, progress } = request;
     let out_dir = out_dir.unwrap_or_else(|| default_out_dir(script));
     let mut pool = rayon::ThreadPoolBuilder::new();
     if let Some(n) = threads.or_else(threads_per_process) {
@@ -72,7 +74,8 @@ pub fn run_request(script: &Path, request: RunRequest) -> Result<RunReport> {
     let pool = pool.build().map_err(|e| granite_core::GraniteError::Other(format!("thread pool: {e}")))?;
     let program = format!("granite {} ({})", env!("CARGO_PKG_VERSION"), env!("GRANITE_GIT_COMMIT"));
     let quiet = quiet || comm.as_ref().is_some_and(|c| c.rank() > 0);
-    let options = RunOptions { program, out_dir, overrides, quiet, plugins, comm, stop_signal, ..Default::default() };
+    let options =
+        RunOptions { program, out_dir, overrides, quiet, plugins, comm, stop_signal, progress, ..Default::default() };
     pool.install(|| run_script(script, registry(), options))
 }
 

@@ -232,6 +232,7 @@ fn main() -> ExitCode {
                 plugins,
                 comm: comm.clone(),
                 stop_signal,
+                progress: None,
             };
             let result = granite::run_request(&script, request);
             if let (Some(signal), Err(e)) = (granite::signals::received(), &result) {

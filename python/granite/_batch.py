@@ -28,7 +28,7 @@ def _one(script, params, out, threads):
     """One run of the sweep, in a worker process: its row (failures recorded, not raised)."""
     row = dict(params)
     try:
-        result = run(script, params=params, out=out, threads=threads)
+        result = run(script, params=params, out=out, threads=threads, progress=False)
         row.update(result.summary)
         provenance = result.provenance
         row["program"] = provenance.get("program")

@@ -6,7 +6,7 @@ import re
 import threading
 import xml.etree.ElementTree as ElementTree
 
-from . import _native, _tables, _vtk
+from . import _native, _progress, _tables, _vtk
 
 
 class ScriptError(_native.GraniteError):
@@ -46,34 +46,44 @@ def _overrides(params):
     return [(str(name), _literal(value)) for name, value in (params or {}).items()]
 
 
-def run(script, params=None, out=None, threads=None, quiet=True):
+def run(script, params=None, out=None, threads=None, quiet=True, progress=True):
     """Runs a Rhai script to its end, as `granite run` does, and returns its `Run`.
 
     params: {name: value} as `--set name=value` (checked as `--set` is: an unknown name is refused
     with the closest declared ones); out: the output folder (default out/<script stem>/);
-    threads: worker threads (default every core); quiet: no progress lines.
+    threads: worker threads (default every core); quiet: no progress lines on standard error;
+    progress: a progress bar of each run call of the script while it goes on (tqdm, where
+    installed: a widget in Jupyter), drawn once a call lasts half a second.
     Raises ScriptError (file, line, message) when the script stops at a line, GraniteError for
     any other failure. Ctrl-C stops the run cleanly at its next step (outputs and checkpoints
     written, as on the command line) and then raises KeyboardInterrupt.
     """
     result = {}
+    probe = _native.Progress()
 
     def work():
         try:
-            result["done"] = _native.run(str(script), _overrides(params), None if out is None else str(out), threads, quiet)
+            result["done"] = _native.run(str(script), _overrides(params), None if out is None else str(out), threads, quiet,
+                                         probe)
         except BaseException as error:  # handed to the calling thread
             result["error"] = error
 
     # The run goes on a thread of its own, so that this one can take Ctrl-C and pass it on.
     worker = threading.Thread(target=work, name="granite run", daemon=True)
+    bar = _progress.Bar(probe, pathlib.Path(script).name) if progress else None
     worker.start()
     try:
         while worker.is_alive():
             worker.join(0.1)
+            if bar is not None:
+                bar.update()
     except KeyboardInterrupt:
         _native.request_stop()
         worker.join()
         raise
+    finally:
+        if bar is not None:
+            bar.close()
     if "error" in result:
         raise _raised(result["error"]) from None
     out_dir, summary = result["done"]

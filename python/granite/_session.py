@@ -5,24 +5,27 @@ import threading
 
 import numpy as np
 
-from . import _native
+from . import _native, _progress
 from ._run import _overrides, _raised
 
 # The script types of simulations (their arrays: spheres or material points).
 _SIMULATIONS = ("DemSim", "MpmSim")
 
 
-def load(script, params=None, out=None, threads=None, quiet=True):
+def load(script, params=None, out=None, threads=None, quiet=True, progress=True):
     """Runs a script in a live session and returns it: its simulations stay, to be stepped,
     inspected and changed from Python (`Session`).
 
-    params, threads, quiet: as for `granite.run`; out: the session's output folder (default
-    out/<script stem>/), each simulation writing into its own simN/ folder of it. The script's
-    own runs, if it has any, run here as they would in `granite run`.
+    params, threads, quiet, progress: as for `granite.run` (the bar for the session's runs);
+    out: the session's output folder (default out/<script stem>/), each simulation writing into
+    its own simN/ folder of it. The script's own runs, if it has any, run here as they would in
+    `granite run`.
     """
     script = pathlib.Path(script)
     folder = pathlib.Path(out) if out is not None else pathlib.Path("out") / script.stem
-    session = Session(_native.Session(_overrides(params), str(folder), threads, quiet))
+    probe = _native.Progress()
+    native = _native.Session(_overrides(params), str(folder), threads, quiet, probe)
+    session = Session(native, _progress.Bar(probe, script.name) if progress else None)
     session.eval(script.read_text(), name=script.name)
     try:
         session._native.check_overrides()
@@ -39,13 +42,14 @@ class Session:
     session (a simulation as a `Simulation`).
     """
 
-    def __init__(self, native):
+    def __init__(self, native, bar=None):
         self._native = native
+        self._bar = bar
 
     def eval(self, code, name="<python>"):
         """Evaluates script code in the session (variables and functions are kept), as a REPL
         input; returns its value. Errors raise ScriptError (the line within `code`)."""
-        value = _interruptible(self._native, lambda: self._native.eval(code), name)
+        value = _interruptible(self._native, lambda: self._native.eval(code), name, self._bar)
         return _wrapped(self, value)
 
     @property
@@ -199,9 +203,10 @@ def _wrapped(session, value):
     return value
 
 
-def _interruptible(native, work, name):
+def _interruptible(native, work, name, bar=None):
     """Runs `work` (native code, GIL released) on a thread of its own so that Ctrl-C here pauses
-    the session's runs; errors become ScriptError naming `name`."""
+    the session's runs, the progress bar following them; errors become ScriptError naming
+    `name`."""
     result = {}
 
     def target():
@@ -215,10 +220,15 @@ def _interruptible(native, work, name):
     try:
         while worker.is_alive():
             worker.join(0.1)
+            if bar is not None:
+                bar.update()
     except KeyboardInterrupt:
         native.interrupt()
         worker.join()
         raise
+    finally:
+        if bar is not None:
+            bar.close()
     if "error" in result:
         error = result["error"]
         if isinstance(error, _native.GraniteError) and str(error).startswith("line "):

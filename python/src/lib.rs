@@ -10,7 +10,7 @@ use pyo3::types::{PyBool, PyBytes, PyDict, PyFloat, PyInt, PyList, PyString, PyT
 use rhai::{Array, Dynamic, Map};
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicI32, AtomicU64, Ordering};
-use std::sync::Mutex;
+use std::sync::{Arc, Mutex};
 
 create_exception!(
     _native,
@@ -26,11 +26,31 @@ static STOP: AtomicI32 = AtomicI32::new(0);
 /// The signal number a run reports when stopped from Python (SIGINT).
 const SIGINT: i32 = 2;
 
+/// Where runs tell how far they have got, read from Python while they go on.
+#[pyclass(frozen)]
+#[derive(Default)]
+struct Progress(Arc<granite_run::ProgressProbe>);
+
+#[pymethods]
+impl Progress {
+    #[new]
+    fn new() -> Progress {
+        Progress::default()
+    }
+
+    /// (run calls started, steps of the current one done, asked (0: no end of its own), its
+    /// simulated time).
+    fn read(&self) -> (u64, u64, u64, f64) {
+        let r = self.0.read();
+        (r.calls, r.done, r.total, r.time)
+    }
+}
+
 /// Runs `script` with `--set` overrides into `out` (None: out/<script stem>/) on `threads`
 /// threads (None: every core), without holding the GIL. Returns the output folder and the
 /// summary as JSON text.
 #[pyfunction]
-#[pyo3(signature = (script, overrides, out=None, threads=None, quiet=true))]
+#[pyo3(signature = (script, overrides, out=None, threads=None, quiet=true, progress=None))]
 fn run(
     py: Python<'_>,
     script: PathBuf,
@@ -38,10 +58,18 @@ fn run(
     out: Option<PathBuf>,
     threads: Option<usize>,
     quiet: bool,
+    progress: Option<PyRef<'_, Progress>>,
 ) -> PyResult<(String, String)> {
     STOP.store(0, Ordering::SeqCst);
-    let request =
-        granite::RunRequest { overrides, out_dir: out, quiet, threads, stop_signal: Some(&STOP), ..Default::default() };
+    let request = granite::RunRequest {
+        overrides,
+        out_dir: out,
+        quiet,
+        threads,
+        stop_signal: Some(&STOP),
+        progress: progress.map(|p| p.0.clone()),
+        ..Default::default()
+    };
     let report =
         py.detach(|| granite::run_request(&script, request)).map_err(|e| GraniteError::new_err(e.to_string()))?;
     let summary = serde_json::to_string(&report.summary).map_err(|e| GraniteError::new_err(e.to_string()))?;
@@ -63,10 +91,7 @@ type Declaration = (String, String, String, String, String);
 /// checked as a run checks them.
 #[pyfunction]
 #[pyo3(signature = (script, overrides=Vec::new()))]
-fn params(
-    script: PathBuf,
-    overrides: Vec<(String, String)>,
-) -> PyResult<Vec<Declaration>> {
+fn params(script: PathBuf, overrides: Vec<(String, String)>) -> PyResult<Vec<Declaration>> {
     let options = granite_script::RunOptions { overrides, quiet: true, ..Default::default() };
     let declared = granite_script::list_params(&script, granite::registry(), options)
         .map_err(|e| GraniteError::new_err(e.to_string()))?;
@@ -100,14 +125,21 @@ struct Session {
 #[pymethods]
 impl Session {
     #[new]
-    #[pyo3(signature = (overrides, out, threads=None, quiet=true))]
-    fn new(overrides: Vec<(String, String)>, out: PathBuf, threads: Option<usize>, quiet: bool) -> PyResult<Session> {
+    #[pyo3(signature = (overrides, out, threads=None, quiet=true, progress=None))]
+    fn new(
+        overrides: Vec<(String, String)>,
+        out: PathBuf,
+        threads: Option<usize>,
+        quiet: bool,
+        progress: Option<PyRef<'_, Progress>>,
+    ) -> PyResult<Session> {
         let options = granite_script::RunOptions {
             program: format!("granite {} (Python)", env!("CARGO_PKG_VERSION")),
             out_dir: out,
             overrides,
             quiet,
             stop_signal: Some(&STOP),
+            progress: progress.map(|p| p.0.clone()),
             ..Default::default()
         };
         let session =
@@ -263,6 +295,7 @@ impl Session {
 fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(run, m)?)?;
     m.add_class::<Session>()?;
+    m.add_class::<Progress>()?;
     m.add_class::<Stored>()?;
     m.add_function(wrap_pyfunction!(request_stop, m)?)?;
     m.add_function(wrap_pyfunction!(params, m)?)?;

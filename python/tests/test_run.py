@@ -78,3 +78,17 @@ def test_params_lists_what_a_script_declares(scripts):
     assert declared["shape_functions"]["value"] == "linear"
     with pytest.raises(granite.GraniteError):
         granite.params(scripts / "mpm" / "vibrating_bar.rhai", cells=2)
+
+
+def test_the_progress_probe_follows_the_runs(scripts, tmp_path):
+    # The column's two runs (settling, collapse), each to its end: the probe the progress bar
+    # reads counts both and ends at the last run's last step and the script's end time.
+    probe = granite._native.Progress()
+    params = [("cell_size", "0.2"), ("points_per_cell", "1"), ("a_tau", "0.05"), ("settle_time", "0.1"),
+              ("collapse_time", "0.1")]
+    out_dir, _ = granite._native.run(str(scripts / "mpm" / "column_collapse.rhai"), params, str(tmp_path / "col"), 1,
+                                     True, probe)
+    calls, done, total, time = probe.read()
+    run = granite.Run(out_dir)
+    assert calls >= 2 and done == total > 0
+    assert time == pytest.approx(float(run.table("series_runout.csv")["time"].iloc[-1]), rel=1e-12)

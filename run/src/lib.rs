@@ -26,5 +26,5 @@ pub mod simulation;
 pub use dem_scene::{DemScene, DemSnapshot, DEEP_OVERLAP};
 pub use mpm_scene::{Driven, MpmScene, Runout};
 pub use output::Output;
-pub use runner::{Cadence, Progress, Runner, StepDone};
+pub use runner::{Cadence, Progress, ProgressProbe, ProgressReading, Runner, StepDone};
 pub use simulation::{RunContext, RunEnd, Simulation};

@@ -9,6 +9,8 @@ use indexmap::IndexMap;
 use serde_json::Value;
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 /// Output intervals of a run with no end of its own, unless the driver set them.
@@ -291,7 +293,7 @@ impl<S: Simulation> Runner<S> {
         let cadence = self.cadence(Some(steps));
         self.open(cadence)?;
         self.write_series_row(&[], &[])?;
-        let progress = Progress::new(self.run.quiet, Some(steps));
+        let progress = Progress::new(self.run.quiet, Some(steps), self.run.progress.clone());
         for k in 1..=steps {
             let done = match self.step(cadence, k, k == steps) {
                 Ok(done) => done,
@@ -340,21 +342,67 @@ impl<S: Simulation> Runner<S> {
     }
 }
 
+/// How far the runs of a script have got, for an observer on another thread (the Python
+/// package's progress bar): the run calls started so far, the steps of the current one done and
+/// asked (0: no end of its own), and its simulated time.
+#[derive(Debug, Default)]
+pub struct ProgressProbe {
+    calls: AtomicU64,
+    done: AtomicU64,
+    total: AtomicU64,
+    time: AtomicU64,
+}
+
+/// What a [`ProgressProbe`] says at one moment.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ProgressReading {
+    pub calls: u64,
+    pub done: u64,
+    pub total: u64,
+    pub time: f64,
+}
+
+impl ProgressProbe {
+    pub fn read(&self) -> ProgressReading {
+        ProgressReading {
+            calls: self.calls.load(Ordering::Relaxed),
+            done: self.done.load(Ordering::Relaxed),
+            total: self.total.load(Ordering::Relaxed),
+            time: f64::from_bits(self.time.load(Ordering::Relaxed)),
+        }
+    }
+
+    fn start(&self, total: Option<u64>) {
+        self.done.store(0, Ordering::Relaxed);
+        self.total.store(total.unwrap_or(0), Ordering::Relaxed);
+        self.calls.fetch_add(1, Ordering::Relaxed);
+    }
+
+    fn tick(&self, done: u64, time: f64) {
+        self.done.store(done, Ordering::Relaxed);
+        self.time.store(time.to_bits(), Ordering::Relaxed);
+    }
+}
+
 /// Progress of a run on standard error: a bar on a terminal, a plain status line every 10 s
-/// otherwise.
+/// otherwise; and on a probe, if the run has one.
 pub struct Progress {
     bar: Option<indicatif::ProgressBar>,
     /// Not on a terminal: when the last status line went out.
     plain: Option<std::cell::Cell<Instant>>,
     total: u64,
     start: Instant,
+    probe: Option<Arc<ProgressProbe>>,
 }
 
 impl Progress {
-    /// Nothing when `quiet` or the run has no end of its own.
-    pub fn new(quiet: bool, total: Option<u64>) -> Progress {
+    /// Nothing on standard error when `quiet` or the run has no end of its own.
+    pub fn new(quiet: bool, total: Option<u64>, probe: Option<Arc<ProgressProbe>>) -> Progress {
         let now = Instant::now();
-        let mut progress = Progress { bar: None, plain: None, total: total.unwrap_or(0), start: now };
+        if let Some(probe) = &probe {
+            probe.start(total);
+        }
+        let mut progress = Progress { bar: None, plain: None, total: total.unwrap_or(0), start: now, probe };
         let Some(total) = total.filter(|_| !quiet) else {
             return progress;
         };
@@ -376,6 +424,9 @@ impl Progress {
     }
 
     pub fn tick(&self, done: u64, time: f64) {
+        if let Some(probe) = &self.probe {
+            probe.tick(done, time);
+        }
         if let Some(bar) = &self.bar {
             bar.set_position(done);
             if done.is_multiple_of(64) {

@@ -16,6 +16,8 @@ pub struct RunContext {
     pub comm: Option<Comm>,
     /// No progress lines or reports on standard error.
     pub quiet: bool,
+    /// Where the runs' progress is also told (an observer on another thread).
+    pub progress: Option<std::sync::Arc<crate::runner::ProgressProbe>>,
 }
 
 impl RunContext {

@@ -351,7 +351,8 @@ impl<S: Simulation> Handle<S> {
 
     fn run_steps_of(&self, caller: &Caller, plan: &Plan) -> RhaiResult<()> {
         self.write_series_with(caller)?;
-        let progress = Progress::new(!plan.progress, plan.steps);
+        let probe = self.lock().ctx.options.progress.clone();
+        let progress = Progress::new(!plan.progress, plan.steps, probe);
         let background = plan.stop.is_some();
         let mut k = 0u64;
         while plan.steps.is_none_or(|n| k < n) {

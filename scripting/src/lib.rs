@@ -71,6 +71,8 @@ pub struct RunOptions {
     /// The folder of the script file (set by `run_script`): files the script reads (meshes) are
     /// also looked for there.
     pub script_dir: Option<PathBuf>,
+    /// Where the runs also tell their progress (the Python package's progress bar).
+    pub progress: Option<Arc<granite_run::ProgressProbe>>,
 }
 
 impl ScriptContext {
@@ -81,6 +83,7 @@ impl ScriptContext {
             program: self.options.program.clone(),
             comm: self.options.comm.clone(),
             quiet: self.options.quiet,
+            progress: self.options.progress.clone(),
         }
     }
 
