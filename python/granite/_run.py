@@ -58,36 +58,51 @@ def run(script, params=None, out=None, threads=None, quiet=True, progress=True):
     any other failure. Ctrl-C stops the run cleanly at its next step (outputs and checkpoints
     written, as on the command line) and then raises KeyboardInterrupt.
     """
-    result = {}
     probe = _native.Progress()
 
     def work():
+        return _native.run(str(script), _overrides(params), None if out is None else str(out), threads, quiet, probe)
+
+    bar = _progress.Bar(probe, pathlib.Path(script).name) if progress else None
+    try:
+        result = _on_a_thread(work, _native.request_stop, bar)
+    except _native.GraniteError as error:
+        raise _raised(error) from None
+    out_dir, summary = result
+    return Run(out_dir, json.loads(summary))
+
+
+def _on_a_thread(work, stop, bar=None):
+    """Runs `work` (native code that releases the GIL) on a thread of its own, so that this one
+    takes Ctrl-C: `stop()` asks the native code to stop at its next step, and once it has, the
+    KeyboardInterrupt goes on. Returns what `work` returns; raises what it raised."""
+    result = {}
+    finished = threading.Event()
+
+    def target():
         try:
-            result["done"] = _native.run(str(script), _overrides(params), None if out is None else str(out), threads, quiet,
-                                         probe)
+            result["value"] = work()
         except BaseException as error:  # handed to the calling thread
             result["error"] = error
+        finally:
+            finished.set()
 
-    # The run goes on a thread of its own, so that this one can take Ctrl-C and pass it on.
-    worker = threading.Thread(target=work, name="granite run", daemon=True)
-    bar = _progress.Bar(probe, pathlib.Path(script).name) if progress else None
-    worker.start()
+    # An Event, not Thread.join: a join that Ctrl-C interrupts can take the thread for ended.
+    threading.Thread(target=target, name="granite", daemon=True).start()
     try:
-        while worker.is_alive():
-            worker.join(0.1)
+        while not finished.wait(0.1):
             if bar is not None:
                 bar.update()
     except KeyboardInterrupt:
-        _native.request_stop()
-        worker.join()
+        stop()
+        finished.wait()
         raise
     finally:
         if bar is not None:
             bar.close()
     if "error" in result:
-        raise _raised(result["error"]) from None
-    out_dir, summary = result["done"]
-    return Run(out_dir, json.loads(summary))
+        raise result["error"]
+    return result["value"]
 
 
 def params(script, **overrides):

@@ -1,12 +1,11 @@
 """`granite.load`: a script's simulations kept alive in Python, to run, inspect and change."""
 
 import pathlib
-import threading
 
 import numpy as np
 
 from . import _native, _progress
-from ._run import _overrides, _raised
+from ._run import _on_a_thread, _overrides, _raised
 
 # The script types of simulations (their arrays: spheres or material points).
 _SIMULATIONS = ("DemSim", "MpmSim")
@@ -38,7 +37,7 @@ class Session:
     """A live session: the variables a script made, and code evaluated among them.
 
     With exactly one simulation, the session stands for it: `run_steps`, `run_time`, `call`,
-    `array`, `time` and `step` go to that simulation; `session["name"]` is any variable of the
+    `array`, `set_array`, `time` and `step` go to that simulation; `session["name"]` is any variable of the
     session (a simulation as a `Simulation`).
     """
 
@@ -87,6 +86,9 @@ class Session:
 
     def array(self, name):
         return self._only().array(name)
+
+    def set_array(self, name, values):
+        return self._only().set_array(name, values)
 
     @property
     def time(self):
@@ -156,6 +158,15 @@ class Simulation:
         values = np.frombuffer(data, dtype=np.float64).copy()
         return values.reshape(-1, columns) if columns > 1 else values
 
+    def set_array(self, name, values):
+        """Sets one array from a numpy array of one row per sphere or point (the order of
+        `array`), with the checks of the script calls that change them (`set_body`,
+        `set_point_velocity`); every row is checked before any changes. DEM: `velocity`,
+        `angular_velocity`, `fixed` (the flags `array("fixed")` gives); MPM: `velocity`."""
+        values = np.ascontiguousarray(values, dtype=np.float64)
+        columns = 1 if values.ndim == 1 else values.shape[1]
+        self.session._native.set_array(self.variable, name, values.tobytes(), columns)
+
     def arrays(self):
         """Every array, {name: array}."""
         return {name: self.array(name) for name in self.array_names}
@@ -204,34 +215,11 @@ def _wrapped(session, value):
 
 
 def _interruptible(native, work, name, bar=None):
-    """Runs `work` (native code, GIL released) on a thread of its own so that Ctrl-C here pauses
-    the session's runs, the progress bar following them; errors become ScriptError naming
-    `name`."""
-    result = {}
-
-    def target():
-        try:
-            result["value"] = work()
-        except BaseException as error:
-            result["error"] = error
-
-    worker = threading.Thread(target=target, name="granite session", daemon=True)
-    worker.start()
+    """Runs `work` (native code, GIL released) so that Ctrl-C here pauses the session's runs, the
+    progress bar following them; errors become ScriptError naming `name`."""
     try:
-        while worker.is_alive():
-            worker.join(0.1)
-            if bar is not None:
-                bar.update()
-    except KeyboardInterrupt:
-        native.interrupt()
-        worker.join()
-        raise
-    finally:
-        if bar is not None:
-            bar.close()
-    if "error" in result:
-        error = result["error"]
-        if isinstance(error, _native.GraniteError) and str(error).startswith("line "):
+        return _on_a_thread(work, native.interrupt, bar)
+    except _native.GraniteError as error:
+        if str(error).startswith("line "):
             error = _native.GraniteError(f"{name}: {error}")
         raise _raised(error) from None
-    return result["value"]

@@ -179,6 +179,16 @@ impl Session {
         Ok((PyBytes::new(py, &bytes).unbind(), table.columns))
     }
 
+    /// Sets one array of the simulation held in `variable` from f64 values (native order) in rows
+    /// of `columns`, with the checks of the script calls that change them.
+    fn set_array(&self, py: Python<'_>, variable: &str, name: &str, values: &[u8], columns: usize) -> PyResult<()> {
+        let sim = self.variable(variable)?;
+        let values = values.chunks_exact(8).map(|b| f64::from_ne_bytes(b.try_into().unwrap_or([0; 8]))).collect();
+        let table = granite_script::arrays::Table { values, columns };
+        py.detach(|| granite_script::arrays::set_array(&sim, name, &table))
+            .map_err(|e| GraniteError::new_err(e.to_string()))
+    }
+
     /// The arrays the value in `variable` offers (None: not a simulation).
     fn array_names(&self, variable: &str) -> PyResult<Option<Vec<String>>> {
         Ok(granite_script::arrays::names(&self.variable(variable)?))

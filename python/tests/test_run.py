@@ -92,3 +92,20 @@ def test_the_progress_probe_follows_the_runs(scripts, tmp_path):
     run = granite.Run(out_dir)
     assert calls >= 2 and done == total > 0
     assert time == pytest.approx(float(run.table("series_runout.csv")["time"].iloc[-1]), rel=1e-12)
+
+
+def test_ctrl_c_stops_the_run_cleanly(scripts, tmp_path):
+    # Ctrl-C one second in (SIGINT to this process): the run stops at its next step with its
+    # outputs written and says so, then KeyboardInterrupt reaches the caller.
+    import json
+    import signal
+    import threading
+
+    timer = threading.Timer(1.0, signal.raise_signal, args=(signal.SIGINT,))
+    timer.start()
+    with pytest.raises(KeyboardInterrupt):
+        granite.run(scripts / "mpm" / "column_collapse.rhai", out=tmp_path / "col", threads=1, progress=False)
+    timer.join()
+    summary = json.loads((tmp_path / "col" / "summary.json").read_text())
+    assert summary["status"] == "interrupted" and summary["signal"] == "SIGINT"
+    assert (tmp_path / "col" / "series.csv").exists()

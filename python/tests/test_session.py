@@ -99,3 +99,49 @@ def test_the_rve_stresses_of_mpmxdem_points_reach_numpy(scripts, tmp_path):
     mean = sim.array("rve_mean_stress")
     np.testing.assert_allclose(mean, stress[:, :3].mean(axis=1), rtol=1e-12)
     assert "coordination" in sim.array_names
+
+
+def test_velocities_set_from_numpy_with_the_consoles_checks(tmp_path):
+    script = tmp_path / "spheres.rhai"
+    script.write_text(FALL.replace("let ball = sim.sphere(glass, [0.0, 0.0, 0.5], 0.01);",
+                                   "for k in 0..4 { sim.sphere(glass, [0.1 * k.to_float(), 0.0, 0.5], 0.01); }")
+                      + "sim.gravity([0.0, 0.0, 0.0]);\n")
+    sim = granite.load(script, out=tmp_path / "out", threads=1)
+    v = np.zeros((4, 3))
+    v[:, 0] = [1.0, 2.0, 3.0, 4.0]
+    sim.set_array("velocity", v)
+    x0 = sim.array("position")
+    sim.run_steps(100)
+    # No gravity, no contact: each sphere moves at the velocity numpy gave it.
+    np.testing.assert_allclose(sim.array("position") - x0, v * 100 * 2e-5, rtol=1e-12, atol=1e-15)
+    # Blocked degrees of freedom as flags (1: x), read back as set.
+    fixed = np.array([1.0, 0.0, 0.0, 0.0])
+    sim.set_array("fixed", fixed)
+    np.testing.assert_array_equal(sim.array("fixed"), fixed)
+    # Refused as the console refuses, before anything changes.
+    bad = v.copy()
+    bad[2, 1] = np.nan
+    with pytest.raises(granite.GraniteError, match="row 2"):
+        sim.set_array("velocity", bad)
+    with pytest.raises(granite.GraniteError, match="shape"):
+        sim.set_array("velocity", v[:3])
+    np.testing.assert_array_equal(sim.array("velocity"), v)
+
+
+def test_ctrl_c_pauses_a_session_run_and_keeps_its_state(tmp_path):
+    import signal
+    import threading
+
+    script = tmp_path / "fall.rhai"
+    script.write_text(FALL)
+    sim = granite.load(script, out=tmp_path / "out", threads=1, progress=False)
+    timer = threading.Timer(0.5, signal.raise_signal, args=(signal.SIGINT,))
+    timer.start()
+    with pytest.raises(KeyboardInterrupt):
+        sim.run_steps(10 ** 9)
+    timer.join()
+    # Paused between two steps, the state kept: it goes on from there.
+    t, step = sim.time, sim.step
+    assert 0.0 < t < 10 ** 9 * 2e-5 and step > 0
+    sim.run_steps(10)
+    assert sim.step == step + 10 and sim.time == pytest.approx(t + 10 * 2e-5, rel=1e-12)

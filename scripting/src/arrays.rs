@@ -4,6 +4,7 @@
 
 use super::dem_api::DemHandle;
 use super::mpm_api::SimHandle;
+use granite_core::dem::bodies::SphereEdit;
 use granite_core::error::{GraniteError, Result};
 use rhai::Dynamic;
 
@@ -111,4 +112,110 @@ fn unknown(of: &str, name: &str, known: impl Iterator<Item = String>) -> Granite
         name: name.to_string(),
         known: known.collect::<Vec<_>>().join(", "),
     }
+}
+
+/// The arrays `set_array` changes: of a DEM simulation's spheres, of an MPM one's points.
+pub const SPHERE_SETTABLE: &[&str] = &["velocity", "angular_velocity", "fixed"];
+pub const POINT_SETTABLE: &[&str] = &["velocity"];
+
+/// Sets one array of a simulation value from a table of one row per sphere or point (the order
+/// of `array`), with the checks of the script calls that change one (`set_body`,
+/// `set_point_velocity`): every row is checked before any is applied.
+pub fn set_array(sim: &Dynamic, name: &str, table: &Table) -> Result<()> {
+    let finite = |what: &str| -> Result<()> {
+        match table.values.iter().position(|v| !v.is_finite()) {
+            Some(k) => Err(GraniteError::param(
+                what,
+                format!("{} in row {}", table.values[k], k / table.columns.max(1)),
+                "finite numbers",
+            )),
+            None => Ok(()),
+        }
+    };
+    let shape = |rows: usize, columns: &[usize], what: &str| -> Result<()> {
+        if !columns.contains(&table.columns) || table.values.len() != rows * table.columns {
+            let wanted = columns.iter().map(|c| format!("({rows}, {c})")).collect::<Vec<_>>().join(" or ");
+            return Err(GraniteError::param(
+                what,
+                format!("{} values in rows of {}", table.values.len(), table.columns),
+                &format!("an array of shape {wanted}"),
+            ));
+        }
+        Ok(())
+    };
+    if let Some(dem) = sim.clone().try_cast::<DemHandle>() {
+        let mut st = dem.lock();
+        let world = &mut st.sim.dem.world;
+        let n = world.spheres.x.len();
+        let edits: Vec<SphereEdit> = match name {
+            "velocity" | "angular_velocity" => {
+                shape(n, &[3], name)?;
+                finite(name)?;
+                let rows = table.values.chunks(3).map(|r| [r[0], r[1], r[2]]);
+                if name == "velocity" {
+                    rows.map(|v| SphereEdit { velocity: Some(v), ..Default::default() }).collect()
+                } else {
+                    rows.map(|w| SphereEdit { spin: Some(w), ..Default::default() }).collect()
+                }
+            }
+            "fixed" => {
+                shape(n, &[1], name)?;
+                let all = f64::from(granite_core::dem::particles::dof::ALL);
+                if let Some(k) = table.values.iter().position(|&b| !(b >= 0.0 && b <= all && b.fract() == 0.0)) {
+                    return Err(GraniteError::param(
+                        "fixed",
+                        format!("{} in row {k}", table.values[k]),
+                        "whole numbers of the x, y, z, rx, ry, rz flags (0 to 63), as `array(\"fixed\")` gives",
+                    ));
+                }
+                table.values.iter().map(|&b| SphereEdit { blocked: Some(b as u8), ..Default::default() }).collect()
+            }
+            _ => {
+                return Err(unknown(
+                    "settable arrays of a DEM simulation",
+                    name,
+                    SPHERE_SETTABLE.iter().map(|s| s.to_string()),
+                ))
+            }
+        };
+        // A clump member's motion is its clump's: refused before anything changes.
+        if let Some(i) = world.spheres.clump.iter().position(|&c| c != granite_core::dem::particles::FREE) {
+            return Err(GraniteError::Setup(format!(
+                "sphere {} is a member of clump {}: its {name} is the clump's",
+                world.spheres.id[i], world.spheres.clump[i]
+            )));
+        }
+        for (i, edit) in edits.iter().enumerate() {
+            world.edit_sphere(i, edit)?;
+        }
+        return Ok(());
+    }
+    if let Some(mpm) = sim.clone().try_cast::<SimHandle>() {
+        let mut st = mpm.lock();
+        let sim = &mut st.sim.mpm;
+        if name != "velocity" {
+            return Err(unknown(
+                "settable arrays of an MPM simulation",
+                name,
+                POINT_SETTABLE.iter().map(|s| s.to_string()),
+            ));
+        }
+        let (n, dim) = (sim.points.len(), sim.dim());
+        shape(n, &[dim, 3], name)?;
+        finite(name)?;
+        if table.columns == 3 && dim < 3 {
+            if let Some(k) = table.values.chunks(3).position(|r| r[2] != 0.0) {
+                return Err(GraniteError::param(
+                    "velocity",
+                    format!("z = {} in row {k}", table.values[3 * k + 2]),
+                    "0 in a 2D simulation",
+                ));
+            }
+        }
+        for (v, row) in sim.points.v.iter_mut().zip(table.values.chunks(table.columns)) {
+            *v = [row[0], row[1], if table.columns == 3 { row[2] } else { 0.0 }];
+        }
+        return Ok(());
+    }
+    Err(GraniteError::Setup(format!("a {} holds no arrays: a DEM or MPM simulation does", sim.type_name())))
 }
