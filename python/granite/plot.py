@@ -77,24 +77,21 @@ def energies(source, table="series.csv", ax=None):
 
 def q_p(source, table="series.csv", p="p", q="q", ax=None):
     """The stress path q against p (compression positive, as the triaxial scripts write them)."""
-    columns = _columns(source, table)
-    _need(columns, [p, q], table)
-    figure, ax = _axes(ax)
-    ax.plot(columns[p], columns[q])
-    ax.set_xlabel(f"{p} [Pa]")
-    ax.set_ylabel(f"{q} [Pa]")
-    ax.grid(True, alpha=0.3)
-    return figure
+    return _path(source, table, p, q, f"{p} [Pa]", f"{q} [Pa]", False, ax)
 
 
 def e_p(source, table="series.csv", p="p", e="void_ratio", ax=None):
     """The void ratio against p on a logarithmic axis (compression positive)."""
+    return _path(source, table, p, e, f"{p} [Pa]", e, True, ax)
+
+
+def _path(source, table, x, y, x_label, y_label, log_x, ax):
     columns = _columns(source, table)
-    _need(columns, [p, e], table)
+    _need(columns, [x, y], table)
     figure, ax = _axes(ax)
-    ax.semilogx(columns[p], columns[e])
-    ax.set_xlabel(f"{p} [Pa]")
-    ax.set_ylabel(e)
+    (ax.semilogx if log_x else ax.plot)(columns[x], columns[y])
+    ax.set_xlabel(x_label)
+    ax.set_ylabel(y_label)
     ax.grid(True, which="both", alpha=0.3)
     return figure
 
