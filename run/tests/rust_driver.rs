@@ -133,3 +133,19 @@ fn a_step_that_loses_a_point_restores_the_last_good_state_and_writes_it() {
     assert!(dir.join("last_good_points.csv").exists());
     assert_eq!(runner.summary["failed_at_step"].as_u64(), Some(failed));
 }
+
+/// A probe given in the run context follows the runs from another thread: the calls, the steps
+/// of the last one done against those asked, and the simulated time it reached.
+#[test]
+fn a_progress_probe_follows_the_runs() {
+    let registry = granite_plugins::default_registry();
+    let dir = out_dir("rust_driver_probe");
+    let probe = std::sync::Arc::new(granite_run::ProgressProbe::default());
+    let context = RunContext { progress: Some(probe.clone()), ..quiet() };
+    let mut runner = Runner::new(MpmScene::new(column().build(&registry).unwrap()), &dir, context);
+    runner.run_steps(30).unwrap();
+    runner.run_steps(20).unwrap();
+    let reading = probe.read();
+    assert_eq!((reading.calls, reading.done, reading.total), (2, 20, 20));
+    assert_eq!(reading.time, runner.sim.mpm.time);
+}
