@@ -163,15 +163,15 @@ impl Session {
 
     /// Sets a variable of the session to a Python value.
     fn set(&self, name: &str, value: &Bound<'_, PyAny>) -> PyResult<()> {
-        let value = self.to_dynamic(value)?;
-        self.lock().set_variable(name, value);
+        let dynamic = self.to_dynamic(value)?;
+        self.with_session(value.py(), |s| s.set_variable(name, dynamic));
         Ok(())
     }
 
     /// One array of the simulation held in `variable`: its values as bytes (f64, native order)
     /// and its number of columns.
     fn array(&self, py: Python<'_>, variable: &str, name: &str) -> PyResult<(Py<PyBytes>, usize)> {
-        let sim = self.variable(variable)?;
+        let sim = self.variable(py, variable)?;
         let table = py
             .detach(|| granite_script::arrays::array(&sim, name))
             .map_err(|e| GraniteError::new_err(e.to_string()))?;
@@ -182,7 +182,7 @@ impl Session {
     /// Sets one array of the simulation held in `variable` from f64 values (native order) in rows
     /// of `columns`, with the checks of the script calls that change them.
     fn set_array(&self, py: Python<'_>, variable: &str, name: &str, values: &[u8], columns: usize) -> PyResult<()> {
-        let sim = self.variable(variable)?;
+        let sim = self.variable(py, variable)?;
         let values = values.chunks_exact(8).map(|b| f64::from_ne_bytes(b.try_into().unwrap_or([0; 8]))).collect();
         let table = granite_script::arrays::Table { values, columns };
         py.detach(|| granite_script::arrays::set_array(&sim, name, &table))
@@ -190,18 +190,19 @@ impl Session {
     }
 
     /// The arrays the value in `variable` offers (None: not a simulation).
-    fn array_names(&self, variable: &str) -> PyResult<Option<Vec<String>>> {
-        Ok(granite_script::arrays::names(&self.variable(variable)?))
+    fn array_names(&self, py: Python<'_>, variable: &str) -> PyResult<Option<Vec<String>>> {
+        let sim = self.variable(py, variable)?;
+        Ok(py.detach(|| granite_script::arrays::names(&sim)))
     }
 
     /// The session's variables and their types.
-    fn variables(&self) -> Vec<(String, String)> {
-        self.lock().variables()
+    fn variables(&self, py: Python<'_>) -> Vec<(String, String)> {
+        self.with_session(py, |s| s.variables())
     }
 
     /// Refuses parameters given that no `param(...)` declared.
-    fn check_overrides(&self) -> PyResult<()> {
-        self.lock().check_overrides().map_err(GraniteError::new_err)
+    fn check_overrides(&self, py: Python<'_>) -> PyResult<()> {
+        self.with_session(py, |s| s.check_overrides()).map_err(GraniteError::new_err)
     }
 
     /// Pauses every run of the session at its next step and stops the code being evaluated
@@ -211,8 +212,8 @@ impl Session {
     }
 
     /// Pauses the runs still going in the background and waits for them.
-    fn finish(&self) {
-        self.lock().finish();
+    fn finish(&self, py: Python<'_>) {
+        self.with_session(py, |s| s.finish());
     }
 }
 
@@ -221,8 +222,15 @@ impl Session {
         self.inner.lock().unwrap_or_else(|e| e.into_inner())
     }
 
-    fn variable(&self, name: &str) -> PyResult<Dynamic> {
-        self.lock().variable(name).ok_or_else(|| GraniteError::new_err(format!("the session has no variable `{name}`")))
+    /// `f` on the session, waiting for it (another thread's input may hold it for a whole run)
+    /// without the GIL, which that input needs to end.
+    fn with_session<R: Send>(&self, py: Python<'_>, f: impl FnOnce(&mut ReplSession) -> R + Send) -> R {
+        py.detach(|| f(&mut self.lock()))
+    }
+
+    fn variable(&self, py: Python<'_>, name: &str) -> PyResult<Dynamic> {
+        self.with_session(py, |s| s.variable(name))
+            .ok_or_else(|| GraniteError::new_err(format!("the session has no variable `{name}`")))
     }
 
     fn to_python(&self, py: Python<'_>, value: Dynamic) -> PyResult<Py<PyAny>> {
@@ -254,9 +262,11 @@ impl Session {
             return Ok(dict.into_any().unbind());
         }
         let variable = format!("__python_{}", self.stored.fetch_add(1, Ordering::SeqCst));
-        let mut session = self.lock();
-        let kind = session.type_name(&value);
-        session.set_variable(&variable, value);
+        let kind = self.with_session(py, |s| {
+            let kind = s.type_name(&value);
+            s.set_variable(&variable, value);
+            kind
+        });
         Ok(Py::new(py, Stored { variable, kind })?.into_any())
     }
 
@@ -265,7 +275,7 @@ impl Session {
             return Ok(Dynamic::UNIT);
         }
         if let Ok(stored) = value.extract::<PyRef<'_, Stored>>() {
-            return self.variable(&stored.variable);
+            return self.variable(value.py(), &stored.variable);
         }
         if value.is_instance_of::<PyBool>() {
             return Ok(Dynamic::from(value.extract::<bool>()?));

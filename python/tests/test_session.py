@@ -145,3 +145,22 @@ def test_ctrl_c_pauses_a_session_run_and_keeps_its_state(tmp_path):
     assert 0.0 < t < 10 ** 9 * 2e-5 and step > 0
     sim.run_steps(10)
     assert sim.step == step + 10 and sim.time == pytest.approx(t + 10 * 2e-5, rel=1e-12)
+
+
+def test_a_second_thread_waits_for_a_run_without_deadlock(tmp_path):
+    # One thread runs the session; another reads an array meanwhile: it waits for the session
+    # without holding the GIL (other Python threads, a notebook, go on), and both finish.
+    import threading
+
+    script = tmp_path / "fall.rhai"
+    script.write_text(FALL)
+    sim = granite.load(script, out=tmp_path / "out", threads=1, progress=False)
+    runner = threading.Thread(target=sim.run_steps, args=(20000,), daemon=True)
+    runner.start()
+    read = {}
+    reader = threading.Thread(target=lambda: read.setdefault("x", sim.array("position")), daemon=True)
+    reader.start()
+    runner.join(timeout=120)
+    reader.join(timeout=120)
+    assert not runner.is_alive() and not reader.is_alive()
+    assert read["x"].shape == (1, 3) and sim.step == 20000
