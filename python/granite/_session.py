@@ -23,7 +23,8 @@ def load(script, params=None, out=None, threads=None, quiet=True, progress=True)
     script = pathlib.Path(script)
     folder = pathlib.Path(out) if out is not None else pathlib.Path("out") / script.stem
     probe = _native.Progress()
-    native = _native.Session(_overrides(params), str(folder), threads, quiet, probe)
+    # Files the script reads (meshes, STL walls) are also looked for beside it, as in `granite run`.
+    native = _native.Session(_overrides(params), str(folder), threads, quiet, probe, str(script.resolve().parent))
     session = Session(native, _progress.Bar(probe, script.name) if progress else None)
     session.eval(script.read_text(), name=script.name)
     try:

@@ -125,13 +125,14 @@ struct Session {
 #[pymethods]
 impl Session {
     #[new]
-    #[pyo3(signature = (overrides, out, threads=None, quiet=true, progress=None))]
+    #[pyo3(signature = (overrides, out, threads=None, quiet=true, progress=None, script_dir=None))]
     fn new(
         overrides: Vec<(String, String)>,
         out: PathBuf,
         threads: Option<usize>,
         quiet: bool,
         progress: Option<PyRef<'_, Progress>>,
+        script_dir: Option<PathBuf>,
     ) -> PyResult<Session> {
         let options = granite_script::RunOptions {
             program: format!("granite {} (Python)", env!("CARGO_PKG_VERSION")),
@@ -140,6 +141,7 @@ impl Session {
             quiet,
             stop_signal: Some(&STOP),
             progress: progress.map(|p| p.0.clone()),
+            script_dir,
             ..Default::default()
         };
         let session =

@@ -164,3 +164,22 @@ def test_a_second_thread_waits_for_a_run_without_deadlock(tmp_path):
     reader.join(timeout=120)
     assert not runner.is_alive() and not reader.is_alive()
     assert read["x"].shape == (1, 3) and sim.step == 20000
+
+
+def test_a_loaded_script_finds_its_files_beside_it(scripts, tmp_path):
+    # The STL walls of the silo, named by the script without a folder, found beside the script
+    # (as `granite run` finds them) though the working directory is elsewhere.
+    import shutil
+
+    folder = tmp_path / "scene"
+    folder.mkdir()
+    shutil.copy(scripts / "dem" / "silo_outlet_15mm.stl", folder)
+    (folder / "silo.rhai").write_text(
+        'let sim = dem();\n'
+        'let glass = sim.material(#{ name: "glass", density: 2500.0 });\n'
+        'let silo = sim.wall_mesh(glass, "silo_outlet_15mm.stl", #{ scale: 0.001 });\n')
+    session = granite.load(folder / "silo.rhai", out=tmp_path / "out")
+    # One wall a triangle of the file.
+    stl = (folder / "silo_outlet_15mm.stl").read_bytes()
+    triangles = stl.count(b"facet normal") if stl.lstrip().startswith(b"solid") else int.from_bytes(stl[80:84], "little")
+    assert session.eval("silo.len()") == triangles > 0
