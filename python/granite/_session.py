@@ -46,6 +46,9 @@ class Session:
         self._native = native
         self._bar = bar
 
+    def __repr__(self):
+        return "Session(" + ", ".join(f"{name}: {kind}" for name, kind in self.variables.items()) + ")"
+
     def eval(self, code, name="<python>"):
         """Evaluates script code in the session (variables and functions are kept), as a REPL
         input; returns its value. Errors raise ScriptError (the line within `code`)."""
