@@ -6,7 +6,7 @@ pandas DataFrames.
     run.summary["final_normalised_runout"]
     run.series            # series.csv as a DataFrame (a numpy structured array without pandas)
 
-    sim = granite.load("scene.rhai")          # a live session: step, inspect, change
+    sim = granite.load("scene.rhai")          # a live scene: step, inspect, change
     sim.run_steps(100)
     sim.array("position")                     # (n, 3) numpy array
 
@@ -17,9 +17,9 @@ from ._native import GraniteError, __version__
 from . import plot
 from ._batch import batch
 from ._run import Run, ScriptError, params, run
-from ._session import Session, Simulation, Value, load
+from ._scene import Scene, Simulation, Value, load
 
 __all__ = [
-    "GraniteError", "Run", "ScriptError", "Session", "Simulation", "Value", "__version__", "batch", "load", "params",
+    "GraniteError", "Run", "ScriptError", "Scene", "Simulation", "Value", "__version__", "batch", "load", "params",
     "plot", "run",
 ]

@@ -7,7 +7,9 @@ from ._run import Run
 
 
 def _columns(source, table):
-    """{column: array} of a Run's CSV file, a DataFrame or a structured array."""
+    """{column: array} of a Run's CSV file, a DataFrame, a structured array or such a dict."""
+    if isinstance(source, dict):
+        return source
     if isinstance(source, Run):
         source = source.table(table)
     if hasattr(source, "columns"):  # a DataFrame
@@ -72,7 +74,7 @@ def energies(source, table="series.csv", ax=None):
     names = [n for n in ("kinetic_energy", "gravitational_energy", "elastic_energy", "total_energy") if n in columns]
     if not names:
         raise KeyError(f"{table} has no energy column; it has: {', '.join(columns)}")
-    return series(_structured(columns), "time", names, table, ax=ax)
+    return series(columns, "time", names, table, ax=ax)
 
 
 def q_p(source, table="series.csv", p="p", q="q", ax=None):
@@ -94,12 +96,3 @@ def _path(source, table, x, y, x_label, y_label, log_x, ax):
     ax.set_ylabel(y_label)
     ax.grid(True, which="both", alpha=0.3)
     return figure
-
-
-def _structured(columns):
-    """{name: array} as a structured array, which `series` takes."""
-    names = list(columns)
-    out = np.zeros(len(columns[names[0]]), dtype=[(n, float) for n in names])
-    for n in names:
-        out[n] = columns[n]
-    return out

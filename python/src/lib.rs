@@ -111,7 +111,8 @@ struct Stored {
     kind: String,
 }
 
-/// A live session: a script's variables and simulations kept between calls, as in `granite repl`.
+/// The live scene of `granite.load`: a script's variables and simulations kept between calls, as in
+/// `granite repl`.
 #[pyclass(frozen)]
 struct Session {
     inner: Mutex<ReplSession>,

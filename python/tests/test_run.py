@@ -13,7 +13,8 @@ def test_the_vibrating_bar_keeps_its_period_and_energy(scripts, tmp_path):
     run = granite.run(scripts / "mpm" / "vibrating_bar.rhai", params={"shape_functions": "bspline2", "cells": 25},
                       out=tmp_path / "bar", threads=2)
     assert run.summary["status"] == "ok"
-    assert math.isclose(run.summary["period"], run.summary["period_exact"], rel_tol=0.01)
+    # B-splines at 25 cells: 1.1e-3 measured (they converge at second order, tests/mpm_fidelity.rs).
+    assert math.isclose(run.summary["period"], run.summary["period_exact"], rel_tol=3e-3)
     series = run.series
     time = np.asarray(series["time"], dtype=float)
     total = np.asarray(series["total_energy"], dtype=float)

@@ -12,11 +12,11 @@ _SIMULATIONS = ("DemSim", "MpmSim")
 
 
 def load(script, params=None, out=None, threads=None, quiet=True, progress=True):
-    """Runs a script in a live session and returns it: its simulations stay, to be stepped,
-    inspected and changed from Python (`Session`).
+    """Runs a script in a live scene and returns it: its simulations stay, to be stepped,
+    inspected and changed from Python (`Scene`).
 
-    params, threads, quiet, progress: as for `granite.run` (the bar for the session's runs);
-    out: the session's output folder (default out/<script stem>/), each simulation writing into
+    params, threads, quiet, progress: as for `granite.run` (the bar for the scene's runs);
+    out: the scene's output folder (default out/<script stem>/), each simulation writing into
     its own simN/ folder of it. The script's own runs, if it has any, run here as they would in
     `granite run`.
     """
@@ -25,21 +25,21 @@ def load(script, params=None, out=None, threads=None, quiet=True, progress=True)
     probe = _native.Progress()
     # Files the script reads (meshes, STL walls) are also looked for beside it, as in `granite run`.
     native = _native.Session(_overrides(params), str(folder), threads, quiet, probe, str(script.resolve().parent))
-    session = Session(native, _progress.Bar(probe, script.name) if progress else None)
-    session.eval(script.read_text(), name=script.name)
+    scene = Scene(native, _progress.Bar(probe, script.name) if progress else None)
+    scene.eval(script.read_text(), name=script.name)
     try:
-        session._native.check_overrides()
+        scene._native.check_overrides()
     except _native.GraniteError as error:
         raise _raised(error) from None
-    return session
+    return scene
 
 
-class Session:
-    """A live session: the variables a script made, and code evaluated among them.
+class Scene:
+    """A live scene: the variables a script made, and code evaluated among them.
 
-    With exactly one simulation, the session stands for it: `run_steps`, `run_time`, `call`,
-    `array`, `set_array`, `time` and `step` go to that simulation; `session["name"]` is any variable of the
-    session (a simulation as a `Simulation`).
+    With exactly one simulation, the scene stands for it: `run_steps`, `run_time`, `call`,
+    `array`, `set_array`, `time` and `step` go to that simulation; `scene["name"]` is any
+    variable of the scene (a simulation as a `Simulation`).
     """
 
     def __init__(self, native, bar=None):
@@ -47,27 +47,27 @@ class Session:
         self._bar = bar
 
     def __repr__(self):
-        return "Session(" + ", ".join(f"{name}: {kind}" for name, kind in self.variables.items()) + ")"
+        return "Scene(" + ", ".join(f"{name}: {kind}" for name, kind in self.variables.items()) + ")"
 
     def eval(self, code, name="<python>"):
-        """Evaluates script code in the session (variables and functions are kept), as a REPL
+        """Evaluates script code in the scene (variables and functions are kept), as a REPL
         input; returns its value. Errors raise ScriptError (the line within `code`)."""
         value = _interruptible(self._native, lambda: self._native.eval(code), name, self._bar)
         return _wrapped(self, value)
 
     @property
     def variables(self):
-        """{name: script type} of the session's variables."""
+        """{name: script type} of the scene's variables."""
         return {name: kind for name, kind in self._native.variables() if not name.startswith("__python_")}
 
     @property
     def simulations(self):
-        """{variable name: Simulation} of the session's DEM and MPM simulations."""
+        """{variable name: Simulation} of the scene's DEM and MPM simulations."""
         return {name: Simulation(self, name) for name, kind in self.variables.items() if kind in _SIMULATIONS}
 
     def __getitem__(self, name):
         if name not in self.variables:
-            raise KeyError(f"the session has no variable `{name}`; it has: {', '.join(self.variables)}")
+            raise KeyError(f"the scene has no variable `{name}`; it has: {', '.join(self.variables)}")
         if self.variables[name] in _SIMULATIONS:
             return Simulation(self, name)
         return self.eval(name)
@@ -76,7 +76,7 @@ class Session:
         sims = self.simulations
         if len(sims) != 1:
             raise _native.GraniteError(
-                f"the session has {len(sims)} simulations ({', '.join(sims) or 'none'}): pick one, session[\"name\"]")
+                f"the scene has {len(sims)} simulations ({', '.join(sims) or 'none'}): pick one, scene[\"name\"]")
         return next(iter(sims.values()))
 
     def run_steps(self, n):
@@ -108,29 +108,29 @@ class Session:
 
 
 class Simulation:
-    """A DEM or MPM simulation of a session, by its variable's name."""
+    """A DEM or MPM simulation of a scene, by its variable's name."""
 
-    def __init__(self, session, variable):
-        self.session = session
+    def __init__(self, scene, variable):
+        self.scene = scene
         self.variable = variable
 
     def __repr__(self):
-        return f"Simulation({self.variable!r}: {self.session.eval(self.variable + '.to_string()')})"
+        return f"Simulation({self.variable!r}: {self.scene.eval(self.variable + '.to_string()')})"
 
     def call(self, method, *args):
         """Calls one of the simulation's script functions, `sim.method(args...)`, with Python
-        values (numbers, strings, lists, dicts, numpy arrays, values the session handed back):
+        values (numbers, strings, lists, dicts, numpy arrays, values the scene handed back):
         the same checks and errors as in a script. Returns its value."""
         names = []
         for k, arg in enumerate(args):
             name = f"__python_arg{k}"
-            self.session._native.set(name, arg._stored if isinstance(arg, Value) else arg)
+            self.scene._native.set(name, arg._stored if isinstance(arg, Value) else arg)
             names.append(name)
-        return self.session.eval(f"{self.variable}.{method}({', '.join(names)})")
+        return self.scene.eval(f"{self.variable}.{method}({', '.join(names)})")
 
     def get(self, prop):
         """A property of the simulation (`time`, `step`, `dt`, ...)."""
-        return self.session.eval(f"{self.variable}.{prop}")
+        return self.scene.eval(f"{self.variable}.{prop}")
 
     def run_steps(self, n):
         """Runs n steps (Ctrl-C pauses at the next step, state kept, and raises KeyboardInterrupt)."""
@@ -152,13 +152,13 @@ class Simulation:
     def array_names(self):
         """The arrays `array` gives: the spheres' (DEM) or the material points' and their laws'
         state variables (MPM)."""
-        return self.session._native.array_names(self.variable)
+        return self.scene._native.array_names(self.variable)
 
     def array(self, name):
         """One array of the spheres (DEM: position, velocity, radius, force, ...) or material
         points (MPM: position, velocity, stress, strain, volume, a state variable, ...): a numpy
         array of one row per sphere or point, (n,) or (n, components); a copy."""
-        data, columns = self.session._native.array(self.variable, name)
+        data, columns = self.scene._native.array(self.variable, name)
         values = np.frombuffer(data, dtype=np.float64).copy()
         return values.reshape(-1, columns) if columns > 1 else values
 
@@ -169,7 +169,7 @@ class Simulation:
         `angular_velocity`, `fixed` (the flags `array("fixed")` gives); MPM: `velocity`."""
         values = np.ascontiguousarray(values, dtype=np.float64)
         columns = 1 if values.ndim == 1 else values.shape[1]
-        self.session._native.set_array(self.variable, name, values.tobytes(), columns)
+        self.scene._native.set_array(self.variable, name, values.tobytes(), columns)
 
     def arrays(self):
         """Every array, {name: array}."""
@@ -191,11 +191,11 @@ class Simulation:
 
 
 class Value:
-    """A value of the session Python cannot hold itself (a material, a wall, a mesh...): passed
+    """A value of the scene Python cannot hold itself (a material, a wall, a mesh...): passed
     back into calls as it is."""
 
-    def __init__(self, session, stored):
-        self.session = session
+    def __init__(self, scene, stored):
+        self.scene = scene
         self._stored = stored
 
     @property
@@ -203,23 +203,23 @@ class Value:
         return self._stored.kind
 
     def __repr__(self):
-        return f"Value({self.kind}: {self.session.eval(self._stored.variable + '.to_string()')})"
+        return f"Value({self.kind}: {self.scene.eval(self._stored.variable + '.to_string()')})"
 
 
-def _wrapped(session, value):
+def _wrapped(scene, value):
     if isinstance(value, _native.Stored):
         if value.kind in _SIMULATIONS:
-            return Simulation(session, value.variable)
-        return Value(session, value)
+            return Simulation(scene, value.variable)
+        return Value(scene, value)
     if isinstance(value, list):
-        return [_wrapped(session, v) for v in value]
+        return [_wrapped(scene, v) for v in value]
     if isinstance(value, dict):
-        return {k: _wrapped(session, v) for k, v in value.items()}
+        return {k: _wrapped(scene, v) for k, v in value.items()}
     return value
 
 
 def _interruptible(native, work, name, bar=None):
-    """Runs `work` (native code, GIL released) so that Ctrl-C here pauses the session's runs, the
+    """Runs `work` (native code, GIL released) so that Ctrl-C here pauses the scene's runs, the
     progress bar following them; errors become ScriptError naming `name`."""
     try:
         return _on_a_thread(work, native.interrupt, bar)

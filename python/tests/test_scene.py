@@ -1,4 +1,4 @@
-"""Live sessions: a script's simulations stepped, inspected and changed from Python."""
+"""Live scenes: a script's simulations stepped, inspected and changed from Python."""
 
 import numpy as np
 import pytest
@@ -37,7 +37,7 @@ def test_a_falling_sphere_driven_from_python(tmp_path):
     sim.run_steps(1000)
     x = sim.array("position")[0]
     assert x[0] == pytest.approx(1000 * 2e-5, rel=1e-12) and x[2] == pytest.approx(z, abs=1e-15)
-    # A value the session holds (the wall) goes back into a call as it is.
+    # A value the scene holds (the wall) goes back into a call as it is.
     assert sim.call("wall_force", sim["floor"]) == [0.0, 0.0, 0.0]
     # The script's checks and errors, from Python.
     with pytest.raises(granite.GraniteError) as caught:
@@ -85,10 +85,10 @@ def test_the_rve_stresses_of_mpmxdem_points_reach_numpy(scripts, tmp_path):
                            out=tmp_path / "rve", threads=2)
     script = tmp_path / "cell.rhai"
     script.write_text('let rve_file = param("rve_file", "");\n' + RVE_CELL)
-    session = granite.load(script, params={"rve_file": str(prepared.out_dir / "rve.json")}, out=tmp_path / "cell")
+    scene = granite.load(script, params={"rve_file": str(prepared.out_dir / "rve.json")}, out=tmp_path / "cell")
     # Two simulations: the loaded RVE (a DEM one) and the MPM cell.
-    assert session.variables["rve"] == "DemSim" and session.variables["sim"] == "MpmSim"
-    sim = session["sim"]
+    assert scene.variables["rve"] == "DemSim" and scene.variables["sim"] == "MpmSim"
+    sim = scene["sim"]
     sim.run_steps(2)
     stress = sim.array("stress")
     assert stress.shape == (8, 6)
@@ -148,7 +148,7 @@ def test_ctrl_c_pauses_a_session_run_and_keeps_its_state(tmp_path):
 
 
 def test_a_second_thread_waits_for_a_run_without_deadlock(tmp_path):
-    # One thread runs the session; another reads an array meanwhile: it waits for the session
+    # One thread runs the scene; another reads an array meanwhile: it waits for the scene
     # without holding the GIL (other Python threads, a notebook, go on), and both finish.
     import threading
 
@@ -178,8 +178,8 @@ def test_a_loaded_script_finds_its_files_beside_it(scripts, tmp_path):
         'let sim = dem();\n'
         'let glass = sim.material(#{ name: "glass", density: 2500.0 });\n'
         'let silo = sim.wall_mesh(glass, "silo_outlet_15mm.stl", #{ scale: 0.001 });\n')
-    session = granite.load(folder / "silo.rhai", out=tmp_path / "out")
+    scene = granite.load(folder / "silo.rhai", out=tmp_path / "out")
     # One wall a triangle of the file.
     stl = (folder / "silo_outlet_15mm.stl").read_bytes()
     triangles = stl.count(b"facet normal") if stl.lstrip().startswith(b"solid") else int.from_bytes(stl[80:84], "little")
-    assert session.eval("silo.len()") == triangles > 0
+    assert scene.eval("silo.len()") == triangles > 0
